@@ -1,0 +1,294 @@
+//! Shortest paths on the arena's clearance grid, shared by robots and opponent bots.
+//!
+//! [`DistanceField`] runs Dijkstra from one cell over the cells where a disc fits (8-connected,
+//! Euclidean step costs): one run answers "how far is every reachable point" (used to score
+//! candidate destinations by travel time) and "what is the path to this one" (predecessor
+//! links, then string-pulled with [`smooth`] so agents walk straight lines, not staircases).
+//! [`PathFollower`] walks a path waypoint by waypoint.
+
+use std::cmp::Reverse;
+use std::collections::BinaryHeap;
+
+use nalgebra::Point2;
+
+use crate::sim::arena::ClearanceGrid;
+use crate::sim::{Motion, Pose, wrap_angle};
+
+const NONE: u32 = u32::MAX;
+
+/// Travel distances from one start cell to every reachable cell.
+#[derive(Debug, Clone)]
+pub struct DistanceField {
+    pub start: usize,
+    pub dist: Vec<f32>,
+    prev: Vec<u32>,
+}
+
+impl DistanceField {
+    /// Dijkstra from the passable cell nearest to `from`; `None` when no passable cell is near.
+    pub fn from_point(grid: &ClearanceGrid, from: Point2<f32>) -> Option<DistanceField> {
+        let start = grid.nearest_passable(from, (1.0 / grid.cell).ceil() as usize + 2)?;
+        Some(DistanceField::from_cell(grid, start))
+    }
+
+    pub fn from_cell(grid: &ClearanceGrid, start: usize) -> DistanceField {
+        let n = grid.len();
+        let mut dist = vec![f32::INFINITY; n];
+        let mut prev = vec![NONE; n];
+        let mut heap = BinaryHeap::new();
+        dist[start] = 0.0;
+        heap.push(Reverse((0u32, start as u32)));
+        let (cols, rows) = (grid.cols as isize, grid.rows as isize);
+        let straight = grid.cell;
+        let diagonal = grid.cell * std::f32::consts::SQRT_2;
+        const STEPS: [(isize, isize); 8] = [
+            (1, 0),
+            (-1, 0),
+            (0, 1),
+            (0, -1),
+            (1, 1),
+            (1, -1),
+            (-1, 1),
+            (-1, -1),
+        ];
+        while let Some(Reverse((d_bits, idx))) = heap.pop() {
+            let d = f32::from_bits(d_bits);
+            let idx = idx as usize;
+            if d > dist[idx] {
+                continue;
+            }
+            let (r, c) = ((idx / grid.cols) as isize, (idx % grid.cols) as isize);
+            for (dr, dc) in STEPS {
+                let (nr, nc) = (r + dr, c + dc);
+                if nr < 0 || nc < 0 || nr >= rows || nc >= cols {
+                    continue;
+                }
+                let nidx = nr as usize * grid.cols + nc as usize;
+                if !grid.passable(nidx) {
+                    continue;
+                }
+                let diag = dr != 0 && dc != 0;
+                if diag
+                    && !(grid.passable(r as usize * grid.cols + nc as usize)
+                        && grid.passable(nr as usize * grid.cols + c as usize))
+                {
+                    continue; // no corner cutting
+                }
+                let nd = d + if diag { diagonal } else { straight };
+                if nd < dist[nidx] {
+                    dist[nidx] = nd;
+                    prev[nidx] = idx as u32;
+                    // Non-negative f32s order like their bit patterns.
+                    heap.push(Reverse((nd.to_bits(), nidx as u32)));
+                }
+            }
+        }
+        DistanceField { start, dist, prev }
+    }
+
+    pub fn reachable(&self, cell: usize) -> bool {
+        self.dist[cell].is_finite()
+    }
+
+    /// Cells from the start to `goal` (inclusive), or `None` when unreachable.
+    pub fn cells_to(&self, goal: usize) -> Option<Vec<usize>> {
+        if !self.reachable(goal) {
+            return None;
+        }
+        let mut cells = vec![goal];
+        let mut at = goal;
+        while at != self.start {
+            at = self.prev[at] as usize;
+            cells.push(at);
+        }
+        cells.reverse();
+        Some(cells)
+    }
+
+    /// A smoothed path of waypoints from `from` to the centre of `goal`.
+    pub fn path_to(
+        &self,
+        grid: &ClearanceGrid,
+        from: Point2<f32>,
+        goal: usize,
+    ) -> Option<Vec<Point2<f32>>> {
+        let cells = self.cells_to(goal)?;
+        let mut pts = Vec::with_capacity(cells.len() + 1);
+        pts.push(from);
+        pts.extend(cells.iter().map(|&c| grid.centre(c)));
+        Some(smooth(grid, &pts))
+    }
+}
+
+/// True when every point of the segment `a`–`b` lies in a passable cell (sampled at half-cell steps).
+pub fn segment_passable(grid: &ClearanceGrid, a: Point2<f32>, b: Point2<f32>) -> bool {
+    let len = (b - a).norm();
+    let steps = (len / (grid.cell * 0.5)).ceil().max(1.0) as usize;
+    (0..=steps).all(|k| {
+        let p = a + (b - a) * (k as f32 / steps as f32);
+        grid.cell_of(p).is_some_and(|c| grid.passable(c))
+    })
+}
+
+/// String-pulls a path: keeps only the waypoints needed for straight, passable legs.
+/// The first point (the agent's own position) is always kept, even if it is off the grid.
+pub fn smooth(grid: &ClearanceGrid, pts: &[Point2<f32>]) -> Vec<Point2<f32>> {
+    if pts.len() <= 2 {
+        return pts.to_vec();
+    }
+    let mut out = vec![pts[0]];
+    let mut anchor = 1; // the first grid point; legs are checked from grid points only
+    out.push(pts[1]);
+    while anchor < pts.len() - 1 {
+        let mut far = anchor + 1;
+        for j in (anchor + 1..pts.len()).rev() {
+            if segment_passable(grid, pts[anchor], pts[j]) {
+                far = j;
+                break;
+            }
+        }
+        out.push(pts[far]);
+        anchor = far;
+    }
+    // Drop the first grid point when the agent can go straight past it.
+    if out.len() > 2 && segment_passable(grid, out[0], out[2]) {
+        out.remove(1);
+    }
+    out
+}
+
+/// Walks a path of waypoints.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct PathFollower {
+    pub waypoints: Vec<Point2<f32>>,
+    pub next: usize,
+}
+
+impl PathFollower {
+    pub fn new(waypoints: Vec<Point2<f32>>) -> PathFollower {
+        // waypoints[0] is where the agent stood when planning.
+        PathFollower { waypoints, next: 1 }
+    }
+
+    pub fn finished(&self) -> bool {
+        self.next >= self.waypoints.len()
+    }
+
+    /// The waypoint to head for now, advancing past those already reached.
+    pub fn target(&mut self, pos: Point2<f32>) -> Option<Point2<f32>> {
+        while self.next < self.waypoints.len() {
+            let last = self.next + 1 == self.waypoints.len();
+            let reach = if last { 0.1 } else { 0.3 };
+            if (self.waypoints[self.next] - pos).norm() <= reach {
+                self.next += 1;
+            } else {
+                break;
+            }
+        }
+        self.waypoints.get(self.next).copied()
+    }
+}
+
+/// Differential-drive steering towards `target`: turn first when the error is large, then drive
+/// with speed falling off as the heading error grows. `turn_rate` is the top turn rate.
+pub fn steer(pose: Pose, target: Point2<f32>, turn_rate: f32) -> Motion {
+    let d = target - pose.pos;
+    let dist = d.norm();
+    if dist < 1e-3 {
+        return Motion::Stop;
+    }
+    let err = wrap_angle(d.y.atan2(d.x) - pose.theta);
+    // A proportional turn that saturates at the top rate; gain chosen to settle in ~3 ticks.
+    let turn = (err * 6.0 / turn_rate).clamp(-1.0, 1.0);
+    let forward = if err.abs() > 0.8 {
+        0.0
+    } else {
+        err.cos().max(0.0) * (dist / 0.4).min(1.0)
+    };
+    Motion::Drive { forward, turn }
+}
+
+/// Turn in place to `theta`; `Stop` once within a small tolerance.
+pub fn turn_to(pose: Pose, theta: f32, turn_rate: f32) -> Motion {
+    let err = wrap_angle(theta - pose.theta);
+    if err.abs() < 0.02 {
+        Motion::Stop
+    } else {
+        Motion::Drive {
+            forward: 0.0,
+            turn: (err * 6.0 / turn_rate).clamp(-1.0, 1.0),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::sim::arena::{Arena, MapDef};
+
+    /// Two rooms joined by a door in a wall at x = 5.
+    fn two_rooms() -> Arena {
+        Arena::new(MapDef {
+            name: "two".into(),
+            width: 10.0,
+            height: 6.0,
+            obstacles: vec![
+                vec![
+                    Point2::new(4.9, 0.0),
+                    Point2::new(5.1, 0.0),
+                    Point2::new(5.1, 4.0),
+                    Point2::new(4.9, 4.0),
+                ],
+                vec![
+                    Point2::new(4.9, 5.2),
+                    Point2::new(5.1, 5.2),
+                    Point2::new(5.1, 6.0),
+                    Point2::new(4.9, 6.0),
+                ],
+            ],
+            robot_spawns: vec![[1.0, 1.0, 0.0]],
+            opponent_spawns: vec![Point2::new(9.0, 1.0)],
+            landmarks: vec![],
+        })
+    }
+
+    #[test]
+    fn paths_go_through_the_door_in_straight_legs() {
+        let a = two_rooms();
+        let g = &a.grid;
+        let f = DistanceField::from_point(g, Point2::new(1.0, 1.0)).unwrap();
+        let goal = g.cell_of(Point2::new(9.0, 1.0)).unwrap();
+        let path = f.path_to(g, Point2::new(1.0, 1.0), goal).unwrap();
+        assert!(path.len() <= 5, "smoothed: {path:?}");
+        assert!(
+            path.iter().any(|p| p.y > 4.0 && (p.x - 5.0).abs() < 1.0),
+            "via the door: {path:?}"
+        );
+        for w in path.windows(2).skip(1) {
+            assert!(segment_passable(g, w[0], w[1]));
+        }
+        // The travel distance exceeds the straight-line 8 m because of the detour.
+        assert!(f.dist[goal] > 10.0);
+    }
+
+    #[test]
+    fn a_walled_off_room_is_unreachable() {
+        let mut def = two_rooms().def.clone();
+        def.obstacles[1][0].y = 3.9;
+        def.obstacles[1][1].y = 3.9;
+        let a = Arena::new(def);
+        let f = DistanceField::from_point(&a.grid, Point2::new(1.0, 1.0)).unwrap();
+        assert!(!f.reachable(a.grid.cell_of(Point2::new(9.0, 1.0)).unwrap()));
+    }
+
+    #[test]
+    fn steering_reaches_a_point() {
+        let mut pose = Pose::new(1.0, 1.0, 3.0);
+        let target = Point2::new(3.0, 2.0);
+        for _ in 0..200 {
+            let m = steer(pose, target, 2.0);
+            pose = crate::sim::motion::propose(pose, m, 1.0, 2.0);
+        }
+        assert!((pose.pos - target).norm() < 0.05, "{pose:?}");
+    }
+}

@@ -1,0 +1,118 @@
+//! The robot team's decisions: where each robot goes, how it gets there, when it fires.
+//!
+//! The team sees the world only through a [`TeamView`] (each robot's own pose estimate, laser
+//! scan and anonymous detections) and answers with one [`RobotCommand`] per robot. It never
+//! reads ground truth; the world applies the commands on the next tick.
+//!
+//! - [`baseline`]: the paper's baseline — random reachable destinations, chosen one robot at a
+//!   time so teammates spread out, travel time as the only other factor.
+//! - [`pursuit`]: shared by every planner — turn to a detected opponent, close in, fire.
+//! - `coordinated` (the tracker-driven planner) falls back to `baseline` until it lands.
+
+pub mod baseline;
+pub mod pursuit;
+
+use nalgebra::Point2;
+use rand_chacha::ChaCha8Rng;
+
+use crate::sim::arena::Arena;
+use crate::sim::sensors::Detection;
+use crate::sim::{Motion, Physics, Pose};
+
+/// What the team may know about one robot this tick.
+#[derive(Debug, Clone, Copy)]
+pub struct RobotView<'a> {
+    /// The robot's own estimate of its pose (not the truth).
+    pub pose: Pose,
+    pub frozen: bool,
+    /// True when its tag device has cooled down.
+    pub can_fire: bool,
+    pub scan: &'a [f32],
+    pub detections: &'a [Detection],
+}
+
+/// What the team knows this tick.
+#[derive(Debug, Clone)]
+pub struct TeamView<'a> {
+    pub tick: u64,
+    pub robots: Vec<RobotView<'a>>,
+}
+
+/// One robot's orders for the next tick.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct RobotCommand {
+    pub motion: Motion,
+    pub tag: bool,
+    /// Where its planner is sending it (shown in the state), if anywhere.
+    pub goal: Option<Pose>,
+}
+
+/// The planner a match asked for.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum PlannerKind {
+    Idle,
+    Baseline,
+    Coordinated,
+}
+
+impl PlannerKind {
+    /// The planner that actually runs: `coordinated` needs the tracker-driven planner, which
+    /// is not built yet, so it runs `baseline` (and the match state says so).
+    pub fn effective(self) -> PlannerKind {
+        match self {
+            PlannerKind::Coordinated => PlannerKind::Baseline,
+            k => k,
+        }
+    }
+}
+
+/// The team's brain: the chosen planner and its memory.
+#[derive(Debug, Clone)]
+pub struct Team {
+    pub requested: PlannerKind,
+    brain: Brain,
+}
+
+#[derive(Debug, Clone)]
+enum Brain {
+    Idle,
+    Baseline(Box<baseline::Baseline>),
+}
+
+impl Team {
+    pub fn new(kind: PlannerKind, arena: &Arena, robots: usize, rng: ChaCha8Rng) -> Team {
+        let brain = match kind.effective() {
+            PlannerKind::Idle => Brain::Idle,
+            _ => Brain::Baseline(Box::new(baseline::Baseline::new(arena, robots, rng))),
+        };
+        Team {
+            requested: kind,
+            brain,
+        }
+    }
+
+    pub fn effective(&self) -> PlannerKind {
+        match self.brain {
+            Brain::Idle => PlannerKind::Idle,
+            Brain::Baseline(_) => PlannerKind::Baseline,
+        }
+    }
+
+    pub fn decide(
+        &mut self,
+        arena: &Arena,
+        physics: &Physics,
+        view: &TeamView,
+    ) -> Vec<RobotCommand> {
+        match &mut self.brain {
+            Brain::Idle => vec![RobotCommand::default(); view.robots.len()],
+            Brain::Baseline(b) => b.decide(arena, physics, view),
+        }
+    }
+}
+
+/// The world point a detection refers to, seen from `pose`.
+pub fn detection_point(pose: Pose, d: &Detection) -> Point2<f32> {
+    let a = pose.theta + d.bearing;
+    pose.pos + nalgebra::Vector2::new(a.cos(), a.sin()) * d.range
+}

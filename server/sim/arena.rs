@@ -1,0 +1,287 @@
+//! The static map as the simulation sees it: walls for ray casts and collisions (a parry2d
+//! `Polyline` with its bounding-volume hierarchy) and a clearance grid for navigation.
+//!
+//! An `Arena` is built once per map from a validated [`MapDef`] and shared (`Arc`) by every
+//! match on that map: it never changes while a match runs.
+
+use nalgebra::{Point2, Vector2};
+use parry2d::query::{PointQuery, Ray, RayCast};
+use parry2d::shape::Polyline;
+
+use crate::sim::AGENT_RADIUS;
+
+/// A map after validation: plain data, no serialisation concerns (see `maps.rs` for the file format).
+#[derive(Debug, Clone, PartialEq)]
+pub struct MapDef {
+    pub name: String,
+    pub width: f32,
+    pub height: f32,
+    pub obstacles: Vec<Vec<Point2<f32>>>,
+    /// `(x, y, heading)`.
+    pub robot_spawns: Vec<[f32; 3]>,
+    pub opponent_spawns: Vec<Point2<f32>>,
+    pub landmarks: Vec<Point2<f32>>,
+}
+
+/// Extra distance kept from walls by planned paths, on top of the agent radius, so that a
+/// disc following a path with small tracking errors does not scrape along walls.
+pub const NAV_MARGIN: f32 = 0.08;
+
+/// The static world: walls, obstacles and a clearance grid.
+#[derive(Debug)]
+pub struct Arena {
+    pub def: MapDef,
+    /// Every obstacle edge plus the arena border, as one polyline with a BVH.
+    walls: Polyline,
+    pub grid: ClearanceGrid,
+}
+
+impl Arena {
+    pub fn new(def: MapDef) -> Arena {
+        let mut vertices = Vec::new();
+        let mut indices = Vec::new();
+        let border = vec![
+            Point2::new(0.0, 0.0),
+            Point2::new(def.width, 0.0),
+            Point2::new(def.width, def.height),
+            Point2::new(0.0, def.height),
+        ];
+        for poly in std::iter::once(&border).chain(def.obstacles.iter()) {
+            let base = vertices.len() as u32;
+            let n = poly.len() as u32;
+            vertices.extend(poly.iter().copied());
+            indices.extend((0..n).map(|i| [base + i, base + (i + 1) % n]));
+        }
+        let walls = Polyline::new(vertices, Some(indices));
+        let grid = ClearanceGrid::build(&def, &walls);
+        Arena { def, walls, grid }
+    }
+
+    pub fn width(&self) -> f32 {
+        self.def.width
+    }
+
+    pub fn height(&self) -> f32 {
+        self.def.height
+    }
+
+    /// Distance along `dir` (unit) from `origin` to the first wall, capped at `max`.
+    pub fn cast_ray(&self, origin: Point2<f32>, dir: Vector2<f32>, max: f32) -> f32 {
+        self.walls
+            .cast_local_ray(&Ray::new(origin, dir), max, false)
+            .unwrap_or(max)
+    }
+
+    /// True when the straight segment from `a` to `b` crosses no wall.
+    pub fn line_of_sight(&self, a: Point2<f32>, b: Point2<f32>) -> bool {
+        let d = b - a;
+        let len = d.norm();
+        if len < 1e-6 {
+            return !self.inside_obstacle(a);
+        }
+        self.walls
+            .cast_local_ray(&Ray::new(a, d / len), len, false)
+            .is_none()
+    }
+
+    /// The closest point of any wall to `p`.
+    pub fn closest_wall_point(&self, p: Point2<f32>) -> Point2<f32> {
+        self.walls.project_local_point(&p, false).point
+    }
+
+    /// True when `p` lies inside an obstacle polygon or outside the arena.
+    pub fn inside_obstacle(&self, p: Point2<f32>) -> bool {
+        if p.x <= 0.0 || p.y <= 0.0 || p.x >= self.def.width || p.y >= self.def.height {
+            return true;
+        }
+        self.def
+            .obstacles
+            .iter()
+            .any(|poly| point_in_polygon(p, poly))
+    }
+
+    /// Distance from `p` to the nearest wall, or 0 inside an obstacle.
+    pub fn clearance(&self, p: Point2<f32>) -> f32 {
+        if self.inside_obstacle(p) {
+            0.0
+        } else {
+            (self.closest_wall_point(p) - p).norm()
+        }
+    }
+
+    /// True when a disc of `radius` at `p` overlaps no wall or obstacle.
+    pub fn disc_is_free(&self, p: Point2<f32>, radius: f32) -> bool {
+        self.clearance(p) >= radius
+    }
+}
+
+/// Even-odd point-in-polygon test (either winding).
+pub fn point_in_polygon(p: Point2<f32>, poly: &[Point2<f32>]) -> bool {
+    let mut inside = false;
+    let n = poly.len();
+    let mut j = n - 1;
+    for i in 0..n {
+        let (a, b) = (poly[i], poly[j]);
+        if (a.y > p.y) != (b.y > p.y) && p.x < (b.x - a.x) * (p.y - a.y) / (b.y - a.y) + a.x {
+            inside = !inside;
+        }
+        j = i;
+    }
+    inside
+}
+
+/// A regular grid over the arena; each cell stores the distance from its centre to the nearest
+/// wall (0 inside obstacles). Navigation treats a cell as passable when a disc plus
+/// [`NAV_MARGIN`] fits there.
+#[derive(Debug, Clone)]
+pub struct ClearanceGrid {
+    pub cell: f32,
+    pub cols: usize,
+    pub rows: usize,
+    pub clearance: Vec<f32>,
+}
+
+/// Upper bound on grid cells, so that a 500 m × 500 m map does not cost gigabytes.
+const MAX_GRID_CELLS: f32 = 400_000.0;
+
+impl ClearanceGrid {
+    fn build(def: &MapDef, walls: &Polyline) -> ClearanceGrid {
+        let cell = (0.1f32).max((def.width * def.height / MAX_GRID_CELLS).sqrt());
+        let cols = (def.width / cell).ceil().max(1.0) as usize;
+        let rows = (def.height / cell).ceil().max(1.0) as usize;
+        let mut clearance = vec![0.0; cols * rows];
+        for r in 0..rows {
+            for c in 0..cols {
+                let p = Point2::new((c as f32 + 0.5) * cell, (r as f32 + 0.5) * cell);
+                let inside = p.x >= def.width
+                    || p.y >= def.height
+                    || def.obstacles.iter().any(|poly| point_in_polygon(p, poly));
+                clearance[r * cols + c] = if inside {
+                    0.0
+                } else {
+                    (walls.project_local_point(&p, false).point - p).norm()
+                };
+            }
+        }
+        ClearanceGrid {
+            cell,
+            cols,
+            rows,
+            clearance,
+        }
+    }
+
+    pub fn len(&self) -> usize {
+        self.clearance.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.clearance.is_empty()
+    }
+
+    /// The cell containing `p`, if inside the grid.
+    pub fn cell_of(&self, p: Point2<f32>) -> Option<usize> {
+        if !(p.x >= 0.0 && p.y >= 0.0) {
+            return None;
+        }
+        let c = (p.x / self.cell) as usize;
+        let r = (p.y / self.cell) as usize;
+        (c < self.cols && r < self.rows).then_some(r * self.cols + c)
+    }
+
+    pub fn centre(&self, idx: usize) -> Point2<f32> {
+        let (r, c) = (idx / self.cols, idx % self.cols);
+        Point2::new((c as f32 + 0.5) * self.cell, (r as f32 + 0.5) * self.cell)
+    }
+
+    /// True when an agent disc (with the navigation margin) fits at this cell's centre.
+    pub fn passable(&self, idx: usize) -> bool {
+        self.clearance[idx] >= AGENT_RADIUS + NAV_MARGIN
+    }
+
+    /// The passable cell nearest to `p` (searching outward ring by ring), if any within `max_rings`.
+    pub fn nearest_passable(&self, p: Point2<f32>, max_rings: usize) -> Option<usize> {
+        let c0 = ((p.x / self.cell) as isize).clamp(0, self.cols as isize - 1);
+        let r0 = ((p.y / self.cell) as isize).clamp(0, self.rows as isize - 1);
+        for ring in 0..=max_rings as isize {
+            let mut best: Option<(f32, usize)> = None;
+            for dr in -ring..=ring {
+                for dc in -ring..=ring {
+                    if dr.abs() != ring && dc.abs() != ring {
+                        continue;
+                    }
+                    let (r, c) = (r0 + dr, c0 + dc);
+                    if r < 0 || c < 0 || r >= self.rows as isize || c >= self.cols as isize {
+                        continue;
+                    }
+                    let idx = r as usize * self.cols + c as usize;
+                    if self.passable(idx) {
+                        let d = (self.centre(idx) - p).norm_squared();
+                        if best.is_none_or(|(bd, _)| d < bd) {
+                            best = Some((d, idx));
+                        }
+                    }
+                }
+            }
+            if let Some((_, idx)) = best {
+                return Some(idx);
+            }
+        }
+        None
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    pub(crate) fn square_room() -> Arena {
+        Arena::new(MapDef {
+            name: "room".into(),
+            width: 10.0,
+            height: 6.0,
+            obstacles: vec![vec![
+                Point2::new(4.0, 2.0),
+                Point2::new(6.0, 2.0),
+                Point2::new(6.0, 4.0),
+                Point2::new(4.0, 4.0),
+            ]],
+            robot_spawns: vec![[1.0, 1.0, 0.0]],
+            opponent_spawns: vec![Point2::new(9.0, 5.0)],
+            landmarks: vec![],
+        })
+    }
+
+    #[test]
+    fn rays_stop_at_obstacles_and_border() {
+        let a = square_room();
+        let d = a.cast_ray(Point2::new(1.0, 3.0), Vector2::new(1.0, 0.0), 8.0);
+        assert!((d - 3.0).abs() < 1e-4, "{d}");
+        let d = a.cast_ray(Point2::new(1.0, 1.0), Vector2::new(0.0, 1.0), 8.0);
+        assert!((d - 5.0).abs() < 1e-4, "{d}");
+        let d = a.cast_ray(Point2::new(1.0, 1.0), Vector2::new(1.0, 0.0), 8.0);
+        assert!((d - 8.0).abs() < 1e-4, "max range when nothing is hit: {d}");
+    }
+
+    #[test]
+    fn line_of_sight_and_clearance() {
+        let a = square_room();
+        assert!(!a.line_of_sight(Point2::new(1.0, 3.0), Point2::new(9.0, 3.0)));
+        assert!(a.line_of_sight(Point2::new(1.0, 1.0), Point2::new(9.0, 1.0)));
+        assert!(a.inside_obstacle(Point2::new(5.0, 3.0)));
+        assert!((a.clearance(Point2::new(3.0, 3.0)) - 1.0).abs() < 1e-4);
+        assert!(a.disc_is_free(Point2::new(3.0, 3.0), 0.25));
+        assert!(!a.disc_is_free(Point2::new(0.1, 3.0), 0.25));
+    }
+
+    #[test]
+    fn grid_marks_obstacles_impassable() {
+        let a = square_room();
+        let inside = a.grid.cell_of(Point2::new(5.0, 3.0)).unwrap();
+        assert!(!a.grid.passable(inside));
+        let open = a.grid.cell_of(Point2::new(2.0, 3.0)).unwrap();
+        assert!(a.grid.passable(open));
+        let near = a.grid.nearest_passable(Point2::new(5.0, 3.0), 30).unwrap();
+        assert!(a.grid.passable(near));
+    }
+}

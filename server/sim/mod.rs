@@ -1,0 +1,173 @@
+//! The functional core: a laser-tag match as plain data and pure steps.
+//!
+//! [`World`] owns everything about one match: the shared static [`arena::Arena`], the robots
+//! and opponents, the seeded random streams, the robots' team brain and the event log.
+//! [`World::step`] advances it by one fixed tick; nothing here reads a clock, does I/O or
+//! touches tokio, so a match is a pure function of (map, settings, seed, inputs by tick).
+//!
+//! - `arena`: static geometry (ray casts, line of sight, clearance grid).
+//! - `motion`: kinematics and collision resolution of disc agents.
+//! - `sensors`: laser scans and anonymous opponent detections.
+//! - `rules`: tagging, freezing, elimination.
+//! - `bots`: the opponents' bot behaviours (part of the environment, so they may read truth).
+//! - `world`: the tick pipeline and the event log.
+
+pub mod arena;
+pub mod bots;
+pub mod motion;
+pub mod rules;
+pub mod sensors;
+pub mod world;
+
+pub use world::{Event, EventKind, MatchStatus, Side, World};
+
+use nalgebra::{Point2, Vector2};
+use rand::RngExt;
+
+/// Ticks per simulated second.
+pub const TICK_HZ: u32 = 20;
+/// Seconds per tick.
+pub const DT: f32 = 1.0 / TICK_HZ as f32;
+/// Every agent is a disc of this radius (metres).
+pub const AGENT_RADIUS: f32 = 0.25;
+
+/// The physical parameters of a match (game-rules.md defaults).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Physics {
+    pub robot_speed: f32,
+    pub robot_turn_rate: f32,
+    pub opponent_speed: f32,
+    pub opponent_turn_rate: f32,
+    pub laser_beams: usize,
+    pub laser_fov: f32,
+    pub laser_range: f32,
+    pub laser_noise: f32,
+    pub detection_range_noise: f32,
+    pub detection_bearing_noise: f32,
+    pub tag_half_angle: f32,
+    pub tag_range: f32,
+    pub tag_cooldown_ticks: u64,
+    pub freeze_ticks: u64,
+}
+
+impl Default for Physics {
+    fn default() -> Self {
+        Physics {
+            robot_speed: 1.0,
+            robot_turn_rate: 2.0,
+            opponent_speed: 1.0,
+            opponent_turn_rate: 3.0,
+            laser_beams: 181,
+            laser_fov: std::f32::consts::PI,
+            laser_range: 8.0,
+            laser_noise: 0.02,
+            detection_range_noise: 0.05,
+            detection_bearing_noise: 1f32.to_radians(),
+            tag_half_angle: 5f32.to_radians(),
+            tag_range: 6.0,
+            tag_cooldown_ticks: TICK_HZ as u64,
+            freeze_ticks: 10 * TICK_HZ as u64,
+        }
+    }
+}
+
+/// A position and heading (radians, counter-clockwise from +x).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Pose {
+    pub pos: Point2<f32>,
+    pub theta: f32,
+}
+
+impl Pose {
+    pub fn new(x: f32, y: f32, theta: f32) -> Pose {
+        Pose {
+            pos: Point2::new(x, y),
+            theta,
+        }
+    }
+
+    pub fn heading(&self) -> Vector2<f32> {
+        Vector2::new(self.theta.cos(), self.theta.sin())
+    }
+
+    /// Bearing of `p` relative to this pose's heading, in (-π, π].
+    pub fn bearing_to(&self, p: Point2<f32>) -> f32 {
+        let d = p - self.pos;
+        wrap_angle(d.y.atan2(d.x) - self.theta)
+    }
+}
+
+/// Wraps an angle into (-π, π].
+pub fn wrap_angle(a: f32) -> f32 {
+    let tau = std::f32::consts::TAU;
+    let mut a = a % tau;
+    if a > std::f32::consts::PI {
+        a -= tau;
+    } else if a <= -std::f32::consts::PI {
+        a += tau;
+    }
+    a
+}
+
+/// One draw from N(0, σ²) by the Box–Muller transform (keeps us to the `rand` crate alone).
+pub fn gaussian(rng: &mut impl RngExt, sigma: f32) -> f32 {
+    if sigma == 0.0 {
+        return 0.0;
+    }
+    let u1: f32 = rng.random::<f32>().max(f32::MIN_POSITIVE);
+    let u2: f32 = rng.random();
+    sigma * (-2.0 * u1.ln()).sqrt() * (std::f32::consts::TAU * u2).cos()
+}
+
+/// Which agent: robots and opponents are numbered separately (`r0`, `o0`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum AgentId {
+    Robot(usize),
+    Opponent(usize),
+}
+
+impl std::fmt::Display for AgentId {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            AgentId::Robot(i) => write!(f, "r{i}"),
+            AgentId::Opponent(i) => write!(f, "o{i}"),
+        }
+    }
+}
+
+/// What moves an agent this tick. Speeds are fractions of the agent's top speed and turn rate.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub enum Motion {
+    #[default]
+    Stop,
+    /// Differential drive (robots, and people at the keyboard): forward and turn in [-1, 1].
+    Drive { forward: f32, turn: f32 },
+    /// Walk straight towards a point at top speed, turning the body towards the direction of
+    /// travel (API-driven opponents and bots).
+    Toward(Point2<f32>),
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::SeedableRng;
+
+    #[test]
+    fn wrap_angle_stays_in_range() {
+        for a in [-10.0f32, -3.2, 0.0, 3.2, 7.0, 100.0] {
+            let w = wrap_angle(a);
+            assert!(w > -std::f32::consts::PI - 1e-6 && w <= std::f32::consts::PI + 1e-6);
+            assert!(((w - a) / std::f32::consts::TAU).fract().abs() < 1e-3 || (w - a).abs() < 1e-4);
+        }
+    }
+
+    #[test]
+    fn gaussian_has_the_right_spread() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(1);
+        let xs: Vec<f32> = (0..20_000).map(|_| gaussian(&mut rng, 2.0)).collect();
+        let mean = xs.iter().sum::<f32>() / xs.len() as f32;
+        let var = xs.iter().map(|x| (x - mean).powi(2)).sum::<f32>() / xs.len() as f32;
+        assert!(mean.abs() < 0.05, "{mean}");
+        assert!((var.sqrt() - 2.0).abs() < 0.05, "{var}");
+    }
+}

@@ -1,0 +1,191 @@
+//! The robots' sensors: a forward laser range finder and the anonymous opponent detector.
+//!
+//! A scan casts `laser_beams` rays evenly over the field of view (beam `i` at bearing
+//! `(i - 90)°` for the default 181 beams). Each ray stops at the first wall or agent disc.
+//! Beams that end on an opponent are grouped per opponent into one [`Detection`] (range and
+//! bearing to its centre, with noise): the detector says *something is there*, never *who*.
+//! The referee-side list of which opponents were seen is kept apart ([`Scan::seen`]) and
+//! never reaches the robots' decisions.
+
+use nalgebra::{Point2, Vector2};
+use rand::RngExt;
+
+use crate::sim::arena::Arena;
+use crate::sim::{AGENT_RADIUS, AgentId, Physics, Pose, gaussian, wrap_angle};
+
+/// An anonymous sighting of an opponent, relative to the sensing robot.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Detection {
+    pub range: f32,
+    pub bearing: f32,
+}
+
+/// One robot's sensing in one tick.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Scan {
+    /// Measured ranges, one per beam; `laser_range` where nothing was hit.
+    pub ranges: Vec<f32>,
+    pub detections: Vec<Detection>,
+    /// Ground truth: opponent indices behind `detections`, in the same order (referee only).
+    pub seen: Vec<usize>,
+}
+
+/// Bearing of beam `i` of `n` spread evenly over `fov`.
+pub fn beam_bearing(i: usize, n: usize, fov: f32) -> f32 {
+    if n <= 1 {
+        return 0.0;
+    }
+    -fov / 2.0 + fov * i as f32 / (n - 1) as f32
+}
+
+/// Distance along unit `dir` from `origin` to the disc at `centre`, if the ray hits it.
+pub fn ray_disc(
+    origin: Point2<f32>,
+    dir: Vector2<f32>,
+    centre: Point2<f32>,
+    radius: f32,
+) -> Option<f32> {
+    let v = centre - origin;
+    let tc = v.dot(&dir);
+    let d2 = v.norm_squared() - tc * tc;
+    let r2 = radius * radius;
+    if d2 > r2 {
+        return None;
+    }
+    let t = tc - (r2 - d2).sqrt();
+    (t >= 0.0).then_some(t)
+}
+
+/// Scans from `pose`. `others` are the centres of every other agent present in the arena.
+pub fn scan(
+    arena: &Arena,
+    physics: &Physics,
+    pose: Pose,
+    others: &[(AgentId, Point2<f32>)],
+    rng: &mut impl RngExt,
+) -> Scan {
+    let n = physics.laser_beams;
+    let max = physics.laser_range;
+    // Only agents within laser range can stop a beam; skip the rest up front.
+    let near: Vec<(AgentId, Point2<f32>)> = others
+        .iter()
+        .filter(|(_, c)| (c - pose.pos).norm() <= max + AGENT_RADIUS)
+        .copied()
+        .collect();
+    let mut ranges = Vec::with_capacity(n);
+    let mut seen: Vec<usize> = Vec::new();
+    for i in 0..n {
+        let a = pose.theta + beam_bearing(i, n, physics.laser_fov);
+        let dir = Vector2::new(a.cos(), a.sin());
+        let mut best = arena.cast_ray(pose.pos, dir, max);
+        let mut hit = None;
+        for (id, c) in &near {
+            if let Some(t) = ray_disc(pose.pos, dir, *c, AGENT_RADIUS)
+                && t < best
+            {
+                best = t;
+                hit = Some(*id);
+            }
+        }
+        if let Some(AgentId::Opponent(k)) = hit
+            && !seen.contains(&k)
+        {
+            seen.push(k);
+        }
+        let measured = if best >= max {
+            max
+        } else {
+            (best + gaussian(rng, physics.laser_noise)).clamp(0.0, max)
+        };
+        ranges.push(measured);
+    }
+    // A fixed order (by opponent index) keeps noise draws, and so the match, deterministic.
+    seen.sort_unstable();
+    let detections = seen
+        .iter()
+        .filter_map(|k| others.iter().find(|(id, _)| *id == AgentId::Opponent(*k)))
+        .map(|(_, c)| Detection {
+            range: ((c - pose.pos).norm() + gaussian(rng, physics.detection_range_noise)).max(0.0),
+            bearing: wrap_angle(
+                pose.bearing_to(*c) + gaussian(rng, physics.detection_bearing_noise),
+            ),
+        })
+        .collect();
+    Scan {
+        ranges,
+        detections,
+        seen,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::sim::arena::MapDef;
+    use rand::SeedableRng;
+
+    fn hall() -> Arena {
+        Arena::new(MapDef {
+            name: "hall".into(),
+            width: 20.0,
+            height: 4.0,
+            obstacles: vec![],
+            robot_spawns: vec![[1.0, 2.0, 0.0]],
+            opponent_spawns: vec![Point2::new(4.0, 2.0)],
+            landmarks: vec![],
+        })
+    }
+
+    #[test]
+    fn beams_span_the_field_of_view() {
+        let fov = std::f32::consts::PI;
+        assert!((beam_bearing(0, 181, fov) + fov / 2.0).abs() < 1e-6);
+        assert!(beam_bearing(90, 181, fov).abs() < 1e-6);
+        assert!((beam_bearing(180, 181, fov) - fov / 2.0).abs() < 1e-6);
+    }
+
+    #[test]
+    fn a_scan_stops_at_walls_and_agents_and_detects_opponents_anonymously() {
+        let a = hall();
+        let physics = Physics::default();
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
+        let pose = Pose::new(1.0, 2.0, 0.0);
+        let others = [
+            (AgentId::Opponent(0), Point2::new(4.0, 2.0)),
+            (AgentId::Robot(1), Point2::new(1.0, 3.0)),
+        ];
+        let s = scan(&a, &physics, pose, &others, &mut rng);
+        assert_eq!(s.ranges.len(), 181);
+        // Straight ahead: the opponent's near edge at 2.75 m.
+        assert!((s.ranges[90] - 2.75).abs() < 0.1, "{}", s.ranges[90]);
+        // Straight left (beam 180, +90°): the teammate's near edge at 0.75 m.
+        assert!((s.ranges[180] - 0.75).abs() < 0.1, "{}", s.ranges[180]);
+        // Straight right: the wall at y = 0, 2 m away.
+        assert!((s.ranges[0] - 2.0).abs() < 0.1, "{}", s.ranges[0]);
+        assert_eq!(s.detections.len(), 1, "only the opponent is detected");
+        assert!((s.detections[0].range - 3.0).abs() < 0.25);
+        assert!(s.detections[0].bearing.abs() < 0.1);
+        assert_eq!(s.seen, vec![0]);
+    }
+
+    #[test]
+    fn an_opponent_behind_a_wall_or_out_of_range_is_not_detected() {
+        let a = hall();
+        let physics = Physics::default();
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
+        let pose = Pose::new(1.0, 2.0, 0.0);
+        let far = [(AgentId::Opponent(0), Point2::new(12.0, 2.0))];
+        assert!(
+            scan(&a, &physics, pose, &far, &mut rng)
+                .detections
+                .is_empty()
+        );
+        let behind = [(AgentId::Opponent(0), Point2::new(0.5, 2.0))];
+        let back = Pose::new(1.0, 2.0, 0.0);
+        assert!(
+            scan(&a, &physics, back, &behind, &mut rng)
+                .detections
+                .is_empty()
+        );
+    }
+}
