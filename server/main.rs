@@ -1,1 +1,115 @@
-fn main() {}
+//! The `lasertag` binary: parse the command line, load the maps, serve, shut down cleanly.
+
+use std::net::SocketAddr;
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::sync::Arc;
+
+use clap::{Parser, Subcommand};
+use lasertag::game::Registry;
+use lasertag::maps::MapStore;
+
+#[derive(Debug, Parser)]
+#[command(
+    version,
+    about = "A team of autonomous robots plays laser tag against people in a web browser."
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Option<Command>,
+    #[command(flatten)]
+    serve: ServeArgs,
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// Serve the game and the API (the default command).
+    Serve(ServeArgs),
+}
+
+#[derive(Debug, Clone, clap::Args)]
+struct ServeArgs {
+    /// Address to listen on.
+    #[arg(long, env = "LASERTAG_ADDR", default_value = "127.0.0.1:8080")]
+    addr: SocketAddr,
+    /// Directory of map files (`<name>.json`).
+    #[arg(long, env = "LASERTAG_MAPS", default_value = "maps")]
+    maps: PathBuf,
+    /// Directory of the static web client.
+    #[arg(long, env = "LASERTAG_WEB", default_value = "web")]
+    web: PathBuf,
+    /// Start without the showcase match.
+    #[arg(long, env = "LASERTAG_NO_SHOWCASE")]
+    no_showcase: bool,
+}
+
+fn main() -> ExitCode {
+    tracing_subscriber::fmt()
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_default_env()
+                .unwrap_or_else(|_| "info,tower_http=warn".into()),
+        )
+        .init();
+    let cli = Cli::parse();
+    let args = match cli.command {
+        Some(Command::Serve(args)) => args,
+        None => cli.serve,
+    };
+    let runtime = match tokio::runtime::Runtime::new() {
+        Ok(rt) => rt,
+        Err(e) => {
+            eprintln!("error: cannot start the async runtime: {e}");
+            return ExitCode::FAILURE;
+        }
+    };
+    match runtime.block_on(serve(args)) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+async fn serve(args: ServeArgs) -> Result<(), String> {
+    let maps = MapStore::load_dir(&args.maps).map_err(|e| format!("loading maps: {e}"))?;
+    tracing::info!(maps = maps.len(), dir = %args.maps.display(), "maps loaded");
+    let registry = Registry::new(maps);
+    if !args.no_showcase {
+        tokio::spawn(lasertag::game::showcase::keep_running(registry.clone()));
+    }
+    let listener = tokio::net::TcpListener::bind(args.addr)
+        .await
+        .map_err(|e| format!("cannot listen on {}: {e}", args.addr))?;
+    let local = listener.local_addr().map_err(|e| e.to_string())?;
+    tracing::info!("serving http://{local}");
+    let app = lasertag::http::app(registry.clone(), args.web);
+    axum::serve(listener, app)
+        .with_graceful_shutdown(shutdown_signal(registry))
+        .await
+        .map_err(|e| format!("server error: {e}"))
+}
+
+/// Resolves on Ctrl-C or SIGTERM, after telling every match to stop.
+async fn shutdown_signal(registry: Arc<Registry>) {
+    let ctrl_c = async {
+        let _ = tokio::signal::ctrl_c().await;
+    };
+    #[cfg(unix)]
+    let terminate = async {
+        match tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate()) {
+            Ok(mut s) => {
+                s.recv().await;
+            }
+            Err(_) => std::future::pending::<()>().await,
+        }
+    };
+    #[cfg(not(unix))]
+    let terminate = std::future::pending::<()>();
+    tokio::select! {
+        _ = ctrl_c => {},
+        _ = terminate => {},
+    }
+    tracing::info!("shutting down");
+    registry.stop_all().await;
+}

@@ -364,11 +364,18 @@ impl MapStore {
     /// Adds a map, building its arena. Returns false (and changes nothing) when the name is taken.
     pub fn insert(&mut self, def: MapDef) -> bool {
         if self.maps.contains_key(&def.name) {
+            return false; // do not build an arena only to throw it away
+        }
+        self.insert_arena(Arc::new(Arena::new(def)))
+    }
+
+    /// Adds an already-built arena. Returns false (and changes nothing) when the name is taken.
+    pub fn insert_arena(&mut self, arena: Arc<Arena>) -> bool {
+        if self.maps.contains_key(&arena.def.name) {
             return false;
         }
-        let name = def.name.clone();
-        let arena = Arc::new(Arena::new(def));
-        self.maps.insert(name, StoredMap { arena });
+        self.maps
+            .insert(arena.def.name.clone(), StoredMap { arena });
         true
     }
 

@@ -1,1 +1,763 @@
+//! Every JSON shape of the HTTP and WebSocket interface (`../shared/spec/http-api.md`), and the
+//! conversions between them and the core's plain types. Nothing else in the crate derives serde
+//! (map files aside, in `maps.rs`), so the wire format is decided here and only here.
+//!
+//! Requests are parsed strictly: unknown fields are errors, and every error names the field
+//! ([`parse`] wraps serde with the JSON path of the failure).
 
+use serde::de::DeserializeOwned;
+use serde::{Deserialize, Serialize};
+use utoipa::ToSchema;
+
+use crate::planner::PlannerKind;
+use crate::sim::bots::BotKind;
+use crate::sim::world::{ControlKind, FinishReason, MatchConfig, Placement};
+use crate::sim::{AgentId, EventKind, MatchStatus, Side, TICK_HZ, World};
+
+/// Parses a request body, naming the JSON path of whatever is wrong.
+pub fn parse<T: DeserializeOwned>(bytes: &[u8]) -> Result<T, String> {
+    let de = &mut serde_json::Deserializer::from_slice(bytes);
+    let value: T = serde_path_to_error::deserialize(de).map_err(|e| {
+        let path = e.path().to_string();
+        let inner = e.into_inner();
+        if path == "." {
+            format!("body: {inner}")
+        } else {
+            format!("{path}: {inner}")
+        }
+    })?;
+    Ok(value)
+}
+
+/// Rounds metres to a millimetre: f32 noise digits help nobody and bloat the JSON.
+fn mm(v: f32) -> f64 {
+    ((v as f64) * 1000.0).round() / 1000.0
+}
+
+fn rad(v: f32) -> f64 {
+    ((v as f64) * 10_000.0).round() / 10_000.0
+}
+
+#[derive(Debug, Serialize, ToSchema)]
+pub struct ErrorBody {
+    /// What is wrong, naming the field.
+    pub error: String,
+}
+
+#[derive(Debug, Serialize, ToSchema)]
+pub struct Health {
+    pub status: &'static str,
+    pub version: &'static str,
+}
+
+#[derive(Debug, Serialize, ToSchema)]
+pub struct MapInfo {
+    pub name: String,
+    pub width: f64,
+    pub height: f64,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, ToSchema)]
+#[serde(rename_all = "lowercase")]
+pub enum OpponentControl {
+    Bot,
+    Api,
+    Human,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, ToSchema)]
+#[serde(rename_all = "lowercase")]
+pub enum OpponentBot {
+    Wander,
+    Evade,
+    Idle,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, ToSchema)]
+#[serde(rename_all = "lowercase")]
+pub enum Planner {
+    Coordinated,
+    Baseline,
+    Idle,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, ToSchema)]
+#[serde(rename_all = "lowercase")]
+pub enum Clock {
+    Realtime,
+    Manual,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, ToSchema)]
+#[serde(rename_all = "lowercase")]
+pub enum StartPlacement {
+    /// The map's spawns, in order, wrapping.
+    Spawns,
+    /// Random free, mutually reachable points (seeded).
+    Random,
+}
+
+/// Settings of the team's opponent tracker.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct TrackerSettings {
+    /// Particles in each role's filter (10..=100000, default 1000).
+    pub particles_per_role: Option<i64>,
+    /// Merge roles whose clouds become indistinguishable (default true).
+    pub merge: Option<bool>,
+    /// Ticks between merge checks (1..=10000, default 20).
+    pub merge_interval: Option<i64>,
+    /// Symmetric KL divergence under which two roles merge (> 0, default 0.5).
+    pub kl_cutoff: Option<f64>,
+    /// Cell size in metres of the merge histogram (0.1..=10, default 1.0).
+    pub grid_cell: Option<f64>,
+}
+
+/// Body of `POST /api/matches`. Every field but `map` is optional.
+#[derive(Debug, Clone, Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct CreateMatch {
+    /// A map name, or an inline map object.
+    #[schema(value_type = Object)]
+    pub map: serde_json::Value,
+    /// 1..=8 robots (default 2).
+    pub robots: Option<i64>,
+    /// 1..=32 opponents (default 1).
+    pub opponents: Option<i64>,
+    pub opponent_control: Option<OpponentControl>,
+    pub opponent_bot: Option<OpponentBot>,
+    pub planner: Option<Planner>,
+    pub tracker: Option<TrackerSettings>,
+    pub clock: Option<Clock>,
+    pub seed: Option<u64>,
+    /// Seconds, in (0, 86400] (default 300).
+    pub time_limit_s: Option<f64>,
+    /// Where agents start when no explicit starts are given (default `spawns`).
+    pub placement: Option<StartPlacement>,
+    /// Explicit robot starts `[x, y, heading]`, one per robot.
+    pub robot_starts: Option<Vec<[f64; 3]>>,
+    /// Explicit opponent starts `[x, y]`, one per opponent.
+    pub opponent_starts: Option<Vec<[f64; 2]>>,
+}
+
+/// The tracker settings a match runs with, defaults filled in.
+#[derive(Debug, Clone, PartialEq, Serialize, ToSchema)]
+pub struct TrackerConfig {
+    pub particles_per_role: i64,
+    pub merge: bool,
+    pub merge_interval: i64,
+    pub kl_cutoff: f64,
+    pub grid_cell: f64,
+}
+
+impl Default for TrackerConfig {
+    fn default() -> Self {
+        TrackerConfig {
+            particles_per_role: 1000,
+            merge: true,
+            merge_interval: 20,
+            kl_cutoff: 0.5,
+            grid_cell: 1.0,
+        }
+    }
+}
+
+/// A validated `CreateMatch`: the core's config plus what only the shell cares about.
+#[derive(Debug, Clone)]
+pub struct MatchRequest {
+    pub map: serde_json::Value,
+    pub config: MatchConfig,
+    pub clock: Clock,
+    pub tracker: TrackerConfig,
+}
+
+fn in_range(field: &str, v: i64, lo: i64, hi: i64) -> Result<i64, String> {
+    if (lo..=hi).contains(&v) {
+        Ok(v)
+    } else {
+        Err(format!("{field}: {v} must be in {lo}..={hi}"))
+    }
+}
+
+fn finite_in(field: &str, v: f64, lo: f64, hi: f64, lo_open: bool) -> Result<f64, String> {
+    let ok = v.is_finite() && (if lo_open { v > lo } else { v >= lo }) && v <= hi;
+    if ok {
+        Ok(v)
+    } else {
+        let open = if lo_open { "(" } else { "[" };
+        Err(format!(
+            "{field}: {v} must be finite and in {open}{lo}, {hi}]"
+        ))
+    }
+}
+
+impl CreateMatch {
+    /// Checks ranges and fills in defaults.
+    pub fn validate(self) -> Result<MatchRequest, String> {
+        let robots = in_range("robots", self.robots.unwrap_or(2), 1, 8)? as usize;
+        let opponents = in_range("opponents", self.opponents.unwrap_or(1), 1, 32)? as usize;
+        let time_limit_s = finite_in(
+            "time_limit_s",
+            self.time_limit_s.unwrap_or(300.0),
+            0.0,
+            86_400.0,
+            true,
+        )?;
+        let t = self.tracker.unwrap_or_default();
+        let d = TrackerConfig::default();
+        let tracker = TrackerConfig {
+            particles_per_role: in_range(
+                "tracker.particles_per_role",
+                t.particles_per_role.unwrap_or(d.particles_per_role),
+                10,
+                100_000,
+            )?,
+            merge: t.merge.unwrap_or(d.merge),
+            merge_interval: in_range(
+                "tracker.merge_interval",
+                t.merge_interval.unwrap_or(d.merge_interval),
+                1,
+                10_000,
+            )?,
+            kl_cutoff: finite_in(
+                "tracker.kl_cutoff",
+                t.kl_cutoff.unwrap_or(d.kl_cutoff),
+                0.0,
+                1e6,
+                true,
+            )?,
+            grid_cell: finite_in(
+                "tracker.grid_cell",
+                t.grid_cell.unwrap_or(d.grid_cell),
+                0.1,
+                10.0,
+                false,
+            )?,
+        };
+        let check_points = |field: &str, pts: &[&[f64]]| -> Result<(), String> {
+            for (i, p) in pts.iter().enumerate() {
+                if let Some(v) = p.iter().find(|v| !v.is_finite() || v.abs() > 1e6) {
+                    return Err(format!("{field}[{i}]: {v} is not a finite coordinate"));
+                }
+            }
+            Ok(())
+        };
+        let robot_starts = self.robot_starts.unwrap_or_default();
+        let opponent_starts = self.opponent_starts.unwrap_or_default();
+        check_points(
+            "robot_starts",
+            &robot_starts.iter().map(|p| &p[..]).collect::<Vec<_>>(),
+        )?;
+        check_points(
+            "opponent_starts",
+            &opponent_starts.iter().map(|p| &p[..]).collect::<Vec<_>>(),
+        )?;
+        let placement = if !robot_starts.is_empty() || !opponent_starts.is_empty() {
+            Placement::Given {
+                robots: robot_starts
+                    .iter()
+                    .map(|p| [p[0] as f32, p[1] as f32, p[2] as f32])
+                    .collect(),
+                opponents: opponent_starts
+                    .iter()
+                    .map(|p| [p[0] as f32, p[1] as f32])
+                    .collect(),
+            }
+        } else if self.placement == Some(StartPlacement::Random) {
+            Placement::Random
+        } else {
+            Placement::Spawns
+        };
+        let config = MatchConfig {
+            robots,
+            opponents,
+            opponent_control: match self.opponent_control.unwrap_or(OpponentControl::Bot) {
+                OpponentControl::Bot => ControlKind::Bot,
+                OpponentControl::Api => ControlKind::Api,
+                OpponentControl::Human => ControlKind::Human,
+            },
+            opponent_bot: match self.opponent_bot.unwrap_or(OpponentBot::Wander) {
+                OpponentBot::Wander => BotKind::Wander,
+                OpponentBot::Evade => BotKind::Evade,
+                OpponentBot::Idle => BotKind::Idle,
+            },
+            planner: planner_kind(self.planner.unwrap_or(Planner::Coordinated)),
+            seed: self.seed.unwrap_or(0),
+            time_limit_ticks: (time_limit_s * TICK_HZ as f64).round().max(1.0) as u64,
+            placement,
+            ..MatchConfig::default()
+        };
+        Ok(MatchRequest {
+            map: self.map,
+            config,
+            clock: self.clock.unwrap_or(Clock::Realtime),
+            tracker,
+        })
+    }
+}
+
+fn planner_kind(p: Planner) -> PlannerKind {
+    match p {
+        Planner::Coordinated => PlannerKind::Coordinated,
+        Planner::Baseline => PlannerKind::Baseline,
+        Planner::Idle => PlannerKind::Idle,
+    }
+}
+
+fn planner_dto(p: PlannerKind) -> Planner {
+    match p {
+        PlannerKind::Coordinated => Planner::Coordinated,
+        PlannerKind::Baseline => Planner::Baseline,
+        PlannerKind::Idle => Planner::Idle,
+    }
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, ToSchema)]
+#[serde(rename_all = "lowercase")]
+pub enum Status {
+    Running,
+    Finished,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, ToSchema)]
+#[serde(rename_all = "lowercase")]
+pub enum Winner {
+    Robots,
+    Opponents,
+}
+
+fn status(s: MatchStatus) -> Status {
+    match s {
+        MatchStatus::Running => Status::Running,
+        MatchStatus::Finished => Status::Finished,
+    }
+}
+
+fn winner(w: Option<Side>) -> Option<Winner> {
+    w.map(|w| match w {
+        Side::Robots => Winner::Robots,
+        Side::Opponents => Winner::Opponents,
+    })
+}
+
+/// What the shell knows about a match besides its world.
+#[derive(Debug, Clone)]
+pub struct MatchMeta {
+    pub id: String,
+    pub map: String,
+    pub clock: Clock,
+    pub tracker: TrackerConfig,
+    pub players: usize,
+}
+
+/// A match in listings and the reply to `POST /api/matches`.
+#[derive(Debug, Clone, Serialize, ToSchema)]
+pub struct MatchSummary {
+    pub id: String,
+    pub map: String,
+    pub clock: Clock,
+    pub tick: u64,
+    pub tick_hz: u32,
+    pub time_s: f64,
+    pub time_limit_s: f64,
+    pub status: Status,
+    pub winner: Option<Winner>,
+    pub robots: usize,
+    pub opponents: usize,
+    pub opponents_left: usize,
+    pub opponent_control: OpponentControl,
+    pub opponent_bot: OpponentBot,
+    /// The planner asked for.
+    pub planner: Planner,
+    /// The planner that runs (differs while a planner falls back to another).
+    pub planner_active: Planner,
+    pub tracker: TrackerConfig,
+    pub seed: u64,
+    pub players: usize,
+    /// Caveats a user should know, e.g. a fallback in effect.
+    pub notes: Vec<String>,
+}
+
+pub fn notes(world: &World) -> Vec<String> {
+    let mut notes = Vec::new();
+    if world.team.requested != world.team.effective() {
+        notes.push(
+            "the coordinated planner is not built yet: this match runs the baseline planner".into(),
+        );
+    }
+    notes
+}
+
+pub fn summary(world: &World, meta: &MatchMeta) -> MatchSummary {
+    let c = &world.config;
+    MatchSummary {
+        id: meta.id.clone(),
+        map: meta.map.clone(),
+        clock: meta.clock,
+        tick: world.tick,
+        tick_hz: TICK_HZ,
+        time_s: world.time_s(),
+        time_limit_s: c.time_limit_ticks as f64 / TICK_HZ as f64,
+        status: status(world.status),
+        winner: winner(world.winner),
+        robots: world.robots.len(),
+        opponents: world.opponents.len(),
+        opponents_left: world.opponents.iter().filter(|o| !o.tagged).count(),
+        opponent_control: match c.opponent_control {
+            ControlKind::Bot => OpponentControl::Bot,
+            ControlKind::Api => OpponentControl::Api,
+            ControlKind::Human => OpponentControl::Human,
+        },
+        opponent_bot: match c.opponent_bot {
+            BotKind::Wander => OpponentBot::Wander,
+            BotKind::Evade => OpponentBot::Evade,
+            BotKind::Idle => OpponentBot::Idle,
+        },
+        planner: planner_dto(world.team.requested),
+        planner_active: planner_dto(world.team.effective()),
+        tracker: meta.tracker.clone(),
+        seed: c.seed,
+        players: meta.players,
+        notes: notes(world),
+    }
+}
+
+#[derive(Debug, Clone, Serialize, ToSchema)]
+pub struct PoseDto {
+    pub x: f64,
+    pub y: f64,
+    pub theta: f64,
+}
+
+fn pose(p: crate::sim::Pose) -> PoseDto {
+    PoseDto {
+        x: mm(p.pos.x),
+        y: mm(p.pos.y),
+        theta: rad(p.theta),
+    }
+}
+
+#[derive(Debug, Clone, Serialize, ToSchema)]
+pub struct DetectionDto {
+    pub range: f64,
+    pub bearing: f64,
+}
+
+#[derive(Debug, Clone, Serialize, ToSchema)]
+pub struct RobotState {
+    pub id: String,
+    pub x: f64,
+    pub y: f64,
+    pub theta: f64,
+    /// The robot's own belief of its pose.
+    pub estimate: PoseDto,
+    pub frozen: bool,
+    /// Where its planner sends it, or null.
+    pub goal: Option<PoseDto>,
+    /// This tick's ranges, beam i at bearing (i - 90)°; empty while frozen.
+    pub scan: Vec<f64>,
+    /// This tick's anonymous sightings.
+    pub detections: Vec<DetectionDto>,
+}
+
+#[derive(Debug, Clone, Serialize, ToSchema)]
+pub struct OpponentState {
+    pub id: String,
+    pub x: f64,
+    pub y: f64,
+    pub theta: f64,
+    pub tagged: bool,
+    pub control: OpponentControl,
+}
+
+/// Full ground-truth state of a match.
+#[derive(Debug, Clone, Serialize, ToSchema)]
+pub struct MatchState {
+    pub id: String,
+    pub map: String,
+    pub tick: u64,
+    pub time_s: f64,
+    pub tick_hz: u32,
+    pub status: Status,
+    pub winner: Option<Winner>,
+    pub planner: Planner,
+    pub planner_active: Planner,
+    pub notes: Vec<String>,
+    pub robots: Vec<RobotState>,
+    pub opponents: Vec<OpponentState>,
+}
+
+pub fn state(world: &World, meta: &MatchMeta) -> MatchState {
+    MatchState {
+        id: meta.id.clone(),
+        map: meta.map.clone(),
+        tick: world.tick,
+        time_s: world.time_s(),
+        tick_hz: TICK_HZ,
+        status: status(world.status),
+        winner: winner(world.winner),
+        planner: planner_dto(world.team.requested),
+        planner_active: planner_dto(world.team.effective()),
+        notes: notes(world),
+        robots: world
+            .robots
+            .iter()
+            .enumerate()
+            .map(|(i, r)| RobotState {
+                id: AgentId::Robot(i).to_string(),
+                x: mm(r.pose.pos.x),
+                y: mm(r.pose.pos.y),
+                theta: rad(r.pose.theta),
+                estimate: pose(r.estimate),
+                frozen: world.robot_frozen(i),
+                goal: r.command.goal.map(pose),
+                scan: r.scan.ranges.iter().map(|v| mm(*v)).collect(),
+                detections: r
+                    .scan
+                    .detections
+                    .iter()
+                    .map(|d| DetectionDto {
+                        range: mm(d.range),
+                        bearing: rad(d.bearing),
+                    })
+                    .collect(),
+            })
+            .collect(),
+        opponents: world
+            .opponents
+            .iter()
+            .enumerate()
+            .map(|(i, o)| OpponentState {
+                id: AgentId::Opponent(i).to_string(),
+                x: mm(o.pose.pos.x),
+                y: mm(o.pose.pos.y),
+                theta: rad(o.pose.theta),
+                tagged: o.tagged,
+                control: match o.control {
+                    crate::sim::world::Control::Bot(_) => OpponentControl::Bot,
+                    crate::sim::world::Control::Api(_) => OpponentControl::Api,
+                    crate::sim::world::Control::Human(_) => OpponentControl::Human,
+                },
+            })
+            .collect(),
+    }
+}
+
+#[derive(Debug, Clone, Serialize, ToSchema)]
+pub struct Role {
+    pub id: u64,
+    pub count: u32,
+    pub tagged: bool,
+    pub particles: Vec<[f64; 2]>,
+    pub weights: Vec<f64>,
+}
+
+/// The robot team's belief about the opponents.
+#[derive(Debug, Clone, Serialize, ToSchema)]
+pub struct Belief {
+    pub tick: u64,
+    pub roles: Vec<Role>,
+    /// Present while the tracker is not built: why `roles` is empty.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub note: Option<String>,
+}
+
+pub fn belief(world: &World) -> Belief {
+    Belief {
+        tick: world.tick,
+        roles: Vec::new(),
+        note: Some("the opponent tracker is not built yet: no roles to show".into()),
+    }
+}
+
+/// One entry of the event log. Fields beyond `seq`, `tick` and `kind` depend on the kind.
+#[derive(Debug, Clone, Serialize, ToSchema)]
+pub struct EventDto {
+    pub seq: u64,
+    pub tick: u64,
+    /// `shot`, `tag`, `robot_tagged`, `player_joined`, `player_left`, `finished`
+    /// (`role_split` and `role_merge` once the tracker lands).
+    pub kind: &'static str,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub by: Option<String>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub target: Option<String>,
+    /// For `shot`: the agent hit, or null for a miss.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub hit: Option<Option<String>>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub opponent: Option<String>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub name: Option<String>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub winner: Option<Winner>,
+    /// For `finished`: `all_tagged`, `time_limit` or `stopped`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub reason: Option<&'static str>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub time_s: Option<f64>,
+}
+
+pub fn event(e: &crate::sim::Event) -> EventDto {
+    let mut dto = EventDto {
+        seq: e.seq,
+        tick: e.tick,
+        kind: "",
+        by: None,
+        target: None,
+        hit: None,
+        opponent: None,
+        name: None,
+        winner: None,
+        reason: None,
+        time_s: None,
+    };
+    match &e.kind {
+        EventKind::Shot { by, hit } => {
+            dto.kind = "shot";
+            dto.by = Some(by.to_string());
+            dto.hit = Some(hit.map(|h| h.to_string()));
+        }
+        EventKind::Tag { by, target } => {
+            dto.kind = "tag";
+            dto.by = Some(by.to_string());
+            dto.target = Some(target.to_string());
+        }
+        EventKind::RobotTagged { by, target } => {
+            dto.kind = "robot_tagged";
+            dto.by = Some(by.to_string());
+            dto.target = Some(target.to_string());
+        }
+        EventKind::PlayerJoined { opponent, name } => {
+            dto.kind = "player_joined";
+            dto.opponent = Some(opponent.to_string());
+            dto.name = Some(name.clone());
+        }
+        EventKind::PlayerLeft { opponent, name } => {
+            dto.kind = "player_left";
+            dto.opponent = Some(opponent.to_string());
+            dto.name = Some(name.clone());
+        }
+        EventKind::Finished { winner: w, reason } => {
+            dto.kind = "finished";
+            dto.winner = winner(Some(*w));
+            dto.reason = Some(match reason {
+                FinishReason::AllTagged => "all_tagged",
+                FinishReason::TimeLimit => "time_limit",
+                FinishReason::Stopped => "stopped",
+            });
+            dto.time_s = Some(e.tick as f64 / TICK_HZ as f64);
+        }
+    }
+    dto
+}
+
+#[derive(Debug, Clone, Serialize, ToSchema)]
+pub struct Events {
+    pub events: Vec<EventDto>,
+}
+
+/// Body of `POST /api/matches/{id}/step`.
+#[derive(Debug, Clone, Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct StepRequest {
+    /// 1..=100000
+    pub ticks: i64,
+}
+
+/// Body of `POST /api/matches/{id}/opponents/{oid}/command`: exactly one field.
+#[derive(Debug, Clone, Default, Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct OpponentCommand {
+    /// Replaces the route: straight legs at top speed, stopping at the last point.
+    pub waypoints: Option<Vec<[f64; 2]>>,
+    /// `true` halts the opponent.
+    pub stop: Option<bool>,
+    /// `true` fires its tag device once.
+    pub tag: Option<bool>,
+}
+
+impl OpponentCommand {
+    pub fn order(self) -> Result<crate::sim::world::OpponentOrder, String> {
+        use crate::sim::world::OpponentOrder;
+        match (self.waypoints, self.stop, self.tag) {
+            (Some(w), None, None) => {
+                if w.len() > 1_000 {
+                    return Err(format!("waypoints: {} points, the limit is 1000", w.len()));
+                }
+                for (i, p) in w.iter().enumerate() {
+                    if !(p[0].is_finite() && p[1].is_finite())
+                        || p[0].abs() > 1e6
+                        || p[1].abs() > 1e6
+                    {
+                        return Err(format!(
+                            "waypoints[{i}]: [{}, {}] is not a finite point",
+                            p[0], p[1]
+                        ));
+                    }
+                }
+                Ok(OpponentOrder::Waypoints(
+                    w.iter()
+                        .map(|p| nalgebra::Point2::new(p[0] as f32, p[1] as f32))
+                        .collect(),
+                ))
+            }
+            (None, Some(true), None) => Ok(OpponentOrder::Stop),
+            (None, None, Some(true)) => Ok(OpponentOrder::Tag),
+            (None, Some(false), None) => Err("stop: must be true".into()),
+            (None, None, Some(false)) => Err("tag: must be true".into()),
+            _ => Err("body: give exactly one of waypoints, stop, tag".into()),
+        }
+    }
+}
+
+/// Body of `POST /api/matches/{id}/players`.
+#[derive(Debug, Clone, Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct JoinRequest {
+    /// 1 to 32 printable characters.
+    pub name: String,
+}
+
+#[derive(Debug, Clone, Serialize, ToSchema)]
+pub struct Joined {
+    pub player_id: String,
+    pub opponent_id: String,
+    pub token: String,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn create_match_defaults_and_ranges() {
+        let m: CreateMatch = parse(br#"{"map": "office"}"#).unwrap();
+        let r = m.validate().unwrap();
+        assert_eq!(r.config.robots, 2);
+        assert_eq!(r.config.time_limit_ticks, 6000);
+        assert_eq!(r.tracker.particles_per_role, 1000);
+        let m: CreateMatch = parse(br#"{"map": "office", "robots": 9}"#).unwrap();
+        assert_eq!(m.validate().unwrap_err(), "robots: 9 must be in 1..=8");
+        let e = parse::<CreateMatch>(br#"{"map": "office", "robots": "two"}"#).unwrap_err();
+        assert!(e.starts_with("robots: invalid type"), "{e}");
+        let e = parse::<CreateMatch>(br#"{"map": "office", "tracker": {"merge": 1}}"#).unwrap_err();
+        assert!(e.starts_with("tracker.merge: invalid type"), "{e}");
+        let e = parse::<CreateMatch>(br#"{"map": "office", "colour": 1}"#).unwrap_err();
+        assert!(e.contains("unknown field `colour`"), "{e}");
+        let e = parse::<CreateMatch>(br#"{"map": "office", "time_limit_s": 1e999}"#).unwrap_err();
+        assert!(e.starts_with("time_limit_s:"), "{e}");
+        let e = parse::<CreateMatch>(br#"{"robots": 2}"#).unwrap_err();
+        assert!(e.contains("missing field `map`"), "{e}");
+    }
+
+    #[test]
+    fn opponent_commands_take_exactly_one_field() {
+        let c: OpponentCommand = parse(br#"{"stop": true}"#).unwrap();
+        assert!(c.order().is_ok());
+        let c: OpponentCommand = parse(br#"{"stop": true, "tag": true}"#).unwrap();
+        assert!(c.order().is_err());
+        let c: OpponentCommand = parse(br#"{}"#).unwrap();
+        assert!(c.order().is_err());
+    }
+}

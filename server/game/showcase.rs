@@ -1,0 +1,71 @@
+//! The showcase: a real-time match that is always running, so that anyone who opens the
+//! server sees play at once. When it ends, a fresh one (new seed) starts a few seconds later.
+
+use std::sync::Arc;
+use std::time::Duration;
+
+use crate::game::{Registry, random_id};
+use crate::planner::PlannerKind;
+use crate::protocol::{Clock, MatchMeta, Status, TrackerConfig};
+use crate::sim::World;
+use crate::sim::bots::BotKind;
+use crate::sim::world::{ControlKind, MatchConfig};
+
+/// Preferred map of the showcase, when the server has it; otherwise the first map.
+const SHOWCASE_MAP: &str = "office";
+/// How long a finished showcase stays up (so its end can be seen) before the next starts.
+const LINGER: Duration = Duration::from_secs(10);
+
+fn start(registry: &Registry, round: u64) -> Option<String> {
+    let arena = {
+        let maps = registry.maps.read().unwrap_or_else(|e| e.into_inner());
+        maps.get(SHOWCASE_MAP)
+            .or_else(|| maps.iter().next())?
+            .arena
+            .clone()
+    };
+    let config = MatchConfig {
+        robots: 2,
+        opponents: 2,
+        opponent_control: ControlKind::Bot,
+        opponent_bot: BotKind::Wander,
+        planner: PlannerKind::Coordinated,
+        seed: round,
+        ..MatchConfig::default()
+    };
+    let map = arena.def.name.clone();
+    let world = World::new(arena, config).ok()?;
+    let meta = MatchMeta {
+        id: format!("showcase-{}", random_id(4)),
+        map,
+        clock: Clock::Realtime,
+        tracker: TrackerConfig::default(),
+        players: 0,
+    };
+    Some(registry.start(world, meta).id)
+}
+
+/// Keeps one showcase match running for as long as the server runs.
+pub async fn keep_running(registry: Arc<Registry>) {
+    let mut round = 0;
+    let Some(mut id) = start(&registry, round) else {
+        tracing::warn!("no map to run a showcase match on");
+        return;
+    };
+    loop {
+        tokio::time::sleep(Duration::from_secs(2)).await;
+        let finished = match registry.get(&id) {
+            Some(h) => matches!(h.summary().await, Ok(s) if s.status == Status::Finished),
+            None => true, // deleted by someone: bring it back
+        };
+        if finished {
+            tokio::time::sleep(LINGER).await;
+            registry.remove(&id).await;
+            round += 1;
+            match start(&registry, round) {
+                Some(new) => id = new,
+                None => return,
+            }
+        }
+    }
+}

@@ -1,0 +1,279 @@
+//! One function per endpoint of `../shared/spec/http-api.md`.
+
+use std::collections::HashMap;
+use std::sync::Arc;
+
+use axum::Json;
+use axum::extract::{Path, Query, State};
+use axum::http::StatusCode;
+use axum::response::IntoResponse;
+
+use crate::game::{MatchHandle, random_id};
+use crate::http::body::JsonBody;
+use crate::http::{ApiError, AppState};
+use crate::maps::{self, MapFile};
+use crate::protocol::{
+    self, Belief, CreateMatch, ErrorBody, Events, Health, JoinRequest, Joined, MapInfo, MatchMeta,
+    MatchState, MatchSummary, OpponentCommand, StepRequest,
+};
+use crate::sim::World;
+use crate::sim::arena::Arena;
+
+fn find(state: &AppState, id: &str) -> Result<MatchHandle, ApiError> {
+    state
+        .registry
+        .get(id)
+        .ok_or_else(|| ApiError::not_found(format!("no match {id}")))
+}
+
+#[utoipa::path(get, path = "/api/health", responses((status = 200, body = Health)))]
+pub async fn health() -> Json<Health> {
+    Json(Health {
+        status: "ok",
+        version: env!("CARGO_PKG_VERSION"),
+    })
+}
+
+#[utoipa::path(get, path = "/api/maps", responses((status = 200, body = [MapInfo])))]
+pub async fn list_maps(State(state): State<AppState>) -> Json<Vec<MapInfo>> {
+    let maps = state
+        .registry
+        .maps
+        .read()
+        .unwrap_or_else(|e| e.into_inner());
+    Json(
+        maps.iter()
+            .map(|m| MapInfo {
+                name: m.arena.def.name.clone(),
+                width: m.arena.def.width as f64,
+                height: m.arena.def.height as f64,
+            })
+            .collect(),
+    )
+}
+
+#[utoipa::path(get, path = "/api/maps/{name}", params(("name" = String, Path)),
+    responses((status = 200, body = MapFile), (status = 404, body = ErrorBody)))]
+pub async fn get_map(
+    State(state): State<AppState>,
+    Path(name): Path<String>,
+) -> Result<Json<MapFile>, ApiError> {
+    let maps = state
+        .registry
+        .maps
+        .read()
+        .unwrap_or_else(|e| e.into_inner());
+    maps.get(&name)
+        .map(|m| Json(maps::to_file(&m.arena.def)))
+        .ok_or_else(|| ApiError::not_found(format!("no map {name:?}")))
+}
+
+#[utoipa::path(post, path = "/api/maps", request_body = MapFile,
+    responses((status = 201, body = MapInfo), (status = 400, body = ErrorBody), (status = 409, body = ErrorBody),
+              (status = 413, body = ErrorBody)))]
+pub async fn add_map(
+    State(state): State<AppState>,
+    JsonBody(value): JsonBody<serde_json::Value>,
+) -> Result<impl IntoResponse, ApiError> {
+    let def = maps::from_value(value).map_err(|e| ApiError::bad_request(e.to_string()))?;
+    if state
+        .registry
+        .maps
+        .read()
+        .unwrap_or_else(|e| e.into_inner())
+        .contains(&def.name)
+    {
+        return Err(ApiError::conflict(format!(
+            "a map named {:?} exists",
+            def.name
+        )));
+    }
+    let name = def.name.clone();
+    let info = MapInfo {
+        name: def.name.clone(),
+        width: def.width as f64,
+        height: def.height as f64,
+    };
+    // Building the clearance grid of a big map takes a while: keep it off the async workers.
+    let arena = tokio::task::spawn_blocking(move || Arena::new(def))
+        .await
+        .map_err(|e| {
+            ApiError::new(
+                StatusCode::INTERNAL_SERVER_ERROR,
+                format!("building the map failed: {e}"),
+            )
+        })?;
+    let mut store = state
+        .registry
+        .maps
+        .write()
+        .unwrap_or_else(|e| e.into_inner());
+    if !store.insert_arena(Arc::new(arena)) {
+        return Err(ApiError::conflict(format!("a map named {name:?} exists")));
+    }
+    Ok((StatusCode::CREATED, Json(info)))
+}
+
+#[utoipa::path(get, path = "/api/matches", responses((status = 200, body = [MatchSummary])))]
+pub async fn list_matches(State(state): State<AppState>) -> Json<Vec<MatchSummary>> {
+    let mut out = Vec::new();
+    for h in state.registry.all() {
+        if let Ok(s) = h.summary().await {
+            out.push(s);
+        }
+    }
+    Json(out)
+}
+
+#[utoipa::path(post, path = "/api/matches", request_body = CreateMatch,
+    responses((status = 201, body = MatchSummary), (status = 400, body = ErrorBody), (status = 404, body = ErrorBody),
+              (status = 413, body = ErrorBody)))]
+pub async fn create_match(
+    State(state): State<AppState>,
+    JsonBody(body): JsonBody<CreateMatch>,
+) -> Result<impl IntoResponse, ApiError> {
+    let req = body.validate().map_err(ApiError::bad_request)?;
+    let arena: Arc<Arena> = match req.map {
+        serde_json::Value::String(name) => {
+            let maps = state
+                .registry
+                .maps
+                .read()
+                .unwrap_or_else(|e| e.into_inner());
+            maps.get(&name)
+                .map(|m| m.arena.clone())
+                .ok_or_else(|| ApiError::not_found(format!("map: no map {name:?}")))?
+        }
+        value @ serde_json::Value::Object(_) => {
+            let def = maps::from_value(value).map_err(|e| {
+                // Name the field as the request has it: `map.obstacles[2]`, or `map` itself.
+                let path = if e.path == "map" {
+                    e.path
+                } else {
+                    format!("map.{}", e.path)
+                };
+                ApiError::bad_request(format!("{path}: {}", e.message))
+            })?;
+            tokio::task::spawn_blocking(move || Arc::new(Arena::new(def)))
+                .await
+                .map_err(|e| {
+                    ApiError::new(
+                        StatusCode::INTERNAL_SERVER_ERROR,
+                        format!("building the map failed: {e}"),
+                    )
+                })?
+        }
+        _ => {
+            return Err(ApiError::bad_request(
+                "map: must be a map name or a map object",
+            ));
+        }
+    };
+    let map_name = arena.def.name.clone();
+    let world = World::new(arena, req.config).map_err(|e| ApiError::bad_request(e.to_string()))?;
+    let meta = MatchMeta {
+        id: random_id(8),
+        map: map_name,
+        clock: req.clock,
+        tracker: req.tracker,
+        players: 0,
+    };
+    let summary = protocol::summary(&world, &meta);
+    state.registry.start(world, meta);
+    Ok((StatusCode::CREATED, Json(summary)))
+}
+
+#[utoipa::path(get, path = "/api/matches/{id}", params(("id" = String, Path)),
+    responses((status = 200, body = MatchState), (status = 404, body = ErrorBody)))]
+pub async fn get_match(
+    State(state): State<AppState>,
+    Path(id): Path<String>,
+) -> Result<Json<MatchState>, ApiError> {
+    Ok(Json(find(&state, &id)?.state().await?))
+}
+
+#[utoipa::path(delete, path = "/api/matches/{id}", params(("id" = String, Path)),
+    responses((status = 204), (status = 404, body = ErrorBody)))]
+pub async fn delete_match(
+    State(state): State<AppState>,
+    Path(id): Path<String>,
+) -> Result<StatusCode, ApiError> {
+    if state.registry.remove(&id).await {
+        Ok(StatusCode::NO_CONTENT)
+    } else {
+        Err(ApiError::not_found(format!("no match {id}")))
+    }
+}
+
+#[utoipa::path(post, path = "/api/matches/{id}/step", params(("id" = String, Path)), request_body = StepRequest,
+    responses((status = 200, body = MatchState), (status = 400, body = ErrorBody), (status = 404, body = ErrorBody),
+              (status = 409, body = ErrorBody)))]
+pub async fn step(
+    State(state): State<AppState>,
+    Path(id): Path<String>,
+    JsonBody(body): JsonBody<StepRequest>,
+) -> Result<Json<MatchState>, ApiError> {
+    let handle = find(&state, &id)?;
+    if !(1..=100_000).contains(&body.ticks) {
+        return Err(ApiError::bad_request(format!(
+            "ticks: {} must be in 1..=100000",
+            body.ticks
+        )));
+    }
+    Ok(Json(handle.step(body.ticks as u64).await?))
+}
+
+#[utoipa::path(get, path = "/api/matches/{id}/belief", params(("id" = String, Path)),
+    responses((status = 200, body = Belief), (status = 404, body = ErrorBody)))]
+pub async fn belief(
+    State(state): State<AppState>,
+    Path(id): Path<String>,
+) -> Result<Json<Belief>, ApiError> {
+    Ok(Json(find(&state, &id)?.belief().await?))
+}
+
+#[utoipa::path(get, path = "/api/matches/{id}/events",
+    params(("id" = String, Path), ("since" = Option<u64>, Query, description = "only events with a greater seq")),
+    responses((status = 200, body = Events), (status = 400, body = ErrorBody), (status = 404, body = ErrorBody)))]
+pub async fn events(
+    State(state): State<AppState>,
+    Path(id): Path<String>,
+    Query(query): Query<HashMap<String, String>>,
+) -> Result<Json<Events>, ApiError> {
+    let handle = find(&state, &id)?;
+    let since = match query.get("since") {
+        None => 0,
+        Some(s) => s.parse::<u64>().map_err(|_| {
+            ApiError::bad_request(format!("since: {s:?} is not a non-negative integer"))
+        })?,
+    };
+    Ok(Json(handle.events(since).await?))
+}
+
+#[utoipa::path(post, path = "/api/matches/{id}/opponents/{oid}/command",
+    params(("id" = String, Path), ("oid" = String, Path)), request_body = OpponentCommand,
+    responses((status = 204), (status = 400, body = ErrorBody), (status = 404, body = ErrorBody),
+              (status = 409, body = ErrorBody)))]
+pub async fn command(
+    State(state): State<AppState>,
+    Path((id, oid)): Path<(String, String)>,
+    JsonBody(body): JsonBody<OpponentCommand>,
+) -> Result<StatusCode, ApiError> {
+    let handle = find(&state, &id)?;
+    let order = body.order().map_err(ApiError::bad_request)?;
+    handle.order(oid, order).await?;
+    Ok(StatusCode::NO_CONTENT)
+}
+
+#[utoipa::path(post, path = "/api/matches/{id}/players", params(("id" = String, Path)), request_body = JoinRequest,
+    responses((status = 201, body = Joined), (status = 400, body = ErrorBody), (status = 404, body = ErrorBody),
+              (status = 409, body = ErrorBody)))]
+pub async fn join(
+    State(state): State<AppState>,
+    Path(id): Path<String>,
+    JsonBody(body): JsonBody<JoinRequest>,
+) -> Result<impl IntoResponse, ApiError> {
+    let handle = find(&state, &id)?;
+    let joined = handle.join(body.name).await?;
+    Ok((StatusCode::CREATED, Json(joined)))
+}

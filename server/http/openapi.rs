@@ -1,0 +1,60 @@
+//! The OpenAPI document of the API, generated from the handlers' annotations and the
+//! protocol types, served at `GET /api/openapi.json`.
+
+use axum::Json;
+use utoipa::OpenApi;
+
+use crate::http::handlers;
+use crate::maps::MapFile;
+use crate::protocol::*;
+
+#[derive(OpenApi)]
+#[openapi(
+    info(
+        title = "lasertag",
+        description = "Robots play laser tag against people: the HTTP API."
+    ),
+    paths(
+        handlers::health,
+        handlers::list_maps,
+        handlers::get_map,
+        handlers::add_map,
+        handlers::list_matches,
+        handlers::create_match,
+        handlers::get_match,
+        handlers::delete_match,
+        handlers::step,
+        handlers::belief,
+        handlers::events,
+        handlers::command,
+        handlers::join,
+    ),
+    components(schemas(
+        ErrorBody,
+        Health,
+        MapInfo,
+        MapFile,
+        CreateMatch,
+        TrackerSettings,
+        TrackerConfig,
+        MatchSummary,
+        MatchState,
+        RobotState,
+        OpponentState,
+        PoseDto,
+        DetectionDto,
+        Belief,
+        Role,
+        Events,
+        EventDto,
+        StepRequest,
+        OpponentCommand,
+        JoinRequest,
+        Joined
+    ))
+)]
+pub struct ApiDoc;
+
+pub async fn document() -> Json<utoipa::openapi::OpenApi> {
+    Json(ApiDoc::openapi())
+}
