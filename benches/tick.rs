@@ -1,1 +1,82 @@
-fn main() {}
+//! One tick of a `baseline` match (2 robots, 2 wandering opponents, `office`), and its laser
+//! scans alone, so the share of ray casting in a tick can be read off.
+//!
+//! `cargo bench --bench tick`
+
+use std::hint::black_box;
+use std::path::Path;
+
+use criterion::{Criterion, criterion_group, criterion_main};
+use lasertag::maps::MapStore;
+use lasertag::planner::PlannerKind;
+use lasertag::sim::sensors;
+use lasertag::sim::world::{MatchConfig, Placement};
+use lasertag::sim::{AgentId, MatchStatus, Physics, World};
+use rand::SeedableRng;
+
+fn office_world(seed: u64) -> World {
+    let store = MapStore::load_dir(&Path::new(env!("CARGO_MANIFEST_DIR")).join("maps")).unwrap();
+    let arena = store.get("office").unwrap().arena.clone();
+    let config = MatchConfig {
+        robots: 2,
+        opponents: 2,
+        planner: PlannerKind::Baseline,
+        placement: Placement::Random,
+        time_limit_ticks: u64::MAX,
+        seed,
+        ..MatchConfig::default()
+    };
+    World::new(arena, config).unwrap()
+}
+
+fn tick(c: &mut Criterion) {
+    // A match that is mid-game after 10 s (paths planned, robots moving, opponents at large).
+    let (initial, start) = (1..)
+        .find_map(|seed| {
+            let initial = office_world(seed);
+            let mut start = initial.clone();
+            for _ in 0..200 {
+                start.step();
+            }
+            (start.status == MatchStatus::Running).then_some((initial, start))
+        })
+        .unwrap();
+    let mut world = start.clone();
+    c.bench_function("tick/baseline_office_2r_2o", |b| {
+        b.iter(|| {
+            if world.status == MatchStatus::Finished {
+                world = start.clone();
+            }
+            world.step();
+            black_box(world.tick)
+        })
+    });
+
+    let physics = Physics::default();
+    let robot = initial.robots[0].pose;
+    let others: Vec<_> = initial
+        .opponents
+        .iter()
+        .enumerate()
+        .map(|(i, o)| (AgentId::Opponent(i), o.pose.pos))
+        .chain(std::iter::once((
+            AgentId::Robot(1),
+            initial.robots[1].pose.pos,
+        )))
+        .collect();
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(0);
+    c.bench_function("scan/one_robot_181_beams", |b| {
+        b.iter(|| {
+            black_box(sensors::scan(
+                &initial.arena,
+                &physics,
+                robot,
+                &others,
+                &mut rng,
+            ))
+        })
+    });
+}
+
+criterion_group!(benches, tick);
+criterion_main!(benches);

@@ -982,4 +982,54 @@ mod tests {
             assert!(a.arena.disc_is_free(r.pose.pos, AGENT_RADIUS));
         }
     }
+
+    #[test]
+    fn an_evading_bot_runs_from_a_robot_it_sees() {
+        let cfg = MatchConfig {
+            opponent_bot: BotKind::Evade,
+            opponent_control: ControlKind::Bot,
+            placement: Placement::Given {
+                robots: vec![[3.0, 2.0, 0.0]],
+                opponents: vec![[5.0, 2.0]],
+            },
+            ..config(PlannerKind::Idle, ControlKind::Bot)
+        };
+        let mut w = World::new(duel(), cfg).unwrap();
+        for _ in 0..200 {
+            w.step();
+        }
+        let robot = w.robots[0].pose.pos;
+        let bot = w.opponents[0].pose.pos;
+        let hidden = !w.arena.line_of_sight(robot, bot);
+        assert!(
+            (bot - robot).norm() > 5.0 || hidden,
+            "the bot fled: {bot:?}"
+        );
+    }
+
+    #[test]
+    fn a_wandering_bot_keeps_moving_and_stays_in_free_space() {
+        let cfg = MatchConfig {
+            time_limit_ticks: 100_000,
+            ..config(PlannerKind::Idle, ControlKind::Bot)
+        };
+        let mut w = World::new(duel(), cfg).unwrap();
+        let mut visited = Vec::new();
+        for t in 0..2_000 {
+            w.step();
+            let p = w.opponents[0].pose.pos;
+            assert!(
+                w.arena.disc_is_free(p, AGENT_RADIUS - 1e-3),
+                "tick {t}: {p:?}"
+            );
+            if t % 200 == 0 {
+                visited.push(p);
+            }
+        }
+        let spread = visited
+            .iter()
+            .map(|p| (p - visited[0]).norm())
+            .fold(0.0, f32::max);
+        assert!(spread > 3.0, "wandered about: {visited:?}");
+    }
 }
