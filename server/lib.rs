@@ -2,7 +2,7 @@
 //!
 //! The crate is a functional core wrapped in an imperative shell:
 //! - core (deterministic, no tokio, no clocks, no I/O): [`sim`] (the world and its tick
-//!   pipeline), [`nav`] (shortest paths), [`planner`] (the robot team's decisions);
+//!   pipeline), [`nav`] (shortest paths), [`tracker`] (role-factored particle filters), [`planner`] (the robot team's decisions);
 //! - edge: [`maps`] (map files), [`protocol`] (every JSON shape of the API);
 //! - shell: [`game`] (one tokio task per match), [`http`] (the axum router), `main.rs` (CLI).
 //!
@@ -16,3 +16,4 @@ pub mod nav;
 pub mod planner;
 pub mod protocol;
 pub mod sim;
+pub mod tracker;

@@ -150,15 +150,21 @@ pub struct TrackerConfig {
     pub grid_cell: f64,
 }
 
+impl From<&crate::tracker::Settings> for TrackerConfig {
+    fn from(s: &crate::tracker::Settings) -> Self {
+        TrackerConfig {
+            particles_per_role: s.particles_per_role as i64,
+            merge: s.merge,
+            merge_interval: s.merge_interval as i64,
+            kl_cutoff: s.kl_cutoff as f64,
+            grid_cell: s.grid_cell as f64,
+        }
+    }
+}
+
 impl Default for TrackerConfig {
     fn default() -> Self {
-        TrackerConfig {
-            particles_per_role: 1000,
-            merge: true,
-            merge_interval: 20,
-            kl_cutoff: 0.5,
-            grid_cell: 1.0,
-        }
+        TrackerConfig::from(&crate::tracker::Settings::default())
     }
 }
 
@@ -168,7 +174,6 @@ pub struct MatchRequest {
     pub map: serde_json::Value,
     pub config: MatchConfig,
     pub clock: Clock,
-    pub tracker: TrackerConfig,
 }
 
 fn in_range(field: &str, v: i64, lo: i64, hi: i64) -> Result<i64, String> {
@@ -287,11 +292,21 @@ impl CreateMatch {
             placement,
             ..MatchConfig::default()
         };
+        let config = MatchConfig {
+            tracker: crate::tracker::Settings {
+                particles_per_role: tracker.particles_per_role as usize,
+                merge: tracker.merge,
+                merge_interval: tracker.merge_interval as u64,
+                kl_cutoff: tracker.kl_cutoff as f32,
+                grid_cell: tracker.grid_cell as f32,
+                ..crate::tracker::Settings::default()
+            },
+            ..config
+        };
         Ok(MatchRequest {
             map: self.map,
             config,
             clock: self.clock.unwrap_or(Clock::Realtime),
-            tracker,
         })
     }
 }
@@ -346,7 +361,6 @@ pub struct MatchMeta {
     pub id: String,
     pub map: String,
     pub clock: Clock,
-    pub tracker: TrackerConfig,
     pub players: usize,
 }
 
@@ -415,7 +429,7 @@ pub fn summary(world: &World, meta: &MatchMeta) -> MatchSummary {
         },
         planner: planner_dto(world.team.requested),
         planner_active: planner_dto(world.team.effective()),
-        tracker: meta.tracker.clone(),
+        tracker: TrackerConfig::from(&c.tracker),
         seed: c.seed,
         players: meta.players,
         notes: notes(world),
@@ -557,16 +571,24 @@ pub struct Role {
 pub struct Belief {
     pub tick: u64,
     pub roles: Vec<Role>,
-    /// Present while the tracker is not built: why `roles` is empty.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub note: Option<String>,
 }
 
 pub fn belief(world: &World) -> Belief {
     Belief {
         tick: world.tick,
-        roles: Vec::new(),
-        note: Some("the opponent tracker is not built yet: no roles to show".into()),
+        roles: world
+            .team
+            .tracker
+            .roles
+            .iter()
+            .map(|r| Role {
+                id: r.id,
+                count: r.count,
+                tagged: r.tagged,
+                particles: r.particles.iter().map(|p| [mm(p.x), mm(p.y)]).collect(),
+                weights: r.weights.iter().map(|w| *w as f64).collect(),
+            })
+            .collect(),
     }
 }
 
@@ -575,8 +597,8 @@ pub fn belief(world: &World) -> Belief {
 pub struct EventDto {
     pub seq: u64,
     pub tick: u64,
-    /// `shot`, `tag`, `robot_tagged`, `player_joined`, `player_left`, `finished`
-    /// (`role_split` and `role_merge` once the tracker lands).
+    /// `shot`, `tag`, `robot_tagged`, `role_split`, `role_merge`, `player_joined`,
+    /// `player_left`, `finished`.
     pub kind: &'static str,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub by: Option<String>,
@@ -596,6 +618,15 @@ pub struct EventDto {
     pub reason: Option<&'static str>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub time_s: Option<f64>,
+    /// For `role_split` and `role_merge`: the role that results.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub role: Option<u64>,
+    /// For `role_split` and `role_merge`: the role it came from / the role merged away.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub from: Option<u64>,
+    /// For `role_merge`: the opponents the merged role stands for.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub count: Option<u32>,
 }
 
 pub fn event(e: &crate::sim::Event) -> EventDto {
@@ -611,6 +642,9 @@ pub fn event(e: &crate::sim::Event) -> EventDto {
         winner: None,
         reason: None,
         time_s: None,
+        role: None,
+        from: None,
+        count: None,
     };
     match &e.kind {
         EventKind::Shot { by, hit } => {
@@ -627,6 +661,17 @@ pub fn event(e: &crate::sim::Event) -> EventDto {
             dto.kind = "robot_tagged";
             dto.by = Some(by.to_string());
             dto.target = Some(target.to_string());
+        }
+        EventKind::RoleSplit { role, from } => {
+            dto.kind = "role_split";
+            dto.role = Some(*role);
+            dto.from = Some(*from);
+        }
+        EventKind::RoleMerge { role, from, count } => {
+            dto.kind = "role_merge";
+            dto.role = Some(*role);
+            dto.from = Some(*from);
+            dto.count = Some(*count);
         }
         EventKind::PlayerJoined { opponent, name } => {
             dto.kind = "player_joined";
@@ -736,7 +781,7 @@ mod tests {
         let r = m.validate().unwrap();
         assert_eq!(r.config.robots, 2);
         assert_eq!(r.config.time_limit_ticks, 6000);
-        assert_eq!(r.tracker.particles_per_role, 1000);
+        assert_eq!(r.config.tracker.particles_per_role, 1000);
         let m: CreateMatch = parse(br#"{"map": "office", "robots": 9}"#).unwrap();
         assert_eq!(m.validate().unwrap_err(), "robots: 9 must be in 1..=8");
         let e = parse::<CreateMatch>(br#"{"map": "office", "robots": "two"}"#).unwrap_err();

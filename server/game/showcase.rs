@@ -6,7 +6,7 @@ use std::time::Duration;
 
 use crate::game::{Registry, random_id};
 use crate::planner::PlannerKind;
-use crate::protocol::{Clock, MatchMeta, Status, TrackerConfig};
+use crate::protocol::{Clock, MatchMeta, Status};
 use crate::sim::World;
 use crate::sim::bots::BotKind;
 use crate::sim::world::{ControlKind, MatchConfig};
@@ -39,7 +39,6 @@ fn start(registry: &Registry, round: u64) -> Option<String> {
         id: format!("showcase-{}", random_id(4)),
         map,
         clock: Clock::Realtime,
-        tracker: TrackerConfig::default(),
         players: 0,
     };
     Some(registry.start(world, meta).id)

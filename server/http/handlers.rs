@@ -175,7 +175,6 @@ pub async fn create_match(
         id: random_id(8),
         map: map_name,
         clock: req.clock,
-        tracker: req.tracker,
         players: 0,
     };
     let summary = protocol::summary(&world, &meta);

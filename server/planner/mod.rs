@@ -18,6 +18,7 @@ use rand_chacha::ChaCha8Rng;
 use crate::sim::arena::Arena;
 use crate::sim::sensors::Detection;
 use crate::sim::{Motion, Physics, Pose};
+use crate::tracker::{LaserModel, Sighting, Tracker, TrackerEvent};
 
 /// What the team may know about one robot this tick.
 #[derive(Debug, Clone, Copy)]
@@ -29,6 +30,8 @@ pub struct RobotView<'a> {
     pub can_fire: bool,
     pub scan: &'a [f32],
     pub detections: &'a [Detection],
+    /// True when this robot's shot tagged an opponent this tick (the device reports hits).
+    pub hit: bool,
 }
 
 /// What the team knows this tick.
@@ -66,10 +69,11 @@ impl PlannerKind {
     }
 }
 
-/// The team's brain: the chosen planner and its memory.
+/// The team's brain: the opponent tracker, the chosen planner and its memory.
 #[derive(Debug, Clone)]
 pub struct Team {
     pub requested: PlannerKind,
+    pub tracker: Tracker,
     brain: Brain,
 }
 
@@ -80,13 +84,22 @@ enum Brain {
 }
 
 impl Team {
-    pub fn new(kind: PlannerKind, arena: &Arena, robots: usize, rng: ChaCha8Rng) -> Team {
+    /// `rng` feeds the planner; the tracker has its own stream, so that tracker settings do
+    /// not change the planner's random choices.
+    pub fn new(
+        kind: PlannerKind,
+        arena: &Arena,
+        robots: usize,
+        tracker: Tracker,
+        rng: ChaCha8Rng,
+    ) -> Team {
         let brain = match kind.effective() {
             PlannerKind::Idle => Brain::Idle,
             _ => Brain::Baseline(Box::new(baseline::Baseline::new(arena, robots, rng))),
         };
         Team {
             requested: kind,
+            tracker,
             brain,
         }
     }
@@ -98,16 +111,35 @@ impl Team {
         }
     }
 
+    /// Updates the tracker with what the robots sensed, then plans. Returns the commands and
+    /// what happened to the roles.
     pub fn decide(
         &mut self,
         arena: &Arena,
         physics: &Physics,
         view: &TeamView,
-    ) -> Vec<RobotCommand> {
-        match &mut self.brain {
+    ) -> (Vec<RobotCommand>, Vec<TrackerEvent>) {
+        let sightings: Vec<Sighting> = view
+            .robots
+            .iter()
+            .filter(|r| !r.frozen)
+            .map(|r| Sighting {
+                pose: r.pose,
+                scan: r.scan,
+                detections: r.detections,
+                tagged: r.hit,
+            })
+            .collect();
+        let laser = LaserModel {
+            fov: physics.laser_fov,
+            range: physics.laser_range,
+        };
+        let events = self.tracker.update(arena, laser, &sightings);
+        let commands = match &mut self.brain {
             Brain::Idle => vec![RobotCommand::default(); view.robots.len()],
             Brain::Baseline(b) => b.decide(arena, physics, view),
-        }
+        };
+        (commands, events)
     }
 }
 

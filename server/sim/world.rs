@@ -25,6 +25,7 @@ use crate::sim::arena::Arena;
 use crate::sim::bots::{Bot, BotKind};
 use crate::sim::sensors::{self, Scan};
 use crate::sim::{AGENT_RADIUS, AgentId, Motion, Physics, Pose, TICK_HZ, motion, rules};
+use crate::tracker::{Tracker, TrackerEvent};
 
 /// Who controls every opponent slot of a match.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -60,6 +61,7 @@ pub struct MatchConfig {
     pub time_limit_ticks: u64,
     pub placement: Placement,
     pub physics: Physics,
+    pub tracker: crate::tracker::Settings,
 }
 
 impl Default for MatchConfig {
@@ -74,6 +76,7 @@ impl Default for MatchConfig {
             time_limit_ticks: 300 * TICK_HZ as u64,
             placement: Placement::Spawns,
             physics: Physics::default(),
+            tracker: crate::tracker::Settings::default(),
         }
     }
 }
@@ -115,6 +118,17 @@ pub enum EventKind {
     RobotTagged {
         by: AgentId,
         target: AgentId,
+    },
+    /// The tracker split role `role` off role `from` for one newly seen opponent.
+    RoleSplit {
+        role: u64,
+        from: u64,
+    },
+    /// The tracker merged role `from` into `role`, which now stands for `count` opponents.
+    RoleMerge {
+        role: u64,
+        from: u64,
+        count: u32,
     },
     PlayerJoined {
         opponent: AgentId,
@@ -228,6 +242,7 @@ const STREAM_SENSE: u64 = 1;
 const STREAM_BOTS: u64 = 2;
 const STREAM_TEAM: u64 = 3;
 const STREAM_SETUP: u64 = 4;
+const STREAM_TRACKER: u64 = 5;
 
 fn stream(seed: u64, id: u64) -> ChaCha8Rng {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
@@ -263,10 +278,19 @@ impl World {
                 },
             })
             .collect();
+        let mut tracker_settings = config.tracker.clone();
+        tracker_settings.opponent_speed = config.physics.opponent_speed;
+        let tracker = Tracker::new(
+            &arena,
+            tracker_settings,
+            config.opponents as u32,
+            stream(config.seed, STREAM_TRACKER),
+        );
         let team = Team::new(
             config.planner,
             &arena,
             config.robots,
+            tracker,
             stream(config.seed, STREAM_TEAM),
         );
         let mut world = World {
@@ -547,12 +571,28 @@ impl World {
     /// Stage 5: the robots' brain decides from what they sensed.
     fn think(&mut self) {
         let tick = self.tick;
+        // A tag device reports its own hits: the robots that tagged an opponent this tick.
+        let hits: Vec<usize> = self
+            .events
+            .iter()
+            .rev()
+            .take_while(|e| e.tick == tick)
+            .filter_map(|e| match e.kind {
+                EventKind::Tag {
+                    by: AgentId::Robot(r),
+                    ..
+                } => Some(r),
+                _ => None,
+            })
+            .collect();
         let view = TeamView {
             tick,
             robots: self
                 .robots
                 .iter()
-                .map(|r| RobotView {
+                .enumerate()
+                .map(|(i, r)| RobotView {
+                    hit: hits.contains(&i),
                     pose: r.estimate,
                     frozen: tick < r.frozen_until,
                     can_fire: tick + 1 >= r.cooldown_until,
@@ -561,9 +601,17 @@ impl World {
                 })
                 .collect(),
         };
-        let commands = self.team.decide(&self.arena, &self.config.physics, &view);
+        let (commands, tracker_events) = self.team.decide(&self.arena, &self.config.physics, &view);
         for (r, c) in self.robots.iter_mut().zip(commands) {
             r.command = c;
+        }
+        for e in tracker_events {
+            self.push(match e {
+                TrackerEvent::Split { role, from } => EventKind::RoleSplit { role, from },
+                TrackerEvent::Merge { role, from, count } => {
+                    EventKind::RoleMerge { role, from, count }
+                }
+            });
         }
     }
 

@@ -1,0 +1,593 @@
+//! The team's opponent tracker: role-factored particle filters under occlusion (sections 2–3
+//! of Rosencrantz, Gordon and Thrun).
+//!
+//! The team's belief is a set of [`Role`]s. A role is one particle filter over an opponent's
+//! `(x, y)` plus the number of opponents it stands for; opponents in one role share one
+//! distribution. The match starts with one role for every opponent, uniform over free space.
+//! Each tick, [`Tracker::update`] runs:
+//! 1. motion — every particle moves at most the opponents' top speed in a random direction,
+//!    never into an obstacle. A particle keeps its direction and speed for a random while
+//!    (a new one with probability `TURN_PROBABILITY` per tick, and whenever a wall stops it):
+//!    people walk in lines, and a memoryless random walk would spread the cloud only as
+//!    √t, far slower than an opponent can actually get away;
+//! 2. tags — a robot whose shot hit takes one opponent out of the role its target was
+//!    associated with (a role left with no opponents disappears; the tagged one is kept as a
+//!    `tagged` role for display and never hunted again);
+//! 3. negative information — every particle that a robot's scan would have seen (in its field
+//!    of view, nearer than the beam at its bearing reports) is down-weighted by the
+//!    probability of a missed detection;
+//! 4. positive information — each detection goes to the role of maximum likelihood; a role
+//!    standing for several opponents first splits off a copy for one;
+//! 5. normalise, recover roles whose every particle became impossible, resample when the
+//!    effective sample size is low;
+//! 6. every `merge_interval` ticks, merge roles whose grid histograms are closer than
+//!    `kl_cutoff` in symmetric KL divergence (see [`merge`]).
+//!
+//! Pure and deterministic: all randomness comes from the tracker's own ChaCha stream.
+
+mod merge;
+
+use nalgebra::{Point2, Vector2};
+use rand::RngExt;
+use rand_chacha::ChaCha8Rng;
+
+use crate::planner::detection_point;
+use crate::sim::arena::Arena;
+use crate::sim::sensors::Detection;
+use crate::sim::{AGENT_RADIUS, DT, Pose};
+
+/// Tracker settings (the match's `tracker` object).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Settings {
+    pub particles_per_role: usize,
+    pub merge: bool,
+    pub merge_interval: u64,
+    pub kl_cutoff: f32,
+    pub grid_cell: f32,
+    /// Probability that an opponent in plain view goes undetected.
+    pub p_miss: f32,
+    /// Top speed assumed for opponents (m/s).
+    pub opponent_speed: f32,
+}
+
+impl Default for Settings {
+    fn default() -> Self {
+        Settings {
+            particles_per_role: 1000,
+            merge: true,
+            merge_interval: 20,
+            kl_cutoff: 0.5,
+            grid_cell: 1.0,
+            p_miss: 0.05,
+            opponent_speed: 1.0,
+        }
+    }
+}
+
+/// One role: a particle filter standing for `count` opponents.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Role {
+    pub id: u64,
+    pub count: u32,
+    /// A role holding tagged opponents: kept where they were tagged, never updated or hunted.
+    pub tagged: bool,
+    pub particles: Vec<Point2<f32>>,
+    /// Same length as `particles`, summing to 1.
+    pub weights: Vec<f32>,
+    /// Each particle's current step per tick (metres), same length as `particles`.
+    pub steps: Vec<Vector2<f32>>,
+}
+
+/// What one robot contributes to the tracker this tick.
+#[derive(Debug, Clone, Copy)]
+pub struct Sighting<'a> {
+    /// The robot's estimate of its pose.
+    pub pose: Pose,
+    pub scan: &'a [f32],
+    pub detections: &'a [Detection],
+    /// True when this robot's shot tagged an opponent this tick.
+    pub tagged: bool,
+}
+
+/// Laser geometry the negative-information update needs.
+#[derive(Debug, Clone, Copy)]
+pub struct LaserModel {
+    pub fov: f32,
+    pub range: f32,
+}
+
+#[derive(Debug, Clone, PartialEq)]
+pub enum TrackerEvent {
+    /// Role `role` was split off `from` to stand for one opponent.
+    Split { role: u64, from: u64 },
+    /// Role `from` merged into `role`, which now stands for `count` opponents.
+    Merge { role: u64, from: u64, count: u32 },
+}
+
+/// Lateral spread (m) of a detection's position: sensor noise plus the pose estimate's error.
+fn detection_sigma(range: f32) -> f32 {
+    0.1 + 0.03 * range
+}
+
+/// Chance per tick that a particle picks a new direction and speed (mean run: 2.5 s).
+const TURN_PROBABILITY: f32 = 0.02;
+/// Slowest speed a particle picks, as a fraction of top speed: a hiding opponent may stand
+/// still, but the belief must keep up with one that runs.
+const MIN_SPEED_FRACTION: f32 = 0.3;
+
+/// Spread used to decide which role a detection belongs to: generous, because a tracked
+/// opponent's cloud lags a running opponent by a little.
+const ASSOCIATION_SIGMA: f32 = 0.75;
+
+#[derive(Debug, Clone)]
+pub struct Tracker {
+    pub settings: Settings,
+    pub roles: Vec<Role>,
+    next_id: u64,
+    rng: ChaCha8Rng,
+    /// Grid cells where an opponent disc fits: where particles may live.
+    free_cells: Vec<u32>,
+    /// Unit vectors for the random walk (a table: cheaper than sin/cos per particle).
+    directions: Vec<Vector2<f32>>,
+    merger: merge::Histograms,
+    tick: u64,
+}
+
+/// Particles that a robot's scan would have seen: negative information.
+fn would_be_seen(p: Point2<f32>, s: &Sighting, laser: LaserModel, cos: f32, sin: f32) -> bool {
+    let dx = p.x - s.pose.pos.x;
+    let dy = p.y - s.pose.pos.y;
+    let d2 = dx * dx + dy * dy;
+    if d2 > laser.range * laser.range {
+        return false;
+    }
+    let forward = dx * cos + dy * sin;
+    let lateral = -dx * sin + dy * cos;
+    let bearing = fast_atan2(lateral, forward);
+    let half = laser.fov / 2.0;
+    if bearing.abs() > half {
+        return false;
+    }
+    let n = s.scan.len();
+    let i = (((bearing + half) / laser.fov) * (n - 1) as f32).round() as usize;
+    let beam = s.scan[i.min(n - 1)];
+    d2.sqrt() < beam - AGENT_RADIUS
+}
+
+/// atan2 to within about 0.0015 rad (a beam is 0.017 rad wide), several times faster than libm.
+fn fast_atan2(y: f32, x: f32) -> f32 {
+    use std::f32::consts::{FRAC_PI_2, PI};
+    if x == 0.0 && y == 0.0 {
+        return 0.0;
+    }
+    let (ax, ay) = (x.abs(), y.abs());
+    let a = ax.min(ay) / ax.max(ay);
+    let s = a * a;
+    let mut r = ((-0.046_496_473 * s + 0.159_314_22) * s - 0.327_622_77) * s * a + a;
+    if ay > ax {
+        r = FRAC_PI_2 - r;
+    }
+    if x < 0.0 {
+        r = PI - r;
+    }
+    if y < 0.0 { -r } else { r }
+}
+
+impl Tracker {
+    /// A tracker with one role for all `opponents`, uniform over free space.
+    pub fn new(arena: &Arena, settings: Settings, opponents: u32, rng: ChaCha8Rng) -> Tracker {
+        let g = &arena.grid;
+        let free_cells: Vec<u32> = (0..g.len())
+            .filter(|&c| g.clearance[c] >= AGENT_RADIUS)
+            .map(|c| c as u32)
+            .collect();
+        let directions = (0..256)
+            .map(|k| {
+                let a = k as f32 / 256.0 * std::f32::consts::TAU;
+                Vector2::new(a.cos(), a.sin())
+            })
+            .collect();
+        let merger = merge::Histograms::new(arena, settings.grid_cell);
+        let mut t = Tracker {
+            settings,
+            roles: Vec::new(),
+            next_id: 0,
+            rng,
+            free_cells,
+            directions,
+            merger,
+            tick: 0,
+        };
+        if opponents > 0 {
+            let particles = t.uniform_particles(
+                arena,
+                &[],
+                LaserModel {
+                    fov: 0.0,
+                    range: 0.0,
+                },
+            );
+            t.push_role(opponents, particles);
+        }
+        t
+    }
+
+    fn push_role(&mut self, count: u32, particles: Vec<Point2<f32>>) -> u64 {
+        let id = self.next_id;
+        self.next_id += 1;
+        let n = particles.len();
+        self.roles.push(Role {
+            id,
+            count,
+            tagged: false,
+            particles,
+            weights: vec![1.0 / n as f32; n],
+            steps: vec![Vector2::zeros(); n],
+        });
+        id
+    }
+
+    /// Opponents the tracker still hunts (the sum of untagged roles' counts).
+    pub fn untagged_count(&self) -> u32 {
+        self.roles
+            .iter()
+            .filter(|r| !r.tagged)
+            .map(|r| r.count)
+            .sum()
+    }
+
+    /// `particles_per_role` points uniform over free space, avoiding what `seen` would see.
+    fn uniform_particles(
+        &mut self,
+        arena: &Arena,
+        seen: &[Sighting],
+        laser: LaserModel,
+    ) -> Vec<Point2<f32>> {
+        let g = &arena.grid;
+        let n = self.settings.particles_per_role;
+        let mut out = Vec::with_capacity(n);
+        let trig: Vec<(f32, f32)> = seen
+            .iter()
+            .map(|s| (s.pose.theta.cos(), s.pose.theta.sin()))
+            .collect();
+        let mut tries = 0usize;
+        while out.len() < n && !self.free_cells.is_empty() {
+            tries += 1;
+            let cell = self.free_cells[self.rng.random_range(0..self.free_cells.len())] as usize;
+            let c = g.centre(cell);
+            let p = Point2::new(
+                c.x + (self.rng.random::<f32>() - 0.5) * g.cell,
+                c.y + (self.rng.random::<f32>() - 0.5) * g.cell,
+            );
+            if !self.free_at(arena, p) {
+                continue;
+            }
+            // After many failures (the team sees nearly everything) accept seen places too.
+            let visible = seen
+                .iter()
+                .zip(&trig)
+                .any(|(s, (cos, sin))| would_be_seen(p, s, laser, *cos, *sin));
+            if visible && tries < 50 * n {
+                continue;
+            }
+            out.push(p);
+        }
+        if out.is_empty() {
+            // A map with no free space at all: keep the filter well-formed.
+            out.push(Point2::new(arena.width() / 2.0, arena.height() / 2.0));
+        }
+        out
+    }
+
+    fn free_at(&self, arena: &Arena, p: Point2<f32>) -> bool {
+        arena
+            .grid
+            .cell_of(p)
+            .is_some_and(|c| arena.grid.clearance[c] >= AGENT_RADIUS)
+    }
+
+    /// One tick of tracking. `sightings` are the robots that sensed this tick (frozen robots
+    /// sense nothing and are left out).
+    pub fn update(
+        &mut self,
+        arena: &Arena,
+        laser: LaserModel,
+        sightings: &[Sighting],
+    ) -> Vec<TrackerEvent> {
+        self.tick += 1;
+        let mut events = Vec::new();
+        self.motion(arena);
+        let mut used: Vec<Vec<bool>> = sightings
+            .iter()
+            .map(|s| vec![false; s.detections.len()])
+            .collect();
+        self.tags(sightings, &mut used, &mut events);
+        self.negative(sightings, laser);
+        self.positive(arena, sightings, &used, &mut events);
+        self.normalise_and_resample(arena, sightings, laser);
+        if self.settings.merge && self.tick.is_multiple_of(self.settings.merge_interval) {
+            self.merge_similar(&mut events);
+        }
+        events
+    }
+
+    /// Stage 1: each particle runs on in its direction, now and then picking a new direction
+    /// and speed (at most top speed); a step that would leave free space is refused and the
+    /// particle picks anew.
+    fn motion(&mut self, arena: &Arena) {
+        let max_step = self.settings.opponent_speed * DT;
+        let turn_below = (TURN_PROBABILITY * (1u32 << 16) as f32) as u32;
+        let g = &arena.grid;
+        for role in self.roles.iter_mut().filter(|r| !r.tagged) {
+            for (p, v) in role.particles.iter_mut().zip(role.steps.iter_mut()) {
+                let bits: u32 = self.rng.random();
+                if bits & 0xffff < turn_below || *v == Vector2::zeros() {
+                    let more: u32 = self.rng.random();
+                    let dir = self.directions[(more & 0xff) as usize];
+                    let u = (more >> 8) as f32 / (1u32 << 24) as f32;
+                    *v = dir * (max_step * (MIN_SPEED_FRACTION + (1.0 - MIN_SPEED_FRACTION) * u));
+                }
+                let q = *p + *v;
+                if g.cell_of(q).is_some_and(|c| g.clearance[c] >= AGENT_RADIUS) {
+                    *p = q;
+                } else {
+                    *v = Vector2::zeros(); // blocked: choose again next tick
+                }
+            }
+        }
+    }
+
+    /// Log-likelihood-ish score of `z` under role `r`, for association.
+    fn association(&self, r: &Role, z: Point2<f32>) -> f32 {
+        let inv = 1.0 / (2.0 * ASSOCIATION_SIGMA * ASSOCIATION_SIGMA);
+        let mut sum = 0.0f32;
+        let mut nearest = f32::INFINITY;
+        for (p, w) in r.particles.iter().zip(&r.weights) {
+            let d2 = (p - z).norm_squared();
+            nearest = nearest.min(d2);
+            if d2 < 16.0 * ASSOCIATION_SIGMA * ASSOCIATION_SIGMA {
+                sum += w * (-d2 * inv).exp();
+            }
+        }
+        if sum > 1e-30 {
+            sum.ln()
+        } else {
+            // No particle near: rank by the nearest particle (always below any real likelihood).
+            -1e6 - nearest
+        }
+    }
+
+    /// The untagged role a detection at `z` most likely belongs to.
+    fn associate(&self, z: Point2<f32>) -> Option<usize> {
+        self.roles
+            .iter()
+            .enumerate()
+            .filter(|(_, r)| !r.tagged && r.count > 0)
+            .map(|(i, r)| (self.association(r, z), i))
+            .max_by(|a, b| a.0.total_cmp(&b.0).then(b.1.cmp(&a.1)))
+            .map(|(_, i)| i)
+    }
+
+    /// Splits one opponent off role `i` (a copy standing for one) when it stands for more;
+    /// returns the index of the role that now stands for exactly that opponent.
+    fn split_one(&mut self, i: usize, events: &mut Vec<TrackerEvent>) -> usize {
+        if self.roles[i].count <= 1 {
+            return i;
+        }
+        self.roles[i].count -= 1;
+        let mut copy = self.roles[i].clone();
+        copy.id = self.next_id;
+        self.next_id += 1;
+        copy.count = 1;
+        events.push(TrackerEvent::Split {
+            role: copy.id,
+            from: self.roles[i].id,
+        });
+        self.roles.push(copy);
+        self.roles.len() - 1
+    }
+
+    /// Stage 2: each robot whose shot hit took out the opponent it was aiming at, the detection
+    /// nearest its heading.
+    fn tags(
+        &mut self,
+        sightings: &[Sighting],
+        used: &mut [Vec<bool>],
+        events: &mut Vec<TrackerEvent>,
+    ) {
+        for (k, s) in sightings.iter().enumerate() {
+            if !s.tagged {
+                continue;
+            }
+            let Some((j, d)) = s
+                .detections
+                .iter()
+                .enumerate()
+                .min_by(|a, b| a.1.bearing.abs().total_cmp(&b.1.bearing.abs()))
+            else {
+                continue;
+            };
+            used[k][j] = true;
+            let z = detection_point(s.pose, d);
+            let Some(i) = self.associate(z) else { continue };
+            let i = self.split_one(i, events);
+            let role = &mut self.roles[i];
+            role.tagged = true;
+            role.particles = vec![z];
+            role.weights = vec![1.0];
+            role.steps = vec![Vector2::zeros()];
+        }
+    }
+
+    /// Stage 3: down-weight every particle some robot would have seen.
+    fn negative(&mut self, sightings: &[Sighting], laser: LaserModel) {
+        let p_miss = self.settings.p_miss;
+        for s in sightings.iter().filter(|s| !s.scan.is_empty()) {
+            let (cos, sin) = (s.pose.theta.cos(), s.pose.theta.sin());
+            for role in self.roles.iter_mut().filter(|r| !r.tagged) {
+                for (p, w) in role.particles.iter().zip(role.weights.iter_mut()) {
+                    if would_be_seen(*p, s, laser, cos, sin) {
+                        *w *= p_miss;
+                    }
+                }
+            }
+        }
+    }
+
+    /// Stage 4: each (unused) detection updates the role it most likely belongs to.
+    fn positive(
+        &mut self,
+        arena: &Arena,
+        sightings: &[Sighting],
+        used: &[Vec<bool>],
+        events: &mut Vec<TrackerEvent>,
+    ) {
+        for (k, s) in sightings.iter().enumerate() {
+            for (j, d) in s.detections.iter().enumerate() {
+                if used[k][j] {
+                    continue;
+                }
+                let z = detection_point(s.pose, d);
+                let Some(i) = self.associate(z) else { continue };
+                let i = self.split_one(i, events);
+                self.observe(arena, i, z, detection_sigma(d.range));
+            }
+        }
+    }
+
+    /// Bayes update of role `i` with a detection at `z`. When the prior has (almost) no
+    /// particles where the detection is, the cloud is re-drawn around it instead (sensor
+    /// resetting): the detection is far sharper than any prior it could disagree with.
+    fn observe(&mut self, arena: &Arena, i: usize, z: Point2<f32>, sigma: f32) {
+        let inv = 1.0 / (2.0 * sigma * sigma);
+        let role = &mut self.roles[i];
+        let mut total = 0.0f32;
+        for (p, w) in role.particles.iter().zip(role.weights.iter_mut()) {
+            *w *= (-(p - z).norm_squared() * inv).exp();
+            total += *w;
+        }
+        let n = role.particles.len() as f32;
+        let ess = if total > 0.0 {
+            let sq: f32 = role.weights.iter().map(|w| (w / total) * (w / total)).sum();
+            1.0 / sq
+        } else {
+            0.0
+        };
+        if ess >= 0.05 * n {
+            return;
+        }
+        let count = role.particles.len();
+        let mut fresh = Vec::with_capacity(count);
+        let mut tries = 0;
+        while fresh.len() < count && tries < count * 20 {
+            tries += 1;
+            let q = z + Vector2::new(
+                crate::sim::gaussian(&mut self.rng, sigma),
+                crate::sim::gaussian(&mut self.rng, sigma),
+            );
+            if arena
+                .grid
+                .cell_of(q)
+                .is_some_and(|c| arena.grid.clearance[c] >= AGENT_RADIUS)
+            {
+                fresh.push(q);
+            }
+        }
+        while fresh.len() < count {
+            fresh.push(z); // pressed against a wall: the detection itself is the best guess
+        }
+        let role = &mut self.roles[i];
+        role.particles = fresh;
+        role.weights = vec![1.0 / count as f32; count];
+        role.steps = vec![Vector2::zeros(); count];
+    }
+
+    /// Stage 5.
+    fn normalise_and_resample(&mut self, arena: &Arena, sightings: &[Sighting], laser: LaserModel) {
+        for i in 0..self.roles.len() {
+            if self.roles[i].tagged {
+                continue;
+            }
+            let total: f32 = self.roles[i].weights.iter().sum();
+            if !(total.is_finite() && total > 1e-30) {
+                // Every particle became impossible: the opponent is somewhere the team has
+                // not just looked. Re-seed there rather than lose the role.
+                let particles = self.uniform_particles(arena, sightings, laser);
+                let n = particles.len();
+                let role = &mut self.roles[i];
+                role.particles = particles;
+                role.weights = vec![1.0 / n as f32; n];
+                role.steps = vec![Vector2::zeros(); n];
+                continue;
+            }
+            let role = &mut self.roles[i];
+            let mut sq = 0.0;
+            for w in role.weights.iter_mut() {
+                *w /= total;
+                sq += *w * *w;
+            }
+            if 1.0 / sq < 0.5 * role.weights.len() as f32 {
+                let offset = self.rng.random::<f32>();
+                low_variance_resample(role, offset);
+            }
+        }
+    }
+
+    /// Stage 6: merge the most similar pair under the cutoff, repeatedly.
+    fn merge_similar(&mut self, events: &mut Vec<TrackerEvent>) {
+        loop {
+            let active: Vec<usize> = (0..self.roles.len())
+                .filter(|&i| !self.roles[i].tagged)
+                .collect();
+            if active.len() < 2 {
+                return;
+            }
+            let hists: Vec<Vec<f32>> = active
+                .iter()
+                .map(|&i| self.merger.histogram(&self.roles[i]))
+                .collect();
+            let mut best: Option<(f32, usize, usize)> = None;
+            for a in 0..active.len() {
+                for b in a + 1..active.len() {
+                    let d = merge::symmetric_kl(&hists[a], &hists[b]);
+                    if d < self.settings.kl_cutoff && best.is_none_or(|(bd, _, _)| d < bd) {
+                        best = Some((d, active[a], active[b]));
+                    }
+                }
+            }
+            let Some((_, a, b)) = best else { return };
+            let offset = self.rng.random::<f32>();
+            let other = self.roles.remove(b);
+            let keep = &mut self.roles[a];
+            merge::average_into(keep, &other, offset);
+            keep.count += other.count;
+            events.push(TrackerEvent::Merge {
+                role: keep.id,
+                from: other.id,
+                count: keep.count,
+            });
+        }
+    }
+}
+
+/// Low-variance (systematic) resampling to equal weights.
+pub fn low_variance_resample(role: &mut Role, offset: f32) {
+    let n = role.particles.len();
+    let step = 1.0 / n as f32;
+    let mut particles = Vec::with_capacity(n);
+    let mut steps = Vec::with_capacity(n);
+    let mut c = role.weights[0];
+    let mut i = 0;
+    for m in 0..n {
+        let u = (offset + m as f32) * step;
+        while u > c && i + 1 < n {
+            i += 1;
+            c += role.weights[i];
+        }
+        particles.push(role.particles[i]);
+        steps.push(role.steps[i]);
+    }
+    role.particles = particles;
+    role.steps = steps;
+    role.weights = vec![step; n];
+}
