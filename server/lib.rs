@@ -4,11 +4,13 @@
 //! - core (deterministic, no tokio, no clocks, no I/O): [`sim`] (the world and its tick
 //!   pipeline), [`nav`] (shortest paths), [`tracker`] (role-factored particle filters), [`planner`] (the robot team's decisions);
 //! - edge: [`maps`] (map files), [`protocol`] (every JSON shape of the API);
-//! - shell: [`game`] (one tokio task per match), [`http`] (the axum router), `main.rs` (CLI).
+//! - shell: [`game`] (one tokio task per match), [`http`] (the axum router), [`experiment`]
+//!   (the paper's experiments over all cores), `main.rs` (CLI).
 //!
 //! Invariants: a match is a pure function of (map, settings, seed, inputs by tick); robots'
 //! decisions read only what a robot could know; only a match's own task mutates it.
 
+pub mod experiment;
 pub mod game;
 pub mod http;
 pub mod maps;

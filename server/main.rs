@@ -25,6 +25,34 @@ struct Cli {
 enum Command {
     /// Serve the game and the API (the default command).
     Serve(ServeArgs),
+    /// Reproduce one of the paper's experiments: CSV files and SVG plots.
+    #[command(subcommand)]
+    Experiment(Experiment),
+}
+
+#[derive(Debug, Subcommand)]
+enum Experiment {
+    /// Fig. 4: active filters with and without role merging on `hallway`.
+    Filters {
+        /// Runs per variant (with and without merging).
+        #[arg(long, default_value_t = 25)]
+        runs: usize,
+        /// Opponents passing the door in each run.
+        #[arg(long, default_value_t = 20)]
+        opponents: usize,
+        /// Particles per role.
+        #[arg(long, default_value_t = 1000)]
+        particles: usize,
+        /// Seed of the first run (run i uses seed + i).
+        #[arg(long, default_value_t = 0)]
+        seed: u64,
+        /// Directory of map files.
+        #[arg(long, default_value = "maps")]
+        maps: PathBuf,
+        /// Where to write filters.csv and filters.svg.
+        #[arg(long, default_value = "out/filters")]
+        out: PathBuf,
+    },
 }
 
 #[derive(Debug, Clone, clap::Args)]
@@ -53,6 +81,15 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let args = match cli.command {
         Some(Command::Serve(args)) => args,
+        Some(Command::Experiment(e)) => {
+            return match experiment(e) {
+                Ok(()) => ExitCode::SUCCESS,
+                Err(e) => {
+                    eprintln!("error: {e}");
+                    ExitCode::FAILURE
+                }
+            };
+        }
         None => cli.serve,
     };
     let runtime = match tokio::runtime::Runtime::new() {
@@ -112,4 +149,49 @@ async fn shutdown_signal(registry: Arc<Registry>) {
     }
     tracing::info!("shutting down");
     registry.stop_all().await;
+}
+
+fn experiment(e: Experiment) -> Result<(), String> {
+    match e {
+        Experiment::Filters {
+            runs,
+            opponents,
+            particles,
+            seed,
+            maps,
+            out,
+        } => {
+            if runs == 0 || opponents == 0 || particles < 10 {
+                return Err(
+                    "--runs and --opponents must be at least 1, --particles at least 10".into(),
+                );
+            }
+            let store = MapStore::load_dir(&maps).map_err(|e| format!("loading maps: {e}"))?;
+            let arena = store
+                .get("hallway")
+                .ok_or_else(|| format!("no hallway map in {}", maps.display()))?
+                .arena
+                .clone();
+            let cfg = lasertag::experiment::filters::FiltersConfig {
+                runs,
+                opponents,
+                seed,
+                particles_per_role: particles,
+            };
+            let r = lasertag::experiment::filters::run(arena, &cfg, &out)?;
+            println!(
+                "with merging: mean active filters peaks at {:.2}, ends at {:.2}\n\
+                 without merging: peaks at {:.2}, ends at {:.2} ({} s of play)\n\
+                 wrote {}/filters.csv and {}/filters.svg",
+                r.with_merge_max_mean,
+                r.with_merge_final_mean,
+                r.without_merge_max_mean,
+                r.without_merge_final_mean,
+                r.seconds,
+                out.display(),
+                out.display()
+            );
+            Ok(())
+        }
+    }
 }

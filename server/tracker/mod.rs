@@ -176,6 +176,18 @@ fn fast_atan2(y: f32, x: f32) -> f32 {
 impl Tracker {
     /// A tracker with one role for all `opponents`, uniform over free space.
     pub fn new(arena: &Arena, settings: Settings, opponents: u32, rng: ChaCha8Rng) -> Tracker {
+        let counts: &[u32] = if opponents > 0 { &[opponents] } else { &[] };
+        Tracker::with_roles(arena, settings, counts, rng)
+    }
+
+    /// A tracker with one role per entry of `counts`, each uniform over free space (a belief
+    /// that has already split, for benchmarks and tests).
+    pub fn with_roles(
+        arena: &Arena,
+        settings: Settings,
+        counts: &[u32],
+        rng: ChaCha8Rng,
+    ) -> Tracker {
         let g = &arena.grid;
         let free_cells: Vec<u32> = (0..g.len())
             .filter(|&c| g.clearance[c] >= AGENT_RADIUS)
@@ -198,16 +210,13 @@ impl Tracker {
             merger,
             tick: 0,
         };
-        if opponents > 0 {
-            let particles = t.uniform_particles(
-                arena,
-                &[],
-                LaserModel {
-                    fov: 0.0,
-                    range: 0.0,
-                },
-            );
-            t.push_role(opponents, particles);
+        let nothing_seen = LaserModel {
+            fov: 0.0,
+            range: 0.0,
+        };
+        for &count in counts {
+            let particles = t.uniform_particles(arena, &[], nothing_seen);
+            t.push_role(count, particles);
         }
         t
     }

@@ -1,0 +1,53 @@
+//! The paper's experiments as commands: many seeded headless matches spread over every core,
+//! with a progress bar, written out as CSV files and SVG plots.
+//!
+//! - [`filters`]: Fig. 4 — the number of active filters with and without role merging.
+
+pub mod filters;
+pub mod plot;
+
+use std::sync::Mutex;
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+use indicatif::{ProgressBar, ProgressStyle};
+
+/// Runs `job(i)` for `i` in `0..n` on every core, showing progress; results in index order.
+/// Each job is a whole deterministic match, so the order of execution does not matter.
+pub fn run_all<T: Send>(label: &str, n: usize, job: impl Fn(usize) -> T + Sync) -> Vec<T> {
+    let bar = ProgressBar::new(n as u64);
+    bar.set_style(
+        ProgressStyle::with_template(
+            "{msg:>24} [{bar:40}] {pos}/{len} runs, {elapsed} (eta {eta})",
+        )
+        .unwrap_or_else(|_| ProgressStyle::default_bar())
+        .progress_chars("=> "),
+    );
+    bar.set_message(label.to_string());
+    let next = AtomicUsize::new(0);
+    let results: Mutex<Vec<Option<T>>> = Mutex::new((0..n).map(|_| None).collect());
+    let threads = std::thread::available_parallelism()
+        .map_or(1, |p| p.get())
+        .min(n.max(1));
+    std::thread::scope(|s| {
+        for _ in 0..threads {
+            s.spawn(|| {
+                loop {
+                    let i = next.fetch_add(1, Ordering::Relaxed);
+                    if i >= n {
+                        break;
+                    }
+                    let r = job(i);
+                    results.lock().unwrap_or_else(|e| e.into_inner())[i] = Some(r);
+                    bar.inc(1);
+                }
+            });
+        }
+    });
+    bar.finish();
+    results
+        .into_inner()
+        .unwrap_or_else(|e| e.into_inner())
+        .into_iter()
+        .map(|r| r.expect("every job ran"))
+        .collect()
+}
