@@ -33,6 +33,8 @@ pub struct Arena {
     pub def: MapDef,
     /// Every obstacle edge plus the arena border, as one polyline with a BVH.
     walls: Polyline,
+    /// The same edges bucketed on a coarse grid, for the laser's many short ray casts.
+    buckets: SegmentGrid,
     pub grid: ClearanceGrid,
 }
 
@@ -54,7 +56,13 @@ impl Arena {
         }
         let walls = Polyline::new(vertices, Some(indices));
         let grid = ClearanceGrid::build(&def, &walls);
-        Arena { def, walls, grid }
+        let buckets = SegmentGrid::build(&def, &walls);
+        Arena {
+            def,
+            walls,
+            buckets,
+            grid,
+        }
     }
 
     pub fn width(&self) -> f32 {
@@ -66,7 +74,16 @@ impl Arena {
     }
 
     /// Distance along `dir` (unit) from `origin` to the first wall, capped at `max`.
+    ///
+    /// The hot path of the simulation (181 rays per robot per tick): it walks the segment
+    /// grid cell by cell (Amanatides–Woo) and stops at the first cell that holds a hit,
+    /// about three times faster than the general BVH query ([`Arena::cast_ray_bvh`]).
     pub fn cast_ray(&self, origin: Point2<f32>, dir: Vector2<f32>, max: f32) -> f32 {
+        self.buckets.cast(origin, dir, max)
+    }
+
+    /// [`Arena::cast_ray`] through parry's BVH: the reference the fast path is tested against.
+    pub fn cast_ray_bvh(&self, origin: Point2<f32>, dir: Vector2<f32>, max: f32) -> f32 {
         self.walls
             .cast_local_ray(&Ray::new(origin, dir), max, false)
             .unwrap_or(max)
@@ -112,6 +129,116 @@ impl Arena {
     /// True when a disc of `radius` at `p` overlaps no wall or obstacle.
     pub fn disc_is_free(&self, p: Point2<f32>, radius: f32) -> bool {
         self.clearance(p) >= radius
+    }
+}
+
+/// Wall segments bucketed on a uniform grid: each cell lists the segments that touch it.
+#[derive(Debug)]
+struct SegmentGrid {
+    cell: f32,
+    cols: usize,
+    rows: usize,
+    /// `starts[c]..starts[c + 1]` indexes `items` for cell `c`.
+    starts: Vec<u32>,
+    items: Vec<[Point2<f32>; 2]>,
+}
+
+impl SegmentGrid {
+    const CELL: f32 = 0.5;
+
+    fn build(def: &MapDef, walls: &Polyline) -> SegmentGrid {
+        // Keep the grid small on huge maps: at most ~250k cells.
+        let cell = Self::CELL.max((def.width * def.height / 250_000.0).sqrt());
+        let cols = (def.width / cell).ceil().max(1.0) as usize;
+        let rows = (def.height / cell).ceil().max(1.0) as usize;
+        let mut per_cell: Vec<Vec<[Point2<f32>; 2]>> = vec![Vec::new(); cols * rows];
+        for seg in walls.segments() {
+            // Conservative: every cell the segment's slightly grown bounding box touches.
+            let pad = 1e-3;
+            let c0 = (((seg.a.x.min(seg.b.x) - pad) / cell).floor().max(0.0)) as usize;
+            let c1 = (((seg.a.x.max(seg.b.x) + pad) / cell).floor() as usize).min(cols - 1);
+            let r0 = (((seg.a.y.min(seg.b.y) - pad) / cell).floor().max(0.0)) as usize;
+            let r1 = (((seg.a.y.max(seg.b.y) + pad) / cell).floor() as usize).min(rows - 1);
+            for r in r0..=r1 {
+                for c in c0..=c1 {
+                    per_cell[r * cols + c].push([seg.a, seg.b]);
+                }
+            }
+        }
+        let mut starts = Vec::with_capacity(cols * rows + 1);
+        let mut items = Vec::new();
+        for segs in per_cell {
+            starts.push(items.len() as u32);
+            items.extend(segs);
+        }
+        starts.push(items.len() as u32);
+        SegmentGrid {
+            cell,
+            cols,
+            rows,
+            starts,
+            items,
+        }
+    }
+
+    fn cast(&self, o: Point2<f32>, d: Vector2<f32>, max: f32) -> f32 {
+        let cross = |a: Vector2<f32>, b: Vector2<f32>| a.x * b.y - a.y * b.x;
+        let mut cx = (o.x / self.cell).floor() as isize;
+        let mut cy = (o.y / self.cell).floor() as isize;
+        let step_x: isize = if d.x >= 0.0 { 1 } else { -1 };
+        let step_y: isize = if d.y >= 0.0 { 1 } else { -1 };
+        let next_boundary = |c: isize, step: isize| (c + (step > 0) as isize) as f32 * self.cell;
+        let mut t_max_x = if d.x.abs() < 1e-12 {
+            f32::INFINITY
+        } else {
+            (next_boundary(cx, step_x) - o.x) / d.x
+        };
+        let mut t_max_y = if d.y.abs() < 1e-12 {
+            f32::INFINITY
+        } else {
+            (next_boundary(cy, step_y) - o.y) / d.y
+        };
+        let t_delta_x = if d.x.abs() < 1e-12 {
+            f32::INFINITY
+        } else {
+            self.cell / d.x.abs()
+        };
+        let t_delta_y = if d.y.abs() < 1e-12 {
+            f32::INFINITY
+        } else {
+            self.cell / d.y.abs()
+        };
+        let mut best = max;
+        loop {
+            if cx >= 0 && cy >= 0 && (cx as usize) < self.cols && (cy as usize) < self.rows {
+                let c = cy as usize * self.cols + cx as usize;
+                for [a, b] in &self.items[self.starts[c] as usize..self.starts[c + 1] as usize] {
+                    let e = b - a;
+                    let denom = cross(d, e);
+                    if denom.abs() < 1e-12 {
+                        continue;
+                    }
+                    let ao = a - o;
+                    let t = cross(ao, e) / denom;
+                    let u = cross(ao, d) / denom;
+                    if t >= 0.0 && t < best && (-1e-6..=1.0 + 1e-6).contains(&u) {
+                        best = t;
+                    }
+                }
+            }
+            // A hit inside this cell cannot be beaten by any later cell.
+            let t_exit = t_max_x.min(t_max_y);
+            if best <= t_exit || t_exit >= max {
+                return best;
+            }
+            if t_max_x < t_max_y {
+                cx += step_x;
+                t_max_x += t_delta_x;
+            } else {
+                cy += step_y;
+                t_max_y += t_delta_y;
+            }
+        }
     }
 }
 
@@ -261,6 +388,37 @@ mod tests {
         assert!((d - 5.0).abs() < 1e-4, "{d}");
         let d = a.cast_ray(Point2::new(1.0, 1.0), Vector2::new(1.0, 0.0), 8.0);
         assert!((d - 8.0).abs() < 1e-4, "max range when nothing is hit: {d}");
+    }
+
+    #[test]
+    fn the_fast_ray_cast_agrees_with_parry() {
+        use rand::{RngExt, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(9);
+        let a = square_room();
+        for _ in 0..20_000 {
+            let o = Point2::new(rng.random_range(0.01..9.99), rng.random_range(0.01..5.99));
+            if a.inside_obstacle(o) {
+                continue;
+            }
+            let ang: f32 = rng.random_range(0.0..std::f32::consts::TAU);
+            let dir = Vector2::new(ang.cos(), ang.sin());
+            let fast = a.cast_ray(o, dir, 8.0);
+            let reference = a.cast_ray_bvh(o, dir, 8.0);
+            // Grazing rays differ in the last f32 digits; the laser noise is 2 cm.
+            assert!(
+                (fast - reference).abs() < 3e-3,
+                "{o:?} {ang}: {fast} vs {reference}"
+            );
+        }
+        // Axis-aligned rays and rays along grid lines.
+        for dir in [
+            Vector2::new(1.0, 0.0),
+            Vector2::new(0.0, -1.0),
+            Vector2::new(-1.0, 0.0),
+        ] {
+            let o = Point2::new(2.0, 3.0);
+            assert!((a.cast_ray(o, dir, 8.0) - a.cast_ray_bvh(o, dir, 8.0)).abs() < 1e-4);
+        }
     }
 
     #[test]
