@@ -43,6 +43,9 @@ enum Experiment {
         /// Particles per role.
         #[arg(long, default_value_t = 1000)]
         particles: usize,
+        /// Symmetric KL divergence under which two roles merge.
+        #[arg(long, default_value_t = 0.7)]
+        kl_cutoff: f32,
         /// Seed of the first run (run i uses seed + i).
         #[arg(long, default_value_t = 0)]
         seed: u64,
@@ -157,13 +160,18 @@ fn experiment(e: Experiment) -> Result<(), String> {
             runs,
             opponents,
             particles,
+            kl_cutoff,
             seed,
             maps,
             out,
         } => {
-            if runs == 0 || opponents == 0 || particles < 10 {
+            if runs == 0
+                || opponents == 0
+                || particles < 10
+                || !(kl_cutoff > 0.0 && kl_cutoff.is_finite())
+            {
                 return Err(
-                    "--runs and --opponents must be at least 1, --particles at least 10".into(),
+                    "--runs and --opponents must be at least 1, --particles at least 10, --kl-cutoff positive".into(),
                 );
             }
             let store = MapStore::load_dir(&maps).map_err(|e| format!("loading maps: {e}"))?;
@@ -177,6 +185,7 @@ fn experiment(e: Experiment) -> Result<(), String> {
                 opponents,
                 seed,
                 particles_per_role: particles,
+                kl_cutoff,
             };
             let r = lasertag::experiment::filters::run(arena, &cfg, &out)?;
             println!(

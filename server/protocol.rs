@@ -107,7 +107,7 @@ pub struct TrackerSettings {
     pub merge: Option<bool>,
     /// Ticks between merge checks (1..=10000, default 20).
     pub merge_interval: Option<i64>,
-    /// Symmetric KL divergence under which two roles merge (> 0, default 0.5).
+    /// Symmetric KL divergence under which two roles merge (> 0, default 0.7).
     pub kl_cutoff: Option<f64>,
     /// Cell size in metres of the merge histogram (0.1..=10, default 1.0).
     pub grid_cell: Option<f64>,

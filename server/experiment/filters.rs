@@ -28,6 +28,7 @@ pub struct FiltersConfig {
     pub opponents: usize,
     pub seed: u64,
     pub particles_per_role: usize,
+    pub kl_cutoff: f32,
 }
 
 impl Default for FiltersConfig {
@@ -37,6 +38,7 @@ impl Default for FiltersConfig {
             opponents: 20,
             seed: 0,
             particles_per_role: 1000,
+            kl_cutoff: crate::tracker::Settings::default().kl_cutoff,
         }
     }
 }
@@ -108,6 +110,7 @@ pub fn one_run(
         tracker: crate::tracker::Settings {
             merge,
             particles_per_role: cfg.particles_per_role,
+            kl_cutoff: cfg.kl_cutoff,
             ..crate::tracker::Settings::default()
         },
         ..MatchConfig::default()

@@ -56,7 +56,7 @@ impl Default for Settings {
             particles_per_role: 1000,
             merge: true,
             merge_interval: 20,
-            kl_cutoff: 0.5,
+            kl_cutoff: 0.7,
             grid_cell: 1.0,
             p_miss: 0.05,
             opponent_speed: 1.0,
