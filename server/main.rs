@@ -56,6 +56,27 @@ enum Experiment {
         #[arg(long, default_value = "out/filters")]
         out: PathBuf,
     },
+    /// Fig. 5: capture time of `coordinated` vs `baseline` on `office` and `warehouse`.
+    Capture {
+        /// Runs per map, opponent bot and planner.
+        #[arg(long, default_value_t = 100)]
+        runs: usize,
+        /// Seed of the first run (run i uses seed + i, the same for both planners).
+        #[arg(long, default_value_t = 0)]
+        seed: u64,
+        /// Time limit of each run in seconds (runs that reach it count as not captured).
+        #[arg(long, default_value_t = 300)]
+        time_limit: u64,
+        /// Maps to run on.
+        #[arg(long, value_delimiter = ',', default_value = "office,warehouse")]
+        on: Vec<String>,
+        /// Directory of map files.
+        #[arg(long, default_value = "maps")]
+        maps: PathBuf,
+        /// Where to write the CSV files and plots.
+        #[arg(long, default_value = "out/capture")]
+        out: PathBuf,
+    },
 }
 
 #[derive(Debug, Clone, clap::Args)]
@@ -156,6 +177,41 @@ async fn shutdown_signal(registry: Arc<Registry>) {
 
 fn experiment(e: Experiment) -> Result<(), String> {
     match e {
+        Experiment::Capture {
+            runs,
+            seed,
+            time_limit,
+            on,
+            maps,
+            out,
+        } => {
+            if runs == 0 || time_limit == 0 {
+                return Err("--runs and --time-limit must be at least 1".into());
+            }
+            let store = MapStore::load_dir(&maps).map_err(|e| format!("loading maps: {e}"))?;
+            let chosen = on
+                .iter()
+                .map(|name| {
+                    store
+                        .get(name)
+                        .map(|m| (name.clone(), m.arena.clone()))
+                        .ok_or_else(|| format!("no map {name:?} in {}", maps.display()))
+                })
+                .collect::<Result<Vec<_>, _>>()?;
+            let cfg = lasertag::experiment::capture::CaptureConfig {
+                runs,
+                seed,
+                time_limit_s: time_limit,
+            };
+            let table = lasertag::experiment::capture::run(&chosen, &cfg, &out)?;
+            print!("{table}");
+            println!(
+                "ratio: median capture time / baseline's; p: two-sided Mann–Whitney U against baseline\n\
+                 wrote {0}/capture.csv, {0}/capture_summary.csv and {0}/capture_<map>_<bot>.svg",
+                out.display()
+            );
+            Ok(())
+        }
         Experiment::Filters {
             runs,
             opponents,

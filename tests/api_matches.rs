@@ -65,6 +65,8 @@ async fn an_api_opponent_freezes_a_robot_it_faces() {
     assert_eq!(r.status, 204);
     let state = server.step(&id, 1).await;
     assert_eq!(state["robots"][0]["frozen"], true, "{state}");
+    // The scan of the tick it was hit was taken before the hit; from the next one it is blind.
+    let state = server.step(&id, 1).await;
     assert_eq!(state["robots"][0]["scan"].as_array().unwrap().len(), 0);
     let events = server.events(&id).await;
     assert!(

@@ -2,7 +2,9 @@
 //! with a progress bar, written out as CSV files and SVG plots.
 //!
 //! - [`filters`]: Fig. 4 — the number of active filters with and without role merging.
+//! - [`capture`]: Fig. 5 — capture time of `coordinated` against `baseline`.
 
+pub mod capture;
 pub mod filters;
 pub mod plot;
 

@@ -122,7 +122,9 @@ impl Team {
         let sightings: Vec<Sighting> = view
             .robots
             .iter()
-            .filter(|r| !r.frozen)
+            // A robot frozen before it sensed has an empty scan and nothing to say; one hit
+            // after sensing still reports what it saw, and whether its own shot hit.
+            .filter(|r| !r.scan.is_empty() || r.hit)
             .map(|r| Sighting {
                 pose: r.pose,
                 scan: r.scan,

@@ -280,6 +280,8 @@ impl World {
             .collect();
         let mut tracker_settings = config.tracker.clone();
         tracker_settings.opponent_speed = config.physics.opponent_speed;
+        tracker_settings.tag_half_angle = config.physics.tag_half_angle;
+        tracker_settings.tag_range = config.physics.tag_range;
         let tracker = Tracker::new(
             &arena,
             tracker_settings,
@@ -537,8 +539,9 @@ impl World {
                     });
                 }
                 (AgentId::Opponent(_), Some(AgentId::Robot(t))) => {
+                    // Its scan of this tick was taken before the hit and still counts;
+                    // it senses nothing from the next tick on.
                     self.robots[t].frozen_until = tick + self.config.physics.freeze_ticks;
-                    self.robots[t].scan = Scan::default();
                     self.push(EventKind::RobotTagged {
                         by: shooter,
                         target: AgentId::Robot(t),
@@ -957,10 +960,6 @@ mod tests {
         w.step();
         assert!(w.robot_frozen(0));
         assert!(
-            w.robots[0].scan.ranges.is_empty(),
-            "a frozen robot does not sense"
-        );
-        assert!(
             w.events()
                 .iter()
                 .any(|e| matches!(e.kind, EventKind::RobotTagged { .. }))
@@ -968,6 +967,10 @@ mod tests {
         // Cool-down: a second order within 1 s does not fire.
         w.order_opponent(0, OpponentOrder::Tag).unwrap();
         w.step();
+        assert!(
+            w.robots[0].scan.ranges.is_empty(),
+            "from the tick after the hit, a frozen robot does not sense"
+        );
         let shots = w
             .events()
             .iter()
@@ -1079,5 +1082,34 @@ mod tests {
             .map(|p| (p - visited[0]).norm())
             .fold(0.0, f32::max);
         assert!(spread > 3.0, "wandered about: {visited:?}");
+    }
+
+    /// Regression (review of the tracker): a robot that tags an opponent in the same tick as
+    /// it is itself frozen still reports the hit, so the role counts keep adding up.
+    #[test]
+    fn a_hit_by_a_robot_frozen_in_the_same_tick_still_counts() {
+        let cfg = MatchConfig {
+            opponents: 2,
+            placement: Placement::Given {
+                robots: vec![[3.0, 3.0, 0.0]],
+                opponents: vec![[6.0, 3.0], [1.0, 3.0]],
+            },
+            ..config(PlannerKind::Baseline, ControlKind::Api)
+        };
+        let mut w = World::new(duel(), cfg).unwrap();
+        // o1 stands behind the robot; turn it to face the robot.
+        w.opponents[1].pose.theta = 0.0;
+        assert!(
+            w.robots[0].command.tag,
+            "the robot sees o0 dead ahead and fires"
+        );
+        w.order_opponent(1, OpponentOrder::Tag).unwrap();
+        w.step();
+        assert!(w.opponents[0].tagged, "o0 was hit");
+        assert!(
+            w.robot_frozen(0),
+            "and the robot was frozen in the same tick"
+        );
+        assert_eq!(w.team.tracker.untagged_count(), 1);
     }
 }

@@ -11,7 +11,7 @@
 //!    people walk in lines, and a memoryless random walk would spread the cloud only as
 //!    √t, far slower than an opponent can actually get away;
 //! 2. tags — a robot whose shot hit takes one opponent out of the role its target was
-//!    associated with (a role left with no opponents disappears; the tagged one is kept as a
+//!    associated with (the nearest detection in the tag cone) (a role left with no opponents disappears; the tagged one is kept as a
 //!    `tagged` role for display and never hunted again);
 //! 3. negative information — every particle that a robot's scan would have seen (in its field
 //!    of view, nearer than the beam at its bearing reports) is down-weighted by the
@@ -48,6 +48,9 @@ pub struct Settings {
     pub p_miss: f32,
     /// Top speed assumed for opponents (m/s).
     pub opponent_speed: f32,
+    /// The robots' tag device (to tell which opponent a hit took out).
+    pub tag_half_angle: f32,
+    pub tag_range: f32,
 }
 
 impl Default for Settings {
@@ -60,6 +63,8 @@ impl Default for Settings {
             grid_cell: 1.0,
             p_miss: 0.05,
             opponent_speed: 1.0,
+            tag_half_angle: 5f32.to_radians(),
+            tag_range: 6.0,
         }
     }
 }
@@ -135,6 +140,9 @@ pub struct Tracker {
 
 /// Particles that a robot's scan would have seen: negative information.
 fn would_be_seen(p: Point2<f32>, s: &Sighting, laser: LaserModel, cos: f32, sin: f32) -> bool {
+    if s.scan.is_empty() {
+        return false; // a robot frozen while sensing saw nothing
+    }
     let dx = p.x - s.pose.pos.x;
     let dy = p.y - s.pose.pos.y;
     let d2 = dx * dx + dy * dy;
@@ -396,29 +404,38 @@ impl Tracker {
         self.roles.len() - 1
     }
 
-    /// Stage 2: each robot whose shot hit took out the opponent it was aiming at, the detection
-    /// nearest its heading.
+    /// Stage 2: each robot whose shot hit took out one opponent: the one its device hit, the
+    /// nearest detection inside the tag cone. When no detection fits (a teammate blocked the
+    /// laser but not the shot), the role with the most weight inside the cone loses it: a
+    /// hit must always take one count off, or the counts would stop adding up.
     fn tags(
         &mut self,
         sightings: &[Sighting],
         used: &mut [Vec<bool>],
         events: &mut Vec<TrackerEvent>,
     ) {
+        // Detections are noisy (1° in bearing): allow a little outside the device's cone.
+        let half = self.settings.tag_half_angle + 2f32.to_radians();
+        let range = self.settings.tag_range + 0.3;
         for (k, s) in sightings.iter().enumerate() {
             if !s.tagged {
                 continue;
             }
-            let Some((j, d)) = s
+            let hit = s
                 .detections
                 .iter()
                 .enumerate()
-                .min_by(|a, b| a.1.bearing.abs().total_cmp(&b.1.bearing.abs()))
-            else {
-                continue;
+                .filter(|(_, d)| d.bearing.abs() <= half && d.range <= range)
+                .min_by(|a, b| a.1.range.total_cmp(&b.1.range));
+            let found = match hit {
+                Some((j, d)) => {
+                    used[k][j] = true;
+                    let z = detection_point(s.pose, d);
+                    self.associate(z).map(|i| (i, z))
+                }
+                None => self.most_weight_in_cone(s.pose, half, range),
             };
-            used[k][j] = true;
-            let z = detection_point(s.pose, d);
-            let Some(i) = self.associate(z) else { continue };
+            let Some((i, z)) = found else { continue };
             let i = self.split_one(i, events);
             let role = &mut self.roles[i];
             role.tagged = true;
@@ -426,6 +443,38 @@ impl Tracker {
             role.weights = vec![1.0];
             role.steps = vec![Vector2::zeros()];
         }
+    }
+
+    /// The untagged role with the most weight inside a tag cone from `pose`, and the weighted
+    /// mean of that weight (or a point straight ahead when no role has any there).
+    fn most_weight_in_cone(
+        &self,
+        pose: Pose,
+        half: f32,
+        range: f32,
+    ) -> Option<(usize, Point2<f32>)> {
+        let ahead = pose.pos + pose.heading() * (range / 2.0);
+        self.roles
+            .iter()
+            .enumerate()
+            .filter(|(_, r)| !r.tagged && r.count > 0)
+            .map(|(i, r)| {
+                let (mut w, mut sum) = (0.0f32, Vector2::zeros());
+                for (p, pw) in r.particles.iter().zip(&r.weights) {
+                    if (p - pose.pos).norm() <= range && pose.bearing_to(*p).abs() <= half {
+                        w += pw;
+                        sum += p.coords * *pw;
+                    }
+                }
+                let z = if w > 0.0 {
+                    Point2::from(sum / w)
+                } else {
+                    ahead
+                };
+                (w, i, z)
+            })
+            .max_by(|a, b| a.0.total_cmp(&b.0).then(b.1.cmp(&a.1)))
+            .map(|(_, i, z)| (i, z))
     }
 
     /// Stage 3: down-weight every particle some robot would have seen.
@@ -482,7 +531,9 @@ impl Tracker {
         } else {
             0.0
         };
-        if ess >= 0.05 * n {
+        // Keep the Bayes update only if it left a usable cloud: weights that underflowed would
+        // otherwise be mistaken for an impossible role and scattered over the map.
+        if total > 1e-30 && ess >= 0.05 * n {
             return;
         }
         let count = role.particles.len();
@@ -599,4 +650,69 @@ pub fn low_variance_resample(role: &mut Role, offset: f32) {
     role.particles = particles;
     role.steps = steps;
     role.weights = vec![step; n];
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::sim::arena::MapDef;
+    use rand::SeedableRng;
+
+    fn open_room() -> Arena {
+        Arena::new(MapDef {
+            name: "open".into(),
+            width: 12.0,
+            height: 6.0,
+            obstacles: vec![],
+            robot_spawns: vec![[6.0, 3.0, 0.0]],
+            opponent_spawns: vec![Point2::new(11.0, 3.0)],
+            landmarks: vec![],
+        })
+    }
+
+    fn laser() -> LaserModel {
+        LaserModel {
+            fov: std::f32::consts::PI,
+            range: 8.0,
+        }
+    }
+
+    fn tracker(arena: &Arena, opponents: u32) -> Tracker {
+        Tracker::new(
+            arena,
+            Settings::default(),
+            opponents,
+            ChaCha8Rng::seed_from_u64(4),
+        )
+    }
+
+    /// Regression (review of the tracker): a hit whose target the laser did not detect (a
+    /// teammate blocked the beams but not the shot) must still take one opponent off.
+    #[test]
+    fn a_hit_without_a_matching_detection_still_takes_one_count_off() {
+        let a = open_room();
+        let mut t = tracker(&a, 2);
+        let scan = vec![8.0; 181];
+        let s = Sighting {
+            pose: Pose::new(1.0, 3.0, 0.0),
+            scan: &scan,
+            detections: &[],
+            tagged: true,
+        };
+        t.update(&a, laser(), &[s]);
+        assert_eq!(t.untagged_count(), 1);
+        assert_eq!(t.roles.iter().filter(|r| r.tagged).count(), 1);
+    }
+
+    #[test]
+    fn fast_atan2_matches_atan2() {
+        for k in 0..3600 {
+            let a = k as f32 / 3600.0 * std::f32::consts::TAU - std::f32::consts::PI;
+            let (y, x) = (a.sin() * 3.0, a.cos() * 3.0);
+            assert!(
+                (fast_atan2(y, x) - y.atan2(x)).abs() < 1e-3
+                    || (a.abs() - std::f32::consts::PI).abs() < 1e-3
+            );
+        }
+    }
 }
