@@ -17,7 +17,19 @@ use crate::protocol::{
     MatchState, MatchSummary, OpponentCommand, StepRequest,
 };
 use crate::sim::World;
-use crate::sim::arena::Arena;
+use crate::sim::arena::{Arena, MapDef};
+
+/// Builds an arena off the async workers: the clearance grid of a big map takes a while.
+async fn build_arena(def: MapDef) -> Result<Arc<Arena>, ApiError> {
+    tokio::task::spawn_blocking(move || Arc::new(Arena::new(def)))
+        .await
+        .map_err(|e| {
+            ApiError::new(
+                StatusCode::INTERNAL_SERVER_ERROR,
+                format!("building the map failed: {e}"),
+            )
+        })
+}
 
 fn find(state: &AppState, id: &str) -> Result<MatchHandle, ApiError> {
     state
@@ -94,21 +106,13 @@ pub async fn add_map(
         width: def.width as f64,
         height: def.height as f64,
     };
-    // Building the clearance grid of a big map takes a while: keep it off the async workers.
-    let arena = tokio::task::spawn_blocking(move || Arena::new(def))
-        .await
-        .map_err(|e| {
-            ApiError::new(
-                StatusCode::INTERNAL_SERVER_ERROR,
-                format!("building the map failed: {e}"),
-            )
-        })?;
+    let arena = build_arena(def).await?;
     let mut store = state
         .registry
         .maps
         .write()
         .unwrap_or_else(|e| e.into_inner());
-    if !store.insert_arena(Arc::new(arena)) {
+    if !store.insert_arena(arena) {
         return Err(ApiError::conflict(format!("a map named {name:?} exists")));
     }
     Ok((StatusCode::CREATED, Json(info)))
@@ -154,14 +158,7 @@ pub async fn create_match(
                 };
                 ApiError::bad_request(format!("{path}: {}", e.message))
             })?;
-            tokio::task::spawn_blocking(move || Arc::new(Arena::new(def)))
-                .await
-                .map_err(|e| {
-                    ApiError::new(
-                        StatusCode::INTERNAL_SERVER_ERROR,
-                        format!("building the map failed: {e}"),
-                    )
-                })?
+            build_arena(def).await?
         }
         _ => {
             return Err(ApiError::bad_request(

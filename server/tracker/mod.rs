@@ -83,6 +83,16 @@ pub struct Role {
     pub steps: Vec<Vector2<f32>>,
 }
 
+impl Role {
+    /// Replaces the cloud by `particles` with equal weights, standing still.
+    fn reset(&mut self, particles: Vec<Point2<f32>>) {
+        let n = particles.len();
+        self.particles = particles;
+        self.weights = vec![1.0 / n as f32; n];
+        self.steps = vec![Vector2::zeros(); n];
+    }
+}
+
 /// What one robot contributes to the tracker this tick.
 #[derive(Debug, Clone, Copy)]
 pub struct Sighting<'a> {
@@ -232,15 +242,16 @@ impl Tracker {
     fn push_role(&mut self, count: u32, particles: Vec<Point2<f32>>) -> u64 {
         let id = self.next_id;
         self.next_id += 1;
-        let n = particles.len();
-        self.roles.push(Role {
+        let mut role = Role {
             id,
             count,
             tagged: false,
-            particles,
-            weights: vec![1.0 / n as f32; n],
-            steps: vec![Vector2::zeros(); n],
-        });
+            particles: Vec::new(),
+            weights: Vec::new(),
+            steps: Vec::new(),
+        };
+        role.reset(particles);
+        self.roles.push(role);
         id
     }
 
@@ -439,9 +450,7 @@ impl Tracker {
             let i = self.split_one(i, events);
             let role = &mut self.roles[i];
             role.tagged = true;
-            role.particles = vec![z];
-            role.weights = vec![1.0];
-            role.steps = vec![Vector2::zeros()];
+            role.reset(vec![z]);
         }
     }
 
@@ -556,10 +565,7 @@ impl Tracker {
         while fresh.len() < count {
             fresh.push(z); // pressed against a wall: the detection itself is the best guess
         }
-        let role = &mut self.roles[i];
-        role.particles = fresh;
-        role.weights = vec![1.0 / count as f32; count];
-        role.steps = vec![Vector2::zeros(); count];
+        self.roles[i].reset(fresh);
     }
 
     /// Stage 5.
@@ -573,11 +579,7 @@ impl Tracker {
                 // Every particle became impossible: the opponent is somewhere the team has
                 // not just looked. Re-seed there rather than lose the role.
                 let particles = self.uniform_particles(arena, sightings, laser);
-                let n = particles.len();
-                let role = &mut self.roles[i];
-                role.particles = particles;
-                role.weights = vec![1.0 / n as f32; n];
-                role.steps = vec![Vector2::zeros(); n];
+                self.roles[i].reset(particles);
                 continue;
             }
             let role = &mut self.roles[i];
