@@ -32,6 +32,31 @@ impl DistanceField {
     }
 
     pub fn from_cell(grid: &ClearanceGrid, start: usize) -> DistanceField {
+        DistanceField::from_cell_avoiding(grid, start, &[])
+    }
+
+    /// Dijkstra from `from` that also treats the discs `avoid` (centre, radius) as walls:
+    /// how an agent replans around teammates that block its way.
+    pub fn from_point_avoiding(
+        grid: &ClearanceGrid,
+        from: Point2<f32>,
+        avoid: &[(Point2<f32>, f32)],
+    ) -> Option<DistanceField> {
+        let start = grid.nearest_passable(from, (1.0 / grid.cell).ceil() as usize + 2)?;
+        Some(DistanceField::from_cell_avoiding(grid, start, avoid))
+    }
+
+    fn from_cell_avoiding(
+        grid: &ClearanceGrid,
+        start: usize,
+        avoid: &[(Point2<f32>, f32)],
+    ) -> DistanceField {
+        let blocked = |idx: usize| {
+            !grid.passable(idx) || {
+                let c = grid.centre(idx);
+                avoid.iter().any(|(p, r)| (c - p).norm_squared() < r * r)
+            }
+        };
         let n = grid.len();
         let mut dist = vec![f32::INFINITY; n];
         let mut prev = vec![NONE; n];
@@ -64,13 +89,13 @@ impl DistanceField {
                     continue;
                 }
                 let nidx = nr as usize * grid.cols + nc as usize;
-                if !grid.passable(nidx) {
+                if blocked(nidx) {
                     continue;
                 }
                 let diag = dr != 0 && dc != 0;
                 if diag
-                    && !(grid.passable(r as usize * grid.cols + nc as usize)
-                        && grid.passable(nr as usize * grid.cols + c as usize))
+                    && (blocked(r as usize * grid.cols + nc as usize)
+                        || blocked(nr as usize * grid.cols + c as usize))
                 {
                     continue; // no corner cutting
                 }

@@ -272,11 +272,6 @@ pub fn run(
     };
     write("capture.csv", &csv)?;
     write("capture_summary.csv", &summary)?;
-    if PlannerKind::Coordinated.effective() != PlannerKind::Coordinated {
-        table.push_str(
-            "note: the coordinated planner is not built yet and runs the baseline planner\n",
-        );
-    }
     Ok(table)
 }
 
