@@ -84,6 +84,39 @@ impl Default for Settings {
 const MAX_POSITIONS: f32 = 1500.0;
 
 impl Settings {
+    /// Sets one field by name (for tuning from the command line).
+    pub fn set(&mut self, name: &str, value: &str) -> Result<(), String> {
+        fn num<T: std::str::FromStr>(v: &str) -> Result<T, String> {
+            v.parse()
+                .map_err(|_| format!("{v:?} is not a valid number"))
+        }
+        let positive = |x: f32| {
+            if x.is_finite() && x >= 0.0 {
+                Ok(x)
+            } else {
+                Err(format!("must be a finite number ≥ 0, got {x}"))
+            }
+        };
+        match name {
+            "centring_weight" => self.centring_weight = positive(num(value)?)?,
+            "travel_weight" => self.travel_weight = positive(num(value)?)?,
+            "crowding_weight" => self.crowding_weight = positive(num(value)?)?,
+            "crowding_radius" => self.crowding_radius = positive(num(value)?)?.max(0.01),
+            "claim_keep" => self.claim_keep = positive(num(value)?)?.min(1.0),
+            "round_ticks" => self.round_ticks = num::<u64>(value)?.max(1),
+            "worthless_share" => self.worthless_share = positive(num(value)?)?,
+            "worthless_floor" => self.worthless_floor = positive(num(value)?)?,
+            _ => {
+                return Err(format!(
+                    "unknown setting {name:?} (known: centring_weight, travel_weight, \
+                     crowding_weight, crowding_radius, claim_keep, round_ticks, \
+                     worthless_share, worthless_floor)"
+                ));
+            }
+        }
+        Ok(())
+    }
+
     /// The view table this planner needs on `arena`, coarsened for big maps.
     pub fn view_spec(&self, arena: &Arena, physics: &Physics) -> ViewSpec {
         let spacing = self
@@ -161,6 +194,11 @@ impl Coordinated {
             mass: vec![0.0; cells],
             seen: vec![0.0; poses],
         }
+    }
+
+    /// A full negotiation round on the next tick.
+    pub fn renegotiate(&mut self) {
+        self.next_round = 0;
     }
 
     /// The pose a robot is heading for, as shown in the state.

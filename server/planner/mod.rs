@@ -111,6 +111,14 @@ impl Team {
         }
     }
 
+    /// Makes every robot choose its destination again on the next tick, as after a change of
+    /// the belief from outside (a test that sets up a belief, a restored match).
+    pub fn renegotiate(&mut self) {
+        if let Brain::Coordinated(c) = &mut self.brain {
+            c.renegotiate();
+        }
+    }
+
     /// Updates the tracker with what the robots sensed, then plans. Returns the commands and
     /// what happened to the roles.
     pub fn decide(
