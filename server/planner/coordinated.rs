@@ -141,6 +141,22 @@ const WORTH_CHECK_TICKS: u64 = 10;
 /// A robot that moved less than this in `STUCK_TICKS` re-plans around its teammates.
 const STUCK_DISTANCE: f32 = 0.2;
 const STUCK_TICKS: u64 = 40;
+/// Shortest time between two choices of one robot outside full rounds.
+const MIN_CHOICE_TICKS: u64 = 10;
+/// Longest a robot waits off a teammate's path before it goes on with its own plans.
+const MAKE_WAY_TICKS: u64 = 160;
+
+/// Distance from `p` to the segment `a`–`b`.
+fn segment_distance(p: Point2<f32>, a: Point2<f32>, b: Point2<f32>) -> f32 {
+    let ab = b - a;
+    let len2 = ab.norm_squared();
+    let t = if len2 > 0.0 {
+        ((p - a).dot(&ab) / len2).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    (p - (a + ab * t)).norm()
+}
 
 #[derive(Debug, Clone, Copy, PartialEq)]
 struct Goal {
@@ -160,6 +176,10 @@ struct RobotState {
     seeing: bool,
     lost_at: Option<u64>,
     progress: Option<(Point2<f32>, u64)>,
+    /// Making way for teammate `.0` until tick `.1`: off its path, waiting for it to pass.
+    making_way: Option<(usize, u64)>,
+    /// When it last chose a destination.
+    chosen_at: u64,
 }
 
 #[derive(Debug, Clone)]
@@ -219,6 +239,7 @@ impl Coordinated {
         let tick = view.tick;
         let n = view.robots.len();
         let mut commands: Vec<Option<RobotCommand>> = vec![None; n];
+        let mut stuck = Vec::new();
         // Who pursues, who is out of the game, who needs a new destination.
         for (i, robot) in view.robots.iter().enumerate() {
             let state = &mut self.robots[i];
@@ -257,17 +278,28 @@ impl Coordinated {
             if state.goal.is_none() {
                 state.replan = true;
             }
+            if let Some((keeper, until)) = state.making_way {
+                let keeper_pos = view.robots[keeper].pose.pos;
+                let passed = state.path.finished() && (keeper_pos - robot.pose.pos).norm() > 2.5;
+                if tick >= until || passed {
+                    state.making_way = None;
+                    state.replan = true;
+                }
+                continue;
+            }
             match state.progress {
                 Some((p, t)) if tick >= t + STUCK_TICKS => {
                     if (robot.pose.pos - p).norm() < STUCK_DISTANCE && !state.path.finished() {
-                        state.replan = true;
-                        state.avoid_team = true;
+                        stuck.push(i);
                     }
                     state.progress = Some((robot.pose.pos, tick));
                 }
                 None => state.progress = Some((robot.pose.pos, tick)),
                 _ => {}
             }
+        }
+        for i in stuck {
+            self.unstick(arena, view, i, tick);
         }
         let searching: Vec<usize> = (0..n).filter(|&i| commands[i].is_none()).collect();
         let round = tick >= self.next_round;
@@ -284,7 +316,13 @@ impl Coordinated {
             let choosing: Vec<usize> = searching
                 .iter()
                 .copied()
-                .filter(|&i| round || self.robots[i].replan)
+                .filter(|&i| self.robots[i].making_way.is_none())
+                .filter(|&i| {
+                    let r = &self.robots[i];
+                    // Outside full rounds, a robot chooses at most every MIN_CHOICE_TICKS:
+                    // one whose best choice is where it stands would otherwise plan every tick.
+                    round || r.replan && tick >= r.chosen_at + MIN_CHOICE_TICKS
+                })
                 .collect();
             if !choosing.is_empty() && total > 0.0 {
                 self.negotiate(arena, physics, view, &choosing, total);
@@ -446,6 +484,7 @@ impl Coordinated {
             state.replan = false;
             state.avoid_team = false;
             state.progress = None;
+            state.chosen_at = view.tick;
             chosen.push(pos);
             self.claim(c.pose);
         }
@@ -515,12 +554,85 @@ impl Coordinated {
         best
     }
 
+    /// Robot `i` has not moved for a while although its path goes on. Blocked by a moving
+    /// teammate (two robots meeting in a doorway or a narrow corridor), the one with the
+    /// higher index steps off the other's path and waits for it to pass: a fixed order, so
+    /// the two never both give way or both insist. Blocked by anything else (a frozen or
+    /// parked teammate, a tight corner), it re-plans around its teammates.
+    fn unstick(&mut self, arena: &Arena, view: &TeamView, i: usize, tick: u64) {
+        let pos = view.robots[i].pose.pos;
+        let blocker = (0..view.robots.len())
+            .filter(|&j| j != i)
+            .filter(|&j| (view.robots[j].pose.pos - pos).norm() < 1.2)
+            .filter(|&j| !view.robots[j].frozen && !self.robots[j].path.finished())
+            .filter(|&j| self.robots[j].making_way.is_none())
+            .min_by(|&a, &b| {
+                let da = (view.robots[a].pose.pos - pos).norm();
+                let db = (view.robots[b].pose.pos - pos).norm();
+                da.total_cmp(&db)
+            });
+        if let Some(j) = blocker {
+            let (yielder, keeper) = (i.max(j), i.min(j));
+            if self.make_way(arena, view, yielder, keeper, tick) {
+                return;
+            }
+        }
+        self.robots[i].replan = true;
+        self.robots[i].avoid_team = true;
+    }
+
+    /// Sends `yielder` to the nearest point off `keeper`'s remaining path. False when there
+    /// is none within reach.
+    fn make_way(
+        &mut self,
+        arena: &Arena,
+        view: &TeamView,
+        yielder: usize,
+        keeper: usize,
+        tick: u64,
+    ) -> bool {
+        const CLEAR: f32 = 0.9; // centre distance at which two discs pass with room to spare
+        const REACH: f32 = 8.0;
+        let grid = &arena.grid;
+        let from = view.robots[yielder].pose.pos;
+        let keeper_pos = view.robots[keeper].pose.pos;
+        let k = &self.robots[keeper].path;
+        let mut route = vec![keeper_pos];
+        route.extend(k.waypoints.iter().skip(k.next).copied());
+        let Some(field) =
+            DistanceField::from_point_avoiding(grid, from, &[(keeper_pos, 2.0 * AGENT_RADIUS)])
+        else {
+            return false;
+        };
+        let off_route = |p: Point2<f32>| {
+            route
+                .windows(2)
+                .all(|w| segment_distance(p, w[0], w[1]) >= CLEAR)
+                && (p - keeper_pos).norm() >= CLEAR
+        };
+        let spot = (0..grid.len())
+            .filter(|&c| field.dist[c] <= REACH)
+            .filter(|&c| off_route(grid.centre(c)))
+            .min_by(|&a, &b| field.dist[a].total_cmp(&field.dist[b]));
+        let Some(path) = spot.and_then(|c| field.path_to(grid, from, c)) else {
+            return false;
+        };
+        let state = &mut self.robots[yielder];
+        state.path = PathFollower::new(path);
+        state.making_way = Some((keeper, tick + MAKE_WAY_TICKS));
+        state.replan = false;
+        state.progress = None;
+        self.robots[keeper].progress = None;
+        true
+    }
+
     /// Follow the path to the goal, then turn to its heading.
     fn drive(&mut self, physics: &Physics, i: usize, robot: &RobotView) -> RobotCommand {
         let goal = self.goal_pose(i);
         let state = &mut self.robots[i];
         let motion = match state.path.target(robot.pose.pos) {
             Some(wp) => steer(robot.pose, wp, physics.robot_turn_rate),
+            None if state.making_way.is_some() => Motion::Stop,
             None => match goal {
                 Some(g) => {
                     let m = turn_to(robot.pose, g.theta, physics.robot_turn_rate);
@@ -537,5 +649,128 @@ impl Coordinated {
             tag: false,
             goal,
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::planner::{Brain, PlannerKind};
+    use crate::sim::World;
+    use crate::sim::arena::MapDef;
+    use crate::sim::bots::BotKind;
+    use crate::sim::world::{MatchConfig, Placement};
+
+    /// Two 6 m × 6 m rooms joined by a corridor 4 m long and 0.9 m wide: too narrow for two
+    /// robots to pass each other. The opponent is walled into a pocket in a corner, out of
+    /// sight, so that nothing distracts the robots.
+    fn corridor() -> Arc<Arena> {
+        Arc::new(Arena::new(MapDef {
+            name: "corridor".into(),
+            width: 16.0,
+            height: 6.0,
+            obstacles: vec![
+                vec![
+                    Point2::new(6.0, 0.0),
+                    Point2::new(10.0, 0.0),
+                    Point2::new(10.0, 2.55),
+                    Point2::new(6.0, 2.55),
+                ],
+                vec![
+                    Point2::new(6.0, 3.45),
+                    Point2::new(10.0, 3.45),
+                    Point2::new(10.0, 6.0),
+                    Point2::new(6.0, 6.0),
+                ],
+                vec![
+                    Point2::new(0.0, 4.5),
+                    Point2::new(2.0, 4.5),
+                    Point2::new(2.0, 4.6),
+                    Point2::new(0.0, 4.6),
+                ],
+                vec![
+                    Point2::new(1.9, 4.6),
+                    Point2::new(2.0, 4.6),
+                    Point2::new(2.0, 6.0),
+                    Point2::new(1.9, 6.0),
+                ],
+            ],
+            robot_spawns: vec![[2.0, 3.0, 0.0]],
+            opponent_spawns: vec![Point2::new(0.9, 5.3)],
+            landmarks: vec![],
+        }))
+    }
+
+    fn coordinated(world: &mut World) -> &mut Coordinated {
+        match &mut world.team.brain {
+            Brain::Coordinated(c) => c,
+            _ => panic!("a coordinated team"),
+        }
+    }
+
+    /// Sends robot `i` to the candidate pose nearest `to`, as a negotiation would.
+    fn send(world: &mut World, i: usize, to: Point2<f32>) {
+        let arena = world.arena.clone();
+        let from = world.robots[i].pose.pos;
+        let c = coordinated(world);
+        let k = c
+            .nearest_pose(Pose {
+                pos: to,
+                theta: 0.0,
+            })
+            .unwrap();
+        let (pos, _) = c.views.pose(k);
+        let field = DistanceField::from_point(&arena.grid, from).unwrap();
+        let path = field
+            .path_to(&arena.grid, from, arena.grid.cell_of(pos).unwrap())
+            .unwrap();
+        let state = &mut c.robots[i];
+        state.goal = Some(Goal {
+            pose: k,
+            worth: 1.0,
+        });
+        state.path = PathFollower::new(path);
+        state.replan = false;
+    }
+
+    #[test]
+    fn two_robots_meeting_head_on_in_a_narrow_corridor_both_get_through() {
+        let config = MatchConfig {
+            robots: 2,
+            opponents: 1,
+            opponent_bot: BotKind::Idle,
+            planner: PlannerKind::Coordinated,
+            placement: Placement::Given {
+                robots: vec![[2.0, 3.0, 0.0], [14.0, 3.0, std::f32::consts::PI]],
+                opponents: vec![[0.9, 5.3]],
+            },
+            // Goals stay as the test sets them: no rounds, never worthless.
+            coordination: Settings {
+                round_ticks: u64::MAX / 2,
+                worthless_floor: 0.0,
+                worthless_share: 0.0,
+                ..Settings::default()
+            },
+            ..MatchConfig::default()
+        };
+        let mut world = World::new(corridor(), config).unwrap();
+        coordinated(&mut world).next_round = u64::MAX / 2;
+        send(&mut world, 0, Point2::new(14.5, 3.5));
+        send(&mut world, 1, Point2::new(1.5, 2.5));
+        let (mut a_through, mut b_through) = (None, None);
+        for _ in 0..(60 * 20) {
+            world.step();
+            if a_through.is_none() && world.robots[0].pose.pos.x > 10.3 {
+                a_through = Some(world.tick);
+            }
+            if b_through.is_none() && world.robots[1].pose.pos.x < 5.7 {
+                b_through = Some(world.tick);
+            }
+        }
+        assert!(
+            a_through.is_some() && b_through.is_some(),
+            "robot 0 through at {a_through:?}, robot 1 at {b_through:?}; poses {:?}",
+            world.robots.iter().map(|r| r.pose).collect::<Vec<_>>()
+        );
     }
 }

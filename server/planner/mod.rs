@@ -65,11 +65,11 @@ pub enum PlannerKind {
 pub struct Team {
     pub requested: PlannerKind,
     pub tracker: Tracker,
-    brain: Brain,
+    pub(crate) brain: Brain,
 }
 
 #[derive(Debug, Clone)]
-enum Brain {
+pub(crate) enum Brain {
     Idle,
     Baseline(Box<baseline::Baseline>),
     Coordinated(Box<coordinated::Coordinated>),
