@@ -127,6 +127,8 @@ pub struct CoordinationSettings {
     pub crowding_radius: Option<f64>,
     /// Share of a hypothesis that still counts once a teammate will observe it (0..=1, default 0.2).
     pub claim_keep: Option<f64>,
+    /// Extra worth of the goal a robot already has (0..=1, default 0).
+    pub keep_bonus: Option<f64>,
     /// Ticks between full negotiation rounds (1..=12000, default 60).
     pub round_ticks: Option<i64>,
     /// A goal is dropped when its view holds less than this share of its worth when chosen (0..=1, default 0.3).
@@ -143,6 +145,7 @@ pub struct CoordinationConfig {
     pub crowding_weight: f64,
     pub crowding_radius: f64,
     pub claim_keep: f64,
+    pub keep_bonus: f64,
     pub round_ticks: u64,
     pub worthless_share: f64,
     pub worthless_floor: f64,
@@ -156,6 +159,7 @@ impl From<&crate::planner::coordinated::Settings> for CoordinationConfig {
             crowding_weight: s.crowding_weight as f64,
             crowding_radius: s.crowding_radius as f64,
             claim_keep: s.claim_keep as f64,
+            keep_bonus: s.keep_bonus as f64,
             round_ticks: s.round_ticks,
             worthless_share: s.worthless_share as f64,
             worthless_floor: s.worthless_floor as f64,
@@ -199,6 +203,7 @@ impl CoordinationSettings {
             )?,
             crowding_radius,
             claim_keep: f("claim_keep", self.claim_keep, d.claim_keep, 1.0)?,
+            keep_bonus: f("keep_bonus", self.keep_bonus, d.keep_bonus, 1.0)?,
             round_ticks: match self.round_ticks {
                 None => d.round_ticks,
                 Some(v) => in_range("coordination.round_ticks", v, 1, 12_000)? as u64,

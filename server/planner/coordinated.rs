@@ -53,6 +53,9 @@ pub struct Settings {
     pub crowding_radius: f32,
     /// Share of a hypothesis that still counts once a teammate is going to observe it.
     pub claim_keep: f32,
+    /// Extra worth of the goal a robot already has, so that it does not switch for a
+    /// marginal gain (each switch wastes the trip so far).
+    pub keep_bonus: f32,
     /// Ticks between full negotiation rounds.
     pub round_ticks: u64,
     /// A goal whose view now holds less than this share of what it held when chosen (or less
@@ -72,6 +75,7 @@ impl Default for Settings {
             crowding_weight: 0.05,
             crowding_radius: 3.0,
             claim_keep: 0.2,
+            keep_bonus: 0.0,
             round_ticks: 60,
             worthless_share: 0.3,
             worthless_floor: 0.01,
@@ -103,13 +107,14 @@ impl Settings {
             "crowding_weight" => self.crowding_weight = positive(num(value)?)?,
             "crowding_radius" => self.crowding_radius = positive(num(value)?)?.max(0.01),
             "claim_keep" => self.claim_keep = positive(num(value)?)?.min(1.0),
+            "keep_bonus" => self.keep_bonus = positive(num(value)?)?,
             "round_ticks" => self.round_ticks = num::<u64>(value)?.max(1),
             "worthless_share" => self.worthless_share = positive(num(value)?)?,
             "worthless_floor" => self.worthless_floor = positive(num(value)?)?,
             _ => {
                 return Err(format!(
                     "unknown setting {name:?} (known: centring_weight, travel_weight, \
-                     crowding_weight, crowding_radius, claim_keep, round_ticks, \
+                     crowding_weight, crowding_radius, claim_keep, keep_bonus, round_ticks, \
                      worthless_share, worthless_floor)"
                 ));
             }
@@ -525,6 +530,7 @@ impl Coordinated {
     ) -> Option<Choice> {
         let s = &self.settings;
         let h = s.headings;
+        let current = self.robots[i].goal.map(|g| g.pose);
         let mut best: Option<Choice> = None;
         for (p_idx, p) in self.views.positions.iter().enumerate() {
             let Some(cell) = arena.grid.cell_of(*p) else {
@@ -540,7 +546,12 @@ impl Coordinated {
                 .sum();
             let cost = s.travel_weight * travel_s + s.crowding_weight * crowding;
             for k in p_idx * h..(p_idx + 1) * h {
-                let value = self.seen[k] - cost;
+                let keep = if current == Some(k) {
+                    s.keep_bonus
+                } else {
+                    0.0
+                };
+                let value = self.seen[k] - cost + keep;
                 if best.is_none_or(|b| value > b.value) {
                     best = Some(Choice {
                         robot: i,

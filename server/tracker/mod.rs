@@ -81,6 +81,9 @@ pub struct Role {
     pub weights: Vec<f32>,
     /// Each particle's current step per tick (metres), same length as `particles`.
     pub steps: Vec<Vector2<f32>>,
+    /// Consecutive ticks in which robots looked at (nearly) all of this role's weight and
+    /// saw nothing of it: see [`CONTRADICTED_TICKS`].
+    pub unseen_run: u32,
 }
 
 impl Role {
@@ -90,6 +93,7 @@ impl Role {
         self.particles = particles;
         self.weights = vec![1.0 / n as f32; n];
         self.steps = vec![Vector2::zeros(); n];
+        self.unseen_run = 0;
     }
 }
 
@@ -130,6 +134,15 @@ const TURN_PROBABILITY: f32 = 0.02;
 /// still, but the belief must keep up with one that runs.
 const MIN_SPEED_FRACTION: f32 = 0.3;
 
+/// A role is contradicted when robots have looked at (nearly) all of its weight — all but
+/// `CONTRADICTED_KEEP` of it, counting the `p_miss` each seen particle keeps — for this many
+/// ticks in a row without seeing anything of it. Renormalising such a cloud would leave it
+/// where it is, and robots would stare at an empty spot for ever; instead it is re-seeded over
+/// the space nobody is looking at. Ten ticks of misses leave 0.05^10 of the evidence: the
+/// opponent is elsewhere.
+const CONTRADICTED_TICKS: u32 = 10;
+const CONTRADICTED_KEEP: f32 = 0.02;
+
 /// Spread used to decide which role a detection belongs to: generous, because a tracked
 /// opponent's cloud lags a running opponent by a little.
 const ASSOCIATION_SIGMA: f32 = 0.75;
@@ -169,8 +182,16 @@ fn would_be_seen(p: Point2<f32>, s: &Sighting, laser: LaserModel, cos: f32, sin:
     let n = s.scan.len();
     let i = (((bearing + half) / laser.fov) * (n - 1) as f32).round() as usize;
     let beam = s.scan[i.min(n - 1)];
-    d2.sqrt() < beam - AGENT_RADIUS
+    // An opponent centred at `p` would have stopped this beam at its near edge, d − R, and
+    // been detected. So the beam reaching past d − R (with a margin for the laser's noise and
+    // the beam not passing exactly through p) means nobody stands at `p`. Requiring the beam
+    // to reach d + R instead would hide every hypothesis hugging a wall from negative
+    // information for ever: robots would stare at an empty strip along a wall.
+    d2.sqrt() < beam + AGENT_RADIUS - SEEN_MARGIN
 }
+
+/// Laser noise (3σ = 0.06 m) plus the most a beam passes off a particle's centre at 8 m.
+const SEEN_MARGIN: f32 = 0.1;
 
 /// atan2 to within about 0.0015 rad (a beam is 0.017 rad wide), several times faster than libm.
 fn fast_atan2(y: f32, x: f32) -> f32 {
@@ -249,6 +270,7 @@ impl Tracker {
             particles: Vec::new(),
             weights: Vec::new(),
             steps: Vec::new(),
+            unseen_run: 0,
         };
         role.reset(particles);
         self.roles.push(role);
@@ -486,9 +508,11 @@ impl Tracker {
             .map(|(_, i, z)| (i, z))
     }
 
-    /// Stage 3: down-weight every particle some robot would have seen.
+    /// Stage 3: down-weight every particle some robot would have seen, and count how long
+    /// each role has been looked at in full without being seen.
     fn negative(&mut self, sightings: &[Sighting], laser: LaserModel) {
         let p_miss = self.settings.p_miss;
+        let before: Vec<f32> = self.roles.iter().map(|r| r.weights.iter().sum()).collect();
         for s in sightings.iter().filter(|s| !s.scan.is_empty()) {
             let (cos, sin) = (s.pose.theta.cos(), s.pose.theta.sin());
             for role in self.roles.iter_mut().filter(|r| !r.tagged) {
@@ -497,6 +521,15 @@ impl Tracker {
                         *w *= p_miss;
                     }
                 }
+            }
+        }
+        for (role, before) in self.roles.iter_mut().zip(before) {
+            let after: f32 = role.weights.iter().sum();
+            // Weight kept = unseen share + p_miss × seen share.
+            if !role.tagged && after <= (p_miss + CONTRADICTED_KEEP) * before {
+                role.unseen_run += 1;
+            } else {
+                role.unseen_run = 0;
             }
         }
     }
@@ -528,6 +561,7 @@ impl Tracker {
     fn observe(&mut self, arena: &Arena, i: usize, z: Point2<f32>, sigma: f32) {
         let inv = 1.0 / (2.0 * sigma * sigma);
         let role = &mut self.roles[i];
+        role.unseen_run = 0; // seen after all
         let mut total = 0.0f32;
         for (p, w) in role.particles.iter().zip(role.weights.iter_mut()) {
             *w *= (-(p - z).norm_squared() * inv).exp();
@@ -575,9 +609,12 @@ impl Tracker {
                 continue;
             }
             let total: f32 = self.roles[i].weights.iter().sum();
-            if !(total.is_finite() && total > 1e-30) {
-                // Every particle became impossible: the opponent is somewhere the team has
-                // not just looked. Re-seed there rather than lose the role.
+            if !(total.is_finite() && total > 1e-30)
+                || self.roles[i].unseen_run >= CONTRADICTED_TICKS
+            {
+                // Every particle became impossible, or the team has looked at the whole cloud
+                // for a while and seen nothing: the opponent is somewhere the team has not
+                // just looked. Re-seed there rather than lose the role.
                 let particles = self.uniform_particles(arena, sightings, laser);
                 self.roles[i].reset(particles);
                 continue;
@@ -704,6 +741,47 @@ mod tests {
         t.update(&a, laser(), &[s]);
         assert_eq!(t.untagged_count(), 1);
         assert_eq!(t.roles.iter().filter(|r| r.tagged).count(), 1);
+    }
+
+    /// Regression (issue 4, capture run office/evade/36): a cloud squeezed against a wall in
+    /// full view of a robot was never down-weighted (a particle counted as seen only when the
+    /// beam reached past its far edge), so the robots stared at an empty strip for 220 s.
+    /// Now the strip is seen, and a role looked at in full for 10 ticks is re-seeded.
+    #[test]
+    fn a_cloud_against_a_wall_in_full_view_is_contradicted_and_re_seeded() {
+        let a = open_room();
+        let mut t = tracker(&a, 1);
+        // Hypotheses in a strip 0.27 m from the east wall, in front of a robot facing it.
+        let strip: Vec<Point2<f32>> = (0..1000)
+            .map(|i| Point2::new(11.73, 1.5 + 3.0 * i as f32 / 1000.0))
+            .collect();
+        t.roles[0].reset(strip);
+        // What the robot's laser measures: the wall, 3 m ahead, along every beam.
+        let robot = Pose::new(8.5, 3.0, 0.0);
+        let scan: Vec<f32> = (0..181)
+            .map(|i| {
+                let b = (i as f32 - 90.0).to_radians();
+                a.cast_ray(robot.pos, Vector2::new(b.cos(), b.sin()), 8.0)
+            })
+            .collect();
+        let s = Sighting {
+            pose: robot,
+            scan: &scan,
+            detections: &[],
+            tagged: false,
+        };
+        for _ in 0..CONTRADICTED_TICKS {
+            t.update(&a, laser(), &[s]);
+        }
+        let near_wall: f32 = t.roles[0]
+            .particles
+            .iter()
+            .zip(&t.roles[0].weights)
+            .filter(|(p, _)| p.x > 11.0)
+            .map(|(_, w)| w)
+            .sum();
+        assert!(near_wall < 0.05, "weight still by the wall: {near_wall}");
+        assert_eq!(t.untagged_count(), 1);
     }
 
     #[test]
