@@ -40,6 +40,10 @@ fn start(registry: &Registry, round: u64) -> Option<String> {
         map,
         clock: Clock::Realtime,
         players: 0,
+        spectators: 0,
+        free_slots: 0,
+        // Anyone who opens the server can take one of the showcase's bots with one click.
+        bots_joinable: true,
     };
     Some(registry.start(world, meta).id)
 }
