@@ -162,15 +162,15 @@ async function route() {
         token = await tokenFor(decodeURIComponent(id));
       } catch (e) {
         debug.joinError = e.message;
-        alert(`cannot join: ${e.message}`);
         location.hash = "#/";
+        $("lobby-error").textContent = `cannot join: ${e.message}`;
         return;
       }
     }
     game = new Game({
       matchId: decodeURIComponent(id), token,
       onLobby: () => (location.hash = "#/"),
-      onReplay: (g) => replay(g).catch((e) => alert(e.message)),
+      onReplay: (g) => replay(g).catch((e) => { $("end-text").textContent = e.message; }),
     });
     return;
   }

@@ -14,6 +14,7 @@ use serde_json::{Value, json};
 pub struct TestServer {
     pub addr: SocketAddr,
     pub client: reqwest::Client,
+    pub registry: std::sync::Arc<Registry>,
 }
 
 pub struct Reply {
@@ -32,13 +33,14 @@ impl TestServer {
         let root = Path::new(env!("CARGO_MANIFEST_DIR"));
         let maps = MapStore::load_dir(&root.join("maps")).expect("shipped maps load");
         let registry = Registry::with_settings(maps, settings);
-        let app = lasertag::http::app(registry, root.join("web"));
+        let app = lasertag::http::app(registry.clone(), root.join("web"));
         let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
         let addr = listener.local_addr().unwrap();
         tokio::spawn(async move { axum::serve(listener, app).await });
         TestServer {
             addr,
             client: reqwest::Client::new(),
+            registry,
         }
     }
 
