@@ -5,8 +5,8 @@
 //! the people who play: their tokens, which connection is theirs, and how long a dropped
 //! player has to come back (a freed slot a person took from a bot goes back to the bot).
 
-use std::sync::Arc;
 use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::{Arc, OnceLock};
 use std::time::{Duration, Instant};
 
 use tokio::sync::{mpsc, oneshot, watch};
@@ -77,6 +77,9 @@ pub fn spawn_match(
         spectators: Arc::new(AtomicUsize::new(0)),
     };
     let span = tracing::info_span!("match", id = %meta.id);
+    let handle = match_runtime()
+        .cloned()
+        .unwrap_or_else(tokio::runtime::Handle::current);
     let task = MatchTask {
         players: (0..world.opponents.len()).map(|_| None).collect(),
         world,
@@ -92,8 +95,29 @@ pub fn spawn_match(
         tick_next: 0,
         late_ticks: 0,
     };
-    tokio::spawn(task.run(rx).instrument(span));
+    handle.spawn(task.run(rx).instrument(span));
     (tx, hub)
+}
+
+/// The runtime match tasks run on: threads of their own, so that a tick is never queued
+/// behind the hundreds of connection tasks (serialising and sending snapshots) of the
+/// server's runtime. Ticks are short and rare, so these threads are mostly asleep and the OS
+/// wakes them promptly. `None` (then the current runtime is used) if it cannot be built.
+fn match_runtime() -> Option<&'static tokio::runtime::Handle> {
+    static RUNTIME: OnceLock<Option<tokio::runtime::Runtime>> = OnceLock::new();
+    RUNTIME
+        .get_or_init(|| {
+            let threads = std::thread::available_parallelism().map_or(2, |n| n.get().min(4));
+            tokio::runtime::Builder::new_multi_thread()
+                .worker_threads(threads)
+                .thread_name("match")
+                .enable_all()
+                .build()
+                .map_err(|e| tracing::warn!("no separate runtime for matches: {e}"))
+                .ok()
+        })
+        .as_ref()
+        .map(|rt| rt.handle())
 }
 
 struct MatchTask {
