@@ -110,6 +110,20 @@ async fn play_and_spectate_in_headless_chromium() {
         "belief hidden: {px}"
     );
 
+    // One more click from the lobby takes over one of the showcase's bots.
+    b.navigate(&format!("{base}/#/")).await;
+    b.wait_for("!document.getElementById('showcase').hidden && !document.getElementById('showcase-play').disabled", 20)
+        .await;
+    b.eval("document.getElementById('showcase-play').click()")
+        .await;
+    b.wait_for(
+        "__lasertag.role === 'player' && __lasertag.view === 'player' && __lasertag.snapshots > 3",
+        20,
+    )
+    .await;
+    let show = s.get("/api/matches").await.body[0].clone();
+    assert_eq!(show["players"], 1, "{show}");
+
     // 2. Play: a robot idles in the corridor in front of the player's opponent.
     let id = s
         .create_match(json!({"map": "office", "robots": 2, "opponents": 1,
