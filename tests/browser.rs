@@ -82,7 +82,7 @@ async fn play_and_spectate_in_headless_chromium() {
     let drawn = b.eval("__lasertag.drawn").await;
     assert!(drawn["walls"].as_u64().unwrap() > 10, "{drawn}");
     assert_eq!(drawn["robots"], 2, "{drawn}");
-    assert_eq!(drawn["opponents"], 2, "{drawn}");
+    assert_eq!(drawn["opponents"], 3, "{drawn}");
     assert!(drawn["fans"].as_u64().unwrap() >= 1, "{drawn}");
     let px = b.eval(PIXELS).await;
     assert!(px["wall"].as_u64().unwrap() > 2000, "walls drawn: {px}");

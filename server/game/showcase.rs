@@ -26,9 +26,11 @@ fn start(registry: &Registry, round: u64) -> Option<String> {
     };
     let config = MatchConfig {
         robots: 2,
-        opponents: 2,
+        // Three bots that run from the robots: a match that lasts long enough to watch, and
+        // a belief that splits into several roles.
+        opponents: 3,
         opponent_control: ControlKind::Bot,
-        opponent_bot: BotKind::Wander,
+        opponent_bot: BotKind::Evade,
         planner: PlannerKind::Coordinated,
         seed: round,
         ..MatchConfig::default()
