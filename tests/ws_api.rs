@@ -448,3 +448,40 @@ async fn events_and_the_end_reach_players_and_spectators() {
         }
     }
 }
+
+#[tokio::test]
+async fn input_at_20_hz_is_never_rate_limited() {
+    let s = TestServer::start().await;
+    let id = s
+        .create_match(
+            json!({"map": "office", "opponent_control": "human", "clock": "manual",
+            "planner": "idle"}),
+        )
+        .await;
+    let (_, token) = s.join(&id, "erin").await;
+    let mut ws = s.ws(&id, Some(&token)).await.unwrap();
+    ws.next_of("snapshot").await;
+    // Three seconds of keys at 20 Hz with a ping every second, as the web client sends them.
+    for i in 0..60 {
+        let turn = if i % 2 == 0 { 0.5 } else { -0.5 };
+        ws.send_json(&json!({"type": "input", "forward": 1, "turn": turn, "tag": i % 20 == 0}))
+            .await
+            .unwrap();
+        if i % 20 == 0 {
+            ws.send_json(&json!({"type": "ping", "t": i}))
+                .await
+                .unwrap();
+        }
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+    ws.send_json(&json!({"type": "ping", "t": -1}))
+        .await
+        .unwrap();
+    loop {
+        let v = ws.json().await;
+        assert_ne!(v["type"], "error", "{v}");
+        if v["type"] == "pong" && v["t"].as_f64() == Some(-1.0) {
+            break;
+        }
+    }
+}
