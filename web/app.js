@@ -171,6 +171,10 @@ async function route() {
       matchId: decodeURIComponent(id), token,
       onLobby: () => (location.hash = "#/"),
       onReplay: (g) => replay(g).catch((e) => { $("end-text").textContent = e.message; }),
+      onStaleToken: token ? () => {
+        sessionStorage.removeItem(`lasertag.token.${decodeURIComponent(id)}`);
+        route();
+      } : null,
     });
     return;
   }

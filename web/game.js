@@ -18,11 +18,13 @@ function fmtTime(s) {
 }
 
 export class Game {
-  constructor({ matchId, token, onLobby, onReplay }) {
+  constructor({ matchId, token, onLobby, onReplay, onStaleToken }) {
     this.matchId = matchId;
     this.token = token;
     this.onLobby = onLobby;
     this.onReplay = onReplay;
+    this.onStaleToken = onStaleToken;
+    this.welcomed = false;
     this.canvas = $("arena");
     this.ctx = this.canvas.getContext("2d");
     this.snaps = [];
@@ -84,6 +86,12 @@ export class Game {
     ws.onclose = (e) => {
       debug.connected = false;
       if (this.closedByUs || this.stopped) return;
+      if (this.token && !this.welcomed && this.onStaleToken) {
+        // Refused before the first message: the stored token's slot was freed. Join again.
+        this.stop();
+        this.onStaleToken();
+        return;
+      }
       if (e.code === 1008) {
         $("hud-status").textContent = `disconnected: ${e.reason}`;
         return;
@@ -125,6 +133,7 @@ export class Game {
   }
 
   welcome(w) {
+    this.welcomed = true;
     this.map = w.map;
     this.segs = segments(w.map);
     this.you = w.you;

@@ -276,8 +276,11 @@ impl MatchTask {
                 let _ = reply.send(result);
             }
             Request::Connect { token, reply } => {
-                let _ = reply.send(self.connect(&token));
-                self.publish();
+                let seat = self.connect(&token);
+                if seat.is_ok() {
+                    self.publish(); // viewers see the player connected
+                }
+                let _ = reply.send(seat);
             }
             Request::Input {
                 slot,
