@@ -1,5 +1,7 @@
-//! One tick of a `baseline` match (2 robots, 2 wandering opponents, `office`), and its laser
-//! scans alone, so the share of ray casting in a tick can be read off.
+//! One tick of a match on `office` — `baseline` and `coordinated` with 2 robots and 2
+//! wandering opponents, and `coordinated` at the planning size (4 robots, 8
+//! opponents) — averaged over ticks with and without negotiation rounds; and one robot's
+//! laser scan alone, so the share of ray casting in a tick can be read off.
 //!
 //! `cargo bench --bench tick`
 
@@ -14,13 +16,13 @@ use lasertag::sim::world::{MatchConfig, Placement};
 use lasertag::sim::{AgentId, MatchStatus, Physics, World};
 use rand::SeedableRng;
 
-fn office_world(seed: u64) -> World {
+fn office_world(seed: u64, planner: PlannerKind, robots: usize, opponents: usize) -> World {
     let store = MapStore::load_dir(&Path::new(env!("CARGO_MANIFEST_DIR")).join("maps")).unwrap();
     let arena = store.get("office").unwrap().arena.clone();
     let config = MatchConfig {
-        robots: 2,
-        opponents: 2,
-        planner: PlannerKind::Baseline,
+        robots,
+        opponents,
+        planner,
         placement: Placement::Random,
         time_limit_ticks: u64::MAX,
         seed,
@@ -29,29 +31,50 @@ fn office_world(seed: u64) -> World {
     World::new(arena, config).unwrap()
 }
 
-fn tick(c: &mut Criterion) {
-    // A match that is mid-game after 10 s (paths planned, robots moving, opponents at large).
-    let (initial, start) = (1..)
+/// A match that is mid-game after 10 s (paths planned, robots moving, opponents at large).
+fn mid_game(planner: PlannerKind, robots: usize, opponents: usize) -> (World, World) {
+    (1..)
         .find_map(|seed| {
-            let initial = office_world(seed);
+            let initial = office_world(seed, planner, robots, opponents);
             let mut start = initial.clone();
             for _ in 0..200 {
                 start.step();
             }
             (start.status == MatchStatus::Running).then_some((initial, start))
         })
-        .unwrap();
-    let mut world = start.clone();
-    c.bench_function("tick/baseline_office_2r_2o", |b| {
-        b.iter(|| {
-            if world.status == MatchStatus::Finished {
-                world = start.clone();
-            }
-            world.step();
-            black_box(world.tick)
-        })
-    });
+        .unwrap()
+}
 
+fn tick(c: &mut Criterion) {
+    for (name, planner, robots, opponents) in [
+        ("tick/baseline_office_2r_2o", PlannerKind::Baseline, 2, 2),
+        (
+            "tick/coordinated_office_2r_2o",
+            PlannerKind::Coordinated,
+            2,
+            2,
+        ),
+        (
+            "tick/coordinated_office_4r_8o",
+            PlannerKind::Coordinated,
+            4,
+            8,
+        ),
+    ] {
+        let (_, start) = mid_game(planner, robots, opponents);
+        let mut world = start.clone();
+        c.bench_function(name, |b| {
+            b.iter(|| {
+                if world.status == MatchStatus::Finished {
+                    world = start.clone();
+                }
+                world.step();
+                black_box(world.tick)
+            })
+        });
+    }
+
+    let (initial, _) = mid_game(PlannerKind::Baseline, 2, 2);
     let physics = Physics::default();
     let robot = initial.robots[0].pose;
     let others: Vec<_> = initial

@@ -76,6 +76,10 @@ enum Experiment {
         /// Where to write the CSV files and plots.
         #[arg(long, default_value = "out/capture")]
         out: PathBuf,
+        /// Override a weight of the coordinated planner, e.g. `--set travel_weight=0.02`
+        /// (repeatable; names as in the README's planner section).
+        #[arg(long = "set", value_name = "NAME=VALUE")]
+        set: Vec<String>,
     },
 }
 
@@ -184,6 +188,7 @@ fn experiment(e: Experiment) -> Result<(), String> {
             on,
             maps,
             out,
+            set,
         } => {
             if runs == 0 || time_limit == 0 {
                 return Err("--runs and --time-limit must be at least 1".into());
@@ -198,10 +203,20 @@ fn experiment(e: Experiment) -> Result<(), String> {
                         .ok_or_else(|| format!("no map {name:?} in {}", maps.display()))
                 })
                 .collect::<Result<Vec<_>, _>>()?;
+            let mut coordination = lasertag::planner::coordinated::Settings::default();
+            for kv in &set {
+                let (k, v) = kv
+                    .split_once('=')
+                    .ok_or_else(|| format!("--set {kv}: expected NAME=VALUE"))?;
+                coordination
+                    .set(k, v)
+                    .map_err(|e| format!("--set {kv}: {e}"))?;
+            }
             let cfg = lasertag::experiment::capture::CaptureConfig {
                 runs,
                 seed,
                 time_limit_s: time_limit,
+                coordination,
             };
             let table = lasertag::experiment::capture::run(&chosen, &cfg, &out)?;
             print!("{table}");

@@ -1,13 +1,10 @@
 //! Shortest paths on the arena's clearance grid, shared by robots and opponent bots.
 //!
-//! [`DistanceField`] runs Dijkstra from one cell over the cells where a disc fits (8-connected,
+//! [`DistanceField`] runs Dijkstra (as Dial's bucket queue) from one cell over the cells where a disc fits (8-connected,
 //! Euclidean step costs): one run answers "how far is every reachable point" (used to score
 //! candidate destinations by travel time) and "what is the path to this one" (predecessor
 //! links, then string-pulled with [`smooth`] so agents walk straight lines, not staircases).
 //! [`PathFollower`] walks a path waypoint by waypoint.
-
-use std::cmp::Reverse;
-use std::collections::BinaryHeap;
 
 use nalgebra::Point2;
 
@@ -32,57 +29,119 @@ impl DistanceField {
     }
 
     pub fn from_cell(grid: &ClearanceGrid, start: usize) -> DistanceField {
+        DistanceField::from_cell_avoiding(grid, start, &[])
+    }
+
+    /// Dijkstra from `from` that also treats the discs `avoid` (centre, radius) as walls:
+    /// how an agent replans around teammates that block its way.
+    pub fn from_point_avoiding(
+        grid: &ClearanceGrid,
+        from: Point2<f32>,
+        avoid: &[(Point2<f32>, f32)],
+    ) -> Option<DistanceField> {
+        let start = grid.nearest_passable(from, (1.0 / grid.cell).ceil() as usize + 2)?;
+        Some(DistanceField::from_cell_avoiding(grid, start, avoid))
+    }
+
+    /// Dial's algorithm: step costs are small integers (12 straight, 17 diagonal: √2 within
+    /// 0.2%), so a ring of buckets replaces the binary heap and a field over the 38,400
+    /// cells of `office` costs about a millisecond instead of three.
+    fn from_cell_avoiding(
+        grid: &ClearanceGrid,
+        start: usize,
+        avoid: &[(Point2<f32>, f32)],
+    ) -> DistanceField {
+        const STRAIGHT: u32 = 12;
+        const DIAGONAL: u32 = 17;
+        const RING: usize = DIAGONAL as usize + 1;
         let n = grid.len();
-        let mut dist = vec![f32::INFINITY; n];
+        let open: Vec<bool> = (0..n)
+            .map(|idx| {
+                grid.passable(idx) && {
+                    let c = grid.centre(idx);
+                    avoid.iter().all(|(p, r)| (c - p).norm_squared() >= r * r)
+                }
+            })
+            .collect();
+        let mut units = vec![u32::MAX; n];
         let mut prev = vec![NONE; n];
-        let mut heap = BinaryHeap::new();
-        dist[start] = 0.0;
-        heap.push(Reverse((0u32, start as u32)));
-        let (cols, rows) = (grid.cols as isize, grid.rows as isize);
-        let straight = grid.cell;
-        let diagonal = grid.cell * std::f32::consts::SQRT_2;
-        const STEPS: [(isize, isize); 8] = [
-            (1, 0),
-            (-1, 0),
-            (0, 1),
-            (0, -1),
-            (1, 1),
-            (1, -1),
-            (-1, 1),
-            (-1, -1),
-        ];
-        while let Some(Reverse((d_bits, idx))) = heap.pop() {
-            let d = f32::from_bits(d_bits);
-            let idx = idx as usize;
-            if d > dist[idx] {
-                continue;
+        let mut buckets: Vec<Vec<u32>> = vec![Vec::new(); RING];
+        units[start] = 0;
+        buckets[0].push(start as u32);
+        let mut pending = 1usize;
+        let (cols, rows) = (grid.cols, grid.rows);
+        let mut d: u32 = 0;
+        while pending > 0 {
+            let slot = d as usize % RING;
+            let cells = std::mem::take(&mut buckets[slot]);
+            pending -= cells.len();
+            for &idx in &cells {
+                let idx = idx as usize;
+                if units[idx] != d {
+                    continue; // a stale entry: reached sooner by another way
+                }
+                let (r, c) = (idx / cols, idx % cols);
+                let (up, down) = (r + 1 < rows, r > 0);
+                let (right, left) = (c + 1 < cols, c > 0);
+                // Straight neighbours first; a diagonal needs both straight ones it passes
+                // between to be open (no corner cutting).
+                let e = right && open[idx + 1];
+                let w = left && open[idx - 1];
+                let nn = up && open[idx + cols];
+                let s = down && open[idx - cols];
+                let mut relax = |to: usize, cost: u32, buckets: &mut Vec<Vec<u32>>| {
+                    let nd = d + cost;
+                    if nd < units[to] {
+                        units[to] = nd;
+                        prev[to] = idx as u32;
+                        buckets[nd as usize % RING].push(to as u32);
+                        pending += 1;
+                    }
+                };
+                if e {
+                    relax(idx + 1, STRAIGHT, &mut buckets);
+                }
+                if w {
+                    relax(idx - 1, STRAIGHT, &mut buckets);
+                }
+                if nn {
+                    relax(idx + cols, STRAIGHT, &mut buckets);
+                }
+                if s {
+                    relax(idx - cols, STRAIGHT, &mut buckets);
+                }
+                if nn && e && open[idx + cols + 1] {
+                    relax(idx + cols + 1, DIAGONAL, &mut buckets);
+                }
+                if nn && w && open[idx + cols - 1] {
+                    relax(idx + cols - 1, DIAGONAL, &mut buckets);
+                }
+                if s && e && open[idx - cols + 1] {
+                    relax(idx - cols + 1, DIAGONAL, &mut buckets);
+                }
+                if s && w && open[idx - cols - 1] {
+                    relax(idx - cols - 1, DIAGONAL, &mut buckets);
+                }
             }
-            let (r, c) = ((idx / grid.cols) as isize, (idx % grid.cols) as isize);
-            for (dr, dc) in STEPS {
-                let (nr, nc) = (r + dr, c + dc);
-                if nr < 0 || nc < 0 || nr >= rows || nc >= cols {
-                    continue;
-                }
-                let nidx = nr as usize * grid.cols + nc as usize;
-                if !grid.passable(nidx) {
-                    continue;
-                }
-                let diag = dr != 0 && dc != 0;
-                if diag
-                    && !(grid.passable(r as usize * grid.cols + nc as usize)
-                        && grid.passable(nr as usize * grid.cols + c as usize))
-                {
-                    continue; // no corner cutting
-                }
-                let nd = d + if diag { diagonal } else { straight };
-                if nd < dist[nidx] {
-                    dist[nidx] = nd;
-                    prev[nidx] = idx as u32;
-                    // Non-negative f32s order like their bit patterns.
-                    heap.push(Reverse((nd.to_bits(), nidx as u32)));
-                }
+            // Hand the emptied bucket's allocation back for reuse.
+            let mut cells = cells;
+            cells.clear();
+            if buckets[slot].is_empty() {
+                buckets[slot] = cells;
             }
+            d += 1;
         }
+        let scale = grid.cell / STRAIGHT as f32;
+        let dist = units
+            .iter()
+            .map(|&u| {
+                if u == u32::MAX {
+                    f32::INFINITY
+                } else {
+                    u as f32 * scale
+                }
+            })
+            .collect();
         DistanceField { start, dist, prev }
     }
 

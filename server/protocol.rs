@@ -115,6 +115,113 @@ pub struct TrackerSettings {
     pub grid_cell: Option<f64>,
 }
 
+/// Weights of the `coordinated` planner; see the README's planner section for what each does.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct CoordinationSettings {
+    /// Extra worth of a hypothesis straight ahead over one at the edge of view (0..=10, default 0.5).
+    pub centring_weight: Option<f64>,
+    /// Worth lost per second of travel, in shares of all hypotheses (0..=1, default 0.01).
+    pub travel_weight: Option<f64>,
+    /// Worth lost for a destination on top of a teammate's (0..=10, default 0.05).
+    pub crowding_weight: Option<f64>,
+    /// Metres over which the crowding penalty falls to 0 ((0, 50], default 3).
+    pub crowding_radius: Option<f64>,
+    /// Share of a hypothesis that still counts once a teammate will observe it (0..=1, default 0.2).
+    pub claim_keep: Option<f64>,
+    /// Ticks between full negotiation rounds (1..=12000, default 60).
+    pub round_ticks: Option<i64>,
+    /// A goal is dropped when its view holds less than this share of its worth when chosen (0..=1, default 0.3).
+    pub worthless_share: Option<f64>,
+    /// ... or less than this share of all hypotheses (0..=1, default 0.01).
+    pub worthless_floor: Option<f64>,
+}
+
+/// The coordinated planner's weights a match runs with, defaults filled in.
+#[derive(Debug, Clone, PartialEq, Serialize, ToSchema)]
+pub struct CoordinationConfig {
+    pub centring_weight: f64,
+    pub travel_weight: f64,
+    pub crowding_weight: f64,
+    pub crowding_radius: f64,
+    pub claim_keep: f64,
+    pub round_ticks: u64,
+    pub worthless_share: f64,
+    pub worthless_floor: f64,
+}
+
+impl From<&crate::planner::coordinated::Settings> for CoordinationConfig {
+    fn from(s: &crate::planner::coordinated::Settings) -> Self {
+        CoordinationConfig {
+            centring_weight: s.centring_weight as f64,
+            travel_weight: s.travel_weight as f64,
+            crowding_weight: s.crowding_weight as f64,
+            crowding_radius: s.crowding_radius as f64,
+            claim_keep: s.claim_keep as f64,
+            round_ticks: s.round_ticks,
+            worthless_share: s.worthless_share as f64,
+            worthless_floor: s.worthless_floor as f64,
+        }
+    }
+}
+
+impl CoordinationSettings {
+    fn validate(self) -> Result<crate::planner::coordinated::Settings, String> {
+        let d = crate::planner::coordinated::Settings::default();
+        let f = |name: &str, v: Option<f64>, default: f32, hi: f64| -> Result<f32, String> {
+            match v {
+                None => Ok(default),
+                Some(v) => {
+                    finite_in(&format!("coordination.{name}"), v, 0.0, hi, false).map(|v| v as f32)
+                }
+            }
+        };
+        let crowding_radius = f(
+            "crowding_radius",
+            self.crowding_radius,
+            d.crowding_radius,
+            50.0,
+        )?;
+        if crowding_radius <= 0.0 {
+            return Err("coordination.crowding_radius: must be greater than 0".into());
+        }
+        Ok(crate::planner::coordinated::Settings {
+            centring_weight: f(
+                "centring_weight",
+                self.centring_weight,
+                d.centring_weight,
+                10.0,
+            )?,
+            travel_weight: f("travel_weight", self.travel_weight, d.travel_weight, 1.0)?,
+            crowding_weight: f(
+                "crowding_weight",
+                self.crowding_weight,
+                d.crowding_weight,
+                10.0,
+            )?,
+            crowding_radius,
+            claim_keep: f("claim_keep", self.claim_keep, d.claim_keep, 1.0)?,
+            round_ticks: match self.round_ticks {
+                None => d.round_ticks,
+                Some(v) => in_range("coordination.round_ticks", v, 1, 12_000)? as u64,
+            },
+            worthless_share: f(
+                "worthless_share",
+                self.worthless_share,
+                d.worthless_share,
+                1.0,
+            )?,
+            worthless_floor: f(
+                "worthless_floor",
+                self.worthless_floor,
+                d.worthless_floor,
+                1.0,
+            )?,
+            ..d
+        })
+    }
+}
+
 /// Body of `POST /api/matches`. Every field but `map` is optional.
 #[derive(Debug, Clone, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
@@ -130,6 +237,8 @@ pub struct CreateMatch {
     pub opponent_bot: Option<OpponentBot>,
     pub planner: Option<Planner>,
     pub tracker: Option<TrackerSettings>,
+    /// Weights of the `coordinated` planner (ignored by the others).
+    pub coordination: Option<CoordinationSettings>,
     pub clock: Option<Clock>,
     pub seed: Option<u64>,
     /// Seconds, in (0, 86400] (default 300).
@@ -306,6 +415,7 @@ impl CreateMatch {
                 grid_cell: tracker.grid_cell as f32,
                 ..crate::tracker::Settings::default()
             },
+            coordination: self.coordination.unwrap_or_default().validate()?,
             ..config
         };
         Ok(MatchRequest {
@@ -398,6 +508,7 @@ pub struct MatchSummary {
     /// The planner that runs (differs while a planner falls back to another).
     pub planner_active: Planner,
     pub tracker: TrackerConfig,
+    pub coordination: CoordinationConfig,
     pub seed: u64,
     pub players: usize,
     /// WebSocket spectators connected now.
@@ -412,9 +523,11 @@ pub struct MatchSummary {
 pub fn notes(world: &World) -> Vec<String> {
     let mut notes = Vec::new();
     if world.team.requested != world.team.effective() {
-        notes.push(
-            "the coordinated planner is not built yet: this match runs the baseline planner".into(),
-        );
+        notes.push(format!(
+            "the {:?} planner is not available: this match runs {:?}",
+            world.team.requested,
+            world.team.effective()
+        ));
     }
     notes
 }
@@ -447,6 +560,7 @@ pub fn summary(world: &World, meta: &MatchMeta) -> MatchSummary {
         planner: planner_dto(world.team.requested),
         planner_active: planner_dto(world.team.effective()),
         tracker: TrackerConfig::from(&c.tracker),
+        coordination: CoordinationConfig::from(&c.coordination),
         seed: c.seed,
         players: meta.players,
         spectators: meta.spectators,

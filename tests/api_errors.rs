@@ -170,6 +170,27 @@ async fn every_error_class_is_answered_and_nothing_running_is_disturbed() {
         400,
         "tracker.kl_cutoff",
     );
+    for (bad, field) in [
+        (json!({"claim_keep": 1.5}), "coordination.claim_keep"),
+        (json!({"round_ticks": 0}), "coordination.round_ticks"),
+        (
+            json!({"crowding_radius": 0.0}),
+            "coordination.crowding_radius",
+        ),
+        (json!({"travel_weight": -1.0}), "coordination.travel_weight"),
+        (json!({"claim": 0.5}), "coordination"),
+    ] {
+        assert_error(
+            &server
+                .post(
+                    "/api/matches",
+                    &json!({"map": "office", "coordination": bad}),
+                )
+                .await,
+            400,
+            field,
+        );
+    }
     assert_error(
         &server
             .post(

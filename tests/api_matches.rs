@@ -132,3 +132,26 @@ async fn the_same_seed_gives_the_same_match_tick_for_tick() {
     );
     assert_eq!(server.events(&a).await, server.events(&b).await);
 }
+
+#[tokio::test]
+async fn coordination_weights_are_taken_and_echoed_with_defaults_filled_in() {
+    let server = TestServer::start().await;
+    let r = server
+        .post(
+            "/api/matches",
+            &json!({"map": "office", "clock": "manual", "planner": "coordinated",
+                    "coordination": {"travel_weight": 0.02, "round_ticks": 40}}),
+        )
+        .await;
+    assert_eq!(r.status, 201, "{}", r.body);
+    let c = &r.body["coordination"];
+    assert_eq!(c["travel_weight"].as_f64().unwrap() as f32, 0.02);
+    assert_eq!(c["round_ticks"], 40);
+    assert_eq!(
+        c["claim_keep"].as_f64().unwrap() as f32,
+        0.2,
+        "default filled in"
+    );
+    assert_eq!(r.body["planner_active"], "coordinated");
+    assert_eq!(r.body["notes"], json!([]));
+}

@@ -2,25 +2,8 @@
 
 mod common;
 
-use common::TestServer;
+use common::{TestServer, one_door_room as room_map};
 use serde_json::{Value, json};
-
-/// 16 m × 10 m; a room in the top-right corner (x > 10, y > 6) whose only door is a 1.4 m gap
-/// at x ∈ [12, 13.4] in its south wall.
-fn room_map() -> Value {
-    json!({
-        "name": "one-door",
-        "width": 16.0,
-        "height": 10.0,
-        "obstacles": [
-            [[10.0, 6.0], [12.0, 6.0], [12.0, 6.2], [10.0, 6.2]],
-            [[13.4, 6.0], [16.0, 6.0], [16.0, 6.2], [13.4, 6.2]],
-            [[10.0, 6.2], [10.2, 6.2], [10.2, 10.0], [10.0, 10.0]]
-        ],
-        "robot_spawns": [[7.0, 3.0, 0.485]],
-        "opponent_spawns": [[2.0, 8.0]]
-    })
-}
 
 fn in_room(p: &Value) -> bool {
     p[0].as_f64().unwrap() > 10.2 && p[1].as_f64().unwrap() > 6.2

@@ -23,6 +23,8 @@ pub struct CaptureConfig {
     pub runs: usize,
     pub seed: u64,
     pub time_limit_s: u64,
+    /// Weights of the coordinated planner (the defaults unless tuning).
+    pub coordination: crate::planner::coordinated::Settings,
 }
 
 /// One setting of the experiment.
@@ -50,7 +52,13 @@ fn planner_name(p: PlannerKind) -> &'static str {
 }
 
 /// Seconds until the opponent was tagged, or `None` if it was not within the time limit.
-fn one_run(arena: Arc<Arena>, s: Setting, seed: u64, limit_s: u64) -> Result<Option<f64>, String> {
+fn one_run(
+    arena: Arc<Arena>,
+    s: Setting,
+    seed: u64,
+    cfg: &CaptureConfig,
+) -> Result<Option<f64>, String> {
+    let limit_s = cfg.time_limit_s;
     let config = MatchConfig {
         robots: 2,
         opponents: 1,
@@ -59,6 +67,7 @@ fn one_run(arena: Arc<Arena>, s: Setting, seed: u64, limit_s: u64) -> Result<Opt
         placement: Placement::Random,
         seed,
         time_limit_ticks: limit_s * TICK_HZ as u64,
+        coordination: cfg.coordination.clone(),
         ..MatchConfig::default()
     };
     let mut world = World::new(arena, config).map_err(|e| e.to_string())?;
@@ -167,7 +176,7 @@ pub fn run(
             maps[s.map].1.clone(),
             s,
             cfg.seed + (j % cfg.runs) as u64,
-            cfg.time_limit_s,
+            cfg,
         )
     });
     let results: Vec<Option<f64>> = results.into_iter().collect::<Result<_, _>>()?;
@@ -272,11 +281,6 @@ pub fn run(
     };
     write("capture.csv", &csv)?;
     write("capture_summary.csv", &summary)?;
-    if PlannerKind::Coordinated.effective() != PlannerKind::Coordinated {
-        table.push_str(
-            "note: the coordinated planner is not built yet and runs the baseline planner\n",
-        );
-    }
     Ok(table)
 }
 

@@ -16,7 +16,7 @@ const SHOWCASE_MAP: &str = "office";
 /// How long a finished showcase stays up (so its end can be seen) before the next starts.
 const LINGER: Duration = Duration::from_secs(10);
 
-fn start(registry: &Registry, round: u64) -> Option<String> {
+async fn start(registry: &Registry, round: u64) -> Option<String> {
     let arena = {
         let maps = registry.maps.read().unwrap_or_else(|e| e.into_inner());
         maps.get(SHOWCASE_MAP)
@@ -36,7 +36,11 @@ fn start(registry: &Registry, round: u64) -> Option<String> {
         ..MatchConfig::default()
     };
     let map = arena.def.name.clone();
-    let world = World::new(arena, config).ok()?;
+    // Off the async workers: the planner's views of a map take tens of milliseconds to build.
+    let world = tokio::task::spawn_blocking(move || World::new(arena, config))
+        .await
+        .ok()?
+        .ok()?;
     let meta = MatchMeta {
         id: format!("showcase-{}", random_id(4)),
         map,
@@ -53,7 +57,7 @@ fn start(registry: &Registry, round: u64) -> Option<String> {
 /// Keeps one showcase match running for as long as the server runs.
 pub async fn keep_running(registry: Arc<Registry>) {
     let mut round = 0;
-    let Some(mut id) = start(&registry, round) else {
+    let Some(mut id) = start(&registry, round).await else {
         tracing::warn!("no map to run a showcase match on");
         return;
     };
@@ -67,7 +71,7 @@ pub async fn keep_running(registry: Arc<Registry>) {
             tokio::time::sleep(LINGER).await;
             registry.remove(&id).await;
             round += 1;
-            match start(&registry, round) {
+            match start(&registry, round).await {
                 Some(new) => id = new,
                 None => return,
             }

@@ -167,7 +167,16 @@ pub async fn create_match(
         }
     };
     let map_name = arena.def.name.clone();
-    let world = World::new(arena, req.config).map_err(|e| ApiError::bad_request(e.to_string()))?;
+    // Off the async workers: a new map's planner views take tens of milliseconds to build.
+    let world = tokio::task::spawn_blocking(move || World::new(arena, req.config))
+        .await
+        .map_err(|e| {
+            ApiError::new(
+                StatusCode::INTERNAL_SERVER_ERROR,
+                format!("setting up the match failed: {e}"),
+            )
+        })?
+        .map_err(|e| ApiError::bad_request(e.to_string()))?;
     let meta = MatchMeta {
         id: random_id(8),
         map: map_name,

@@ -11,6 +11,7 @@ use crate::nav::{DistanceField, PathFollower, steer, turn_to};
 use crate::planner::pursuit::{engage, nearest_sighting, pursuit_goal};
 use crate::planner::{RobotCommand, TeamView};
 use crate::sim::arena::Arena;
+pub use crate::sim::views::candidate_points;
 use crate::sim::{Motion, Physics, Pose};
 
 /// Ticks between negotiation rounds (8 s).
@@ -28,26 +29,6 @@ const CHASE_MEMORY_TICKS: u64 = 100;
 /// A robot that moved less than this in `STUCK_TICKS` picks a new destination.
 const STUCK_DISTANCE: f32 = 0.2;
 const STUCK_TICKS: u64 = 60;
-
-/// Candidate destinations: the centres of a coarse grid that a disc can stand on.
-pub fn candidate_points(arena: &Arena, spacing: f32) -> Vec<Point2<f32>> {
-    let cols = (arena.width() / spacing).floor() as usize;
-    let rows = (arena.height() / spacing).floor() as usize;
-    let mut out = Vec::new();
-    for r in 0..rows {
-        for c in 0..cols {
-            let p = Point2::new((c as f32 + 0.5) * spacing, (r as f32 + 0.5) * spacing);
-            if arena
-                .grid
-                .cell_of(p)
-                .is_some_and(|i| arena.grid.passable(i))
-            {
-                out.push(p);
-            }
-        }
-    }
-    out
-}
 
 #[derive(Debug, Clone, Default)]
 struct RobotState {

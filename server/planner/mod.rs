@@ -7,9 +7,11 @@
 //! - [`baseline`]: the paper's baseline — random reachable destinations, chosen one robot at a
 //!   time so teammates spread out, travel time as the only other factor.
 //! - [`pursuit`]: shared by every planner — turn to a detected opponent, close in, fire.
-//! - `coordinated` (the tracker-driven planner) falls back to `baseline` until it lands.
+//! - [`coordinated`]: the paper's tracker-driven planner — destinations where the team's
+//!   belief expects the most opponent hypotheses, negotiated one robot at a time.
 
 pub mod baseline;
+pub mod coordinated;
 pub mod pursuit;
 
 use nalgebra::Point2;
@@ -58,29 +60,19 @@ pub enum PlannerKind {
     Coordinated,
 }
 
-impl PlannerKind {
-    /// The planner that actually runs: `coordinated` needs the tracker-driven planner, which
-    /// is not built yet, so it runs `baseline` (and the match state says so).
-    pub fn effective(self) -> PlannerKind {
-        match self {
-            PlannerKind::Coordinated => PlannerKind::Baseline,
-            k => k,
-        }
-    }
-}
-
 /// The team's brain: the opponent tracker, the chosen planner and its memory.
 #[derive(Debug, Clone)]
 pub struct Team {
     pub requested: PlannerKind,
     pub tracker: Tracker,
-    brain: Brain,
+    pub(crate) brain: Brain,
 }
 
 #[derive(Debug, Clone)]
-enum Brain {
+pub(crate) enum Brain {
     Idle,
     Baseline(Box<baseline::Baseline>),
+    Coordinated(Box<coordinated::Coordinated>),
 }
 
 impl Team {
@@ -89,13 +81,20 @@ impl Team {
     pub fn new(
         kind: PlannerKind,
         arena: &Arena,
+        physics: &Physics,
+        coordination: coordinated::Settings,
         robots: usize,
         tracker: Tracker,
         rng: ChaCha8Rng,
     ) -> Team {
-        let brain = match kind.effective() {
+        let brain = match kind {
             PlannerKind::Idle => Brain::Idle,
-            _ => Brain::Baseline(Box::new(baseline::Baseline::new(arena, robots, rng))),
+            PlannerKind::Baseline => {
+                Brain::Baseline(Box::new(baseline::Baseline::new(arena, robots, rng)))
+            }
+            PlannerKind::Coordinated => Brain::Coordinated(Box::new(
+                coordinated::Coordinated::new(arena, physics, coordination, robots),
+            )),
         };
         Team {
             requested: kind,
@@ -108,6 +107,15 @@ impl Team {
         match self.brain {
             Brain::Idle => PlannerKind::Idle,
             Brain::Baseline(_) => PlannerKind::Baseline,
+            Brain::Coordinated(_) => PlannerKind::Coordinated,
+        }
+    }
+
+    /// Makes every robot choose its destination again on the next tick, as after a change of
+    /// the belief from outside (a test that sets up a belief, a restored match).
+    pub fn renegotiate(&mut self) {
+        if let Brain::Coordinated(c) = &mut self.brain {
+            c.renegotiate();
         }
     }
 
@@ -140,6 +148,7 @@ impl Team {
         let commands = match &mut self.brain {
             Brain::Idle => vec![RobotCommand::default(); view.robots.len()],
             Brain::Baseline(b) => b.decide(arena, physics, view),
+            Brain::Coordinated(c) => c.decide(arena, physics, &self.tracker, view),
         };
         (commands, events)
     }

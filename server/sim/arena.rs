@@ -8,7 +8,10 @@ use nalgebra::{Point2, Vector2};
 use parry2d::query::{PointQuery, Ray, RayCast};
 use parry2d::shape::Polyline;
 
+use std::sync::{Arc, Mutex};
+
 use crate::sim::AGENT_RADIUS;
+use crate::sim::views::{ViewSpec, ViewTable};
 
 /// A map after validation: plain data, no serialisation concerns (see `maps.rs` for the file format).
 #[derive(Debug, Clone, PartialEq)]
@@ -36,6 +39,8 @@ pub struct Arena {
     /// The same edges bucketed on a coarse grid, for the laser's many short ray casts.
     buckets: SegmentGrid,
     pub grid: ClearanceGrid,
+    /// Candidate-view tables built so far, one per laser setting (see `views.rs`).
+    views: Mutex<Vec<Arc<ViewTable>>>,
 }
 
 impl Arena {
@@ -62,7 +67,23 @@ impl Arena {
             walls,
             buckets,
             grid,
+            views: Mutex::new(Vec::new()),
         }
+    }
+
+    /// The candidate-view table for `spec`, built on first use and shared afterwards.
+    ///
+    /// Building takes tens to hundreds of milliseconds, so the server builds it off the
+    /// async runtime before a match starts rather than in the match's first tick.
+    pub fn view_table(&self, spec: ViewSpec) -> Arc<ViewTable> {
+        // A poisoned lock only means another builder panicked; the list itself is intact.
+        let mut tables = self.views.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some(t) = tables.iter().find(|t| t.spec == spec) {
+            return t.clone();
+        }
+        let table = Arc::new(ViewTable::build(self, spec));
+        tables.push(table.clone());
+        table
     }
 
     pub fn width(&self) -> f32 {

@@ -9,6 +9,7 @@
 //! - `motion`: kinematics and collision resolution of disc agents.
 //! - `sensors`: laser scans and anonymous opponent detections.
 //! - `rules`: tagging, freezing, elimination.
+//! - `views`: what each candidate destination's laser would see (the planner's footprints).
 //! - `bots`: the opponents' bot behaviours (part of the environment, so they may read truth).
 //! - `world`: the tick pipeline and the event log.
 
@@ -17,6 +18,7 @@ pub mod bots;
 pub mod motion;
 pub mod rules;
 pub mod sensors;
+pub mod views;
 pub mod world;
 
 pub use world::{Event, EventKind, MatchStatus, Side, World};

@@ -62,6 +62,8 @@ pub struct MatchConfig {
     pub placement: Placement,
     pub physics: Physics,
     pub tracker: crate::tracker::Settings,
+    /// Weights of the `coordinated` planner.
+    pub coordination: crate::planner::coordinated::Settings,
 }
 
 impl Default for MatchConfig {
@@ -77,6 +79,7 @@ impl Default for MatchConfig {
             placement: Placement::Spawns,
             physics: Physics::default(),
             tracker: crate::tracker::Settings::default(),
+            coordination: crate::planner::coordinated::Settings::default(),
         }
     }
 }
@@ -291,6 +294,8 @@ impl World {
         let team = Team::new(
             config.planner,
             &arena,
+            &config.physics,
+            config.coordination.clone(),
             config.robots,
             tracker,
             stream(config.seed, STREAM_TEAM),

@@ -227,3 +227,20 @@ impl Ws {
         }
     }
 }
+
+/// 16 m × 10 m; a room in the top-right corner (x > 10.2, y > 6.2) whose only door is a
+/// 1.4 m gap at x ∈ [12, 13.4] in its south wall.
+pub fn one_door_room() -> Value {
+    json!({
+        "name": "one-door",
+        "width": 16.0,
+        "height": 10.0,
+        "obstacles": [
+            [[10.0, 6.0], [12.0, 6.0], [12.0, 6.2], [10.0, 6.2]],
+            [[13.4, 6.0], [16.0, 6.0], [16.0, 6.2], [13.4, 6.2]],
+            [[10.0, 6.2], [10.2, 6.2], [10.2, 10.0], [10.0, 10.0]]
+        ],
+        "robot_spawns": [[7.0, 3.0, 0.485]],
+        "opponent_spawns": [[2.0, 8.0]]
+    })
+}

@@ -1,0 +1,115 @@
+//! One negotiation round of the coordinated planner on `office`: 4 robots choose one after
+//! the other against a belief of 8 roles × 1,000 particles (the reference size); and
+//! building a map's view table (once per map and laser setting). A round is rare (every 3 s,
+//! or when a robot needs a new goal) but runs inside a tick, so it must fit well within the
+//! 50 ms budget. The cost of ordinary ticks is in `cargo bench --bench tick`.
+//!
+//! `cargo bench --bench planner`
+
+use std::hint::black_box;
+use std::path::Path;
+
+use criterion::{Criterion, criterion_group, criterion_main};
+use lasertag::maps::MapStore;
+use lasertag::planner::coordinated::{Coordinated, Settings};
+use lasertag::planner::{RobotView, TeamView};
+use lasertag::sim::arena::Arena;
+use lasertag::sim::sensors::{self, Scan};
+use lasertag::sim::{Physics, Pose};
+use lasertag::tracker::{self, LaserModel, Sighting, Tracker};
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+
+fn office() -> std::sync::Arc<Arena> {
+    let store = MapStore::load_dir(&Path::new(env!("CARGO_MANIFEST_DIR")).join("maps")).unwrap();
+    store.get("office").unwrap().arena.clone()
+}
+
+fn planner(c: &mut Criterion) {
+    let arena = office();
+    let physics = Physics::default();
+    let poses = [
+        Pose::new(2.0, 8.0, 0.0),
+        Pose::new(14.0, 8.0, 1.57),
+        Pose::new(20.0, 8.0, 3.0),
+        Pose::new(14.0, 12.0, -1.57),
+    ];
+    let mut rng = ChaCha8Rng::seed_from_u64(0);
+    let scans: Vec<Scan> = poses
+        .iter()
+        .map(|p| sensors::scan(&arena, &physics, *p, &[], &mut rng))
+        .collect();
+    // A belief shaped by a second of looking: 8 roles, the corridors' hypotheses gone.
+    let mut tracker = Tracker::with_roles(
+        &arena,
+        tracker::Settings {
+            merge: false,
+            ..tracker::Settings::default()
+        },
+        &[1; 8],
+        ChaCha8Rng::seed_from_u64(1),
+    );
+    let sightings: Vec<Sighting> = poses
+        .iter()
+        .zip(&scans)
+        .map(|(pose, scan)| Sighting {
+            pose: *pose,
+            scan: &scan.ranges,
+            detections: &[],
+            tagged: false,
+        })
+        .collect();
+    let laser = LaserModel {
+        fov: physics.laser_fov,
+        range: physics.laser_range,
+    };
+    for _ in 0..20 {
+        tracker.update(&arena, laser, &sightings);
+    }
+    let view = TeamView {
+        tick: 1,
+        robots: poses
+            .iter()
+            .zip(&scans)
+            .map(|(pose, scan)| RobotView {
+                pose: *pose,
+                frozen: false,
+                can_fire: true,
+                scan: &scan.ranges,
+                detections: &[],
+                hit: false,
+            })
+            .collect(),
+    };
+    // Build the map's view table outside the measurement (it is built once per map).
+    let mut team = Coordinated::new(&arena, &physics, Settings::default(), 4);
+    c.bench_function("negotiation_round/4r_8x1000_office", |b| {
+        b.iter(|| {
+            team.renegotiate();
+            black_box(team.decide(&arena, &physics, &tracker, &view))
+        })
+    });
+    c.bench_function("distance_field/office", |b| {
+        b.iter(|| {
+            black_box(lasertag::nav::DistanceField::from_point(
+                &arena.grid,
+                poses[0].pos,
+            ))
+        })
+    });
+    c.bench_function("view_table_build/office", |b| {
+        b.iter(|| {
+            black_box(lasertag::sim::views::ViewTable::build(
+                &arena,
+                Settings::default().view_spec(&arena, &physics),
+            ))
+        })
+    });
+}
+
+criterion_group! {
+    name = benches;
+    config = Criterion::default().sample_size(20);
+    targets = planner
+}
+criterion_main!(benches);

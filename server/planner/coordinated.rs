@@ -1,0 +1,776 @@
+//! The tracker-driven planner of the paper's section 4.3: robots go where they expect to see
+//! the most opponent hypotheses, chosen one robot at a time so that teammates look at
+//! different places.
+//!
+//! Each negotiation round runs these stages over plain data:
+//!
+//! 1. **Mass**: the tracker's particles of untagged roles, each weighted by its role's count,
+//!    are binned on the scoring grid of the arena's [`ViewTable`]: `mass[c]` is the expected
+//!    number of opponents in cell `c`.
+//! 2. **Claims**: what robots that are not choosing will observe — a pursuer's current view,
+//!    a teammate's kept destination — counts for less (`claim_keep` of its mass).
+//! 3. **Choice**: for every choosing robot, every candidate pose `k` is worth
+//!    `seen(k) / total − travel_weight · seconds to get there − crowding_weight · crowding`,
+//!    where `seen(k)` sums the mass of the cells `k` sees, weighted up to `1 + centring_weight`
+//!    for cells straight ahead. The best (robot, pose) pair wins; that robot's view is
+//!    claimed, and the remaining robots choose again. This is what splits a team across
+//!    branching corridors: a branch that one robot will search is worth little to the next.
+//!
+//! Rounds happen every `round_ticks`, and for one robot alone when it reached its goal, when
+//! its goal became worthless (the tracker's negative information emptied it on the way), when
+//! it is stuck, or while it follows an opponent it just lost sight of.
+//!
+//! A robot that detects an opponent leaves the negotiation and pursues it ([`pursuit`]); the
+//! others keep searching, with the pursuer's view claimed.
+
+use std::sync::Arc;
+
+use nalgebra::Point2;
+
+use crate::nav::{DistanceField, PathFollower, steer, turn_to};
+use crate::planner::pursuit::{engage, nearest_sighting, pursuit_goal};
+use crate::planner::{RobotCommand, RobotView, TeamView};
+use crate::sim::arena::Arena;
+use crate::sim::views::{ViewSpec, ViewTable};
+use crate::sim::{AGENT_RADIUS, Motion, Physics, Pose, wrap_angle};
+use crate::tracker::Tracker;
+
+/// The planner's weights and rhythms. Defaults are tuned with `lasertag experiment capture`
+/// (see the README).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Settings {
+    /// Spacing of candidate positions (metres) and headings per position.
+    pub candidate_spacing: f32,
+    pub headings: usize,
+    /// Side of the scoring grid's cells (metres).
+    pub score_cell: f32,
+    /// Extra worth of a hypothesis straight ahead over one at the edge of the view.
+    pub centring_weight: f32,
+    /// Worth lost per second of travel, in fractions of all hypotheses.
+    pub travel_weight: f32,
+    /// Worth lost for a destination on top of a teammate's, falling to 0 at `crowding_radius`.
+    pub crowding_weight: f32,
+    pub crowding_radius: f32,
+    /// Share of a hypothesis that still counts once a teammate is going to observe it.
+    pub claim_keep: f32,
+    /// Ticks between full negotiation rounds.
+    pub round_ticks: u64,
+    /// A goal whose view now holds less than this share of what it held when chosen (or less
+    /// than `worthless_floor` of all hypotheses) is dropped for a new one.
+    pub worthless_share: f32,
+    pub worthless_floor: f32,
+}
+
+impl Default for Settings {
+    fn default() -> Self {
+        Settings {
+            candidate_spacing: 1.0,
+            headings: 8,
+            score_cell: 0.5,
+            centring_weight: 0.5,
+            travel_weight: 0.01,
+            crowding_weight: 0.05,
+            crowding_radius: 3.0,
+            claim_keep: 0.2,
+            round_ticks: 60,
+            worthless_share: 0.3,
+            worthless_floor: 0.01,
+        }
+    }
+}
+
+/// Most candidate positions a map gets: a 500 m × 500 m map would otherwise need gigabytes
+/// of views, so big maps get a coarser candidate grid (and scoring grid) instead.
+const MAX_POSITIONS: f32 = 1500.0;
+
+impl Settings {
+    /// Sets one field by name (for tuning from the command line).
+    pub fn set(&mut self, name: &str, value: &str) -> Result<(), String> {
+        fn num<T: std::str::FromStr>(v: &str) -> Result<T, String> {
+            v.parse()
+                .map_err(|_| format!("{v:?} is not a valid number"))
+        }
+        let positive = |x: f32| {
+            if x.is_finite() && x >= 0.0 {
+                Ok(x)
+            } else {
+                Err(format!("must be a finite number ≥ 0, got {x}"))
+            }
+        };
+        match name {
+            "centring_weight" => self.centring_weight = positive(num(value)?)?,
+            "travel_weight" => self.travel_weight = positive(num(value)?)?,
+            "crowding_weight" => self.crowding_weight = positive(num(value)?)?,
+            "crowding_radius" => self.crowding_radius = positive(num(value)?)?.max(0.01),
+            "claim_keep" => self.claim_keep = positive(num(value)?)?.min(1.0),
+            "round_ticks" => self.round_ticks = num::<u64>(value)?.max(1),
+            "worthless_share" => self.worthless_share = positive(num(value)?)?,
+            "worthless_floor" => self.worthless_floor = positive(num(value)?)?,
+            _ => {
+                return Err(format!(
+                    "unknown setting {name:?} (known: centring_weight, travel_weight, \
+                     crowding_weight, crowding_radius, claim_keep, round_ticks, \
+                     worthless_share, worthless_floor)"
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    /// The view table this planner needs on `arena`, coarsened for big maps.
+    pub fn view_spec(&self, arena: &Arena, physics: &Physics) -> ViewSpec {
+        let spacing = self
+            .candidate_spacing
+            .max((arena.width() * arena.height() / MAX_POSITIONS).sqrt());
+        ViewSpec {
+            spacing,
+            headings: self.headings,
+            cell: self.score_cell.max(spacing / 4.0),
+            fov: physics.laser_fov,
+            range: physics.laser_range,
+        }
+    }
+}
+
+/// How long after losing sight of an opponent a robot keeps re-planning towards where the
+/// belief says it went, and how often.
+const CHASE_TICKS: u64 = 100;
+const CHASE_REPLAN_TICKS: u64 = 10;
+/// How often goals are checked for having become worthless.
+const WORTH_CHECK_TICKS: u64 = 10;
+/// A robot that moved less than this in `STUCK_TICKS` re-plans around its teammates.
+const STUCK_DISTANCE: f32 = 0.2;
+const STUCK_TICKS: u64 = 40;
+/// Shortest time between two choices of one robot outside full rounds.
+const MIN_CHOICE_TICKS: u64 = 10;
+/// Longest a robot waits off a teammate's path before it goes on with its own plans.
+const MAKE_WAY_TICKS: u64 = 160;
+
+/// Distance from `p` to the segment `a`–`b`.
+fn segment_distance(p: Point2<f32>, a: Point2<f32>, b: Point2<f32>) -> f32 {
+    let ab = b - a;
+    let len2 = ab.norm_squared();
+    let t = if len2 > 0.0 {
+        ((p - a).dot(&ab) / len2).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    (p - (a + ab * t)).norm()
+}
+
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Goal {
+    /// Candidate pose index in the view table.
+    pose: usize,
+    /// Share of all hypotheses its view held when it was chosen.
+    worth: f32,
+}
+
+#[derive(Debug, Clone, Default)]
+struct RobotState {
+    goal: Option<Goal>,
+    path: PathFollower,
+    replan: bool,
+    /// Plan around teammates next time (set when stuck).
+    avoid_team: bool,
+    seeing: bool,
+    lost_at: Option<u64>,
+    progress: Option<(Point2<f32>, u64)>,
+    /// Making way for teammate `.0` until tick `.1`: off its path, waiting for it to pass.
+    making_way: Option<(usize, u64)>,
+    /// When it last chose a destination.
+    chosen_at: u64,
+}
+
+#[derive(Debug, Clone)]
+pub struct Coordinated {
+    settings: Settings,
+    views: Arc<ViewTable>,
+    robots: Vec<RobotState>,
+    next_round: u64,
+    /// Scratch: expected opponents per scoring cell, and per-pose worth.
+    mass: Vec<f32>,
+    seen: Vec<f32>,
+}
+
+/// One robot's best choice in a round.
+#[derive(Debug, Clone, Copy)]
+struct Choice {
+    robot: usize,
+    pose: usize,
+    value: f32,
+    worth: f32,
+}
+
+impl Coordinated {
+    pub fn new(arena: &Arena, physics: &Physics, settings: Settings, robots: usize) -> Self {
+        let views = arena.view_table(settings.view_spec(arena, physics));
+        let (cells, poses) = (views.cell_count(), views.len());
+        Coordinated {
+            settings,
+            views,
+            robots: vec![RobotState::default(); robots],
+            next_round: 0,
+            mass: vec![0.0; cells],
+            seen: vec![0.0; poses],
+        }
+    }
+
+    /// A full negotiation round on the next tick.
+    pub fn renegotiate(&mut self) {
+        self.next_round = 0;
+    }
+
+    /// The pose a robot is heading for, as shown in the state.
+    fn goal_pose(&self, i: usize) -> Option<Pose> {
+        self.robots[i].goal.map(|g| {
+            let (pos, theta) = self.views.pose(g.pose);
+            Pose { pos, theta }
+        })
+    }
+
+    pub fn decide(
+        &mut self,
+        arena: &Arena,
+        physics: &Physics,
+        tracker: &Tracker,
+        view: &TeamView,
+    ) -> Vec<RobotCommand> {
+        let tick = view.tick;
+        let n = view.robots.len();
+        let mut commands: Vec<Option<RobotCommand>> = vec![None; n];
+        let mut stuck = Vec::new();
+        // Who pursues, who is out of the game, who needs a new destination.
+        for (i, robot) in view.robots.iter().enumerate() {
+            let state = &mut self.robots[i];
+            if robot.frozen {
+                state.seeing = false;
+                commands[i] = Some(RobotCommand {
+                    goal: None,
+                    ..RobotCommand::default()
+                });
+                continue;
+            }
+            if let Some((target, range, bearing)) = nearest_sighting(robot) {
+                state.seeing = true;
+                state.lost_at = None;
+                let (motion, tag) = engage(robot, physics, target, range, bearing);
+                commands[i] = Some(RobotCommand {
+                    motion,
+                    tag,
+                    goal: Some(pursuit_goal(robot.pose, target)),
+                });
+                continue;
+            }
+            if state.seeing {
+                // Lost it: go where the belief says it went, re-planning often for a while.
+                state.seeing = false;
+                state.lost_at = Some(tick);
+                state.replan = true;
+            }
+            if let Some(lost) = state.lost_at {
+                if tick >= lost + CHASE_TICKS {
+                    state.lost_at = None;
+                } else if (tick - lost).is_multiple_of(CHASE_REPLAN_TICKS) {
+                    state.replan = true;
+                }
+            }
+            if state.goal.is_none() {
+                state.replan = true;
+            }
+            if let Some((keeper, until)) = state.making_way {
+                let keeper_pos = view.robots[keeper].pose.pos;
+                let passed = state.path.finished() && (keeper_pos - robot.pose.pos).norm() > 2.5;
+                if tick >= until || passed {
+                    state.making_way = None;
+                    state.replan = true;
+                }
+                continue;
+            }
+            match state.progress {
+                Some((p, t)) if tick >= t + STUCK_TICKS => {
+                    if (robot.pose.pos - p).norm() < STUCK_DISTANCE && !state.path.finished() {
+                        stuck.push(i);
+                    }
+                    state.progress = Some((robot.pose.pos, tick));
+                }
+                None => state.progress = Some((robot.pose.pos, tick)),
+                _ => {}
+            }
+        }
+        for i in stuck {
+            self.unstick(arena, view, i, tick);
+        }
+        let searching: Vec<usize> = (0..n).filter(|&i| commands[i].is_none()).collect();
+        let round = tick >= self.next_round;
+        if round {
+            self.next_round = tick + self.settings.round_ticks;
+        }
+        let check = tick.is_multiple_of(WORTH_CHECK_TICKS);
+        // Binning is cheap but not free: only when a goal is checked or chosen.
+        if round || check || searching.iter().any(|&i| self.robots[i].replan) {
+            let total = self.bin_mass(tracker);
+            if total > 0.0 && check {
+                self.drop_worthless(&searching, total);
+            }
+            let choosing: Vec<usize> = searching
+                .iter()
+                .copied()
+                .filter(|&i| self.robots[i].making_way.is_none())
+                .filter(|&i| {
+                    let r = &self.robots[i];
+                    // Outside full rounds, a robot chooses at most every MIN_CHOICE_TICKS:
+                    // one whose best choice is where it stands would otherwise plan every tick.
+                    round || r.replan && tick >= r.chosen_at + MIN_CHOICE_TICKS
+                })
+                .collect();
+            if !choosing.is_empty() && total > 0.0 {
+                self.negotiate(arena, physics, view, &choosing, total);
+            }
+        }
+        for &i in &searching {
+            commands[i] = Some(self.drive(physics, i, &view.robots[i]));
+        }
+        commands
+            .into_iter()
+            .map(|c| c.unwrap_or_default())
+            .collect()
+    }
+
+    /// Stage 1: expected opponents per scoring cell. Returns their total.
+    fn bin_mass(&mut self, tracker: &Tracker) -> f32 {
+        self.mass.iter_mut().for_each(|m| *m = 0.0);
+        let mut total = 0.0;
+        for role in tracker.roles.iter().filter(|r| !r.tagged && r.count > 0) {
+            let count = role.count as f32;
+            for (p, w) in role.particles.iter().zip(&role.weights) {
+                if let Some(c) = self.views.cell_of(*p) {
+                    self.mass[c] += w * count;
+                }
+            }
+            total += count;
+        }
+        total
+    }
+
+    /// Share of all hypotheses (weighted towards the centre of view) that pose `k` sees.
+    fn worth_of(&self, k: usize, total: f32) -> f32 {
+        let (cells, centring) = self.views.view(k);
+        let cw = self.settings.centring_weight;
+        let sum: f32 = cells
+            .iter()
+            .zip(centring)
+            .map(|(&c, &f)| self.mass[c as usize] * (1.0 + cw * f))
+            .sum();
+        sum / ((1.0 + cw) * total)
+    }
+
+    fn drop_worthless(&mut self, searching: &[usize], total: f32) {
+        for &i in searching {
+            if let Some(g) = self.robots[i].goal {
+                let now = self.worth_of(g.pose, total);
+                if now < self.settings.worthless_floor
+                    || now < self.settings.worthless_share * g.worth
+                {
+                    self.robots[i].replan = true;
+                }
+            }
+        }
+    }
+
+    /// Discounts the mass a pose will observe: a teammate is taking care of it.
+    fn claim(&mut self, k: usize) {
+        let keep = self.settings.claim_keep;
+        let views = self.views.clone();
+        for &c in views.view(k).0 {
+            self.mass[c as usize] *= keep;
+        }
+    }
+
+    /// The candidate pose nearest to what `pose` sees now.
+    fn nearest_pose(&self, pose: Pose) -> Option<usize> {
+        let h = self.settings.headings;
+        let i = self
+            .views
+            .positions
+            .iter()
+            .enumerate()
+            .min_by(|a, b| {
+                (a.1 - pose.pos)
+                    .norm_squared()
+                    .total_cmp(&(b.1 - pose.pos).norm_squared())
+            })?
+            .0;
+        let step = std::f32::consts::TAU / h as f32;
+        let heading =
+            (wrap_angle(pose.theta).rem_euclid(std::f32::consts::TAU) / step).round() as usize % h;
+        Some(i * h + heading)
+    }
+
+    /// Stages 2 and 3: claims, then greedy sequential choice among `choosing`.
+    fn negotiate(
+        &mut self,
+        arena: &Arena,
+        physics: &Physics,
+        view: &TeamView,
+        choosing: &[usize],
+        total: f32,
+    ) {
+        // Claims of robots that keep what they do: pursuers look where they look; searchers
+        // that are not choosing keep their goals.
+        for (i, robot) in view.robots.iter().enumerate() {
+            if robot.frozen || choosing.contains(&i) {
+                continue;
+            }
+            let k = if self.robots[i].seeing {
+                self.nearest_pose(robot.pose)
+            } else {
+                self.robots[i].goal.map(|g| g.pose)
+            };
+            if let Some(k) = k {
+                self.claim(k);
+            }
+        }
+        // One travel field per choosing robot, computed once per round.
+        let fields: Vec<Option<DistanceField>> = choosing
+            .iter()
+            .map(|&i| self.field_for(arena, view, i))
+            .collect();
+        let mut chosen: Vec<Point2<f32>> = (0..view.robots.len())
+            .filter(|i| !choosing.contains(i))
+            .filter_map(|i| self.goal_pose(i).map(|g| g.pos))
+            .collect();
+        let mut left: Vec<usize> = (0..choosing.len()).collect();
+        while !left.is_empty() {
+            self.score_poses(total);
+            let mut best: Option<Choice> = None;
+            for &j in &left {
+                let Some(field) = &fields[j] else { continue };
+                if let Some(c) = self.best_for(arena, physics, choosing[j], field, &chosen)
+                    && best.is_none_or(|b| c.value > b.value)
+                {
+                    best = Some(c);
+                }
+            }
+            let Some(c) = best else {
+                // Nobody can reach anything: leave the rest without goals.
+                for &j in &left {
+                    let state = &mut self.robots[choosing[j]];
+                    state.goal = None;
+                    state.path = PathFollower::default();
+                    state.replan = false;
+                }
+                break;
+            };
+            let j = left
+                .iter()
+                .position(|&j| choosing[j] == c.robot)
+                .expect("the winner was among those left");
+            let field = fields[left[j]].as_ref().expect("the winner had a field");
+            left.swap_remove(j);
+            let (pos, _) = self.views.pose(c.pose);
+            let from = view.robots[c.robot].pose.pos;
+            let path = arena
+                .grid
+                .cell_of(pos)
+                .and_then(|cell| field.path_to(&arena.grid, from, cell))
+                .unwrap_or_else(|| vec![from]);
+            let state = &mut self.robots[c.robot];
+            state.goal = Some(Goal {
+                pose: c.pose,
+                worth: c.worth,
+            });
+            state.path = PathFollower::new(path);
+            state.replan = false;
+            state.avoid_team = false;
+            state.progress = None;
+            state.chosen_at = view.tick;
+            chosen.push(pos);
+            self.claim(c.pose);
+        }
+    }
+
+    fn field_for(&self, arena: &Arena, view: &TeamView, i: usize) -> Option<DistanceField> {
+        let from = view.robots[i].pose.pos;
+        if self.robots[i].avoid_team {
+            let others: Vec<(Point2<f32>, f32)> = view
+                .robots
+                .iter()
+                .enumerate()
+                .filter(|(j, _)| *j != i)
+                .map(|(_, r)| (r.pose.pos, 3.0 * AGENT_RADIUS))
+                .collect();
+            if let Some(f) = DistanceField::from_point_avoiding(&arena.grid, from, &others) {
+                return Some(f);
+            }
+        }
+        DistanceField::from_point(&arena.grid, from)
+    }
+
+    /// Per-pose worth under the current (claimed) mass.
+    fn score_poses(&mut self, total: f32) {
+        for k in 0..self.views.len() {
+            self.seen[k] = self.worth_of(k, total);
+        }
+    }
+
+    /// Robot `i`'s best pose given the scored worths.
+    fn best_for(
+        &self,
+        arena: &Arena,
+        physics: &Physics,
+        i: usize,
+        field: &DistanceField,
+        chosen: &[Point2<f32>],
+    ) -> Option<Choice> {
+        let s = &self.settings;
+        let h = s.headings;
+        let mut best: Option<Choice> = None;
+        for (p_idx, p) in self.views.positions.iter().enumerate() {
+            let Some(cell) = arena.grid.cell_of(*p) else {
+                continue;
+            };
+            if !field.reachable(cell) {
+                continue;
+            }
+            let travel_s = field.dist[cell] / physics.robot_speed;
+            let crowding: f32 = chosen
+                .iter()
+                .map(|q| (1.0 - (q - p).norm() / s.crowding_radius).max(0.0))
+                .sum();
+            let cost = s.travel_weight * travel_s + s.crowding_weight * crowding;
+            for k in p_idx * h..(p_idx + 1) * h {
+                let value = self.seen[k] - cost;
+                if best.is_none_or(|b| value > b.value) {
+                    best = Some(Choice {
+                        robot: i,
+                        pose: k,
+                        value,
+                        worth: self.seen[k],
+                    });
+                }
+            }
+        }
+        best
+    }
+
+    /// Robot `i` has not moved for a while although its path goes on. Blocked by a moving
+    /// teammate (two robots meeting in a doorway or a narrow corridor), the one with the
+    /// higher index steps off the other's path and waits for it to pass: a fixed order, so
+    /// the two never both give way or both insist. Blocked by anything else (a frozen or
+    /// parked teammate, a tight corner), it re-plans around its teammates.
+    fn unstick(&mut self, arena: &Arena, view: &TeamView, i: usize, tick: u64) {
+        let pos = view.robots[i].pose.pos;
+        let blocker = (0..view.robots.len())
+            .filter(|&j| j != i)
+            .filter(|&j| (view.robots[j].pose.pos - pos).norm() < 1.2)
+            .filter(|&j| !view.robots[j].frozen && !self.robots[j].path.finished())
+            .filter(|&j| self.robots[j].making_way.is_none())
+            .min_by(|&a, &b| {
+                let da = (view.robots[a].pose.pos - pos).norm();
+                let db = (view.robots[b].pose.pos - pos).norm();
+                da.total_cmp(&db)
+            });
+        if let Some(j) = blocker {
+            let (yielder, keeper) = (i.max(j), i.min(j));
+            if self.make_way(arena, view, yielder, keeper, tick) {
+                return;
+            }
+        }
+        self.robots[i].replan = true;
+        self.robots[i].avoid_team = true;
+    }
+
+    /// Sends `yielder` to the nearest point off `keeper`'s remaining path. False when there
+    /// is none within reach.
+    fn make_way(
+        &mut self,
+        arena: &Arena,
+        view: &TeamView,
+        yielder: usize,
+        keeper: usize,
+        tick: u64,
+    ) -> bool {
+        const CLEAR: f32 = 0.9; // centre distance at which two discs pass with room to spare
+        const REACH: f32 = 8.0;
+        let grid = &arena.grid;
+        let from = view.robots[yielder].pose.pos;
+        let keeper_pos = view.robots[keeper].pose.pos;
+        let k = &self.robots[keeper].path;
+        let mut route = vec![keeper_pos];
+        route.extend(k.waypoints.iter().skip(k.next).copied());
+        let Some(field) =
+            DistanceField::from_point_avoiding(grid, from, &[(keeper_pos, 2.0 * AGENT_RADIUS)])
+        else {
+            return false;
+        };
+        let off_route = |p: Point2<f32>| {
+            route
+                .windows(2)
+                .all(|w| segment_distance(p, w[0], w[1]) >= CLEAR)
+                && (p - keeper_pos).norm() >= CLEAR
+        };
+        let spot = (0..grid.len())
+            .filter(|&c| field.dist[c] <= REACH)
+            .filter(|&c| off_route(grid.centre(c)))
+            .min_by(|&a, &b| field.dist[a].total_cmp(&field.dist[b]));
+        let Some(path) = spot.and_then(|c| field.path_to(grid, from, c)) else {
+            return false;
+        };
+        let state = &mut self.robots[yielder];
+        state.path = PathFollower::new(path);
+        state.making_way = Some((keeper, tick + MAKE_WAY_TICKS));
+        state.replan = false;
+        state.progress = None;
+        self.robots[keeper].progress = None;
+        true
+    }
+
+    /// Follow the path to the goal, then turn to its heading.
+    fn drive(&mut self, physics: &Physics, i: usize, robot: &RobotView) -> RobotCommand {
+        let goal = self.goal_pose(i);
+        let state = &mut self.robots[i];
+        let motion = match state.path.target(robot.pose.pos) {
+            Some(wp) => steer(robot.pose, wp, physics.robot_turn_rate),
+            None if state.making_way.is_some() => Motion::Stop,
+            None => match goal {
+                Some(g) => {
+                    let m = turn_to(robot.pose, g.theta, physics.robot_turn_rate);
+                    if m == Motion::Stop {
+                        state.replan = true; // arrived and looked: choose again next tick
+                    }
+                    m
+                }
+                None => Motion::Stop,
+            },
+        };
+        RobotCommand {
+            motion,
+            tag: false,
+            goal,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::planner::{Brain, PlannerKind};
+    use crate::sim::World;
+    use crate::sim::arena::MapDef;
+    use crate::sim::bots::BotKind;
+    use crate::sim::world::{MatchConfig, Placement};
+
+    /// Two 6 m × 6 m rooms joined by a corridor 4 m long and 0.9 m wide: too narrow for two
+    /// robots to pass each other. The opponent is walled into a pocket in a corner, out of
+    /// sight, so that nothing distracts the robots.
+    fn corridor() -> Arc<Arena> {
+        Arc::new(Arena::new(MapDef {
+            name: "corridor".into(),
+            width: 16.0,
+            height: 6.0,
+            obstacles: vec![
+                vec![
+                    Point2::new(6.0, 0.0),
+                    Point2::new(10.0, 0.0),
+                    Point2::new(10.0, 2.55),
+                    Point2::new(6.0, 2.55),
+                ],
+                vec![
+                    Point2::new(6.0, 3.45),
+                    Point2::new(10.0, 3.45),
+                    Point2::new(10.0, 6.0),
+                    Point2::new(6.0, 6.0),
+                ],
+                vec![
+                    Point2::new(0.0, 4.5),
+                    Point2::new(2.0, 4.5),
+                    Point2::new(2.0, 4.6),
+                    Point2::new(0.0, 4.6),
+                ],
+                vec![
+                    Point2::new(1.9, 4.6),
+                    Point2::new(2.0, 4.6),
+                    Point2::new(2.0, 6.0),
+                    Point2::new(1.9, 6.0),
+                ],
+            ],
+            robot_spawns: vec![[2.0, 3.0, 0.0]],
+            opponent_spawns: vec![Point2::new(0.9, 5.3)],
+            landmarks: vec![],
+        }))
+    }
+
+    fn coordinated(world: &mut World) -> &mut Coordinated {
+        match &mut world.team.brain {
+            Brain::Coordinated(c) => c,
+            _ => panic!("a coordinated team"),
+        }
+    }
+
+    /// Sends robot `i` to the candidate pose nearest `to`, as a negotiation would.
+    fn send(world: &mut World, i: usize, to: Point2<f32>) {
+        let arena = world.arena.clone();
+        let from = world.robots[i].pose.pos;
+        let c = coordinated(world);
+        let k = c
+            .nearest_pose(Pose {
+                pos: to,
+                theta: 0.0,
+            })
+            .unwrap();
+        let (pos, _) = c.views.pose(k);
+        let field = DistanceField::from_point(&arena.grid, from).unwrap();
+        let path = field
+            .path_to(&arena.grid, from, arena.grid.cell_of(pos).unwrap())
+            .unwrap();
+        let state = &mut c.robots[i];
+        state.goal = Some(Goal {
+            pose: k,
+            worth: 1.0,
+        });
+        state.path = PathFollower::new(path);
+        state.replan = false;
+    }
+
+    #[test]
+    fn two_robots_meeting_head_on_in_a_narrow_corridor_both_get_through() {
+        let config = MatchConfig {
+            robots: 2,
+            opponents: 1,
+            opponent_bot: BotKind::Idle,
+            planner: PlannerKind::Coordinated,
+            placement: Placement::Given {
+                robots: vec![[2.0, 3.0, 0.0], [14.0, 3.0, std::f32::consts::PI]],
+                opponents: vec![[0.9, 5.3]],
+            },
+            // Goals stay as the test sets them: no rounds, never worthless.
+            coordination: Settings {
+                round_ticks: u64::MAX / 2,
+                worthless_floor: 0.0,
+                worthless_share: 0.0,
+                ..Settings::default()
+            },
+            ..MatchConfig::default()
+        };
+        let mut world = World::new(corridor(), config).unwrap();
+        coordinated(&mut world).next_round = u64::MAX / 2;
+        send(&mut world, 0, Point2::new(14.5, 3.5));
+        send(&mut world, 1, Point2::new(1.5, 2.5));
+        let (mut a_through, mut b_through) = (None, None);
+        for _ in 0..(60 * 20) {
+            world.step();
+            if a_through.is_none() && world.robots[0].pose.pos.x > 10.3 {
+                a_through = Some(world.tick);
+            }
+            if b_through.is_none() && world.robots[1].pose.pos.x < 5.7 {
+                b_through = Some(world.tick);
+            }
+        }
+        assert!(
+            a_through.is_some() && b_through.is_some(),
+            "robot 0 through at {a_through:?}, robot 1 at {b_through:?}; poses {:?}",
+            world.robots.iter().map(|r| r.pose).collect::<Vec<_>>()
+        );
+    }
+}

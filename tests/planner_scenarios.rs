@@ -1,0 +1,182 @@
+//! The coordinated planner in situations with a known right answer: a team that splits up
+//! across two branches, and a team that searches a room nobody has looked into.
+
+mod common;
+
+use std::path::Path;
+use std::sync::Arc;
+
+use lasertag::maps::MapStore;
+use lasertag::planner::PlannerKind;
+use lasertag::sim::arena::Arena;
+use lasertag::sim::bots::BotKind;
+use lasertag::sim::world::{MatchConfig, Placement};
+use lasertag::sim::{Physics, Pose, World};
+use nalgebra::Point2;
+use serde_json::{Value, json};
+
+fn office() -> Arc<Arena> {
+    let store = MapStore::load_dir(Path::new(env!("CARGO_MANIFEST_DIR")).join("maps").as_path())
+        .expect("shipped maps load");
+    store
+        .get("office")
+        .expect("office is shipped")
+        .arena
+        .clone()
+}
+
+/// The office's two branches beyond the junction at x ≈ 14 of its main corridor: north
+/// (the corridor going up, and the room in the north-east corner that only it leads to) and
+/// east (the main corridor going on east, and the rooms off it).
+fn in_north_branch(p: Point2<f32>) -> bool {
+    (13.0..=15.0).contains(&p.x) && p.y > 9.2 || p.x > 15.2 && p.y > 12.6
+}
+fn in_east_branch(p: Point2<f32>) -> bool {
+    p.x > 15.2 && p.y < 12.4
+}
+
+/// Share of `points` a robot at `pose` would see (laser range, field of view, walls).
+fn share_seen(arena: &Arena, pose: Pose, points: &[Point2<f32>]) -> f32 {
+    let physics = Physics::default();
+    let seen = points
+        .iter()
+        .filter(|p| {
+            let d = *p - pose.pos;
+            let off = lasertag::sim::wrap_angle(d.y.atan2(d.x) - pose.theta);
+            d.norm() <= physics.laser_range
+                && off.abs() <= physics.laser_fov / 2.0
+                && arena.line_of_sight(pose.pos, **p)
+        })
+        .count();
+    seen as f32 / points.len() as f32
+}
+
+/// Issue 4: the opponent was last seen running towards the junction where the office's
+/// corridor branches north and east; the belief is split between the two branches. Two
+/// robots coming from the west must not both search the same branch.
+#[test]
+fn robots_split_across_the_two_branches_of_the_office_corridor() {
+    let arena = office();
+    let config = MatchConfig {
+        robots: 2,
+        opponents: 1,
+        opponent_bot: BotKind::Idle,
+        planner: PlannerKind::Coordinated,
+        // Facing west, away from both branches, so the first scan says nothing about them.
+        placement: Placement::Given {
+            robots: vec![
+                [7.0, 7.6, std::f32::consts::PI],
+                [7.0, 8.4, std::f32::consts::PI],
+            ],
+            opponents: vec![[22.5, 8.0]],
+        },
+        seed: 7,
+        ..MatchConfig::default()
+    };
+    let mut world = World::new(arena.clone(), config).expect("valid match");
+    // The belief: 40% of the hypotheses deep in the north branch (in the north-east room),
+    // 60% deep in the east branch (in the south-east room); no single pose sees into both.
+    // Each robot alone would search east: only coordination sends one north.
+    let north: Vec<Point2<f32>> = (0..400)
+        .map(|i| Point2::new(16.0 + (i % 20) as f32 * 0.13, 13.0 + (i / 20) as f32 * 0.14))
+        .collect();
+    let east: Vec<Point2<f32>> = (0..600)
+        .map(|i| Point2::new(20.6 + (i % 20) as f32 * 0.14, 1.0 + (i / 20) as f32 * 0.16))
+        .collect();
+    assert!(north.iter().all(|p| in_north_branch(*p)));
+    assert!(east.iter().all(|p| in_east_branch(*p)));
+    let role = &mut world.team.tracker.roles[0];
+    role.particles = north.iter().chain(&east).copied().collect();
+    role.weights = vec![1.0 / 1000.0; 1000];
+    role.steps = vec![nalgebra::Vector2::zeros(); 1000];
+    world.team.renegotiate();
+    world.step();
+    let goals: Vec<Pose> = world
+        .robots
+        .iter()
+        .map(|r| r.command.goal.expect("every robot has a goal"))
+        .collect();
+    let views: Vec<(f32, f32)> = goals
+        .iter()
+        .map(|g| {
+            (
+                share_seen(&arena, *g, &north),
+                share_seen(&arena, *g, &east),
+            )
+        })
+        .collect();
+    // One goal in each branch, each looking into its own branch's hypotheses.
+    let north_robot = goals
+        .iter()
+        .position(|g| in_north_branch(g.pos))
+        .unwrap_or_else(|| panic!("one robot goes north: goals {goals:?}, views {views:?}"));
+    let east_robot = goals
+        .iter()
+        .position(|g| in_east_branch(g.pos))
+        .unwrap_or_else(|| panic!("one robot goes east: goals {goals:?}, views {views:?}"));
+    assert_ne!(north_robot, east_robot, "goals {goals:?}, views {views:?}");
+    assert!(views[north_robot].0 > 0.5, "views {views:?}");
+    assert!(views[east_robot].1 > 0.5, "views {views:?}");
+}
+
+fn in_room(p: &Value) -> bool {
+    p["x"].as_f64().unwrap() > 10.2 && p["y"].as_f64().unwrap() > 6.2
+}
+
+/// Issue 4: an API opponent stands in a corner of a one-door room that no point outside
+/// the room can see. The team, knowing nothing, must search the open area, conclude the
+/// room is where the opponent must be, go in and tag it.
+#[tokio::test]
+async fn a_coordinated_team_searches_a_one_door_room_and_tags_the_opponent_hiding_there() {
+    let server = common::TestServer::start().await;
+    let id = server
+        .create_match(json!({
+            "map": common::one_door_room(), "clock": "manual", "robots": 2, "opponents": 1,
+            "opponent_control": "api", "planner": "coordinated", "seed": 3,
+            "robot_starts": [[2.0, 2.0, 0.0], [3.0, 4.0, 1.57]],
+            "opponent_starts": [[15.6, 6.6]]
+        }))
+        .await;
+    let mut goal_in_room_at = None;
+    let mut first_seen_at = None;
+    let mut state = Value::Null;
+    for _ in 0..(120 * 20 / 10) {
+        state = server.step(&id, 10).await;
+        let t = state["time_s"].as_f64().unwrap();
+        let robots = state["robots"].as_array().unwrap();
+        if first_seen_at.is_none()
+            && robots
+                .iter()
+                .any(|r| !r["detections"].as_array().unwrap().is_empty())
+        {
+            first_seen_at = Some(t);
+        }
+        if goal_in_room_at.is_none()
+            && first_seen_at.is_none()
+            && robots
+                .iter()
+                .any(|r| r["goal"].is_object() && in_room(&r["goal"]))
+        {
+            goal_in_room_at = Some(t);
+        }
+        if state["status"] == "finished" {
+            break;
+        }
+    }
+    let goal_at = goal_in_room_at.expect("a goal pointed into the room before anyone saw it");
+    let seen_at = first_seen_at.expect("the opponent was found");
+    assert!(goal_at < seen_at);
+    assert_eq!(state["status"], "finished", "{state}");
+    assert_eq!(state["winner"], "robots");
+    let tags: Vec<Value> = server
+        .events(&id)
+        .await
+        .into_iter()
+        .filter(|e| e["kind"] == "tag")
+        .collect();
+    assert_eq!(tags.len(), 1);
+    eprintln!(
+        "goal in the room at {goal_at} s, opponent first seen at {seen_at} s, state time {}",
+        state["time_s"]
+    );
+}
