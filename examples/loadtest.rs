@@ -6,8 +6,9 @@
 //!
 //! Bounded and self-stopping, loopback only. By default it starts the server in this process
 //! (on 127.0.0.1, an ephemeral port, no showcase); `--addr` points it at a server already
-//! running on a loopback address instead. It creates the matches (office, 2 robots against 3
-//! evading bots, so that few matches end within the window; the default tracker), spreads the spectators over them round-robin (belief on,
+//! running on a loopback address instead. It creates the matches (warehouse, 2 robots with the
+//! default planner and tracker against 3 evading bots, so that few matches end within the
+//! window), spreads the spectators over them round-robin (belief on,
 //! as spectators have it by default), reads for `--seconds`, then reports:
 //! - each match's tick rate and per-tick compute time (p50/p99/max, measured inside the match
 //!   task: the step plus building the published frame; from `/api/matches/{id}/stats`) and its
@@ -42,9 +43,15 @@ struct Args {
     /// A running server to test (a loopback address); by default one is started in-process.
     #[arg(long)]
     addr: Option<SocketAddr>,
-    /// Map of the matches.
-    #[arg(long, default_value = "office")]
+    /// Map of the matches (warehouse: big enough that few matches end within the window).
+    #[arg(long, default_value = "warehouse")]
     map: String,
+    /// Planner of the robots (coordinated, baseline or idle).
+    #[arg(long, default_value = "coordinated")]
+    planner: String,
+    /// Bot opponents per match (evading bots, so that matches last).
+    #[arg(long, default_value_t = 3)]
+    opponents: usize,
     /// Directory of map files (in-process server).
     #[arg(long, default_value = "maps")]
     maps: PathBuf,
@@ -163,7 +170,8 @@ async fn run(args: Args) -> Result<(), String> {
     let base = format!("http://{addr}");
     let mut ids = Vec::new();
     for i in 0..args.matches {
-        let body = json!({"map": args.map, "robots": 2, "opponents": 3, "opponent_bot": "evade",
+        let body = json!({"map": args.map, "robots": 2, "opponents": args.opponents,
+            "opponent_bot": "evade", "planner": args.planner,
             "seed": i,
             "time_limit_s": (args.seconds + 120) as f64});
         let r = http
@@ -182,8 +190,8 @@ async fn run(args: Args) -> Result<(), String> {
         ids.push(v["id"].as_str().unwrap_or_default().to_string());
     }
     println!(
-        "{} real-time matches on {} (2 robots, 3 evade bots), {} spectators, {} s, server {addr}",
-        args.matches, args.map, args.spectators, args.seconds
+        "{} real-time matches on {} (2 {} robots, {} evade bots), {} spectators, {} s, server {addr}",
+        args.matches, args.map, args.planner, args.opponents, args.spectators, args.seconds
     );
     let warmup = Duration::from_secs(3);
     let start = Instant::now() + warmup;
@@ -221,6 +229,7 @@ async fn run(args: Args) -> Result<(), String> {
     for c in clients {
         stats.push(c.await.unwrap_or_default());
     }
+    tokio::time::sleep_until(until.into()).await; // (when there are no spectators to wait for)
     let secs = args.seconds as f64;
     let mut last = Vec::new();
     for id in &ids {
