@@ -5,6 +5,8 @@
 //! Requests are parsed strictly: unknown fields are errors, and every error names the field
 //! ([`parse`] wraps serde with the JSON path of the failure).
 
+pub mod ws;
+
 use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
@@ -252,6 +254,8 @@ pub struct CreateMatch {
     pub robot_starts: Option<Vec<[f64; 3]>>,
     /// Explicit opponent starts `[x, y]`, one per opponent.
     pub opponent_starts: Option<Vec<[f64; 2]>>,
+    /// Whether people may take over bot opponents (default false; the showcase allows it).
+    pub bots_joinable: Option<bool>,
 }
 
 /// The tracker settings a match runs with, defaults filled in.
@@ -288,6 +292,7 @@ pub struct MatchRequest {
     pub map: serde_json::Value,
     pub config: MatchConfig,
     pub clock: Clock,
+    pub bots_joinable: bool,
 }
 
 fn in_range(field: &str, v: i64, lo: i64, hi: i64) -> Result<i64, String> {
@@ -422,6 +427,7 @@ impl CreateMatch {
             map: self.map,
             config,
             clock: self.clock.unwrap_or(Clock::Realtime),
+            bots_joinable: self.bots_joinable.unwrap_or(false),
         })
     }
 }
@@ -477,6 +483,12 @@ pub struct MatchMeta {
     pub map: String,
     pub clock: Clock,
     pub players: usize,
+    /// WebSocket spectators connected now.
+    pub spectators: usize,
+    /// Opponent slots a person can take now.
+    pub free_slots: usize,
+    /// Whether people may take over bot opponents (the showcase).
+    pub bots_joinable: bool,
 }
 
 /// A match in listings and the reply to `POST /api/matches`.
@@ -504,6 +516,11 @@ pub struct MatchSummary {
     pub coordination: CoordinationConfig,
     pub seed: u64,
     pub players: usize,
+    /// WebSocket spectators connected now.
+    pub spectators: usize,
+    /// Opponent slots a person can take now (`POST /api/matches/{id}/players`).
+    pub free_slots: usize,
+    pub bots_joinable: bool,
     /// Caveats a user should know, e.g. a fallback in effect.
     pub notes: Vec<String>,
 }
@@ -551,8 +568,32 @@ pub fn summary(world: &World, meta: &MatchMeta) -> MatchSummary {
         coordination: CoordinationConfig::from(&c.coordination),
         seed: c.seed,
         players: meta.players,
+        spectators: meta.spectators,
+        free_slots: meta.free_slots,
+        bots_joinable: meta.bots_joinable,
         notes: notes(world),
     }
+}
+
+/// `GET /api/matches/{id}/stats`: how the match's task keeps up (wall-clock measurements of
+/// the shell, not part of the deterministic match).
+#[derive(Debug, Clone, Serialize, ToSchema)]
+pub struct MatchStats {
+    pub id: String,
+    pub tick: u64,
+    /// Ticks in the window the percentiles cover (the most recent ones, up to 4096).
+    pub ticks_measured: usize,
+    /// Compute time of one tick (the step plus building the published frame), microseconds.
+    pub tick_us_p50: f64,
+    pub tick_us_p99: f64,
+    pub tick_us_max: f64,
+    pub tick_us_mean: f64,
+    /// Real-time ticks that were late by more than a whole tick period (skipped, not burst).
+    pub late_ticks: u64,
+    /// Frames published to viewers so far.
+    pub frames_published: u64,
+    pub spectators: usize,
+    pub players_connected: usize,
 }
 
 #[derive(Debug, Clone, Serialize, ToSchema)]

@@ -6,20 +6,24 @@
 //! only when asked, in chunks between which it keeps answering other requests.
 
 pub mod showcase;
+pub mod snapshot;
 mod task;
 
 use std::collections::BTreeMap;
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
 use std::sync::{Arc, RwLock};
+use std::time::Duration;
 
-use tokio::sync::{mpsc, oneshot};
+use tokio::sync::{mpsc, oneshot, watch};
 
 use crate::maps::MapStore;
-use crate::protocol::{self, Belief, Clock, Events, Joined, MatchState, MatchSummary};
+use crate::protocol::{self, Belief, Clock, Events, Joined, MatchState, MatchStats, MatchSummary};
 use crate::sim::World;
-use crate::sim::world::OpponentOrder;
+use crate::sim::arena::Arena;
+use crate::sim::world::{HumanInput, OpponentOrder};
+use snapshot::Frame;
 
-pub use task::spawn_match;
+pub use task::{TaskSettings, spawn_match};
 
 /// A request refused by a match, mapped to an HTTP status at the edge.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -32,6 +36,8 @@ pub enum MatchError {
     Conflict(String),
     #[error("match {0} has ended")]
     Gone(String),
+    #[error("{0}")]
+    Unauthorized(String),
 }
 
 /// What a handler may ask of a match task.
@@ -57,8 +63,41 @@ pub enum Request {
         name: String,
         reply: oneshot::Sender<Result<Joined, MatchError>>,
     },
+    Stats(oneshot::Sender<MatchStats>),
+    /// A WebSocket connection wants to play the slot `token` belongs to.
+    Connect {
+        token: String,
+        reply: oneshot::Sender<Result<Seat, MatchError>>,
+    },
+    /// A seated connection's latest keys (ignored unless `generation` is the slot's current one).
+    Input {
+        slot: usize,
+        generation: u64,
+        input: HumanInput,
+    },
     /// End the match (it was deleted or the server is shutting down).
     Stop,
+}
+
+/// A connection's place at a match: the opponent slot it plays.
+#[derive(Debug)]
+pub struct Seat {
+    pub slot: usize,
+    pub opponent_id: String,
+    pub name: String,
+    pub generation: u64,
+    /// Resolves when a newer connection with the same token takes the seat. Dropping it
+    /// (the connection ended) tells the task that the player has gone.
+    pub kicked: oneshot::Receiver<()>,
+}
+
+/// What viewers of a match share: the latest published frame, the arena (for line of
+/// sight) and the count of spectators.
+#[derive(Debug, Clone)]
+pub struct Hub {
+    pub frames: watch::Receiver<Arc<Frame>>,
+    pub arena: Arc<Arena>,
+    pub spectators: Arc<AtomicUsize>,
 }
 
 /// The way to one match's task.
@@ -68,6 +107,7 @@ pub struct MatchHandle {
     /// Creation order, for stable listings.
     pub order: u64,
     pub clock: Clock,
+    pub hub: Hub,
     tx: mpsc::Sender<Request>,
 }
 
@@ -117,8 +157,43 @@ impl MatchHandle {
         self.ask(|reply| Request::Join { name, reply }).await?
     }
 
+    pub async fn stats(&self) -> Result<MatchStats, MatchError> {
+        self.ask(Request::Stats).await
+    }
+
+    pub async fn connect(&self, token: String) -> Result<Seat, MatchError> {
+        self.ask(|reply| Request::Connect { token, reply }).await?
+    }
+
+    /// Forwards a player's keys; waits only for room in the task's queue.
+    pub async fn input(&self, slot: usize, generation: u64, input: HumanInput) -> bool {
+        self.tx
+            .send(Request::Input {
+                slot,
+                generation,
+                input,
+            })
+            .await
+            .is_ok()
+    }
+
     pub async fn stop(&self) {
         let _ = self.tx.send(Request::Stop).await;
+    }
+}
+
+/// Settings of the server's matches that are not part of a match's own settings.
+#[derive(Debug, Clone)]
+pub struct GameSettings {
+    /// How long a player who dropped may take to come back with the same token (30 s).
+    pub reconnect_grace: Duration,
+}
+
+impl Default for GameSettings {
+    fn default() -> Self {
+        GameSettings {
+            reconnect_grace: Duration::from_secs(30),
+        }
     }
 }
 
@@ -126,14 +201,20 @@ impl MatchHandle {
 #[derive(Debug, Default)]
 pub struct Registry {
     pub maps: RwLock<MapStore>,
+    pub settings: GameSettings,
     matches: RwLock<BTreeMap<String, MatchHandle>>,
     next_order: AtomicU64,
 }
 
 impl Registry {
     pub fn new(maps: MapStore) -> Arc<Registry> {
+        Registry::with_settings(maps, GameSettings::default())
+    }
+
+    pub fn with_settings(maps: MapStore, settings: GameSettings) -> Arc<Registry> {
         Arc::new(Registry {
             maps: RwLock::new(maps),
+            settings,
             ..Registry::default()
         })
     }
@@ -142,11 +223,18 @@ impl Registry {
     pub fn start(&self, world: World, meta: protocol::MatchMeta) -> MatchHandle {
         let id = meta.id.clone();
         let clock = meta.clock;
-        let tx = spawn_match(world, meta);
+        let (tx, hub) = spawn_match(
+            world,
+            meta,
+            TaskSettings {
+                reconnect_grace: self.settings.reconnect_grace,
+            },
+        );
         let handle = MatchHandle {
             id: id.clone(),
             order: self.next_order.fetch_add(1, Ordering::Relaxed),
             clock,
+            hub,
             tx,
         };
         self.matches

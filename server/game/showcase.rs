@@ -26,9 +26,11 @@ async fn start(registry: &Registry, round: u64) -> Option<String> {
     };
     let config = MatchConfig {
         robots: 2,
-        opponents: 2,
+        // Three bots that run from the robots: a match that lasts long enough to watch, and
+        // a belief that splits into several roles.
+        opponents: 3,
         opponent_control: ControlKind::Bot,
-        opponent_bot: BotKind::Wander,
+        opponent_bot: BotKind::Evade,
         planner: PlannerKind::Coordinated,
         seed: round,
         ..MatchConfig::default()
@@ -44,6 +46,10 @@ async fn start(registry: &Registry, round: u64) -> Option<String> {
         map,
         clock: Clock::Realtime,
         players: 0,
+        spectators: 0,
+        free_slots: 0,
+        // Anyone who opens the server can take one of the showcase's bots with one click.
+        bots_joinable: true,
     };
     Some(registry.start(world, meta).id)
 }

@@ -1,168 +1,522 @@
 //! The task that owns one match's [`World`].
+//!
+//! Besides answering requests and ticking, the task publishes a [`Frame`] after every tick
+//! (and after anything else that changes what viewers see) on a `watch` channel, and keeps
+//! the people who play: their tokens, which connection is theirs, and how long a dropped
+//! player has to come back (a freed slot a person took from a bot goes back to the bot).
 
-use std::time::Duration;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::{Arc, OnceLock};
+use std::time::{Duration, Instant};
 
-use tokio::sync::mpsc;
+use tokio::sync::{mpsc, oneshot, watch};
 use tokio::time::MissedTickBehavior;
 use tracing::Instrument;
 
-use crate::game::{MatchError, Request, random_id};
-use crate::protocol::{self, Clock, Joined, MatchMeta, MatchState};
-use crate::sim::world::Control;
+use crate::game::snapshot::{BELIEF_EVERY, Frame};
+use crate::game::{Hub, MatchError, Request, Seat, random_id};
+use crate::protocol::{self, Clock, Joined, MatchMeta, MatchState, MatchStats};
+use crate::sim::world::{Control, HumanInput};
 use crate::sim::{MatchStatus, TICK_HZ, World};
 
 /// Ticks a manual step runs before it lets other requests in.
 const STEP_CHUNK: u64 = 250;
+/// Tick compute times kept for the stats percentiles.
+const TICK_WINDOW: usize = 4096;
+/// How often the task looks for players whose connection has gone.
+const HOUSEKEEPING: Duration = Duration::from_millis(100);
 
 /// A person holding an opponent slot.
-#[derive(Debug, Clone)]
+#[derive(Debug)]
 struct Player {
     id: String,
-    name: String,
+    name: Arc<str>,
     token: String,
+    /// Bumped at every connection with this token; inputs from older ones are ignored.
+    generation: u64,
+    /// Held while a connection plays this slot: its receiver is dropped when the
+    /// connection ends (so the task notices), and sending on it closes an older connection.
+    kick: Option<oneshot::Sender<()>>,
+    /// Since when nobody plays this slot (joined but not connected yet, or dropped).
+    away_since: Option<Instant>,
+    /// The bot a person took over (the showcase), given back when the slot is freed.
+    bot: Option<Control>,
+}
+
+impl Player {
+    fn connected(&self) -> bool {
+        self.kick.as_ref().is_some_and(|k| !k.is_closed())
+    }
 }
 
 struct PendingStep {
     remaining: u64,
-    reply: tokio::sync::oneshot::Sender<Result<MatchState, MatchError>>,
+    reply: oneshot::Sender<Result<MatchState, MatchError>>,
 }
 
-/// Spawns the task for `world` and returns the channel to it. The task ends when the match is
-/// stopped or every handle is dropped.
-pub fn spawn_match(world: World, meta: MatchMeta) -> mpsc::Sender<Request> {
-    let (tx, rx) = mpsc::channel(64);
+/// What a match task needs from the shell besides its world.
+#[derive(Debug, Clone)]
+pub struct TaskSettings {
+    /// How long a dropped player may take to come back before the slot is freed.
+    pub reconnect_grace: Duration,
+}
+
+/// Spawns the task for `world` and returns the channel to it and the viewers' hub. The task
+/// ends when the match is stopped or every handle is dropped.
+pub fn spawn_match(
+    world: World,
+    meta: MatchMeta,
+    settings: TaskSettings,
+) -> (mpsc::Sender<Request>, Hub) {
+    let (tx, rx) = mpsc::channel(256);
+    let first = Arc::new(Frame::build(&world, &[], 0, 0, true));
+    let (frames_tx, frames) = watch::channel(first);
+    let hub = Hub {
+        frames,
+        arena: world.arena.clone(),
+        spectators: Arc::new(AtomicUsize::new(0)),
+    };
     let span = tracing::info_span!("match", id = %meta.id);
-    tokio::spawn(run(world, meta, rx).instrument(span));
-    tx
+    let handle = match_runtime()
+        .cloned()
+        .unwrap_or_else(tokio::runtime::Handle::current);
+    let task = MatchTask {
+        players: (0..world.opponents.len()).map(|_| None).collect(),
+        world,
+        meta,
+        settings,
+        frames: frames_tx,
+        spectators: hub.spectators.clone(),
+        published_seq: 0,
+        robot_tags: 0,
+        last_belief_tick: 0,
+        frames_published: 1,
+        tick_us: Vec::with_capacity(TICK_WINDOW),
+        tick_next: 0,
+        late_ticks: 0,
+    };
+    handle.spawn(task.run(rx).instrument(span));
+    (tx, hub)
 }
 
-async fn run(mut world: World, mut meta: MatchMeta, mut rx: mpsc::Receiver<Request>) {
-    tracing::info!(map = %meta.map, clock = ?meta.clock, "match started");
-    let realtime = meta.clock == Clock::Realtime;
-    let mut interval = tokio::time::interval(Duration::from_millis(1000 / TICK_HZ as u64));
-    // A match that overran its tick (a loaded machine) skips the missed ticks rather than
-    // bursting to catch up: the world must not fast-forward under the players' feet.
-    interval.set_missed_tick_behavior(MissedTickBehavior::Skip);
-    let mut players: Vec<Option<Player>> = vec![None; world.opponents.len()];
-    let mut pending: Option<PendingStep> = None;
-    loop {
-        let running = world.status == MatchStatus::Running;
-        tokio::select! {
-            biased;
-            req = rx.recv() => {
-                let Some(req) = req else { break };
-                match req {
-                    Request::Stop => {
-                        world.stop();
+/// The runtime match tasks run on: threads of their own, so that a tick is never queued
+/// behind the hundreds of connection tasks (serialising and sending snapshots) of the
+/// server's runtime. Ticks are short and rare, so these threads are mostly asleep and the OS
+/// wakes them promptly. `None` (then the current runtime is used) if it cannot be built.
+fn match_runtime() -> Option<&'static tokio::runtime::Handle> {
+    static RUNTIME: OnceLock<Option<tokio::runtime::Runtime>> = OnceLock::new();
+    RUNTIME
+        .get_or_init(|| {
+            let threads = std::thread::available_parallelism().map_or(2, |n| n.get().min(4));
+            tokio::runtime::Builder::new_multi_thread()
+                .worker_threads(threads)
+                .thread_name("match")
+                .enable_all()
+                .build()
+                .map_err(|e| tracing::warn!("no separate runtime for matches: {e}"))
+                .ok()
+        })
+        .as_ref()
+        .map(|rt| rt.handle())
+}
+
+struct MatchTask {
+    world: World,
+    meta: MatchMeta,
+    settings: TaskSettings,
+    players: Vec<Option<Player>>,
+    frames: watch::Sender<Arc<Frame>>,
+    spectators: Arc<AtomicUsize>,
+    published_seq: u64,
+    robot_tags: u32,
+    last_belief_tick: u64,
+    frames_published: u64,
+    /// Ring buffer of tick compute times (µs).
+    tick_us: Vec<u32>,
+    tick_next: usize,
+    late_ticks: u64,
+}
+
+impl MatchTask {
+    async fn run(mut self, mut rx: mpsc::Receiver<Request>) {
+        tracing::info!(map = %self.meta.map, clock = ?self.meta.clock, "match started");
+        let realtime = self.meta.clock == Clock::Realtime;
+        let period = Duration::from_millis(1000 / TICK_HZ as u64);
+        let mut interval = tokio::time::interval(period);
+        // A match that overran its tick (a loaded machine) skips the missed ticks rather than
+        // bursting to catch up: the world must not fast-forward under the players' feet.
+        interval.set_missed_tick_behavior(MissedTickBehavior::Skip);
+        let mut housekeeping = tokio::time::interval(HOUSEKEEPING);
+        housekeeping.set_missed_tick_behavior(MissedTickBehavior::Skip);
+        let mut pending: Option<PendingStep> = None;
+        let mut last_tick: Option<Instant> = None;
+        loop {
+            let running = self.world.status == MatchStatus::Running;
+            tokio::select! {
+                biased;
+                req = rx.recv() => {
+                    let Some(req) = req else { break };
+                    if let Request::Stop = req {
+                        self.world.stop();
+                        self.publish();
                         break;
                     }
-                    Request::Summary(reply) => {
-                        meta.players = players.iter().flatten().count();
-                        let _ = reply.send(protocol::summary(&world, &meta));
+                    self.answer(req, realtime, &mut pending);
+                }
+                _ = interval.tick(), if realtime && running => {
+                    let now = Instant::now();
+                    if last_tick.is_some_and(|t| now - t > period + period / 2) {
+                        self.late_ticks += 1;
                     }
-                    Request::State(reply) => { let _ = reply.send(protocol::state(&world, &meta)); }
-                    Request::Belief(reply) => { let _ = reply.send(protocol::belief(&world)); }
-                    Request::Events { since, reply } => {
-                        let events = world.events_since(since).iter().map(protocol::event).collect();
-                        let _ = reply.send(protocol::Events { events });
+                    last_tick = Some(now);
+                    self.world.step();
+                    self.publish();
+                    self.record(now.elapsed());
+                    if self.world.status == MatchStatus::Finished {
+                        tracing::info!(tick = self.world.tick, winner = ?self.world.winner, "match finished");
                     }
-                    Request::Step { ticks, reply } => {
-                        if realtime {
-                            let _ = reply.send(Err(MatchError::Conflict(format!(
-                                "match {} runs in real time; step works only on manual-clock matches", meta.id
-                            ))));
-                        } else if pending.is_some() {
-                            let _ = reply.send(Err(MatchError::Conflict(format!(
-                                "match {} is already stepping", meta.id
-                            ))));
+                }
+                _ = std::future::ready(()), if pending.is_some() => {
+                    if let Some(mut step) = pending.take() {
+                        let n = step.remaining.min(STEP_CHUNK);
+                        for _ in 0..n {
+                            let t = Instant::now();
+                            self.world.step();
+                            self.record(t.elapsed());
+                            if self.world.status == MatchStatus::Finished {
+                                break;
+                            }
+                        }
+                        self.publish();
+                        step.remaining -= n;
+                        if step.remaining == 0 || self.world.status == MatchStatus::Finished {
+                            let _ = step.reply.send(Ok(protocol::state(&self.world, &self.meta)));
                         } else {
-                            pending = Some(PendingStep { remaining: ticks, reply });
+                            pending = Some(step);
+                            tokio::task::yield_now().await;
                         }
                     }
-                    Request::Order { opponent, order, reply } => {
-                        let result = opponent_index(&opponent, world.opponents.len())
-                            .ok_or_else(|| MatchError::NotFound(format!("no opponent {opponent} in match {}", meta.id)))
-                            .and_then(|i| world.order_opponent(i, order).map_err(|e| match e {
-                                crate::sim::world::OrderError::UnknownOpponent(_) => MatchError::NotFound(e.to_string()),
-                                crate::sim::world::OrderError::OutsideArena { .. } => MatchError::BadRequest(e.to_string()),
-                                _ => MatchError::Conflict(e.to_string()),
-                            }));
-                        let _ = reply.send(result);
-                    }
-                    Request::Join { name, reply } => {
-                        let _ = reply.send(join(&mut world, &mut players, name, &meta.id));
-                    }
+                }
+                _ = housekeeping.tick() => self.housekeeping(),
+            }
+        }
+        tracing::info!(tick = self.world.tick, "match ended");
+    }
+
+    fn answer(&mut self, req: Request, realtime: bool, pending: &mut Option<PendingStep>) {
+        let id = self.meta.id.clone();
+        match req {
+            Request::Stop => {}
+            Request::Summary(reply) => {
+                self.refresh_meta();
+                let _ = reply.send(protocol::summary(&self.world, &self.meta));
+            }
+            Request::State(reply) => {
+                let _ = reply.send(protocol::state(&self.world, &self.meta));
+            }
+            Request::Belief(reply) => {
+                let _ = reply.send(protocol::belief(&self.world));
+            }
+            Request::Events { since, reply } => {
+                let events = self
+                    .world
+                    .events_since(since)
+                    .iter()
+                    .map(protocol::event)
+                    .collect();
+                let _ = reply.send(protocol::Events { events });
+            }
+            Request::Stats(reply) => {
+                let _ = reply.send(self.stats());
+            }
+            Request::Step { ticks, reply } => {
+                if realtime {
+                    let _ = reply.send(Err(MatchError::Conflict(format!(
+                        "match {id} runs in real time; step works only on manual-clock matches"
+                    ))));
+                } else if pending.is_some() {
+                    let _ = reply.send(Err(MatchError::Conflict(format!(
+                        "match {id} is already stepping"
+                    ))));
+                } else {
+                    *pending = Some(PendingStep {
+                        remaining: ticks,
+                        reply,
+                    });
                 }
             }
-            _ = interval.tick(), if realtime && running => {
-                world.step();
-                if world.status == MatchStatus::Finished {
-                    tracing::info!(tick = world.tick, winner = ?world.winner, "match finished");
-                }
+            Request::Order {
+                opponent,
+                order,
+                reply,
+            } => {
+                let world = &mut self.world;
+                let result = opponent_index(&opponent, world.opponents.len())
+                    .ok_or_else(|| {
+                        MatchError::NotFound(format!("no opponent {opponent} in match {id}"))
+                    })
+                    .and_then(|i| {
+                        world.order_opponent(i, order).map_err(|e| match e {
+                            crate::sim::world::OrderError::UnknownOpponent(_) => {
+                                MatchError::NotFound(e.to_string())
+                            }
+                            crate::sim::world::OrderError::OutsideArena { .. } => {
+                                MatchError::BadRequest(e.to_string())
+                            }
+                            _ => MatchError::Conflict(e.to_string()),
+                        })
+                    });
+                let _ = reply.send(result);
             }
-            _ = std::future::ready(()), if pending.is_some() => {
-                if let Some(mut step) = pending.take() {
-                    let n = step.remaining.min(STEP_CHUNK);
-                    for _ in 0..n {
-                        world.step();
-                        if world.status == MatchStatus::Finished {
-                            break;
-                        }
-                    }
-                    step.remaining -= n;
-                    if step.remaining == 0 || world.status == MatchStatus::Finished {
-                        let _ = step.reply.send(Ok(protocol::state(&world, &meta)));
-                    } else {
-                        pending = Some(step);
-                        tokio::task::yield_now().await;
-                    }
+            Request::Join { name, reply } => {
+                let result = self.join(name);
+                if result.is_ok() {
+                    self.publish();
+                }
+                let _ = reply.send(result);
+            }
+            Request::Connect { token, reply } => {
+                let seat = self.connect(&token);
+                if seat.is_ok() {
+                    self.publish(); // viewers see the player connected
+                }
+                let _ = reply.send(seat);
+            }
+            Request::Input {
+                slot,
+                generation,
+                input,
+            } => {
+                if self.players[slot]
+                    .as_ref()
+                    .is_some_and(|p| p.generation == generation && p.connected())
+                {
+                    self.world.set_human_input(slot, input);
                 }
             }
         }
     }
-    tracing::info!(tick = world.tick, "match ended");
+
+    /// Builds and publishes the frame of the world as it is now. O(agents + belief points).
+    fn publish(&mut self) {
+        let players: Vec<Option<(Arc<str>, bool)>> = self
+            .players
+            .iter()
+            .map(|p| p.as_ref().map(|p| (p.name.clone(), p.connected())))
+            .collect();
+        let tick = self.world.tick;
+        let finished = self.world.status == MatchStatus::Finished;
+        let with_belief = tick == 0 || finished || tick >= self.last_belief_tick + BELIEF_EVERY;
+        if with_belief {
+            self.last_belief_tick = tick;
+        }
+        let frame = Frame::build(
+            &self.world,
+            &players,
+            self.published_seq,
+            self.robot_tags,
+            with_belief,
+        );
+        let new_tags = frame
+            .events
+            .iter()
+            .filter(|e| e.kind == "robot_tagged")
+            .count() as u32;
+        let frame = if new_tags > 0 {
+            Frame {
+                robot_tags: self.robot_tags + new_tags,
+                ..frame
+            }
+        } else {
+            frame
+        };
+        self.robot_tags = frame.robot_tags;
+        self.published_seq = frame.last_seq;
+        self.frames_published += 1;
+        // `send_replace` never fails nor waits, whoever (if anyone) is watching.
+        self.frames.send_replace(Arc::new(frame));
+    }
+
+    fn record(&mut self, took: Duration) {
+        let us = took.as_micros().min(u32::MAX as u128) as u32;
+        if self.tick_us.len() < TICK_WINDOW {
+            self.tick_us.push(us);
+        } else {
+            self.tick_us[self.tick_next] = us;
+        }
+        self.tick_next = (self.tick_next + 1) % TICK_WINDOW;
+    }
+
+    fn stats(&self) -> MatchStats {
+        let mut v = self.tick_us.clone();
+        v.sort_unstable();
+        let pct = |q: f64| -> f64 {
+            if v.is_empty() {
+                0.0
+            } else {
+                v[((v.len() - 1) as f64 * q).round() as usize] as f64
+            }
+        };
+        MatchStats {
+            id: self.meta.id.clone(),
+            tick: self.world.tick,
+            ticks_measured: v.len(),
+            tick_us_p50: pct(0.5),
+            tick_us_p99: pct(0.99),
+            tick_us_max: v.last().copied().unwrap_or(0) as f64,
+            tick_us_mean: if v.is_empty() {
+                0.0
+            } else {
+                v.iter().map(|x| *x as f64).sum::<f64>() / v.len() as f64
+            },
+            late_ticks: self.late_ticks,
+            frames_published: self.frames_published,
+            spectators: self.spectators.load(Ordering::Relaxed),
+            players_connected: self
+                .players
+                .iter()
+                .flatten()
+                .filter(|p| p.connected())
+                .count(),
+        }
+    }
+
+    fn refresh_meta(&mut self) {
+        self.meta.players = self.players.iter().flatten().count();
+        self.meta.spectators = self.spectators.load(Ordering::Relaxed);
+        self.meta.free_slots = (0..self.players.len())
+            .filter(|&i| self.slot_free(i))
+            .count();
+    }
+
+    fn slot_free(&self, i: usize) -> bool {
+        let o = &self.world.opponents[i];
+        self.world.status == MatchStatus::Running
+            && self.players[i].is_none()
+            && !o.tagged
+            && match o.control {
+                Control::Human(_) => true,
+                Control::Bot(_) => self.meta.bots_joinable,
+                Control::Api(_) => false,
+            }
+    }
+
+    fn join(&mut self, name: String) -> Result<Joined, MatchError> {
+        let id = &self.meta.id;
+        let name = name.trim().to_string();
+        if name.is_empty() || name.chars().count() > 32 || name.chars().any(char::is_control) {
+            return Err(MatchError::BadRequest(
+                "name: must be 1 to 32 printable characters".into(),
+            ));
+        }
+        if self.world.status == MatchStatus::Finished {
+            return Err(MatchError::Conflict(format!("match {id} has finished")));
+        }
+        let slot = (0..self.players.len())
+            .find(|&i| self.slot_free(i))
+            .ok_or_else(|| MatchError::Conflict(format!("match {id} has no free opponent slot")))?;
+        let o = &mut self.world.opponents[slot];
+        let bot = match o.control {
+            Control::Bot(_) => Some(std::mem::replace(
+                &mut o.control,
+                Control::Human(HumanInput::default()),
+            )),
+            _ => None,
+        };
+        let player = Player {
+            id: random_id(8),
+            name: name.as_str().into(),
+            token: random_id(24),
+            generation: 0,
+            kick: None,
+            away_since: Some(Instant::now()),
+            bot,
+        };
+        tracing::info!(player = %player.name, slot, "player joined");
+        let joined = Joined {
+            player_id: player.id.clone(),
+            opponent_id: format!("o{slot}"),
+            token: player.token.clone(),
+        };
+        self.players[slot] = Some(player);
+        self.world.log_player(slot, name, true);
+        Ok(joined)
+    }
+
+    /// Seats a WebSocket connection on the slot `token` belongs to; an older connection with
+    /// the same token is closed.
+    fn connect(&mut self, token: &str) -> Result<Seat, MatchError> {
+        let slot = self
+            .players
+            .iter()
+            .position(|p| p.as_ref().is_some_and(|p| same_secret(&p.token, token)))
+            .ok_or_else(|| {
+                MatchError::Unauthorized(format!("token: not a player of match {}", self.meta.id))
+            })?;
+        let Some(p) = self.players[slot].as_mut() else {
+            return Err(MatchError::Unauthorized("token: slot was freed".into()));
+        };
+        if let Some(old) = p.kick.take() {
+            let _ = old.send(());
+        }
+        let (kick, kicked) = oneshot::channel();
+        p.kick = Some(kick);
+        p.generation += 1;
+        p.away_since = None;
+        tracing::info!(player = %p.name, slot, generation = p.generation, "player connected");
+        Ok(Seat {
+            slot,
+            opponent_id: format!("o{slot}"),
+            name: p.name.to_string(),
+            generation: p.generation,
+            kicked,
+        })
+    }
+
+    /// Notices dropped players (they stand still) and frees the slots of those gone too long.
+    fn housekeeping(&mut self) {
+        let now = Instant::now();
+        let mut changed = false;
+        for slot in 0..self.players.len() {
+            let Some(p) = self.players[slot].as_mut() else {
+                continue;
+            };
+            if p.kick.as_ref().is_some_and(|k| k.is_closed()) {
+                p.kick = None;
+                p.away_since = Some(now);
+                tracing::info!(player = %p.name, slot, "player dropped");
+                self.world.set_human_input(slot, HumanInput::default());
+                changed = true;
+            }
+            let gone = p
+                .away_since
+                .is_some_and(|t| now - t >= self.settings.reconnect_grace);
+            if gone && let Some(p) = self.players[slot].take() {
+                tracing::info!(player = %p.name, slot, "player slot freed");
+                if let Some(bot) = p.bot {
+                    self.world.opponents[slot].control = bot;
+                }
+                self.world.log_player(slot, p.name.to_string(), false);
+                changed = true;
+            }
+        }
+        if changed {
+            self.publish();
+        }
+    }
+}
+
+/// Compares secrets in time independent of where they differ.
+fn same_secret(a: &str, b: &str) -> bool {
+    a.len() == b.len()
+        && a.bytes()
+            .zip(b.bytes())
+            .fold(0u8, |acc, (x, y)| acc | (x ^ y))
+            == 0
 }
 
 /// `o3` → 3, when that opponent exists.
 fn opponent_index(id: &str, count: usize) -> Option<usize> {
     let n: usize = id.strip_prefix('o')?.parse().ok()?;
     (n < count && id == format!("o{n}")).then_some(n)
-}
-
-fn join(
-    world: &mut World,
-    players: &mut [Option<Player>],
-    name: String,
-    id: &str,
-) -> Result<Joined, MatchError> {
-    let name = name.trim().to_string();
-    if name.is_empty() || name.chars().count() > 32 || name.chars().any(char::is_control) {
-        return Err(MatchError::BadRequest(
-            "name: must be 1 to 32 printable characters".into(),
-        ));
-    }
-    if world.status == MatchStatus::Finished {
-        return Err(MatchError::Conflict(format!("match {id} has finished")));
-    }
-    let slot = world
-        .opponents
-        .iter()
-        .enumerate()
-        .position(|(i, o)| {
-            !o.tagged && matches!(o.control, Control::Human(_)) && players[i].is_none()
-        })
-        .ok_or_else(|| MatchError::Conflict(format!("match {id} has no free opponent slot")))?;
-    let player = Player {
-        id: random_id(8),
-        name: name.clone(),
-        token: random_id(24),
-    };
-    tracing::info!(player = %player.name, slot, "player joined");
-    players[slot] = Some(player.clone());
-    world.log_player(slot, name, true);
-    Ok(Joined {
-        player_id: player.id,
-        opponent_id: format!("o{slot}"),
-        token: player.token,
-    })
 }

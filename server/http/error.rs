@@ -40,6 +40,7 @@ impl From<MatchError> for ApiError {
             MatchError::BadRequest(_) => StatusCode::BAD_REQUEST,
             MatchError::NotFound(_) | MatchError::Gone(_) => StatusCode::NOT_FOUND,
             MatchError::Conflict(_) => StatusCode::CONFLICT,
+            MatchError::Unauthorized(_) => StatusCode::UNAUTHORIZED,
         };
         ApiError::new(status, e.to_string())
     }

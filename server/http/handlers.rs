@@ -13,8 +13,8 @@ use crate::http::body::JsonBody;
 use crate::http::{ApiError, AppState};
 use crate::maps::{self, MapFile};
 use crate::protocol::{
-    self, Belief, CreateMatch, ErrorBody, Events, Health, JoinRequest, Joined, MapInfo, MatchMeta,
-    MatchState, MatchSummary, OpponentCommand, StepRequest,
+    Belief, CreateMatch, ErrorBody, Events, Health, JoinRequest, Joined, MapInfo, MatchMeta,
+    MatchState, MatchStats, MatchSummary, OpponentCommand, StepRequest,
 };
 use crate::sim::World;
 use crate::sim::arena::{Arena, MapDef};
@@ -182,9 +182,13 @@ pub async fn create_match(
         map: map_name,
         clock: req.clock,
         players: 0,
+        spectators: 0,
+        free_slots: 0,
+        bots_joinable: req.bots_joinable,
     };
-    let summary = protocol::summary(&world, &meta);
-    state.registry.start(world, meta);
+    let handle = state.registry.start(world, meta);
+    // Asked of the task so that fields it owns (free slots) are filled in.
+    let summary = handle.summary().await?;
     Ok((StatusCode::CREATED, Json(summary)))
 }
 
@@ -281,4 +285,13 @@ pub async fn join(
     let handle = find(&state, &id)?;
     let joined = handle.join(body.name).await?;
     Ok((StatusCode::CREATED, Json(joined)))
+}
+
+#[utoipa::path(get, path = "/api/matches/{id}/stats", params(("id" = String, Path)),
+    responses((status = 200, body = MatchStats), (status = 404, body = ErrorBody)))]
+pub async fn stats(
+    State(state): State<AppState>,
+    Path(id): Path<String>,
+) -> Result<Json<MatchStats>, ApiError> {
+    Ok(Json(find(&state, &id)?.stats().await?))
 }

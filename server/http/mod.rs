@@ -6,6 +6,7 @@ mod body;
 mod error;
 mod handlers;
 mod openapi;
+pub mod ws;
 
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -31,7 +32,8 @@ pub struct AppState {
     pub registry: Arc<Registry>,
 }
 
-/// The whole HTTP surface: the API under `/api`, the static client everywhere else.
+/// The whole HTTP surface: the API under `/api`, WebSockets under `/ws`, the static client
+/// everywhere else.
 pub fn app(registry: Arc<Registry>, web_dir: PathBuf) -> Router {
     let state = AppState { registry };
     let api = Router::new()
@@ -55,11 +57,13 @@ pub fn app(registry: Arc<Registry>, web_dir: PathBuf) -> Router {
             post(handlers::command),
         )
         .route("/matches/{id}/players", post(handlers::join))
+        .route("/matches/{id}/stats", get(handlers::stats))
         .fallback(not_found)
         .method_not_allowed_fallback(method_not_allowed);
     let static_files = ServeDir::new(web_dir).not_found_service(not_found.into_service());
     Router::new()
         .nest("/api", api)
+        .route("/ws/matches/{id}", get(ws::upgrade))
         .fallback_service(static_files)
         // Bodies are read (and limited) by `JsonBody`; this layer is the outer guard so a huge
         // upload is cut off even on routes that do not read bodies.

@@ -12,7 +12,7 @@ use crate::protocol::*;
 #[openapi(
     info(
         title = "lasertag",
-        description = "Robots play laser tag against people: the HTTP API."
+        description = "Robots play laser tag against people: the HTTP API. Play and spectate over the WebSocket `GET /ws/matches/{id}` (`?token=` to play); its messages are described in the project's README."
     ),
     paths(
         handlers::health,
@@ -28,6 +28,7 @@ use crate::protocol::*;
         handlers::events,
         handlers::command,
         handlers::join,
+        handlers::stats,
     ),
     components(schemas(
         ErrorBody,
@@ -50,7 +51,8 @@ use crate::protocol::*;
         StepRequest,
         OpponentCommand,
         JoinRequest,
-        Joined
+        Joined,
+        MatchStats
     ))
 )]
 pub struct ApiDoc;

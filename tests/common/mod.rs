@@ -4,13 +4,17 @@
 use std::net::SocketAddr;
 use std::path::Path;
 
-use lasertag::game::Registry;
+use std::time::Duration;
+
+use futures_util::{SinkExt, StreamExt};
+use lasertag::game::{GameSettings, Registry};
 use lasertag::maps::MapStore;
 use serde_json::{Value, json};
 
 pub struct TestServer {
     pub addr: SocketAddr,
     pub client: reqwest::Client,
+    pub registry: std::sync::Arc<Registry>,
 }
 
 pub struct Reply {
@@ -21,17 +25,48 @@ pub struct Reply {
 impl TestServer {
     /// The app of `lasertag::http::app` with the shipped maps, on 127.0.0.1:0, without a showcase.
     pub async fn start() -> TestServer {
+        TestServer::start_with(GameSettings::default()).await
+    }
+
+    /// Like [`TestServer::start`], with other game settings (e.g. a short reconnect grace).
+    pub async fn start_with(settings: GameSettings) -> TestServer {
         let root = Path::new(env!("CARGO_MANIFEST_DIR"));
         let maps = MapStore::load_dir(&root.join("maps")).expect("shipped maps load");
-        let registry = Registry::new(maps);
-        let app = lasertag::http::app(registry, root.join("web"));
+        let registry = Registry::with_settings(maps, settings);
+        let app = lasertag::http::app(registry.clone(), root.join("web"));
         let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
         let addr = listener.local_addr().unwrap();
         tokio::spawn(async move { axum::serve(listener, app).await });
         TestServer {
             addr,
             client: reqwest::Client::new(),
+            registry,
         }
+    }
+
+    /// Opens `/ws/matches/{id}` (with `?token=` when given); the handshake's error otherwise.
+    pub async fn ws(&self, id: &str, token: Option<&str>) -> Result<Ws, WsError> {
+        let url = match token {
+            Some(t) => format!("ws://{}/ws/matches/{id}?token={t}", self.addr),
+            None => format!("ws://{}/ws/matches/{id}", self.addr),
+        };
+        let (stream, _) = tokio_tungstenite::connect_async(url).await?;
+        Ok(Ws { stream })
+    }
+
+    /// Joins match `id` as `name`: (opponent id, token).
+    pub async fn join(&self, id: &str, name: &str) -> (String, String) {
+        let r = self
+            .post(
+                &format!("/api/matches/{id}/players"),
+                &json!({"name": name}),
+            )
+            .await;
+        assert_eq!(r.status, 201, "{}", r.body);
+        (
+            r.body["opponent_id"].as_str().unwrap().to_string(),
+            r.body["token"].as_str().unwrap().to_string(),
+        )
     }
 
     pub fn url(&self, path: &str) -> String {
@@ -111,6 +146,86 @@ pub fn duel_map() -> Value {
         "opponent_spawns": [[13.0, 7.0], [13.0, 1.0]],
         "landmarks": [[7.0, 1.0]]
     })
+}
+
+pub type WsError = tokio_tungstenite::tungstenite::Error;
+pub use tokio_tungstenite::tungstenite::Message as WsMessage;
+
+/// A WebSocket client of the game.
+pub struct Ws {
+    pub stream: tokio_tungstenite::WebSocketStream<
+        tokio_tungstenite::MaybeTlsStream<tokio::net::TcpStream>,
+    >,
+}
+
+/// What [`Ws::next`] saw.
+#[derive(Debug)]
+pub enum Got {
+    Json(Value),
+    Closed {
+        code: u16,
+        reason: String,
+    },
+    /// The connection ended without a close frame.
+    Ended,
+}
+
+impl Ws {
+    pub async fn send_json(&mut self, v: &Value) -> Result<(), WsError> {
+        self.stream
+            .send(WsMessage::Text(v.to_string().into()))
+            .await
+    }
+
+    pub async fn send_text(&mut self, s: String) -> Result<(), WsError> {
+        self.stream.send(WsMessage::Text(s.into())).await
+    }
+
+    /// The next message (text parsed as JSON), waiting at most 10 s.
+    pub async fn next(&mut self) -> Got {
+        loop {
+            let msg = tokio::time::timeout(Duration::from_secs(10), self.stream.next())
+                .await
+                .expect("a message within 10 s");
+            match msg {
+                Some(Ok(WsMessage::Text(t))) => {
+                    return Got::Json(serde_json::from_str(t.as_str()).expect("JSON text"));
+                }
+                Some(Ok(WsMessage::Close(frame))) => {
+                    return match frame {
+                        Some(f) => Got::Closed {
+                            code: f.code.into(),
+                            reason: f.reason.to_string(),
+                        },
+                        None => Got::Closed {
+                            code: 1005,
+                            reason: String::new(),
+                        },
+                    };
+                }
+                Some(Ok(_)) => continue,
+                Some(Err(_)) | None => return Got::Ended,
+            }
+        }
+    }
+
+    /// The next JSON message (panics on a close).
+    pub async fn json(&mut self) -> Value {
+        match self.next().await {
+            Got::Json(v) => v,
+            other => panic!("expected a message, got {other:?}"),
+        }
+    }
+
+    /// The next message of `kind` (`snapshot`, `event`, …), skipping others.
+    pub async fn next_of(&mut self, kind: &str) -> Value {
+        loop {
+            let v = self.json().await;
+            if v["type"] == kind {
+                return v;
+            }
+        }
+    }
 }
 
 /// 16 m × 10 m; a room in the top-right corner (x > 10.2, y > 6.2) whose only door is a

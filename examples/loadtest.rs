@@ -1,0 +1,377 @@
+//! Load test of the WebSocket fan-out: real-time matches watched by many spectators.
+//!
+//! ```sh
+//! cargo run --release --example loadtest -- --matches 20 --spectators 500 --seconds 30
+//! ```
+//!
+//! Bounded and self-stopping, loopback only. By default it starts the server in this process
+//! (on 127.0.0.1, an ephemeral port, no showcase); `--addr` points it at a server already
+//! running on a loopback address instead. It creates the matches (warehouse, 2 robots with the
+//! default planner and tracker against 3 evading bots, so that few matches end within the
+//! window), spreads the spectators over them round-robin (belief on,
+//! as spectators have it by default), reads for `--seconds`, then reports:
+//! - each match's tick rate and per-tick compute time (p50/p99/max, measured inside the match
+//!   task: the step plus building the published frame; from `/api/matches/{id}/stats`) and its
+//!   late ticks;
+//! - snapshots per second per client (min, 1st percentile, median) and clients starved
+//!   (under 15 Hz);
+//! - bytes per snapshot, with and without the belief.
+//!
+//! The matches are deleted at the end.
+
+use std::net::SocketAddr;
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+
+use clap::Parser;
+use futures_util::StreamExt;
+use serde_json::{Value, json};
+use tokio_tungstenite::tungstenite::Message;
+
+#[derive(Debug, Parser)]
+#[command(about = "Load test: real-time matches and WebSocket spectators on loopback")]
+struct Args {
+    /// Real-time matches to run (1..=200).
+    #[arg(long, default_value_t = 20)]
+    matches: usize,
+    /// WebSocket spectators, spread over the matches (0..=5000).
+    #[arg(long, default_value_t = 500)]
+    spectators: usize,
+    /// Seconds to measure (1..=600).
+    #[arg(long, default_value_t = 30)]
+    seconds: u64,
+    /// A running server to test (a loopback address); by default one is started in-process.
+    #[arg(long)]
+    addr: Option<SocketAddr>,
+    /// Map of the matches (warehouse: big enough that few matches end within the window).
+    #[arg(long, default_value = "warehouse")]
+    map: String,
+    /// Planner of the robots (coordinated, baseline or idle).
+    #[arg(long, default_value = "coordinated")]
+    planner: String,
+    /// Bot opponents per match (evading bots, so that matches last).
+    #[arg(long, default_value_t = 3)]
+    opponents: usize,
+    /// Directory of map files (in-process server).
+    #[arg(long, default_value = "maps")]
+    maps: PathBuf,
+}
+
+#[derive(Debug, Default, Clone)]
+struct ClientStats {
+    snapshots: u64,
+    distinct_ticks: u64,
+    bytes_plain: u64,
+    n_plain: u64,
+    bytes_belief: u64,
+    n_belief: u64,
+    max_belief: u64,
+    max_plain: u64,
+    events: u64,
+    closed_early: bool,
+}
+
+fn tick_of(text: &str) -> Option<u64> {
+    let i = text.find("\"tick\":")? + 7;
+    let rest = &text[i..];
+    let end = rest
+        .find(|c: char| !c.is_ascii_digit())
+        .unwrap_or(rest.len());
+    rest[..end].parse().ok()
+}
+
+async fn spectate(addr: SocketAddr, id: String, until: Instant, start: Instant) -> ClientStats {
+    let mut st = ClientStats::default();
+    let url = format!("ws://{addr}/ws/matches/{id}");
+    let Ok((mut ws, _)) = tokio_tungstenite::connect_async(url).await else {
+        st.closed_early = true;
+        return st;
+    };
+    let mut last_tick = None;
+    loop {
+        let now = Instant::now();
+        if now >= until {
+            break;
+        }
+        let msg = match tokio::time::timeout(until - now, ws.next()).await {
+            Err(_) => break,
+            Ok(Some(Ok(m))) => m,
+            Ok(_) => {
+                st.closed_early = true;
+                break;
+            }
+        };
+        let Message::Text(t) = msg else { continue };
+        let text = t.as_str();
+        if Instant::now() < start {
+            continue; // warm-up: connecting clients
+        }
+        if text.starts_with("{\"type\":\"snapshot\"") {
+            st.snapshots += 1;
+            let len = text.len() as u64;
+            if let Some(tick) = tick_of(text)
+                && last_tick != Some(tick)
+            {
+                st.distinct_ticks += 1;
+                last_tick = Some(tick);
+            }
+            if text.contains("\"belief\":") {
+                st.bytes_belief += len;
+                st.n_belief += 1;
+                st.max_belief = st.max_belief.max(len);
+            } else {
+                st.bytes_plain += len;
+                st.n_plain += 1;
+                st.max_plain = st.max_plain.max(len);
+            }
+        } else if text.starts_with("{\"type\":\"event\"") {
+            st.events += 1;
+        }
+    }
+    let _ = ws.close(None).await;
+    st
+}
+
+fn pct(sorted: &[f64], q: f64) -> f64 {
+    if sorted.is_empty() {
+        return 0.0;
+    }
+    sorted[((sorted.len() - 1) as f64 * q).round() as usize]
+}
+
+async fn run(args: Args) -> Result<(), String> {
+    if !(1..=200).contains(&args.matches)
+        || args.spectators > 5000
+        || !(1..=600).contains(&args.seconds)
+    {
+        return Err("--matches 1..=200, --spectators 0..=5000, --seconds 1..=600".into());
+    }
+    let addr = match args.addr {
+        Some(a) if a.ip().is_loopback() => a,
+        Some(a) => {
+            return Err(format!(
+                "{a} is not a loopback address: this test stays local"
+            ));
+        }
+        None => {
+            let maps = lasertag::maps::MapStore::load_dir(&args.maps)
+                .map_err(|e| format!("loading maps: {e}"))?;
+            let registry = lasertag::game::Registry::new(maps);
+            let app = lasertag::http::app(registry, PathBuf::from("web"));
+            let listener = tokio::net::TcpListener::bind("127.0.0.1:0")
+                .await
+                .map_err(|e| e.to_string())?;
+            let addr = listener.local_addr().map_err(|e| e.to_string())?;
+            tokio::spawn(async move { axum::serve(listener, app).await });
+            addr
+        }
+    };
+    let http = reqwest::Client::new();
+    let base = format!("http://{addr}");
+    let mut ids = Vec::new();
+    for i in 0..args.matches {
+        let body = json!({"map": args.map, "robots": 2, "opponents": args.opponents,
+            "opponent_bot": "evade", "planner": args.planner,
+            "seed": i,
+            "time_limit_s": (args.seconds + 120) as f64});
+        let r = http
+            .post(format!("{base}/api/matches"))
+            .json(&body)
+            .send()
+            .await
+            .map_err(|e| e.to_string())?;
+        if r.status() != 201 {
+            return Err(format!(
+                "creating a match: {}",
+                r.text().await.unwrap_or_default()
+            ));
+        }
+        let v: Value = r.json().await.map_err(|e| e.to_string())?;
+        ids.push(v["id"].as_str().unwrap_or_default().to_string());
+    }
+    println!(
+        "{} real-time matches on {} (2 {} robots, {} evade bots), {} spectators, {} s, server {addr}",
+        args.matches, args.map, args.planner, args.opponents, args.spectators, args.seconds
+    );
+    let warmup = Duration::from_secs(3);
+    let start = Instant::now() + warmup;
+    let until = start + Duration::from_secs(args.seconds);
+    let mut clients = Vec::new();
+    for k in 0..args.spectators {
+        let id = ids[k % ids.len()].clone();
+        clients.push(tokio::spawn(spectate(addr, id, until, start)));
+        if k % 50 == 49 {
+            tokio::time::sleep(Duration::from_millis(20)).await;
+        }
+    }
+    // Ticks at the start and end of the measured window.
+    tokio::time::sleep_until(start.into()).await;
+    let tick_at = |id: String| {
+        let http = http.clone();
+        let base = base.clone();
+        async move {
+            let v: Value = http
+                .get(format!("{base}/api/matches/{id}/stats"))
+                .send()
+                .await
+                .ok()?
+                .json()
+                .await
+                .ok()?;
+            Some(v)
+        }
+    };
+    let mut first = Vec::new();
+    for id in &ids {
+        first.push(tick_at(id.clone()).await);
+    }
+    let mut stats: Vec<ClientStats> = Vec::new();
+    for c in clients {
+        stats.push(c.await.unwrap_or_default());
+    }
+    tokio::time::sleep_until(until.into()).await; // (when there are no spectators to wait for)
+    let secs = args.seconds as f64;
+    let mut last = Vec::new();
+    for id in &ids {
+        last.push(tick_at(id.clone()).await);
+    }
+    // Matches that ended during the window (robots tagged every bot) stop ticking: their tick
+    // rate and their spectators' snapshot rate are not counted below.
+    let summaries: Vec<Value> = match http.get(format!("{base}/api/matches")).send().await {
+        Ok(r) => r.json().await.unwrap_or_default(),
+        Err(_) => Vec::new(),
+    };
+    let finished: Vec<bool> = ids
+        .iter()
+        .map(|id| {
+            summaries
+                .iter()
+                .any(|m| m["id"] == id.as_str() && m["status"] == "finished")
+        })
+        .collect();
+    // Matches.
+    let mut hz = Vec::new();
+    let mut p50 = Vec::new();
+    let mut p99 = Vec::new();
+    let mut max = Vec::new();
+    let mut late = 0;
+    let mut lines = Vec::new();
+    for ((a, b), done) in first.iter().zip(&last).zip(&finished) {
+        let (Some(a), Some(b)) = (a, b) else { continue };
+        let ticks = b["tick"].as_f64().unwrap_or(0.0) - a["tick"].as_f64().unwrap_or(0.0);
+        lines.push(format!(
+            "{:.1} Hz p50 {} p99 {} µs",
+            ticks / secs,
+            b["tick_us_p50"],
+            b["tick_us_p99"]
+        ));
+        if *done {
+            lines.push("  (finished during the window)".into());
+        } else {
+            hz.push(ticks / secs);
+        }
+        p50.push(b["tick_us_p50"].as_f64().unwrap_or(0.0));
+        p99.push(b["tick_us_p99"].as_f64().unwrap_or(0.0));
+        max.push(b["tick_us_max"].as_f64().unwrap_or(0.0));
+        late += b["late_ticks"].as_u64().unwrap_or(0);
+    }
+    for v in [&mut hz, &mut p50, &mut p99, &mut max] {
+        v.sort_by(f64::total_cmp);
+    }
+    println!(
+        "\nmatches ({} ran throughout, {} finished during the window):",
+        hz.len(),
+        finished.iter().filter(|f| **f).count()
+    );
+    println!(
+        "  tick rate        min {:.2} Hz, median {:.2} Hz (target 20)",
+        pct(&hz, 0.0),
+        pct(&hz, 0.5)
+    );
+    println!(
+        "  tick compute     p50 {:.0} µs (median over matches), p99 {:.0} µs (worst match {:.0} µs), max {:.0} µs",
+        pct(&p50, 0.5),
+        pct(&p99, 0.5),
+        pct(&p99, 1.0),
+        pct(&max, 1.0)
+    );
+    if std::env::var("LOADTEST_VERBOSE").is_ok() {
+        for l in &lines {
+            println!("    {l}");
+        }
+    }
+    println!("  late ticks       {late} in all (a tick more than 1.5 periods after the previous)");
+    // Clients.
+    let running: Vec<&ClientStats> = stats
+        .iter()
+        .enumerate()
+        .filter(|(k, _)| !finished[k % ids.len()])
+        .map(|(_, s)| s)
+        .collect();
+    let mut rate: Vec<f64> = running.iter().map(|s| s.snapshots as f64 / secs).collect();
+    rate.sort_by(f64::total_cmp);
+    let distinct: Vec<f64> = running
+        .iter()
+        .map(|s| s.distinct_ticks as f64 / secs)
+        .collect();
+    let starved = rate.iter().filter(|r| **r < 15.0).count();
+    let closed = stats.iter().filter(|s| s.closed_early).count();
+    println!(
+        "\nspectators ({}; {} of them on matches that ran throughout):",
+        stats.len(),
+        running.len()
+    );
+    println!(
+        "  snapshots/s      min {:.2}, p1 {:.2}, median {:.2}, mean {:.2}",
+        pct(&rate, 0.0),
+        pct(&rate, 0.01),
+        pct(&rate, 0.5),
+        rate.iter().sum::<f64>() / rate.len().max(1) as f64
+    );
+    println!(
+        "  distinct ticks/s mean {:.2}",
+        distinct.iter().sum::<f64>() / distinct.len().max(1) as f64
+    );
+    println!("  starved (<15/s)  {starved}; closed early {closed}");
+    let sum = |f: fn(&ClientStats) -> u64| stats.iter().map(f).sum::<u64>();
+    let (bb, nb, bp, np) = (
+        sum(|s| s.bytes_belief),
+        sum(|s| s.n_belief),
+        sum(|s| s.bytes_plain),
+        sum(|s| s.n_plain),
+    );
+    let maxb = stats.iter().map(|s| s.max_belief).max().unwrap_or(0);
+    let maxp = stats.iter().map(|s| s.max_plain).max().unwrap_or(0);
+    println!(
+        "  bytes/snapshot   with belief: mean {:.0}, max {maxb}; without: mean {:.0}, max {maxp}; overall mean {:.0}",
+        bb as f64 / nb.max(1) as f64,
+        bp as f64 / np.max(1) as f64,
+        (bb + bp) as f64 / (nb + np).max(1) as f64
+    );
+    println!(
+        "  throughput       {:.1} MB/s to all spectators",
+        (bb + bp) as f64 / secs / 1e6
+    );
+    for id in &ids {
+        let _ = http.delete(format!("{base}/api/matches/{id}")).send().await;
+    }
+    Ok(())
+}
+
+fn main() -> std::process::ExitCode {
+    let args = Args::parse();
+    let rt = match tokio::runtime::Runtime::new() {
+        Ok(rt) => rt,
+        Err(e) => {
+            eprintln!("error: {e}");
+            return std::process::ExitCode::FAILURE;
+        }
+    };
+    match rt.block_on(run(args)) {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e}");
+            std::process::ExitCode::FAILURE
+        }
+    }
+}

@@ -1,0 +1,307 @@
+//! What a match task publishes after every tick: one shared [`Frame`] of ground truth.
+//!
+//! The task builds a frame once per tick (O(agents + particles shown), never O(clients)) and
+//! publishes it on a `watch` channel: the latest frame wins, so a slow viewer skips stale
+//! frames instead of slowing the tick. Each WebSocket connection filters a frame for its
+//! viewer (a player sees what its opponent has in line of sight) and serialises it; what
+//! every spectator gets is serialised once per frame and shared ([`crate::protocol::ws::WireCache`]).
+//!
+//! The belief is thinned for display here: each role's cloud is resampled (systematic
+//! resampling, no randomness) down to a few hundred points in all, quantised to centimetres,
+//! and rebuilt only every [`BELIEF_EVERY`] ticks.
+
+use std::sync::Arc;
+
+use nalgebra::Point2;
+
+use crate::protocol::EventDto;
+use crate::protocol::ws::WireCache;
+use crate::sim::arena::Arena;
+use crate::sim::world::Control;
+use crate::sim::{MatchStatus, Pose, Side, World};
+
+/// Ticks between two belief updates sent to viewers (5 Hz at 20 Hz ticks).
+pub const BELIEF_EVERY: u64 = 4;
+/// Points of the belief shown in all, shared among the untagged roles.
+pub const BELIEF_BUDGET: usize = 480;
+/// No role is shown with fewer points than this (unless it has fewer particles).
+pub const BELIEF_MIN_PER_ROLE: usize = 48;
+
+#[derive(Debug, Clone)]
+pub struct RobotFrame {
+    pub pose: Pose,
+    pub frozen: bool,
+    pub goal: Option<Pose>,
+    /// This tick's laser ranges (metres), empty while frozen.
+    pub scan: Vec<f32>,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SlotControl {
+    Bot,
+    Api,
+    Human,
+}
+
+#[derive(Debug, Clone)]
+pub struct OpponentFrame {
+    pub pose: Pose,
+    pub tagged: bool,
+    pub control: SlotControl,
+    /// The person playing it, if any.
+    pub player: Option<Arc<str>>,
+    /// Whether that person is connected right now.
+    pub connected: bool,
+}
+
+/// One role of the belief, thinned for display.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RoleView {
+    pub id: u64,
+    pub count: u32,
+    pub tagged: bool,
+    /// Particles the tracker holds for this role.
+    pub particles: usize,
+    /// Weighted mean of the cloud (metres).
+    pub mean: [f32; 2],
+    /// Points shown, in centimetres.
+    pub points: Vec<[i32; 2]>,
+}
+
+#[derive(Debug, Clone, PartialEq)]
+pub struct BeliefView {
+    pub tick: u64,
+    pub roles: Vec<RoleView>,
+}
+
+/// Everything about one tick that any viewer may be shown.
+#[derive(Debug)]
+pub struct Frame {
+    pub tick: u64,
+    pub time_s: f64,
+    pub time_limit_s: f64,
+    pub status: MatchStatus,
+    pub winner: Option<Side>,
+    pub robots: Vec<RobotFrame>,
+    pub opponents: Vec<OpponentFrame>,
+    /// Present on belief ticks (every [`BELIEF_EVERY`] ticks and on the last one).
+    pub belief: Option<Arc<BeliefView>>,
+    /// Events logged since the previous frame, oldest first.
+    pub events: Vec<EventDto>,
+    /// The `seq` of the last event before this frame's (0 for none).
+    pub since_seq: u64,
+    /// The `seq` of the newest event so far.
+    pub last_seq: u64,
+    /// Tags of robots by opponents so far (the opponents' score).
+    pub robot_tags: u32,
+    /// The `finished` event, once the match has ended.
+    pub finished: Option<EventDto>,
+    /// Serialised forms shared by every spectator of this frame.
+    pub wire: WireCache,
+}
+
+impl Frame {
+    /// The frame of a world that has not changed since `since_seq`.
+    pub fn build(
+        world: &World,
+        players: &[Option<(Arc<str>, bool)>],
+        since_seq: u64,
+        robot_tags: u32,
+        with_belief: bool,
+    ) -> Frame {
+        let events: Vec<EventDto> = world
+            .events_since(since_seq)
+            .iter()
+            .map(crate::protocol::event)
+            .collect();
+        let last_seq = events.last().map_or(since_seq, |e| e.seq);
+        Frame {
+            tick: world.tick,
+            time_s: world.time_s(),
+            time_limit_s: world.config.time_limit_ticks as f64 / crate::sim::TICK_HZ as f64,
+            status: world.status,
+            winner: world.winner,
+            robots: world
+                .robots
+                .iter()
+                .enumerate()
+                .map(|(i, r)| RobotFrame {
+                    pose: r.pose,
+                    frozen: world.robot_frozen(i),
+                    goal: r.command.goal,
+                    scan: r.scan.ranges.clone(),
+                })
+                .collect(),
+            opponents: world
+                .opponents
+                .iter()
+                .enumerate()
+                .map(|(i, o)| {
+                    let (player, connected) = match players.get(i) {
+                        Some(Some((name, connected))) => (Some(name.clone()), *connected),
+                        _ => (None, false),
+                    };
+                    OpponentFrame {
+                        pose: o.pose,
+                        tagged: o.tagged,
+                        control: match o.control {
+                            Control::Bot(_) => SlotControl::Bot,
+                            Control::Api(_) => SlotControl::Api,
+                            Control::Human(_) => SlotControl::Human,
+                        },
+                        player,
+                        connected,
+                    }
+                })
+                .collect(),
+            belief: with_belief.then(|| Arc::new(belief_view(world))),
+            events,
+            since_seq,
+            last_seq,
+            robot_tags,
+            finished: (world.status == MatchStatus::Finished)
+                .then(|| {
+                    world
+                        .events()
+                        .iter()
+                        .rev()
+                        .find(|e| matches!(e.kind, crate::sim::EventKind::Finished { .. }))
+                        .map(crate::protocol::event)
+                })
+                .flatten(),
+            wire: WireCache::default(),
+        }
+    }
+}
+
+/// Which agents the person playing opponent `slot` can see: its own line of sight (walls
+/// occlude, agents do not), computed from ground truth on the server. A tagged opponent has
+/// left the arena and sees everything, like a spectator.
+pub fn visible_to(frame: &Frame, arena: &Arena, slot: usize) -> Option<Visible> {
+    let me = frame.opponents.get(slot)?;
+    if me.tagged {
+        return None;
+    }
+    let sees = |p: Point2<f32>| arena.line_of_sight(me.pose.pos, p);
+    Some(Visible {
+        robots: frame.robots.iter().map(|r| sees(r.pose.pos)).collect(),
+        opponents: frame
+            .opponents
+            .iter()
+            .enumerate()
+            .map(|(i, o)| i == slot || (!o.tagged && sees(o.pose.pos)))
+            .collect(),
+    })
+}
+
+/// The result of [`visible_to`], one flag per agent.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Visible {
+    pub robots: Vec<bool>,
+    pub opponents: Vec<bool>,
+}
+
+/// The team's belief, thinned for display (see the module docs).
+pub fn belief_view(world: &World) -> BeliefView {
+    let roles = &world.team.tracker.roles;
+    let live = roles.iter().filter(|r| !r.tagged).count().max(1);
+    let per_role = (BELIEF_BUDGET / live).max(BELIEF_MIN_PER_ROLE);
+    BeliefView {
+        tick: world.tick,
+        roles: roles
+            .iter()
+            .map(|r| {
+                let k = if r.tagged { 1 } else { per_role };
+                RoleView {
+                    id: r.id,
+                    count: r.count,
+                    tagged: r.tagged,
+                    particles: r.particles.len(),
+                    mean: weighted_mean(&r.particles, &r.weights),
+                    points: thin(&r.particles, &r.weights, k),
+                }
+            })
+            .collect(),
+    }
+}
+
+fn weighted_mean(points: &[Point2<f32>], weights: &[f32]) -> [f32; 2] {
+    let (mut x, mut y, mut w) = (0.0f64, 0.0f64, 0.0f64);
+    for (p, wi) in points.iter().zip(weights) {
+        let wi = *wi as f64;
+        x += p.x as f64 * wi;
+        y += p.y as f64 * wi;
+        w += wi;
+    }
+    if w > 0.0 && w.is_finite() {
+        [(x / w) as f32, (y / w) as f32]
+    } else if let Some(p) = points.first() {
+        [p.x, p.y]
+    } else {
+        [0.0, 0.0]
+    }
+}
+
+/// At most `k` points that represent the weighted cloud: systematic resampling with a fixed
+/// offset (deterministic), duplicates dropped, quantised to centimetres.
+pub fn thin(points: &[Point2<f32>], weights: &[f32], k: usize) -> Vec<[i32; 2]> {
+    let cm = |p: &Point2<f32>| [(p.x * 100.0).round() as i32, (p.y * 100.0).round() as i32];
+    if points.len() <= k {
+        return points.iter().map(cm).collect();
+    }
+    let total: f64 = weights.iter().map(|w| *w as f64).sum();
+    if !(total > 0.0 && total.is_finite()) || weights.len() != points.len() {
+        // Weights unusable: an even stride over the particles.
+        let step = points.len() as f64 / k as f64;
+        return (0..k)
+            .map(|j| cm(&points[((j as f64 + 0.5) * step) as usize % points.len()]))
+            .collect();
+    }
+    let mut out: Vec<[i32; 2]> = Vec::with_capacity(k);
+    let mut last: Option<usize> = None;
+    let mut cum = weights[0] as f64 / total;
+    let mut i = 0;
+    for j in 0..k {
+        let u = (j as f64 + 0.5) / k as f64;
+        while cum < u && i + 1 < points.len() {
+            i += 1;
+            cum += weights[i] as f64 / total;
+        }
+        if last != Some(i) {
+            out.push(cm(&points[i]));
+            last = Some(i);
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn thinning_keeps_the_weighted_shape_and_caps_the_count() {
+        // 1000 particles: the heavy half on the left, the light half on the right.
+        let points: Vec<Point2<f32>> = (0..1000)
+            .map(|i| Point2::new(if i < 500 { 1.0 } else { 9.0 }, i as f32 * 0.001))
+            .collect();
+        let weights: Vec<f32> = (0..1000)
+            .map(|i| if i < 500 { 0.0018 } else { 0.0002 })
+            .collect();
+        let shown = thin(&points, &weights, 100);
+        assert!(shown.len() <= 100 && shown.len() >= 80, "{}", shown.len());
+        let left = shown.iter().filter(|p| p[0] == 100).count();
+        assert!(left as f32 / shown.len() as f32 > 0.85, "{left}");
+        let mean = weighted_mean(&points, &weights)[0];
+        assert!((mean - 1.8).abs() < 1e-3, "{mean}");
+    }
+
+    #[test]
+    fn small_or_unweighted_clouds_pass_through() {
+        let points = vec![Point2::new(0.5, 0.25), Point2::new(1.0, 2.0)];
+        assert_eq!(thin(&points, &[0.5, 0.5], 10), vec![[50, 25], [100, 200]]);
+        let many: Vec<Point2<f32>> = (0..10).map(|i| Point2::new(i as f32, 0.0)).collect();
+        assert_eq!(thin(&many, &[0.0; 10], 5).len(), 5);
+        assert_eq!(thin(&many, &[f32::NAN; 10], 5).len(), 5);
+    }
+}

@@ -1,0 +1,482 @@
+//! The WebSocket messages of `GET /ws/matches/{id}` (`../shared/spec/http-api.md`), as
+//! implemented and documented in the README.
+//!
+//! Server to client, JSON text with a `type`: `welcome` (once, first), `snapshot` (every
+//! tick), `event` (as in the events endpoint), `finished` (once, at the end), `pong`, `error`.
+//! Client to server: `input`, `belief`, `ping` ([`ClientMessage`]).
+//!
+//! Sizes: positions are metres rounded to millimetres, headings to 1e-4 rad, scan ranges are
+//! integer centimetres, belief points integer centimetres in one flat array `[x0, y0, x1, …]`.
+
+use std::sync::OnceLock;
+
+use axum::extract::ws::Utf8Bytes;
+use serde::{Deserialize, Serialize};
+
+use crate::game::snapshot::{BeliefView, Frame, SlotControl, Visible};
+use crate::maps::MapFile;
+use crate::protocol::{EventDto, OpponentControl, PoseDto, Status, Winner};
+use crate::sim::{MatchStatus, Pose, Side};
+
+/// Serialised forms of one frame, built by the first connection that needs them and shared
+/// by all the others (so 500 spectators cost one serialisation per tick, not 500).
+#[derive(Debug, Default)]
+pub struct WireCache {
+    spectator: OnceLock<Utf8Bytes>,
+    spectator_belief: OnceLock<Utf8Bytes>,
+    belief: OnceLock<String>,
+}
+
+/// A message from a client. Unknown types and fields are errors.
+#[derive(Debug, Clone, PartialEq)]
+pub enum ClientMessage {
+    /// A player's keys; the latest holds until the next.
+    Input { forward: f64, turn: f64, tag: bool },
+    /// Switch the team's belief on or off in this connection's snapshots.
+    Belief { on: bool },
+    /// Answered at once with a `pong` carrying the same `t` (for the ping display).
+    Ping { t: f64 },
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct InputMsg {
+    forward: f64,
+    turn: f64,
+    #[serde(default)]
+    tag: bool,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct BeliefMsg {
+    on: bool,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct PingMsg {
+    t: f64,
+}
+
+/// Deserialises `v`, naming the field of the failure.
+fn fields<T: serde::de::DeserializeOwned>(v: serde_json::Value) -> Result<T, String> {
+    serde_path_to_error::deserialize(v).map_err(|e| {
+        let path = e.path().to_string();
+        let inner = e.into_inner();
+        if path == "." {
+            format!("message: {inner}")
+        } else {
+            format!("{path}: {inner}")
+        }
+    })
+}
+
+impl ClientMessage {
+    /// Parses and range-checks a client's text message, naming what is wrong.
+    pub fn parse(text: &str) -> Result<ClientMessage, String> {
+        let mut v: serde_json::Value =
+            serde_json::from_str(text).map_err(|e| format!("message: not JSON: {e}"))?;
+        let Some(obj) = v.as_object_mut() else {
+            return Err("message: must be a JSON object with a \"type\"".into());
+        };
+        let kind = match obj.remove("type") {
+            Some(serde_json::Value::String(s)) => s,
+            Some(_) => return Err("type: must be a string".into()),
+            None => return Err("type: missing (input, belief or ping)".into()),
+        };
+        let msg = match kind.as_str() {
+            "input" => {
+                let m: InputMsg = fields(v)?;
+                ClientMessage::Input {
+                    forward: m.forward,
+                    turn: m.turn,
+                    tag: m.tag,
+                }
+            }
+            "belief" => ClientMessage::Belief {
+                on: fields::<BeliefMsg>(v)?.on,
+            },
+            "ping" => ClientMessage::Ping {
+                t: fields::<PingMsg>(v)?.t,
+            },
+            other => {
+                return Err(format!(
+                    "type: unknown message type {other:?} (input, belief or ping)"
+                ));
+            }
+        };
+        match &msg {
+            ClientMessage::Input { forward, turn, .. } => {
+                for (field, v) in [("forward", forward), ("turn", turn)] {
+                    if !(v.is_finite() && (-1.0..=1.0).contains(v)) {
+                        return Err(format!("{field}: {v} must be in -1..=1"));
+                    }
+                }
+            }
+            ClientMessage::Ping { t } if !t.is_finite() => {
+                return Err(format!("t: {t} must be a finite number"));
+            }
+            _ => {}
+        }
+        Ok(msg)
+    }
+}
+
+/// Limits a client should know (sent in `welcome`).
+#[derive(Debug, Clone, Serialize)]
+pub struct Limits {
+    pub max_message_bytes: usize,
+    /// Sustained messages per second.
+    pub messages_per_s: f64,
+    /// Messages that may come at once.
+    pub burst: f64,
+    /// Seconds a dropped player has to come back with the same token.
+    pub reconnect_s: f64,
+}
+
+#[derive(Debug, Clone, Serialize)]
+pub struct Welcome<'a> {
+    #[serde(rename = "type")]
+    pub kind: &'static str,
+    #[serde(rename = "match")]
+    pub match_id: &'a str,
+    /// `player` or `spectator`.
+    pub role: &'static str,
+    /// The opponent this connection plays, for a player.
+    pub you: Option<String>,
+    pub name: Option<String>,
+    pub map: MapFile,
+    pub tick_hz: u32,
+    pub time_limit_s: f64,
+    /// The belief is sent with every this many ticks' snapshot (when switched on).
+    pub belief_every: u64,
+    /// Whether this connection's snapshots carry the belief now.
+    pub belief: bool,
+    pub limits: Limits,
+}
+
+#[derive(Debug, Clone, Serialize)]
+struct RobotWire {
+    id: String,
+    x: f64,
+    y: f64,
+    theta: f64,
+    frozen: bool,
+    /// Spectators only: where its planner sends it.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    goal: Option<PoseDto>,
+    /// Spectators only: this tick's ranges in centimetres, beam i at bearing (i - 90)°.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    scan: Option<Vec<u16>>,
+}
+
+#[derive(Debug, Clone, Serialize)]
+struct OpponentWire {
+    id: String,
+    x: f64,
+    y: f64,
+    theta: f64,
+    tagged: bool,
+    control: OpponentControl,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    name: Option<String>,
+}
+
+#[derive(Debug, Clone, Serialize)]
+struct Score {
+    /// Opponents the robots have tagged.
+    tags: usize,
+    /// Robots the opponents have tagged (each freezes it for 10 s).
+    robot_tags: u32,
+    opponents: usize,
+    opponents_left: usize,
+    robots_frozen: usize,
+}
+
+#[derive(Debug, Clone, Serialize)]
+struct Snapshot<'a> {
+    #[serde(rename = "type")]
+    kind: &'static str,
+    tick: u64,
+    time_s: f64,
+    time_left_s: f64,
+    status: Status,
+    winner: Option<Winner>,
+    /// `player` (line of sight only) or `spectator` (everything).
+    view: &'static str,
+    you: Option<&'a str>,
+    robots: Vec<RobotWire>,
+    opponents: Vec<OpponentWire>,
+    score: Score,
+}
+
+#[derive(Debug, Clone, Serialize)]
+struct RoleWire {
+    id: u64,
+    count: u32,
+    tagged: bool,
+    /// Particles the tracker holds (the points below are a thinned sample).
+    particles: usize,
+    mean: [f64; 2],
+    /// Flat `[x0, y0, x1, y1, …]` in centimetres.
+    points: Vec<i32>,
+}
+
+#[derive(Debug, Clone, Serialize)]
+struct BeliefWire {
+    tick: u64,
+    roles: Vec<RoleWire>,
+}
+
+#[derive(Debug, Clone, Serialize)]
+struct EventWire<'a> {
+    #[serde(rename = "type")]
+    kind: &'static str,
+    #[serde(flatten)]
+    event: &'a EventDto,
+}
+
+#[derive(Debug, Clone, Serialize)]
+struct Finished {
+    #[serde(rename = "type")]
+    kind: &'static str,
+    tick: u64,
+    winner: Option<Winner>,
+    reason: Option<&'static str>,
+    time_s: f64,
+}
+
+#[derive(Debug, Clone, Serialize)]
+struct ErrorWire<'a> {
+    #[serde(rename = "type")]
+    kind: &'static str,
+    error: &'a str,
+}
+
+#[derive(Debug, Clone, Serialize)]
+struct Pong {
+    #[serde(rename = "type")]
+    kind: &'static str,
+    t: f64,
+}
+
+fn to_json<T: Serialize>(v: &T) -> String {
+    // Plain structs of numbers and strings: serialising them cannot fail.
+    serde_json::to_string(v).unwrap_or_else(|e| format!(r#"{{"type":"error","error":"{e}"}}"#))
+}
+
+fn mm(v: f32) -> f64 {
+    ((v as f64) * 1000.0).round() / 1000.0
+}
+
+fn rad(v: f32) -> f64 {
+    ((v as f64) * 10_000.0).round() / 10_000.0
+}
+
+fn pose(p: Pose) -> PoseDto {
+    PoseDto {
+        x: mm(p.pos.x),
+        y: mm(p.pos.y),
+        theta: rad(p.theta),
+    }
+}
+
+fn status(s: MatchStatus) -> Status {
+    match s {
+        MatchStatus::Running => Status::Running,
+        MatchStatus::Finished => Status::Finished,
+    }
+}
+
+fn winner(w: Option<Side>) -> Option<Winner> {
+    w.map(|w| match w {
+        Side::Robots => Winner::Robots,
+        Side::Opponents => Winner::Opponents,
+    })
+}
+
+fn snapshot_json(frame: &Frame, you: Option<&str>, visible: Option<&Visible>) -> String {
+    let spectator = visible.is_none();
+    let snap = Snapshot {
+        kind: "snapshot",
+        tick: frame.tick,
+        time_s: frame.time_s,
+        time_left_s: ((frame.time_limit_s - frame.time_s).max(0.0) * 100.0).round() / 100.0,
+        status: status(frame.status),
+        winner: winner(frame.winner),
+        view: if spectator { "spectator" } else { "player" },
+        you,
+        robots: frame
+            .robots
+            .iter()
+            .enumerate()
+            .filter(|(i, _)| visible.is_none_or(|v| v.robots[*i]))
+            .map(|(i, r)| RobotWire {
+                id: format!("r{i}"),
+                x: mm(r.pose.pos.x),
+                y: mm(r.pose.pos.y),
+                theta: rad(r.pose.theta),
+                frozen: r.frozen,
+                goal: if spectator { r.goal.map(pose) } else { None },
+                scan: spectator.then(|| {
+                    r.scan
+                        .iter()
+                        .map(|v| (v * 100.0).round().clamp(0.0, u16::MAX as f32) as u16)
+                        .collect()
+                }),
+            })
+            .collect(),
+        opponents: frame
+            .opponents
+            .iter()
+            .enumerate()
+            .filter(|(i, _)| visible.is_none_or(|v| v.opponents[*i]))
+            .map(|(i, o)| OpponentWire {
+                id: format!("o{i}"),
+                x: mm(o.pose.pos.x),
+                y: mm(o.pose.pos.y),
+                theta: rad(o.pose.theta),
+                tagged: o.tagged,
+                control: match o.control {
+                    SlotControl::Bot => OpponentControl::Bot,
+                    SlotControl::Api => OpponentControl::Api,
+                    SlotControl::Human => OpponentControl::Human,
+                },
+                name: o.player.as_deref().map(str::to_string),
+            })
+            .collect(),
+        score: Score {
+            tags: frame.opponents.iter().filter(|o| o.tagged).count(),
+            robot_tags: frame.robot_tags,
+            opponents: frame.opponents.len(),
+            opponents_left: frame.opponents.iter().filter(|o| !o.tagged).count(),
+            robots_frozen: frame.robots.iter().filter(|r| r.frozen).count(),
+        },
+    };
+    to_json(&snap)
+}
+
+fn belief_json(b: &BeliefView) -> String {
+    to_json(&BeliefWire {
+        tick: b.tick,
+        roles: b
+            .roles
+            .iter()
+            .map(|r| RoleWire {
+                id: r.id,
+                count: r.count,
+                tagged: r.tagged,
+                particles: r.particles,
+                mean: [mm(r.mean[0]), mm(r.mean[1])],
+                points: r.points.iter().flat_map(|p| [p[0], p[1]]).collect(),
+            })
+            .collect(),
+    })
+}
+
+/// Appends `"belief": …` to a serialised snapshot object.
+fn with_belief(mut snapshot: String, frame: &Frame) -> String {
+    if let Some(b) = &frame.belief {
+        let belief = frame.wire.belief.get_or_init(|| belief_json(b));
+        if snapshot.ends_with('}') {
+            snapshot.pop();
+            snapshot.push_str(",\"belief\":");
+            snapshot.push_str(belief);
+            snapshot.push('}');
+        }
+    }
+    snapshot
+}
+
+/// The snapshot every spectator gets: serialised once per frame and shared.
+pub fn spectator_snapshot(frame: &Frame, belief: bool) -> Utf8Bytes {
+    let make = || Utf8Bytes::from(snapshot_json(frame, None, None));
+    if belief && frame.belief.is_some() {
+        frame
+            .wire
+            .spectator_belief
+            .get_or_init(|| {
+                let plain = frame.wire.spectator.get_or_init(make);
+                Utf8Bytes::from(with_belief(plain.as_str().to_string(), frame))
+            })
+            .clone()
+    } else {
+        frame.wire.spectator.get_or_init(make).clone()
+    }
+}
+
+/// A player's snapshot: what its opponent sees, plus the belief when switched on.
+pub fn player_snapshot(frame: &Frame, you: &str, visible: &Visible, belief: bool) -> Utf8Bytes {
+    let json = snapshot_json(frame, Some(you), Some(visible));
+    Utf8Bytes::from(if belief {
+        with_belief(json, frame)
+    } else {
+        json
+    })
+}
+
+pub fn event(e: &EventDto) -> Utf8Bytes {
+    Utf8Bytes::from(to_json(&EventWire {
+        kind: "event",
+        event: e,
+    }))
+}
+
+/// The `finished` message, from the match's `finished` event.
+pub fn finished(frame: &Frame) -> Utf8Bytes {
+    let e = frame.finished.as_ref();
+    Utf8Bytes::from(to_json(&Finished {
+        kind: "finished",
+        tick: e.map_or(frame.tick, |e| e.tick),
+        winner: winner(frame.winner),
+        reason: e.and_then(|e| e.reason),
+        time_s: e.and_then(|e| e.time_s).unwrap_or(frame.time_s),
+    }))
+}
+
+pub fn error(message: &str) -> Utf8Bytes {
+    Utf8Bytes::from(to_json(&ErrorWire {
+        kind: "error",
+        error: message,
+    }))
+}
+
+pub fn pong(t: f64) -> Utf8Bytes {
+    Utf8Bytes::from(to_json(&Pong { kind: "pong", t }))
+}
+
+pub fn welcome(w: &Welcome<'_>) -> Utf8Bytes {
+    Utf8Bytes::from(to_json(w))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn client_messages_are_parsed_strictly() {
+        assert_eq!(
+            ClientMessage::parse(r#"{"type":"input","forward":1,"turn":-0.5,"tag":true}"#),
+            Ok(ClientMessage::Input {
+                forward: 1.0,
+                turn: -0.5,
+                tag: true
+            })
+        );
+        assert_eq!(
+            ClientMessage::parse(r#"{"type":"belief","on":true}"#),
+            Ok(ClientMessage::Belief { on: true })
+        );
+        let e = ClientMessage::parse(r#"{"type":"input","forward":2,"turn":0}"#).unwrap_err();
+        assert_eq!(e, "forward: 2 must be in -1..=1");
+        let e = ClientMessage::parse(r#"{"type":"input","forward":0,"turn":0,"x":1}"#).unwrap_err();
+        assert!(e.contains("unknown field `x`"), "{e}");
+        let e = ClientMessage::parse(r#"{"type":"dance"}"#).unwrap_err();
+        assert!(e.starts_with("type: unknown message type"), "{e}");
+        let e = ClientMessage::parse(r#"{"type":"input","forward":"fast","turn":0}"#).unwrap_err();
+        assert!(e.starts_with("forward"), "{e}");
+        assert!(ClientMessage::parse("not json").is_err());
+        assert!(ClientMessage::parse(r#"{"forward":0}"#).is_err());
+    }
+}

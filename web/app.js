@@ -1,0 +1,192 @@
+// The page: a lobby (#/), and a match to watch (#/watch/<id>) or play (#/play/<id>).
+// Plain ES modules, no build step, nothing fetched from anywhere but this server.
+
+import { Game, debug } from "./game.js";
+
+const $ = (id) => document.getElementById(id);
+let game = null;
+let lobbyTimer = null;
+
+function playerName() {
+  const input = $("name");
+  let name = input.value.trim();
+  if (!name) {
+    name = `player-${Math.floor(Math.random() * 900 + 100)}`;
+    input.value = name;
+  }
+  localStorage.setItem("lasertag.name", name);
+  return name;
+}
+
+async function api(method, path, body) {
+  const r = await fetch(path, {
+    method,
+    headers: body ? { "content-type": "application/json" } : {},
+    body: body ? JSON.stringify(body) : undefined,
+  });
+  const text = await r.text();
+  const data = text ? JSON.parse(text) : null;
+  if (!r.ok) throw new Error(data && data.error ? data.error : `${r.status}`);
+  return data;
+}
+
+/** Takes a slot of match `id` (once per tab) and returns the token. */
+async function tokenFor(id) {
+  const key = `lasertag.token.${id}`;
+  let token = sessionStorage.getItem(key);
+  if (!token) {
+    const joined = await api("POST", `/api/matches/${encodeURIComponent(id)}/players`, { name: playerName() });
+    token = joined.token;
+    sessionStorage.setItem(key, token);
+  }
+  return token;
+}
+
+function fmtTime(s) {
+  s = Math.max(0, Math.floor(s));
+  return `${Math.floor(s / 60)}:${String(s % 60).padStart(2, "0")}`;
+}
+
+function button(text, onclick, cls) {
+  const b = document.createElement("button");
+  b.textContent = text;
+  if (cls) b.className = cls;
+  b.onclick = onclick;
+  return b;
+}
+
+async function refreshLobby() {
+  let matches;
+  try {
+    matches = await api("GET", "/api/matches");
+  } catch (e) {
+    $("matches").tBodies[0].innerHTML = `<tr><td colspan="8">cannot reach the server: ${e.message}</td></tr>`;
+    return;
+  }
+  debug.matches = matches.length;
+  const show = matches.find((m) => m.id.startsWith("showcase-") && m.status === "running");
+  $("showcase").hidden = !show;
+  if (show) {
+    $("showcase-text").textContent =
+      `${show.robots} robots hunt ${show.opponents_left} opponents on ${show.map} — ${fmtTime(show.time_limit_s - show.time_s)} left. ` +
+      (show.free_slots ? "Take over a bot and play." : "");
+    $("showcase-watch").onclick = () => (location.hash = `#/watch/${show.id}`);
+    $("showcase-play").onclick = () => (location.hash = `#/play/${show.id}`);
+    $("showcase-play").disabled = !show.free_slots;
+  }
+  const rows = matches.map((m) => {
+    const tr = document.createElement("tr");
+    tr.dataset.id = m.id;
+    const left = m.status === "running" ? fmtTime(m.time_limit_s - m.time_s) : `${m.winner} won`;
+    const cells = [m.id.length > 16 ? m.id.slice(0, 16) + "…" : m.id, m.map, `${m.robots} · ${m.planner_active}`,
+      `${m.opponents_left}/${m.opponents} ${m.opponent_control}`, m.players, m.spectators, left];
+    for (const c of cells) {
+      const td = document.createElement("td");
+      td.textContent = c;
+      tr.append(td);
+    }
+    const td = document.createElement("td");
+    const div = document.createElement("div");
+    div.className = "buttons";
+    div.append(button("Watch", () => (location.hash = `#/watch/${m.id}`), "secondary watch"));
+    if (m.free_slots > 0) div.append(button("Play", () => (location.hash = `#/play/${m.id}`), "play"));
+    td.append(div);
+    tr.append(td);
+    return tr;
+  });
+  if (!rows.length) rows.push(Object.assign(document.createElement("tr"), { innerHTML: "<td colspan=8>no matches</td>" }));
+  $("matches").tBodies[0].replaceChildren(...rows);
+}
+
+async function loadMaps() {
+  const sel = document.querySelector("#create select[name=map]");
+  if (sel.options.length) return;
+  try {
+    for (const m of await api("GET", "/api/maps")) {
+      const o = document.createElement("option");
+      o.value = m.name;
+      o.textContent = `${m.name} (${m.width}×${m.height} m)`;
+      sel.append(o);
+    }
+  } catch { /* the lobby shows the error */ }
+}
+
+async function create(e) {
+  e.preventDefault();
+  const f = new FormData($("create"));
+  $("create-error").textContent = "";
+  try {
+    const m = await api("POST", "/api/matches", {
+      map: f.get("map"),
+      robots: Number(f.get("robots")),
+      opponents: Number(f.get("opponents")),
+      planner: f.get("planner"),
+      opponent_control: f.get("control") === "human" ? "human" : "bot",
+      bots_joinable: f.get("control") === "bots",
+      time_limit_s: Number(f.get("minutes")) * 60,
+    });
+    location.hash = `#/play/${m.id}`;
+  } catch (err) {
+    $("create-error").textContent = err.message;
+  }
+}
+
+/** Play again: the next showcase, or a new match like this one. */
+async function replay(g) {
+  const matches = await api("GET", "/api/matches");
+  if (g.matchId.startsWith("showcase-")) {
+    const next = matches.find((m) => m.id.startsWith("showcase-") && m.status === "running" && m.free_slots > 0);
+    location.hash = next ? `#/play/${next.id}` : "#/";
+    return;
+  }
+  const m = matches.find((x) => x.id === g.matchId);
+  if (!m) { location.hash = "#/"; return; }
+  const fresh = await api("POST", "/api/matches", {
+    map: m.map, robots: m.robots, opponents: m.opponents, planner: m.planner,
+    opponent_control: m.opponent_control, opponent_bot: m.opponent_bot,
+    bots_joinable: m.bots_joinable, time_limit_s: m.time_limit_s,
+  });
+  location.hash = g.role === "player" || m.free_slots > 0 ? `#/play/${fresh.id}` : `#/watch/${fresh.id}`;
+}
+
+async function route() {
+  if (game) { game.stop(); game = null; }
+  clearInterval(lobbyTimer);
+  const [, page, id] = location.hash.split("/");
+  if ((page === "watch" || page === "play") && id) {
+    $("lobby").hidden = true;
+    $("game").hidden = false;
+    let token = null;
+    if (page === "play") {
+      try {
+        token = await tokenFor(decodeURIComponent(id));
+      } catch (e) {
+        debug.joinError = e.message;
+        location.hash = "#/";
+        $("lobby-error").textContent = `cannot join: ${e.message}`;
+        return;
+      }
+    }
+    game = new Game({
+      matchId: decodeURIComponent(id), token,
+      onLobby: () => (location.hash = "#/"),
+      onReplay: (g) => replay(g).catch((e) => { $("end-text").textContent = e.message; }),
+      onStaleToken: token ? () => {
+        sessionStorage.removeItem(`lasertag.token.${decodeURIComponent(id)}`);
+        route();
+      } : null,
+    });
+    return;
+  }
+  debug.page = "lobby";
+  $("game").hidden = true;
+  $("lobby").hidden = false;
+  loadMaps();
+  refreshLobby();
+  lobbyTimer = setInterval(refreshLobby, 1000);
+}
+
+$("name").value = localStorage.getItem("lasertag.name") || "";
+$("create").addEventListener("submit", create);
+window.addEventListener("hashchange", route);
+route();

@@ -1,0 +1,326 @@
+// One match in the browser: the WebSocket, smooth motion between snapshots, the keyboard,
+// the HUD (score, timer, ping, tag feed) and the end screen.
+
+import { segments, visibility, castRay, angleDiff } from "./geometry.js";
+import { draw, fit, roleColor } from "./render.js";
+
+const $ = (id) => document.getElementById(id);
+const TICK_MS = 50;
+/** Render this many ticks behind the newest snapshot, so there is always a next one. */
+const DELAY_TICKS = 2;
+
+/** What tests read: counts of what was drawn, the feed, the end. */
+export const debug = (window.__lasertag = window.__lasertag || {});
+
+function fmtTime(s) {
+  s = Math.max(0, Math.floor(s));
+  return `${Math.floor(s / 60)}:${String(s % 60).padStart(2, "0")}`;
+}
+
+export class Game {
+  constructor({ matchId, token, onLobby, onReplay, onStaleToken }) {
+    this.matchId = matchId;
+    this.token = token;
+    this.onLobby = onLobby;
+    this.onReplay = onReplay;
+    this.onStaleToken = onStaleToken;
+    this.welcomed = false;
+    this.canvas = $("arena");
+    this.ctx = this.canvas.getContext("2d");
+    this.snaps = [];
+    this.offset = null;
+    this.beams = [];
+    this.names = {};
+    this.keys = new Set();
+    this.beliefOn = !token;
+    this.belief = null;
+    this.lastInput = null;
+    this.lastInputAt = 0;
+    this.ended = null;
+    this.closedByUs = false;
+    this.retries = 0;
+    Object.assign(debug, {
+      page: "game", matchId, role: token ? "player" : "spectator", connected: false,
+      snapshots: 0, lastTick: null, drawn: null, feed: [], ended: null, ping: null, you: null,
+      belief: this.beliefOn, errors: [],
+    });
+    $("feed").replaceChildren();
+    $("end").hidden = true;
+    $("hud-status").textContent = "connecting…";
+    this.onKey = (e) => this.key(e);
+    window.addEventListener("keydown", this.onKey);
+    window.addEventListener("keyup", this.onKey);
+    this.onBlur = () => { this.keys.clear(); this.sendInput(true); };
+    window.addEventListener("blur", this.onBlur);
+    $("end-lobby").onclick = () => this.onLobby();
+    $("end-replay").onclick = () => this.onReplay(this);
+    this.connect();
+    this.pingTimer = setInterval(() => this.send({ type: "ping", t: performance.now() }), 1000);
+    this.inputTimer = setInterval(() => this.sendInput(false), 50);
+    const loop = (t) => { if (!this.stopped) { this.frame(t); requestAnimationFrame(loop); } };
+    requestAnimationFrame(loop);
+  }
+
+  stop() {
+    this.stopped = true;
+    this.closedByUs = true;
+    clearInterval(this.pingTimer);
+    clearInterval(this.inputTimer);
+    window.removeEventListener("keydown", this.onKey);
+    window.removeEventListener("keyup", this.onKey);
+    window.removeEventListener("blur", this.onBlur);
+    if (this.ws) this.ws.close(1000, "left");
+  }
+
+  connect() {
+    const proto = location.protocol === "https:" ? "wss" : "ws";
+    const q = this.token ? `?token=${encodeURIComponent(this.token)}` : "";
+    const ws = new WebSocket(`${proto}://${location.host}/ws/matches/${encodeURIComponent(this.matchId)}${q}`);
+    this.ws = ws;
+    ws.onopen = () => { debug.connected = true; this.retries = 0; };
+    ws.onmessage = (m) => {
+      let msg;
+      try { msg = JSON.parse(m.data); } catch { return; }
+      this.message(msg);
+    };
+    ws.onclose = (e) => {
+      debug.connected = false;
+      if (this.closedByUs || this.stopped) return;
+      if (this.token && !this.welcomed && this.onStaleToken) {
+        // Refused before the first message: the stored token's slot was freed. Join again.
+        this.stop();
+        this.onStaleToken();
+        return;
+      }
+      if (e.code === 1008) {
+        $("hud-status").textContent = `disconnected: ${e.reason}`;
+        return;
+      }
+      if (this.ended && e.code === 1000) {
+        return; // the match ended and was removed: the end screen stays
+      }
+      // Players keep their opponent for a while: try to come back.
+      if (this.retries++ < 20) {
+        $("hud-status").textContent = "connection lost — reconnecting…";
+        setTimeout(() => this.connect(), 1000);
+      } else {
+        $("hud-status").textContent = "connection lost";
+      }
+    };
+  }
+
+  send(obj) {
+    if (this.ws && this.ws.readyState === WebSocket.OPEN) this.ws.send(JSON.stringify(obj));
+  }
+
+  message(msg) {
+    switch (msg.type) {
+      case "welcome": return this.welcome(msg);
+      case "snapshot": return this.snapshot(msg);
+      case "event": return this.event(msg);
+      case "finished": return this.finished(msg);
+      case "pong": {
+        const rtt = performance.now() - msg.t;
+        debug.ping = rtt;
+        $("hud-ping").textContent = `ping ${rtt.toFixed(0)} ms`;
+        return;
+      }
+      case "error":
+        debug.errors.push(msg.error);
+        console.warn("server:", msg.error);
+        return;
+    }
+  }
+
+  welcome(w) {
+    this.welcomed = true;
+    this.map = w.map;
+    this.segs = segments(w.map);
+    this.you = w.you;
+    this.role = w.role;
+    this.tickHz = w.tick_hz;
+    debug.you = w.you;
+    debug.role = w.role;
+    if (w.belief !== this.beliefOn) this.send({ type: "belief", on: this.beliefOn });
+    $("hud-match").textContent = `${w.map.name} · ${w.role === "player" ? `playing ${w.you} (${w.name})` : "spectating"}`;
+    $("hud-status").textContent = "";
+    $("controls").innerHTML = w.role === "player"
+      ? "<kbd>W</kbd><kbd>A</kbd><kbd>S</kbd><kbd>D</kbd> / arrows move and turn · <kbd>Space</kbd> tag · <kbd>B</kbd> robots' belief"
+      : "spectating: true positions, scans, goals and belief · <kbd>B</kbd> belief on/off";
+  }
+
+  snapshot(s) {
+    const now = performance.now();
+    const sample = now - s.tick * TICK_MS;
+    // The offset follows the earliest arrivals (least delayed), drifting up slowly.
+    this.offset = this.offset === null ? sample : Math.min(this.offset + 0.5, sample);
+    if (this.snaps.length && s.tick < this.snaps[this.snaps.length - 1].tick) this.snaps = [];
+    this.snaps.push(s);
+    if (this.snaps.length > 12) this.snaps.shift();
+    if (s.belief) this.belief = s.belief;
+    for (const o of s.opponents) if (o.name) this.names[o.id] = o.name;
+    debug.snapshots++;
+    debug.lastTick = s.tick;
+    debug.view = s.view;
+    const sc = s.score;
+    $("hud-score").textContent =
+      `robots tagged ${sc.tags}/${sc.opponents} opponents · opponents tagged robots ${sc.robot_tags}×`;
+    $("hud-timer").textContent = fmtTime(s.time_left_s);
+    if (this.role === "player" && s.view === "spectator" && !this.ended) {
+      $("hud-status").textContent = "you were tagged — spectating";
+    }
+    this.legend();
+  }
+
+  who(id) {
+    return this.names[id] ? `${this.names[id]}` : id;
+  }
+
+  event(e) {
+    const latest = this.snaps[this.snaps.length - 1];
+    let text = null;
+    let cls = e.kind;
+    switch (e.kind) {
+      case "shot": this.beam(e, latest); break;
+      case "tag": text = `${this.who(e.by)} tagged ${e.target === this.you ? "you" : this.who(e.target)}`; break;
+      case "robot_tagged": text = `${e.by === this.you ? "you" : this.who(e.by)} tagged ${e.target} (frozen 10 s)`; break;
+      case "role_split": text = `belief: role ${e.role} split from ${e.from}`; cls = "role"; break;
+      case "role_merge": text = `belief: role ${e.from} merged into ${e.role} (${e.count})`; cls = "role"; break;
+      case "player_joined": text = `${e.name} joined as ${e.opponent}`; this.names[e.opponent] = e.name; break;
+      case "player_left": text = `${e.name} left`; break;
+      case "finished": text = `match over: ${e.winner} win`; break;
+    }
+    if (!text) return;
+    debug.feed.push({ kind: e.kind, text, seq: e.seq });
+    const li = document.createElement("li");
+    li.className = cls;
+    li.textContent = text;
+    const feed = $("feed");
+    feed.prepend(li);
+    while (feed.children.length > 8) feed.lastChild.remove();
+  }
+
+  beam(e, snap) {
+    if (!snap) return;
+    const all = [...snap.robots, ...snap.opponents];
+    const from = all.find((a) => a.id === e.by);
+    if (!from) return; // out of sight
+    const to = e.hit && all.find((a) => a.id === e.hit);
+    let x2, y2;
+    if (to) { x2 = to.x; y2 = to.y; } else {
+      const dx = Math.cos(from.theta), dy = Math.sin(from.theta);
+      const r = this.segs ? castRay(this.segs, from.x, from.y, dx, dy, 6) : 6;
+      x2 = from.x + dx * r; y2 = from.y + dy * r;
+    }
+    const color = e.by.startsWith("r") ? "#9fdcff" : "#ff6b8b";
+    this.beams.push({ x1: from.x, y1: from.y, x2, y2, t0: performance.now(), color });
+    if (this.beams.length > 20) this.beams.shift();
+  }
+
+  finished(f) {
+    this.ended = f;
+    debug.ended = f;
+    const won = f.winner === "robots" ? "The robots win" : "The opponents win";
+    const why = {
+      all_tagged: `every opponent was tagged after ${fmtTime(f.time_s)}`,
+      time_limit: `the opponents held out for ${fmtTime(f.time_s)}`,
+      stopped: `the match was stopped at ${fmtTime(f.time_s)}`,
+    }[f.reason] || `at ${fmtTime(f.time_s)}`;
+    let you = "";
+    if (this.role === "player") {
+      you = f.winner === "opponents" ? " — you win!" : " — you lose.";
+    }
+    $("end-title").textContent = won + you;
+    $("end-text").textContent = why[0].toUpperCase() + why.slice(1) + ".";
+    $("end").hidden = false;
+    $("hud-status").textContent = "";
+  }
+
+  legend() {
+    const el = $("legend");
+    if (!this.beliefOn || !this.belief) { el.replaceChildren(); return; }
+    const rows = this.belief.roles.filter((r) => !r.tagged).map((r) => {
+      const div = document.createElement("div");
+      const dot = document.createElement("i");
+      dot.style.background = roleColor(r.id);
+      div.append(dot, `role ${r.id}: ${r.count} opponent${r.count === 1 ? "" : "s"} · ${r.particles} particles`);
+      return div;
+    });
+    const head = document.createElement("div");
+    head.textContent = "robots' belief (B)";
+    head.style.color = "#8b949e";
+    el.replaceChildren(head, ...rows);
+  }
+
+  key(e) {
+    const codes = ["KeyW", "KeyA", "KeyS", "KeyD", "ArrowUp", "ArrowDown", "ArrowLeft", "ArrowRight", "Space"];
+    if (e.code === "KeyB" && e.type === "keydown" && !e.repeat) {
+      this.beliefOn = !this.beliefOn;
+      debug.belief = this.beliefOn;
+      this.send({ type: "belief", on: this.beliefOn });
+      this.legend();
+      return;
+    }
+    if (!codes.includes(e.code)) return;
+    e.preventDefault();
+    if (e.type === "keydown") this.keys.add(e.code); else this.keys.delete(e.code);
+    this.sendInput(false);
+  }
+
+  sendInput(force) {
+    if (this.role !== "player") return;
+    const k = this.keys;
+    const forward = (k.has("KeyW") || k.has("ArrowUp") ? 1 : 0) - (k.has("KeyS") || k.has("ArrowDown") ? 1 : 0);
+    const turn = (k.has("KeyA") || k.has("ArrowLeft") ? 1 : 0) - (k.has("KeyD") || k.has("ArrowRight") ? 1 : 0);
+    const tag = k.has("Space");
+    const input = { type: "input", forward, turn, tag };
+    const same = this.lastInput && this.lastInput.forward === forward && this.lastInput.turn === turn && this.lastInput.tag === tag;
+    const now = performance.now();
+    // At most 20 a second; a change goes at once, the same keys are repeated once a second.
+    if (now - this.lastInputAt < 50) return;
+    if (same && !force && now - this.lastInputAt < 1000) return;
+    this.send(input);
+    this.lastInput = input;
+    this.lastInputAt = now;
+  }
+
+  /** The world at render time: snapshots interpolated by tick. */
+  interpolated(now) {
+    const snaps = this.snaps;
+    if (!snaps.length) return null;
+    const latest = snaps[snaps.length - 1];
+    const t = Math.min((now - this.offset) / TICK_MS - DELAY_TICKS, latest.tick);
+    let a = snaps[0], b = latest;
+    for (let i = snaps.length - 1; i > 0; i--) {
+      if (snaps[i - 1].tick <= t) { a = snaps[i - 1]; b = snaps[i]; break; }
+    }
+    if (t <= a.tick || a === b) return { snap: t <= a.tick ? a : b, robots: (t <= a.tick ? a : b).robots, opponents: (t <= a.tick ? a : b).opponents };
+    const f = Math.max(0, Math.min(1, (t - a.tick) / (b.tick - a.tick)));
+    const lerp = (list0, list1) => list1.map((q) => {
+      const p = list0.find((x) => x.id === q.id);
+      if (!p) return q;
+      return { ...q, x: p.x + (q.x - p.x) * f, y: p.y + (q.y - p.y) * f, theta: p.theta + angleDiff(p.theta, q.theta) * f };
+    });
+    return { snap: b, robots: lerp(a.robots, b.robots), opponents: lerp(a.opponents, b.opponents) };
+  }
+
+  frame(now) {
+    if (!this.map) return;
+    const v = fit(this.canvas, this.map);
+    const w = this.interpolated(now);
+    const robots = w ? w.robots : [];
+    const opponents = w ? w.opponents : [];
+    let visible = null;
+    if (w && w.snap.view === "player") {
+      const me = opponents.find((o) => o.id === this.you);
+      if (me) visible = visibility(this.segs, me.x, me.y);
+    }
+    this.beams = this.beams.filter((b) => now - b.t0 < 450);
+    const counts = draw(this.ctx, v, {
+      map: this.map, segs: this.segs, you: this.you, robots, opponents, visible,
+      belief: this.beliefOn ? this.belief : null, beams: this.beams, now,
+    });
+    debug.drawn = counts;
+    debug.frames = (debug.frames || 0) + 1;
+  }
+}
