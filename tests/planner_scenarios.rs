@@ -90,6 +90,8 @@ fn robots_split_across_the_two_branches_of_the_office_corridor() {
     role.weights = vec![1.0 / 1000.0; 1000];
     role.steps = vec![nalgebra::Vector2::zeros(); 1000];
     world.team.renegotiate();
+    // A round lets one robot choose per tick.
+    world.step();
     world.step();
     let goals: Vec<Pose> = world
         .robots

@@ -186,7 +186,7 @@ pub fn run(
         "map,bot,planner,runs,captured,median_s,mean_s,mean_ci95_low_s,mean_ci95_high_s,median_ratio_vs_baseline,mann_whitney_p\n",
     );
     let mut table = format!(
-        "{:<10} {:<7} {:<12} {:>8} {:>8} {:>8} {:>16} {:>6} {:>8}\n",
+        "{:<10} {:<7} {:<12} {:>8} {:>8} {:>8} {:>16} {:>6} {:>9}\n",
         "map", "bot", "planner", "captured", "median", "mean", "95% CI of mean", "ratio", "p"
     );
     for (k, s) in settings.iter().enumerate() {
@@ -227,14 +227,14 @@ pub fn run(
                 let ratio = median / base_median;
                 let pv = mann_whitney_p(&as_values(&times), &as_values(&base));
                 summary.push_str(&format!(
-                    "{},{},{},{},{captured},{median:.2},{mean:.2},{lo:.2},{hi:.2},{ratio:.3},{pv:.4}\n",
+                    "{},{},{},{},{captured},{median:.2},{mean:.2},{lo:.2},{hi:.2},{ratio:.3},{pv:.3e}\n",
                     map_name,
                     bot_name(bot),
                     planner_name(p),
                     cfg.runs
                 ));
                 table.push_str(&format!(
-                    "{:<10} {:<7} {:<12} {:>4}/{:<3} {:>7.1}s {:>7.1}s {:>16} {:>6.2} {:>8.4}\n",
+                    "{:<10} {:<7} {:<12} {:>4}/{:<3} {:>7.1}s {:>7.1}s {:>16} {:>6.2} {:>9.2e}\n",
                     map_name,
                     bot_name(bot),
                     planner_name(p),

@@ -12,9 +12,10 @@
 //! 3. **Choice**: for every choosing robot, every candidate pose `k` is worth
 //!    `seen(k) / total − travel_weight · seconds to get there − crowding_weight · crowding`,
 //!    where `seen(k)` sums the mass of the cells `k` sees, weighted up to `1 + centring_weight`
-//!    for cells straight ahead. The best (robot, pose) pair wins; that robot's view is
-//!    claimed, and the remaining robots choose again. This is what splits a team across
-//!    branching corridors: a branch that one robot will search is worth little to the next.
+//!    for cells straight ahead. Robots choose one per tick, the one that chose longest ago
+//!    first (when several choose in one call, the best (robot, pose) pair wins first); each
+//!    choice is claimed before the next. This is what splits a team across branching
+//!    corridors: a branch that one robot will search is worth little to the next.
 //!
 //! Rounds happen every `round_ticks`, and for one robot alone when it reached its goal, when
 //! its goal became worthless (the tracker's negative information emptied it on the way), when
@@ -185,6 +186,8 @@ struct RobotState {
     making_way: Option<(usize, u64)>,
     /// When it last chose a destination.
     chosen_at: u64,
+    /// A full round asked it to choose again; it will, on its turn.
+    due: bool,
 }
 
 #[derive(Debug, Clone)]
@@ -307,30 +310,37 @@ impl Coordinated {
             self.unstick(arena, view, i, tick);
         }
         let searching: Vec<usize> = (0..n).filter(|&i| commands[i].is_none()).collect();
-        let round = tick >= self.next_round;
-        if round {
+        if tick >= self.next_round {
             self.next_round = tick + self.settings.round_ticks;
+            for &i in &searching {
+                self.robots[i].due = true;
+            }
         }
         let check = tick.is_multiple_of(WORTH_CHECK_TICKS);
         // Binning is cheap but not free: only when a goal is checked or chosen.
-        if round || check || searching.iter().any(|&i| self.robots[i].replan) {
+        let wants = |r: &RobotState| r.due || r.replan;
+        if check || searching.iter().any(|&i| wants(&self.robots[i])) {
             let total = self.bin_mass(tracker);
             if total > 0.0 && check {
                 self.drop_worthless(&searching, total);
             }
-            let choosing: Vec<usize> = searching
+            // One robot chooses per tick (the one that chose longest ago): a round of n
+            // robots is spread over n ticks, 50 ms apart, so that no tick pays for n travel
+            // fields at once. Outside rounds a robot chooses at most every MIN_CHOICE_TICKS:
+            // one whose best choice is where it stands would otherwise plan every tick.
+            let chooser = searching
                 .iter()
                 .copied()
                 .filter(|&i| self.robots[i].making_way.is_none())
                 .filter(|&i| {
                     let r = &self.robots[i];
-                    // Outside full rounds, a robot chooses at most every MIN_CHOICE_TICKS:
-                    // one whose best choice is where it stands would otherwise plan every tick.
-                    round || r.replan && tick >= r.chosen_at + MIN_CHOICE_TICKS
+                    r.due || r.replan && tick >= r.chosen_at + MIN_CHOICE_TICKS
                 })
-                .collect();
-            if !choosing.is_empty() && total > 0.0 {
-                self.negotiate(arena, physics, view, &choosing, total);
+                .min_by_key(|&i| (self.robots[i].chosen_at, i));
+            if let Some(i) = chooser
+                && total > 0.0
+            {
+                self.negotiate(arena, physics, view, &[i], total);
             }
         }
         for &i in &searching {
@@ -464,6 +474,8 @@ impl Coordinated {
                     state.goal = None;
                     state.path = PathFollower::default();
                     state.replan = false;
+                    state.due = false;
+                    state.chosen_at = view.tick;
                 }
                 break;
             };
@@ -487,6 +499,7 @@ impl Coordinated {
             });
             state.path = PathFollower::new(path);
             state.replan = false;
+            state.due = false;
             state.avoid_team = false;
             state.progress = None;
             state.chosen_at = view.tick;

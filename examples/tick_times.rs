@@ -1,0 +1,64 @@
+//! Tick-duration percentiles of the functional core alone (no server, no sockets): seeded
+//! `coordinated` matches against `evade` bots, every tick timed. The rare heavy ticks are
+//! the planner's negotiation turns; this is where to see them.
+//!
+//! `cargo run --release --example tick_times -- [robots] [opponents] [map] [matches]`
+//! (defaults: 2 robots, 1 opponent, office, 10 matches of up to 2 minutes).
+
+use std::path::Path;
+use std::time::Instant;
+
+use lasertag::maps::MapStore;
+use lasertag::planner::PlannerKind;
+use lasertag::sim::bots::BotKind;
+use lasertag::sim::world::{MatchConfig, Placement};
+use lasertag::sim::{MatchStatus, World};
+
+fn main() -> Result<(), String> {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let num = |i: usize, default: usize| -> Result<usize, String> {
+        args.get(i).map_or(Ok(default), |s| {
+            s.parse().map_err(|_| format!("not a number: {s}"))
+        })
+    };
+    let (robots, opponents) = (num(0, 2)?, num(1, 1)?);
+    let map = args.get(2).map_or("office", String::as_str);
+    let matches = num(3, 10)? as u64;
+    let store = MapStore::load_dir(Path::new("maps")).map_err(|e| e.to_string())?;
+    let arena = store
+        .get(map)
+        .ok_or_else(|| format!("no map {map:?}"))?
+        .arena
+        .clone();
+    let mut times = Vec::new();
+    for seed in 0..matches {
+        let config = MatchConfig {
+            robots,
+            opponents,
+            opponent_bot: BotKind::Evade,
+            planner: PlannerKind::Coordinated,
+            placement: Placement::Random,
+            seed,
+            ..MatchConfig::default()
+        };
+        let mut world = World::new(arena.clone(), config).map_err(|e| e.to_string())?;
+        while world.status == MatchStatus::Running && world.tick < 2400 {
+            let start = Instant::now();
+            world.step();
+            times.push(start.elapsed().as_secs_f64() * 1e3);
+        }
+    }
+    times.sort_by(f64::total_cmp);
+    let q = |p: f64| times[((times.len() - 1) as f64 * p) as usize];
+    println!(
+        "{map}, {robots} robots, {opponents} opponents, {} ticks: p50 {:.2} ms, p90 {:.2}, \
+         p99 {:.2}, p99.9 {:.2}, max {:.2}",
+        times.len(),
+        q(0.5),
+        q(0.9),
+        q(0.99),
+        q(0.999),
+        q(1.0)
+    );
+    Ok(())
+}
