@@ -462,14 +462,14 @@ pub enum Winner {
     Opponents,
 }
 
-fn status(s: MatchStatus) -> Status {
+pub(crate) fn status(s: MatchStatus) -> Status {
     match s {
         MatchStatus::Running => Status::Running,
         MatchStatus::Finished => Status::Finished,
     }
 }
 
-fn winner(w: Option<Side>) -> Option<Winner> {
+pub(crate) fn winner(w: Option<Side>) -> Option<Winner> {
     w.map(|w| match w {
         Side::Robots => Winner::Robots,
         Side::Opponents => Winner::Opponents,

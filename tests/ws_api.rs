@@ -210,12 +210,7 @@ async fn bad_tokens_and_unknown_matches_are_refused_before_the_upgrade() {
 #[tokio::test]
 async fn junk_gets_errors_then_a_close_and_never_reaches_the_match() {
     let s = TestServer::start().await;
-    let id = s
-        .create_match(
-            json!({"map": "office", "opponent_control": "human", "clock": "manual",
-            "planner": "idle"}),
-        )
-        .await;
+    let id = idle_human_match(&s).await;
     let (_, token) = s.join(&id, "mallory").await;
     let before = s.get(&format!("/api/matches/{id}")).await.body["opponents"][0].clone();
     let mut ws = s.ws(&id, Some(&token)).await.unwrap();
@@ -288,12 +283,7 @@ async fn junk_gets_errors_then_a_close_and_never_reaches_the_match() {
 #[tokio::test]
 async fn a_player_who_drops_keeps_the_slot_for_the_grace_period() {
     let s = TestServer::start().await;
-    let id = s
-        .create_match(
-            json!({"map": "office", "opponent_control": "human", "clock": "manual",
-            "planner": "idle"}),
-        )
-        .await;
+    let id = idle_human_match(&s).await;
     let (me, token) = s.join(&id, "alice").await;
     let start = s.get(&format!("/api/matches/{id}")).await.body["opponents"][0].clone();
     let mut ws = s.ws(&id, Some(&token)).await.unwrap();
@@ -452,12 +442,7 @@ async fn events_and_the_end_reach_players_and_spectators() {
 #[tokio::test]
 async fn input_at_20_hz_is_never_rate_limited() {
     let s = TestServer::start().await;
-    let id = s
-        .create_match(
-            json!({"map": "office", "opponent_control": "human", "clock": "manual",
-            "planner": "idle"}),
-        )
-        .await;
+    let id = idle_human_match(&s).await;
     let (_, token) = s.join(&id, "erin").await;
     let mut ws = s.ws(&id, Some(&token)).await.unwrap();
     ws.next_of("snapshot").await;
@@ -484,4 +469,14 @@ async fn input_at_20_hz_is_never_rate_limited() {
             break;
         }
     }
+}
+
+/// A manual match on `office` with one human slot and robots that never move: what players
+/// do is all that happens.
+async fn idle_human_match(s: &TestServer) -> String {
+    s.create_match(
+        json!({"map": "office", "opponent_control": "human", "clock": "manual",
+                          "planner": "idle"}),
+    )
+    .await
 }

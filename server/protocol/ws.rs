@@ -15,8 +15,8 @@ use serde::{Deserialize, Serialize};
 
 use crate::game::snapshot::{BeliefView, Frame, SlotControl, Visible};
 use crate::maps::MapFile;
-use crate::protocol::{EventDto, OpponentControl, PoseDto, Status, Winner};
-use crate::sim::{MatchStatus, Pose, Side};
+use crate::protocol::{EventDto, OpponentControl, PoseDto, Status, Winner, status, winner};
+use crate::sim::Pose;
 
 /// Serialised forms of one frame, built by the first connection that needs them and shared
 /// by all the others (so 500 spectators cost one serialisation per tick, not 500).
@@ -280,20 +280,6 @@ fn pose(p: Pose) -> PoseDto {
         y: mm(p.pos.y),
         theta: rad(p.theta),
     }
-}
-
-fn status(s: MatchStatus) -> Status {
-    match s {
-        MatchStatus::Running => Status::Running,
-        MatchStatus::Finished => Status::Finished,
-    }
-}
-
-fn winner(w: Option<Side>) -> Option<Winner> {
-    w.map(|w| match w {
-        Side::Robots => Winner::Robots,
-        Side::Opponents => Winner::Opponents,
-    })
 }
 
 fn snapshot_json(frame: &Frame, you: Option<&str>, visible: Option<&Visible>) -> String {
