@@ -131,6 +131,8 @@ pub struct CoordinationSettings {
     pub claim_keep: Option<f64>,
     /// Extra worth of the goal a robot already has (0..=1, default 0).
     pub keep_bonus: Option<f64>,
+    /// Weight of a suspicious role's hypotheses relative to others' (0..=100, default 2).
+    pub suspicious_weight: Option<f64>,
     /// Ticks between full negotiation rounds (1..=12000, default 60).
     pub round_ticks: Option<i64>,
     /// A goal is dropped when its view holds less than this share of its worth when chosen (0..=1, default 0.3).
@@ -148,6 +150,7 @@ pub struct CoordinationConfig {
     pub crowding_radius: f64,
     pub claim_keep: f64,
     pub keep_bonus: f64,
+    pub suspicious_weight: f64,
     pub round_ticks: u64,
     pub worthless_share: f64,
     pub worthless_floor: f64,
@@ -162,6 +165,7 @@ impl From<&crate::planner::coordinated::Settings> for CoordinationConfig {
             crowding_radius: s.crowding_radius as f64,
             claim_keep: s.claim_keep as f64,
             keep_bonus: s.keep_bonus as f64,
+            suspicious_weight: s.suspicious_weight as f64,
             round_ticks: s.round_ticks,
             worthless_share: s.worthless_share as f64,
             worthless_floor: s.worthless_floor as f64,
@@ -206,6 +210,12 @@ impl CoordinationSettings {
             crowding_radius,
             claim_keep: f("claim_keep", self.claim_keep, d.claim_keep, 1.0)?,
             keep_bonus: f("keep_bonus", self.keep_bonus, d.keep_bonus, 1.0)?,
+            suspicious_weight: f(
+                "suspicious_weight",
+                self.suspicious_weight,
+                d.suspicious_weight,
+                100.0,
+            )?,
             round_ticks: match self.round_ticks {
                 None => d.round_ticks,
                 Some(v) => in_range("coordination.round_ticks", v, 1, 12_000)? as u64,
@@ -722,8 +732,30 @@ pub struct Role {
     pub id: u64,
     pub count: u32,
     pub tagged: bool,
+    /// The team's trust in this cloud, 0..=1: 1 when just confirmed by a sighting.
+    pub confidence: f64,
+    /// `valid` (≥ 0.5), `suspicious` (≥ 0.15: worth a look) or `invalid` (a guess).
+    pub state: ConfidenceState,
     pub particles: Vec<[f64; 2]>,
     pub weights: Vec<f64>,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, ToSchema)]
+#[serde(rename_all = "lowercase")]
+pub enum ConfidenceState {
+    Valid,
+    Suspicious,
+    Invalid,
+}
+
+impl From<crate::tracker::Confidence> for ConfidenceState {
+    fn from(c: crate::tracker::Confidence) -> Self {
+        match c {
+            crate::tracker::Confidence::Valid => ConfidenceState::Valid,
+            crate::tracker::Confidence::Suspicious => ConfidenceState::Suspicious,
+            crate::tracker::Confidence::Invalid => ConfidenceState::Invalid,
+        }
+    }
 }
 
 /// The robot team's belief about the opponents.
@@ -745,6 +777,8 @@ pub fn belief(world: &World) -> Belief {
                 id: r.id,
                 count: r.count,
                 tagged: r.tagged,
+                confidence: (r.confidence as f64 * 1000.0).round() / 1000.0,
+                state: r.confidence_state().into(),
                 particles: r.particles.iter().map(|p| [mm(p.x), mm(p.y)]).collect(),
                 weights: r.weights.iter().map(|w| *w as f64).collect(),
             })

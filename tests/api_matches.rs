@@ -155,3 +155,23 @@ async fn coordination_weights_are_taken_and_echoed_with_defaults_filled_in() {
     assert_eq!(r.body["planner_active"], "coordinated");
     assert_eq!(r.body["notes"], json!([]));
 }
+
+/// Issue 6 (world-model confidence): every role in `belief` carries its confidence and what
+/// it makes of it; a prior over the whole map is a guess.
+#[tokio::test]
+async fn belief_roles_carry_confidence_and_state() {
+    let server = TestServer::start().await;
+    let id = server
+        .create_match(json!({"map": "office", "clock": "manual", "opponents": 2,
+                             "robot_starts": [[2.0, 8.0, 3.0], [3.0, 8.0, 3.0]],
+                             "opponent_starts": [[22.0, 1.5], [22.8, 15.2]]}))
+        .await;
+    server.step(&id, 1).await;
+    let belief = server.get(&format!("/api/matches/{id}/belief")).await.body;
+    let roles = belief["roles"].as_array().unwrap();
+    assert!(!roles.is_empty());
+    for r in roles {
+        assert_eq!(r["state"], "invalid", "{}", r["id"]);
+        assert_eq!(r["confidence"], 0.0);
+    }
+}

@@ -23,8 +23,9 @@ const PIXELS: &str = r#"(() => {
   const hex = (h) => [1, 3, 5].map((i) => parseInt(h.slice(i, i + 2), 16));
   const floor = hex('#161c25');
   const near = (r, g, b, t, tol) => Math.abs(r - t[0]) + Math.abs(g - t[1]) + Math.abs(b - t[2]) <= tol;
+  // Role colours over the floor at each confidence state's opacity (web/render.js STATE_ALPHA).
   const palette = ['#ffb000', '#00e0ff', '#ff5fd2', '#7dff6b', '#b48cff', '#ff8a3d', '#3de0c0', '#fff06a']
-    .map(hex).map((p) => p.map((v, i) => 0.6 * v + 0.4 * floor[i]));
+    .map(hex).flatMap((p) => [0.4, 0.55, 0.75].map((a) => p.map((v, i) => a * v + (1 - a) * floor[i])));
   const wall = hex('#3a4556'), robot = hex('#58a6ff'), frozen = hex('#9fb3c8'), opp = hex('#ff4d6d'), you = hex('#ffd166');
   const n = { wall: 0, robot: 0, opponent: 0, you: 0, particles: 0 };
   for (let i = 0; i < d.length; i += 4) {

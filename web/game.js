@@ -243,7 +243,8 @@ export class Game {
       const div = document.createElement("div");
       const dot = document.createElement("i");
       dot.style.background = roleColor(r.id);
-      div.append(dot, `role ${r.id}: ${r.count} opponent${r.count === 1 ? "" : "s"} · ${r.particles} particles`);
+      const trust = r.state ? ` · ${r.state} (${Number(r.confidence).toFixed(2)})` : "";
+      div.append(dot, `role ${r.id}: ${r.count} opponent${r.count === 1 ? "" : "s"} · ${r.particles} particles${trust}`);
       return div;
     });
     const head = document.createElement("div");

@@ -19,6 +19,9 @@ export const COLORS = {
   lit: "rgba(255, 225, 160, 0.05)",
 };
 
+// Particle opacity by the role's confidence state (world-model confidence).
+const STATE_ALPHA = { valid: 0.75, suspicious: 0.55, invalid: 0.4 };
+
 // One colour per belief role, picked by role id: bright, distinct on the dark floor and
 // from the agents' own colours.
 export const ROLE_PALETTE = [
@@ -154,7 +157,8 @@ export function draw(ctx, v, scene) {
       }
       counts.roles++;
       ctx.fillStyle = color;
-      ctx.globalAlpha = 0.6;
+      // Trust shows as strength: a confirmed cloud is vivid, a guess is faint.
+      ctx.globalAlpha = STATE_ALPHA[role.state] ?? 0.6;
       const size = Math.max(2.5, v.s * 0.07);
       for (let i = 0; i + 1 < p.length; i += 2) {
         ctx.fillRect(v.x(p[i] / 100) - size / 2, v.y(p[i + 1] / 100) - size / 2, size, size);
@@ -173,7 +177,10 @@ export function draw(ctx, v, scene) {
       ctx.strokeStyle = color;
       ctx.fillStyle = "rgba(13,17,23,0.8)";
       ctx.fill();
+      // Solid ring: valid; dashed: suspicious (a robot will go and check); dotted: a guess.
+      ctx.setLineDash(role.state === "suspicious" ? [4, 3] : role.state === "invalid" ? [1, 3] : []);
       ctx.stroke();
+      ctx.setLineDash([]);
       ctx.font = "700 11px system-ui, sans-serif";
       ctx.textAlign = "center";
       ctx.textBaseline = "middle";

@@ -60,6 +60,9 @@ pub struct RoleView {
     pub id: u64,
     pub count: u32,
     pub tagged: bool,
+    /// The team's trust in the cloud and what it makes of it (see `tracker::Confidence`).
+    pub confidence: f32,
+    pub state: crate::protocol::ConfidenceState,
     /// Particles the tracker holds for this role.
     pub particles: usize,
     /// Weighted mean of the cloud (metres).
@@ -216,6 +219,8 @@ pub fn belief_view(world: &World) -> BeliefView {
                     id: r.id,
                     count: r.count,
                     tagged: r.tagged,
+                    confidence: r.confidence,
+                    state: r.confidence_state().into(),
                     particles: r.particles.len(),
                     mean: weighted_mean(&r.particles, &r.weights),
                     points: thin(&r.particles, &r.weights, k),

@@ -34,7 +34,7 @@ use crate::planner::{RobotCommand, RobotView, TeamView};
 use crate::sim::arena::Arena;
 use crate::sim::views::{ViewSpec, ViewTable};
 use crate::sim::{AGENT_RADIUS, Motion, Physics, Pose, wrap_angle};
-use crate::tracker::Tracker;
+use crate::tracker::{Confidence, Tracker};
 
 /// The planner's weights and rhythms. Defaults are tuned with `lasertag experiment capture`
 /// (see the README).
@@ -54,6 +54,9 @@ pub struct Settings {
     pub crowding_radius: f32,
     /// Share of a hypothesis that still counts once a teammate is going to observe it.
     pub claim_keep: f32,
+    /// How much more a hypothesis of a suspicious role (see `tracker::Confidence`) counts
+    /// than one of a valid or invalid role: robots go and check what the team is unsure of.
+    pub suspicious_weight: f32,
     /// Extra worth of the goal a robot already has, so that it does not switch for a
     /// marginal gain (each switch wastes the trip so far).
     pub keep_bonus: f32,
@@ -77,6 +80,7 @@ impl Default for Settings {
             crowding_radius: 3.0,
             claim_keep: 0.2,
             keep_bonus: 0.0,
+            suspicious_weight: 2.0,
             round_ticks: 60,
             worthless_share: 0.3,
             worthless_floor: 0.01,
@@ -109,14 +113,15 @@ impl Settings {
             "crowding_radius" => self.crowding_radius = positive(num(value)?)?.max(0.01),
             "claim_keep" => self.claim_keep = positive(num(value)?)?.min(1.0),
             "keep_bonus" => self.keep_bonus = positive(num(value)?)?,
+            "suspicious_weight" => self.suspicious_weight = positive(num(value)?)?,
             "round_ticks" => self.round_ticks = num::<u64>(value)?.max(1),
             "worthless_share" => self.worthless_share = positive(num(value)?)?,
             "worthless_floor" => self.worthless_floor = positive(num(value)?)?,
             _ => {
                 return Err(format!(
                     "unknown setting {name:?} (known: centring_weight, travel_weight, \
-                     crowding_weight, crowding_radius, claim_keep, keep_bonus, round_ticks, \
-                     worthless_share, worthless_floor)"
+                     crowding_weight, crowding_radius, claim_keep, keep_bonus, \
+                     suspicious_weight, round_ticks, worthless_share, worthless_floor)"
                 ));
             }
         }
@@ -357,7 +362,13 @@ impl Coordinated {
         self.mass.iter_mut().for_each(|m| *m = 0.0);
         let mut total = 0.0;
         for role in tracker.roles.iter().filter(|r| !r.tagged && r.count > 0) {
-            let count = role.count as f32;
+            // Active feedback (Coltin et al.): a role the team is no longer sure of is worth
+            // checking on, so its hypotheses weigh more than a confirmed role's or a guess's.
+            let boost = match role.confidence_state() {
+                Confidence::Suspicious => self.settings.suspicious_weight,
+                _ => 1.0,
+            };
+            let count = role.count as f32 * boost;
             for (p, w) in role.particles.iter().zip(&role.weights) {
                 if let Some(c) = self.views.cell_of(*p) {
                     self.mass[c] += w * count;

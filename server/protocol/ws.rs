@@ -216,6 +216,9 @@ struct RoleWire {
     id: u64,
     count: u32,
     tagged: bool,
+    /// 0..=1, to two decimals, and `valid` / `suspicious` / `invalid`.
+    confidence: f64,
+    state: crate::protocol::ConfidenceState,
     /// Particles the tracker holds (the points below are a thinned sample).
     particles: usize,
     mean: [f64; 2],
@@ -353,6 +356,8 @@ fn belief_json(b: &BeliefView) -> String {
                 id: r.id,
                 count: r.count,
                 tagged: r.tagged,
+                confidence: (r.confidence as f64 * 100.0).round() / 100.0,
+                state: r.state,
                 particles: r.particles,
                 mean: [mm(r.mean[0]), mm(r.mean[1])],
                 points: r.points.iter().flat_map(|p| [p[0], p[1]]).collect(),

@@ -84,6 +84,43 @@ pub struct Role {
     /// Consecutive ticks in which robots looked at (nearly) all of this role's weight and
     /// saw nothing of it: see [`CONTRADICTED_TICKS`].
     pub unseen_run: u32,
+    /// How much the team trusts this role's cloud (Coltin et al.'s world-model confidence):
+    /// 1 when a detection confirms it, decaying with time and faster while robots look where
+    /// it should be and see nothing; 0 for a guess over the whole map. See [`Confidence`].
+    pub confidence: f32,
+}
+
+/// What a role's confidence says about it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Confidence {
+    /// Recently confirmed: act on it.
+    Valid,
+    /// Not confirmed for a while, or looked for and not found: worth a look (the planner
+    /// weighs suspicious roles up, so a robot goes to check).
+    Suspicious,
+    /// Long unconfirmed or never confirmed: a guess.
+    Invalid,
+}
+
+/// Confidence at or above which a role is valid, and above which it is suspicious.
+pub const VALID_CONFIDENCE: f32 = 0.5;
+pub const SUSPICIOUS_CONFIDENCE: f32 = 0.15;
+/// Confidence lost per second without confirmation: halves in about 21 s (time constant 30 s).
+const CONFIDENCE_TIME_CONSTANT_S: f32 = 30.0;
+/// Confidence lost per tick while robots look at all of the role's weight and see nothing:
+/// 10% (so half in about 7 ticks of a full, fruitless look).
+const CONFIDENCE_LOOK_DECAY: f32 = 0.1;
+
+impl Role {
+    pub fn confidence_state(&self) -> Confidence {
+        if self.confidence >= VALID_CONFIDENCE {
+            Confidence::Valid
+        } else if self.confidence >= SUSPICIOUS_CONFIDENCE {
+            Confidence::Suspicious
+        } else {
+            Confidence::Invalid
+        }
+    }
 }
 
 impl Role {
@@ -271,6 +308,7 @@ impl Tracker {
             weights: Vec::new(),
             steps: Vec::new(),
             unseen_run: 0,
+            confidence: 0.0, // a prior over the whole map confirms nothing
         };
         role.reset(particles);
         self.roles.push(role);
@@ -472,6 +510,7 @@ impl Tracker {
             let i = self.split_one(i, events);
             let role = &mut self.roles[i];
             role.tagged = true;
+            role.confidence = 1.0; // the device reported the hit: a fact
             role.reset(vec![z]);
         }
     }
@@ -523,14 +562,24 @@ impl Tracker {
                 }
             }
         }
+        let time_decay = (-DT / CONFIDENCE_TIME_CONSTANT_S).exp();
         for (role, before) in self.roles.iter_mut().zip(before) {
+            if role.tagged {
+                continue;
+            }
             let after: f32 = role.weights.iter().sum();
             // Weight kept = unseen share + p_miss × seen share.
-            if !role.tagged && after <= (p_miss + CONTRADICTED_KEEP) * before {
+            if after <= (p_miss + CONTRADICTED_KEEP) * before {
                 role.unseen_run += 1;
             } else {
                 role.unseen_run = 0;
             }
+            let seen_share = if before > 0.0 {
+                ((before - after) / (before * (1.0 - p_miss))).clamp(0.0, 1.0)
+            } else {
+                0.0
+            };
+            role.confidence *= time_decay * (1.0 - CONFIDENCE_LOOK_DECAY * seen_share);
         }
     }
 
@@ -562,6 +611,7 @@ impl Tracker {
         let inv = 1.0 / (2.0 * sigma * sigma);
         let role = &mut self.roles[i];
         role.unseen_run = 0; // seen after all
+        role.confidence = 1.0;
         let mut total = 0.0f32;
         for (p, w) in role.particles.iter().zip(role.weights.iter_mut()) {
             *w *= (-(p - z).norm_squared() * inv).exp();
@@ -617,6 +667,7 @@ impl Tracker {
                 // just looked. Re-seed there rather than lose the role.
                 let particles = self.uniform_particles(arena, sightings, laser);
                 self.roles[i].reset(particles);
+                self.roles[i].confidence = 0.0; // a guess over the unseen space
                 continue;
             }
             let role = &mut self.roles[i];
@@ -660,6 +711,8 @@ impl Tracker {
             let keep = &mut self.roles[a];
             merge::average_into(keep, &other, offset);
             keep.count += other.count;
+            // The merged cloud is no better known than the less trusted of the two.
+            keep.confidence = keep.confidence.min(other.confidence);
             events.push(TrackerEvent::Merge {
                 role: keep.id,
                 from: other.id,
@@ -782,6 +835,59 @@ mod tests {
             .sum();
         assert!(near_wall < 0.05, "weight still by the wall: {near_wall}");
         assert_eq!(t.untagged_count(), 1);
+        assert_eq!(
+            t.roles[0].confidence_state(),
+            Confidence::Invalid,
+            "a guess now"
+        );
+    }
+
+    /// Issue 6 (world-model confidence): a sighting makes a role valid; unconfirmed, it turns
+    /// suspicious after about 20 s and invalid after about a minute; looking where it should
+    /// be and seeing nothing wears it down within a second.
+    #[test]
+    fn confidence_is_set_by_sightings_and_worn_down_by_time_and_fruitless_looks() {
+        let a = open_room();
+        let mut t = tracker(&a, 1);
+        assert_eq!(
+            t.roles[0].confidence_state(),
+            Confidence::Invalid,
+            "a prior"
+        );
+        let scan = vec![8.0; 181];
+        let seen = [Detection {
+            range: 5.0,
+            bearing: 0.0,
+        }];
+        let watching = Sighting {
+            pose: Pose::new(1.0, 3.0, 0.0),
+            scan: &scan,
+            detections: &seen,
+            tagged: false,
+        };
+        t.update(&a, laser(), &[watching]);
+        assert_eq!(t.roles[0].confidence, 1.0);
+        assert_eq!(t.roles[0].confidence_state(), Confidence::Valid);
+        // Nobody senses for 30 s: the cloud spreads, unconfirmed.
+        for _ in 0..600 {
+            t.update(&a, laser(), &[]);
+        }
+        assert_eq!(t.roles[0].confidence_state(), Confidence::Suspicious);
+        for _ in 0..600 {
+            t.update(&a, laser(), &[]);
+        }
+        assert_eq!(t.roles[0].confidence_state(), Confidence::Invalid);
+        // Confirmed again, then looked for where it was and not found.
+        t.update(&a, laser(), &[watching]);
+        assert_eq!(t.roles[0].confidence_state(), Confidence::Valid);
+        let looking = Sighting {
+            detections: &[],
+            ..watching
+        };
+        for _ in 0..8 {
+            t.update(&a, laser(), &[looking]);
+        }
+        assert_eq!(t.roles[0].confidence_state(), Confidence::Suspicious);
     }
 
     #[test]
