@@ -121,6 +121,102 @@ fn robots_split_across_the_two_branches_of_the_office_corridor() {
     assert!(views[east_robot].1 > 0.5, "views {views:?}");
 }
 
+/// An L-shaped corridor: along the bottom (y < 4) and up the right-hand side (x > 10).
+fn l_corridor() -> Arc<Arena> {
+    Arc::new(Arena::new(lasertag::sim::arena::MapDef {
+        name: "l".into(),
+        width: 16.0,
+        height: 10.0,
+        obstacles: vec![vec![
+            Point2::new(0.0, 4.0),
+            Point2::new(10.0, 4.0),
+            Point2::new(10.0, 10.0),
+            Point2::new(0.0, 10.0),
+        ]],
+        robot_spawns: vec![[2.0, 2.0, 0.0]],
+        opponent_spawns: vec![Point2::new(9.5, 2.0)],
+        landmarks: vec![],
+    }))
+}
+
+/// Issue 4 (pursuit): a robot chases a faster opponent that runs out of range and round a
+/// corner. Within 2 s of the opponent disappearing round the corner, the robot's goal must
+/// point up the side corridor (where the belief says it went), and the robot must catch it
+/// there. (Here the last sighting is already at the corner, so a chase to the last-seen point
+/// would pass the first check too; the capture experiment is where the two differ.)
+#[test]
+fn a_pursuer_that_loses_sight_follows_the_belief_round_the_corner() {
+    use lasertag::sim::world::{ControlKind, OpponentOrder};
+    let config = MatchConfig {
+        robots: 1,
+        opponents: 1,
+        opponent_control: ControlKind::Api,
+        planner: PlannerKind::Coordinated,
+        placement: Placement::Given {
+            robots: vec![[2.0, 2.0, 0.0]],
+            opponents: vec![[9.5, 2.0]],
+        },
+        seed: 11,
+        // Faster than the robot, so that it gets out of sight round the corner.
+        physics: Physics {
+            opponent_speed: 1.5,
+            ..Physics::default()
+        },
+        ..MatchConfig::default()
+    };
+    let mut world = World::new(l_corridor(), config).expect("valid match");
+    world
+        .order_opponent(
+            0,
+            OpponentOrder::Waypoints(vec![Point2::new(13.0, 2.0), Point2::new(13.0, 9.0)]),
+        )
+        .expect("an API opponent");
+    // Ticks at which the opponent was up the side corridor and out of the robot's sight,
+    // and whether the robot's goal then pointed up that corridor.
+    let mut hidden_round_corner = 0;
+    let mut hidden_since = None;
+    let mut goal_round_corner = false;
+    for _ in 0..(60 * 20) {
+        world.step();
+        if world.status == lasertag::sim::MatchStatus::Finished {
+            break;
+        }
+        let robot = &world.robots[0];
+        let opponent = world.opponents[0].pose.pos;
+        if opponent.y > 4.5 && robot.scan.detections.is_empty() && robot.pose.pos.y < 4.0 {
+            hidden_round_corner += 1;
+            let since = *hidden_since.get_or_insert(world.tick);
+            if let Some(goal) = robot.command.goal
+                && world.tick <= since + 40
+                && goal.pos.x > 9.0
+                && (goal.pos.y > 4.0 || goal.theta.sin() > 0.5)
+            {
+                goal_round_corner = true;
+            }
+        }
+    }
+    assert!(
+        hidden_round_corner > 0,
+        "the opponent got out of sight round the corner"
+    );
+    assert!(
+        goal_round_corner,
+        "within 2 s of the opponent hiding round the corner (hidden {hidden_round_corner} \
+         ticks), the robot's goal pointed up the side corridor"
+    );
+    for _ in 0..(60 * 20) {
+        if world.status == lasertag::sim::MatchStatus::Finished {
+            break;
+        }
+        world.step();
+    }
+    assert_eq!(
+        world.winner,
+        Some(lasertag::sim::Side::Robots),
+        "caught round the corner"
+    );
+}
+
 fn in_room(p: &Value) -> bool {
     p["x"].as_f64().unwrap() > 10.2 && p["y"].as_f64().unwrap() > 6.2
 }
