@@ -1,7 +1,7 @@
 //! Shortest paths on the arena's clearance grid, shared by robots and opponent bots.
 //!
 //! [`DistanceField`] runs Dijkstra (as Dial's bucket queue) from one cell over the cells where a disc fits (8-connected,
-//! Euclidean step costs): one run answers "how far is every reachable point" (used to score
+//! step costs 12 and 17 per 12ths of a cell, √2 within 0.2%): one run answers "how far is every reachable point" (used to score
 //! candidate destinations by travel time) and "what is the path to this one" (predecessor
 //! links, then string-pulled with [`smooth`] so agents walk straight lines, not staircases).
 //! [`PathFollower`] walks a path waypoint by waypoint.

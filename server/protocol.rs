@@ -131,7 +131,7 @@ pub struct CoordinationSettings {
     pub claim_keep: Option<f64>,
     /// Extra worth of the goal a robot already has (0..=1, default 0).
     pub keep_bonus: Option<f64>,
-    /// Weight of a suspicious role's hypotheses relative to others' (0..=100, default 2).
+    /// Weight of a suspicious role's hypotheses relative to others' ((0, 100], default 2).
     pub suspicious_weight: Option<f64>,
     /// Ticks between full negotiation rounds (1..=12000, default 60).
     pub round_ticks: Option<i64>,
@@ -193,6 +193,17 @@ impl CoordinationSettings {
         if crowding_radius <= 0.0 {
             return Err("coordination.crowding_radius: must be greater than 0".into());
         }
+        let suspicious_weight = f(
+            "suspicious_weight",
+            self.suspicious_weight,
+            d.suspicious_weight,
+            100.0,
+        )?;
+        if suspicious_weight <= 0.0 {
+            // A weight of 0 would make a team whose roles are all suspicious see no
+            // hypotheses at all, and stand still.
+            return Err("coordination.suspicious_weight: must be greater than 0".into());
+        }
         Ok(crate::planner::coordinated::Settings {
             centring_weight: f(
                 "centring_weight",
@@ -210,12 +221,7 @@ impl CoordinationSettings {
             crowding_radius,
             claim_keep: f("claim_keep", self.claim_keep, d.claim_keep, 1.0)?,
             keep_bonus: f("keep_bonus", self.keep_bonus, d.keep_bonus, 1.0)?,
-            suspicious_weight: f(
-                "suspicious_weight",
-                self.suspicious_weight,
-                d.suspicious_weight,
-                100.0,
-            )?,
+            suspicious_weight,
             round_ticks: match self.round_ticks {
                 None => d.round_ticks,
                 Some(v) => in_range("coordination.round_ticks", v, 1, 12_000)? as u64,

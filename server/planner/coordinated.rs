@@ -13,11 +13,13 @@
 //!    `seen(k) / total − travel_weight · seconds to get there − crowding_weight · crowding`,
 //!    where `seen(k)` sums the mass of the cells `k` sees, weighted up to `1 + centring_weight`
 //!    for cells straight ahead. Robots choose one per tick, the one that chose longest ago
-//!    first (when several choose in one call, the best (robot, pose) pair wins first); each
-//!    choice is claimed before the next. This is what splits a team across branching
+//!    first; each choice is claimed before the next.
+//!    (`negotiate` also handles several robots in one call — best (robot, pose) pair first —
+//!    but the planner calls it with one.) This is what splits a team across branching
 //!    corridors: a branch that one robot will search is worth little to the next.
 //!
-//! Rounds happen every `round_ticks`, and for one robot alone when it reached its goal, when
+//! Rounds happen every `round_ticks` (each searching robot then chooses on its turn), and a
+//! robot also chooses on its own, at most every `MIN_CHOICE_TICKS`, when it reached its goal, when
 //! its goal became worthless (the tracker's negative information emptied it on the way), when
 //! it is stuck, or while it follows an opponent it just lost sight of.
 //!
@@ -113,7 +115,13 @@ impl Settings {
             "crowding_radius" => self.crowding_radius = positive(num(value)?)?.max(0.01),
             "claim_keep" => self.claim_keep = positive(num(value)?)?.min(1.0),
             "keep_bonus" => self.keep_bonus = positive(num(value)?)?,
-            "suspicious_weight" => self.suspicious_weight = positive(num(value)?)?,
+            "suspicious_weight" => {
+                let w = positive(num(value)?)?;
+                if w == 0.0 {
+                    return Err("must be greater than 0".into());
+                }
+                self.suspicious_weight = w;
+            }
             "round_ticks" => self.round_ticks = num::<u64>(value)?.max(1),
             "worthless_share" => self.worthless_share = positive(num(value)?)?,
             "worthless_floor" => self.worthless_floor = positive(num(value)?)?,
@@ -173,7 +181,8 @@ fn segment_distance(p: Point2<f32>, a: Point2<f32>, b: Point2<f32>) -> f32 {
 struct Goal {
     /// Candidate pose index in the view table.
     pose: usize,
-    /// Share of all hypotheses its view held when it was chosen.
+    /// Share of all hypotheses its view held when it was chosen, after teammates' claims
+    /// (so at most what it holds unclaimed: the worthless check compares against that).
     worth: f32,
 }
 
@@ -258,6 +267,7 @@ impl Coordinated {
             let state = &mut self.robots[i];
             if robot.frozen {
                 state.seeing = false;
+                state.progress = None; // standing still while frozen is not being stuck
                 commands[i] = Some(RobotCommand {
                     goal: None,
                     ..RobotCommand::default()
@@ -267,6 +277,7 @@ impl Coordinated {
             if let Some((target, range, bearing)) = nearest_sighting(robot) {
                 state.seeing = true;
                 state.lost_at = None;
+                state.progress = None; // turning to a target in place is not being stuck
                 let (motion, tag) = engage(robot, physics, target, range, bearing);
                 commands[i] = Some(RobotCommand {
                     motion,
@@ -322,26 +333,29 @@ impl Coordinated {
             }
         }
         let check = tick.is_multiple_of(WORTH_CHECK_TICKS);
+        // One robot chooses per tick (the one that chose longest ago): a round of n robots is
+        // spread over n ticks, 50 ms apart, so that no tick pays for n travel fields at once.
+        // Outside rounds a robot chooses at most every MIN_CHOICE_TICKS: one whose best
+        // choice is where it stands would otherwise plan every tick.
+        let pick = |robots: &[RobotState]| {
+            searching
+                .iter()
+                .copied()
+                .filter(|&i| robots[i].making_way.is_none())
+                .filter(|&i| {
+                    let r = &robots[i];
+                    r.due || r.replan && tick >= r.chosen_at + MIN_CHOICE_TICKS
+                })
+                .min_by_key(|&i| (robots[i].chosen_at, i))
+        };
+        let mut chooser = pick(&self.robots);
         // Binning is cheap but not free: only when a goal is checked or chosen.
-        let wants = |r: &RobotState| r.due || r.replan;
-        if check || searching.iter().any(|&i| wants(&self.robots[i])) {
+        if check || chooser.is_some() {
             let total = self.bin_mass(tracker);
             if total > 0.0 && check {
                 self.drop_worthless(&searching, total);
+                chooser = pick(&self.robots);
             }
-            // One robot chooses per tick (the one that chose longest ago): a round of n
-            // robots is spread over n ticks, 50 ms apart, so that no tick pays for n travel
-            // fields at once. Outside rounds a robot chooses at most every MIN_CHOICE_TICKS:
-            // one whose best choice is where it stands would otherwise plan every tick.
-            let chooser = searching
-                .iter()
-                .copied()
-                .filter(|&i| self.robots[i].making_way.is_none())
-                .filter(|&i| {
-                    let r = &self.robots[i];
-                    r.due || r.replan && tick >= r.chosen_at + MIN_CHOICE_TICKS
-                })
-                .min_by_key(|&i| (self.robots[i].chosen_at, i));
             if let Some(i) = chooser
                 && total > 0.0
             {
@@ -457,13 +471,13 @@ impl Coordinated {
                 self.claim(k);
             }
         }
-        // One travel field per choosing robot, computed once per round.
+        // One travel field per choosing robot (one robot per call in practice).
         let fields: Vec<Option<DistanceField>> = choosing
             .iter()
             .map(|&i| self.field_for(arena, view, i))
             .collect();
         let mut chosen: Vec<Point2<f32>> = (0..view.robots.len())
-            .filter(|i| !choosing.contains(i))
+            .filter(|i| !choosing.contains(i) && !view.robots[*i].frozen)
             .filter_map(|i| self.goal_pose(i).map(|g| g.pos))
             .collect();
         let mut left: Vec<usize> = (0..choosing.len()).collect();
@@ -487,6 +501,8 @@ impl Coordinated {
                     state.replan = false;
                     state.due = false;
                     state.chosen_at = view.tick;
+                    // Walled in by teammates? Plan without them next time.
+                    state.avoid_team = false;
                 }
                 break;
             };
@@ -527,7 +543,12 @@ impl Coordinated {
                 .iter()
                 .enumerate()
                 .filter(|(j, _)| *j != i)
-                .map(|(_, r)| (r.pose.pos, 3.0 * AGENT_RADIUS))
+                // A teammate pressed against this robot must not wall in its start cell:
+                // the disc stops short of it.
+                .map(|(_, r)| {
+                    let gap = (r.pose.pos - from).norm() - 1.5 * arena.grid.cell;
+                    (r.pose.pos, (3.0 * AGENT_RADIUS).min(gap.max(0.0)))
+                })
                 .collect();
             if let Some(f) = DistanceField::from_point_avoiding(&arena.grid, from, &others) {
                 return Some(f);
@@ -600,6 +621,7 @@ impl Coordinated {
             .filter(|&j| j != i)
             .filter(|&j| (view.robots[j].pose.pos - pos).norm() < 1.2)
             .filter(|&j| !view.robots[j].frozen && !self.robots[j].path.finished())
+            .filter(|&j| !self.robots[j].seeing) // a pursuer follows its target, not its path
             .filter(|&j| self.robots[j].making_way.is_none())
             .min_by(|&a, &b| {
                 let da = (view.robots[a].pose.pos - pos).norm();
@@ -672,7 +694,7 @@ impl Coordinated {
                 Some(g) => {
                     let m = turn_to(robot.pose, g.theta, physics.robot_turn_rate);
                     if m == Motion::Stop {
-                        state.replan = true; // arrived and looked: choose again next tick
+                        state.replan = true; // arrived and looked: choose again on its turn
                     }
                     m
                 }

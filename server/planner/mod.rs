@@ -111,7 +111,8 @@ impl Team {
         }
     }
 
-    /// Makes every robot choose its destination again on the next tick, as after a change of
+    /// Starts a full negotiation round on the next tick (searching robots then choose one per
+    /// tick), as after a change of
     /// the belief from outside (a test that sets up a belief, a restored match).
     pub fn renegotiate(&mut self) {
         if let Brain::Coordinated(c) = &mut self.brain {

@@ -44,20 +44,30 @@ pub struct ViewTable {
     centring: Vec<f32>,
 }
 
-/// Candidate positions: the centres of a `spacing` grid where an agent disc fits.
+/// Candidate positions: one per cell of a `spacing` grid that has room for an agent disc —
+/// the cell's centre, or when a wall covers it the passable point nearest to it inside the
+/// cell, so that corridors narrower than the spacing and strips along the border still get
+/// candidates.
 pub fn candidate_points(arena: &Arena, spacing: f32) -> Vec<Point2<f32>> {
-    let cols = (arena.width() / spacing).floor() as usize;
-    let rows = (arena.height() / spacing).floor() as usize;
+    let grid = &arena.grid;
+    let cols = (arena.width() / spacing).ceil() as usize;
+    let rows = (arena.height() / spacing).ceil() as usize;
+    let rings = ((spacing / 2.0) / grid.cell).floor() as usize;
     let mut out = Vec::new();
     for r in 0..rows {
         for c in 0..cols {
-            let p = Point2::new((c as f32 + 0.5) * spacing, (r as f32 + 0.5) * spacing);
-            if arena
-                .grid
-                .cell_of(p)
-                .is_some_and(|i| arena.grid.passable(i))
+            let centre = Point2::new((c as f32 + 0.5) * spacing, (r as f32 + 0.5) * spacing);
+            if grid.cell_of(centre).is_some_and(|i| grid.passable(i)) {
+                out.push(centre);
+                continue;
+            }
+            let inside = |p: Point2<f32>| {
+                (p.x - centre.x).abs() <= spacing / 2.0 && (p.y - centre.y).abs() <= spacing / 2.0
+            };
+            if let Some(i) = grid.nearest_passable(centre, rings)
+                && inside(grid.centre(i))
             {
-                out.push(p);
+                out.push(grid.centre(i));
             }
         }
     }
@@ -222,6 +232,41 @@ mod tests {
         // Facing -x (heading 4) it sees behind.
         let (cells, _) = t.view(pose_at(&t, Point2::new(2.5, 1.5), 4));
         assert!(cells.contains(&(t.cell_of(Point2::new(0.75, 1.25)).unwrap() as u32)));
+    }
+
+    /// Review finding: a corridor narrower than the candidate spacing, off the grid's
+    /// centres, had no candidate in it, so no robot was ever sent into it.
+    #[test]
+    fn a_narrow_corridor_off_the_grid_centres_still_gets_candidates() {
+        // 8 × 3 m; a wall fills y ∈ [0, 1.8] and y ∈ [2.7, 3] leaves a 0.9 m corridor whose
+        // middle (y = 2.25) is no 1 m grid centre.
+        let arena = Arena::new(MapDef {
+            name: "narrow".into(),
+            width: 8.0,
+            height: 3.0,
+            obstacles: vec![
+                vec![
+                    Point2::new(0.0, 0.0),
+                    Point2::new(8.0, 0.0),
+                    Point2::new(8.0, 1.8),
+                    Point2::new(0.0, 1.8),
+                ],
+                vec![
+                    Point2::new(0.0, 2.7),
+                    Point2::new(8.0, 2.7),
+                    Point2::new(8.0, 3.0),
+                    Point2::new(0.0, 3.0),
+                ],
+            ],
+            robot_spawns: vec![[1.0, 2.25, 0.0]],
+            opponent_spawns: vec![Point2::new(7.0, 2.25)],
+            landmarks: vec![],
+        });
+        let points = candidate_points(&arena, 1.0);
+        assert!(points.len() >= 6, "{points:?}");
+        for p in &points {
+            assert!(arena.grid.passable(arena.grid.cell_of(*p).unwrap()), "{p:?}");
+        }
     }
 
     #[test]

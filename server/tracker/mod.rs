@@ -227,7 +227,8 @@ fn would_be_seen(p: Point2<f32>, s: &Sighting, laser: LaserModel, cos: f32, sin:
     d2.sqrt() < beam + AGENT_RADIUS - SEEN_MARGIN
 }
 
-/// Laser noise (3σ = 0.06 m) plus the most a beam passes off a particle's centre at 8 m.
+/// Laser noise (3σ = 0.06 m), the bit a beam that passes a little off a particle's centre
+/// meets the disc later (about 0.01 m), and some slack.
 const SEEN_MARGIN: f32 = 0.1;
 
 /// atan2 to within about 0.0015 rad (a beam is 0.017 rad wide), several times faster than libm.
@@ -711,8 +712,10 @@ impl Tracker {
             let keep = &mut self.roles[a];
             merge::average_into(keep, &other, offset);
             keep.count += other.count;
-            // The merged cloud is no better known than the less trusted of the two.
+            // The merged cloud is no better known than the less trusted of the two, and has
+            // not been looked at in full as a whole yet.
             keep.confidence = keep.confidence.min(other.confidence);
+            keep.unseen_run = keep.unseen_run.min(other.unseen_run);
             events.push(TrackerEvent::Merge {
                 role: keep.id,
                 from: other.id,
