@@ -264,7 +264,8 @@ impl Localiser {
         &self.particles
     }
 
-    /// The point estimate: the weighted mean pose (circular mean for the heading).
+    /// The point estimate: the weighted mean pose (circular mean for the heading) at the
+    /// last measurement update, moved on by odometry since.
     pub fn estimate(&self) -> Pose {
         self.estimate
     }
@@ -311,7 +312,13 @@ impl Localiser {
             p.pos.y += t * a.sin();
             p.theta = wrap_angle(a + r2);
         }
-        self.summarise();
+        // The estimate moves by the noiseless odometry rather than being re-averaged: the
+        // cloud may hold freshly injected particles that no measurement has weighed yet.
+        let e = &mut self.estimate;
+        let a = e.theta + rot1;
+        e.pos.x += trans * a.cos();
+        e.pos.y += trans * a.sin();
+        e.theta = wrap_angle(a + rot2);
     }
 
     /// Weighs the particles by what the robot senses and resamples. Skipped while the robot
@@ -356,8 +363,9 @@ impl Localiser {
         } else {
             self.weights.iter_mut().for_each(|w| *w /= total);
         }
-        self.resample(obs, rng);
+        // Summarised while weighed, before resampling injects unweighed random particles.
         self.summarise();
+        self.resample(obs, rng);
     }
 
     fn observation_count(&self, obs: &Observation) -> usize {
