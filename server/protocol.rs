@@ -623,8 +623,11 @@ pub struct RobotState {
     pub x: f64,
     pub y: f64,
     pub theta: f64,
-    /// The robot's own belief of its pose.
+    /// The robot's own belief of its pose (its localiser's point estimate; the true pose
+    /// when the match runs without localisation).
     pub estimate: PoseDto,
+    /// Standard deviation of the localiser's position belief, metres (0 without localisation).
+    pub spread: f64,
     pub frozen: bool,
     /// Where its planner sends it, or null.
     pub goal: Option<PoseDto>,
@@ -683,6 +686,7 @@ pub fn state(world: &World, meta: &MatchMeta) -> MatchState {
                 y: mm(r.pose.pos.y),
                 theta: rad(r.pose.theta),
                 estimate: pose(r.estimate),
+                spread: mm(r.spread),
                 frozen: world.robot_frozen(i),
                 goal: r.command.goal.map(pose),
                 scan: r.scan.ranges.iter().map(|v| mm(*v)).collect(),
