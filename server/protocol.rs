@@ -256,6 +256,9 @@ pub struct CreateMatch {
     pub opponent_starts: Option<Vec<[f64; 2]>>,
     /// Whether people may take over bot opponents (default false; the showcase allows it).
     pub bots_joinable: Option<bool>,
+    /// Whether robots localise themselves from odometry, laser and landmarks (default
+    /// false: each robot's estimate is its true pose).
+    pub localisation: Option<bool>,
 }
 
 /// The tracker settings a match runs with, defaults filled in.
@@ -421,6 +424,7 @@ impl CreateMatch {
                 ..crate::tracker::Settings::default()
             },
             coordination: self.coordination.unwrap_or_default().validate()?,
+            localisation: self.localisation.unwrap_or(false),
             ..config
         };
         Ok(MatchRequest {
@@ -958,6 +962,9 @@ mod tests {
         assert!(e.starts_with("time_limit_s:"), "{e}");
         let e = parse::<CreateMatch>(br#"{"robots": 2}"#).unwrap_err();
         assert!(e.contains("missing field `map`"), "{e}");
+        assert!(!r.config.localisation, "localisation is opt-in for now");
+        let m: CreateMatch = parse(br#"{"map": "office", "localisation": true}"#).unwrap();
+        assert!(m.validate().unwrap().config.localisation);
     }
 
     #[test]
