@@ -81,6 +81,29 @@ enum Experiment {
         #[arg(long = "set", value_name = "NAME=VALUE")]
         set: Vec<String>,
     },
+    /// Issue 6: the robots' localisation error over time, with and without landmarks, on
+    /// every map.
+    Localisation {
+        /// Runs per map and variant (with and without landmarks).
+        #[arg(long, default_value_t = 3)]
+        runs: usize,
+        /// Seed of the first run (run i uses seed + i).
+        #[arg(long, default_value_t = 0)]
+        seed: u64,
+        /// Length of each run in seconds.
+        #[arg(long, default_value_t = 600)]
+        seconds: u64,
+        #[arg(long, default_value_t = 2)]
+        robots: usize,
+        #[arg(long, default_value_t = 2)]
+        opponents: usize,
+        /// Directory of map files (every map in it is run).
+        #[arg(long, default_value = "maps")]
+        maps: PathBuf,
+        /// Where to write the CSV files and plots.
+        #[arg(long, default_value = "out/localisation")]
+        out: PathBuf,
+    },
 }
 
 #[derive(Debug, Clone, clap::Args)]
@@ -223,6 +246,43 @@ fn experiment(e: Experiment) -> Result<(), String> {
             println!(
                 "ratio: median capture time / baseline's; p: two-sided Mann–Whitney U against baseline\n\
                  wrote {0}/capture.csv, {0}/capture_summary.csv and {0}/capture_<map>_<bot>.svg",
+                out.display()
+            );
+            Ok(())
+        }
+        Experiment::Localisation {
+            runs,
+            seed,
+            seconds,
+            robots,
+            opponents,
+            maps,
+            out,
+        } => {
+            if runs == 0 || seconds == 0 || robots == 0 {
+                return Err("--runs, --seconds and --robots must be at least 1".into());
+            }
+            let store = MapStore::load_dir(&maps).map_err(|e| format!("loading maps: {e}"))?;
+            let mut arenas: Vec<Arc<lasertag::sim::arena::Arena>> =
+                store.iter().map(|m| m.arena.clone()).collect();
+            arenas.sort_by(|a, b| a.def.name.cmp(&b.def.name));
+            let cfg = lasertag::experiment::localisation::LocalisationConfig {
+                runs,
+                seed,
+                seconds,
+                robots,
+                opponents,
+            };
+            let curves = lasertag::experiment::localisation::run(&arenas, &cfg, &out)?;
+            println!("map        landmarks  mean error (m)  worst (m)");
+            for c in &curves {
+                println!(
+                    "{:<10} {:<10} {:>14.4} {:>10.4}",
+                    c.map, c.landmarks, c.mean, c.worst
+                );
+            }
+            println!(
+                "wrote {0}/localisation.csv, {0}/localisation_summary.csv and {0}/localisation_<map>.svg",
                 out.display()
             );
             Ok(())

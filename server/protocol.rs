@@ -272,6 +272,9 @@ pub struct CreateMatch {
     pub opponent_starts: Option<Vec<[f64; 2]>>,
     /// Whether people may take over bot opponents (default false; the showcase allows it).
     pub bots_joinable: Option<bool>,
+    /// Whether robots localise themselves from odometry, laser and landmarks (default
+    /// false: each robot's estimate is its true pose).
+    pub localisation: Option<bool>,
 }
 
 /// The tracker settings a match runs with, defaults filled in.
@@ -437,6 +440,7 @@ impl CreateMatch {
                 ..crate::tracker::Settings::default()
             },
             coordination: self.coordination.unwrap_or_default().validate()?,
+            localisation: self.localisation.unwrap_or(false),
             ..config
         };
         Ok(MatchRequest {
@@ -639,8 +643,11 @@ pub struct RobotState {
     pub x: f64,
     pub y: f64,
     pub theta: f64,
-    /// The robot's own belief of its pose.
+    /// The robot's own belief of its pose (its localiser's point estimate; the true pose
+    /// when the match runs without localisation).
     pub estimate: PoseDto,
+    /// Standard deviation of the localiser's position belief, metres (0 without localisation).
+    pub spread: f64,
     pub frozen: bool,
     /// Where its planner sends it, or null.
     pub goal: Option<PoseDto>,
@@ -699,6 +706,7 @@ pub fn state(world: &World, meta: &MatchMeta) -> MatchState {
                 y: mm(r.pose.pos.y),
                 theta: rad(r.pose.theta),
                 estimate: pose(r.estimate),
+                spread: mm(r.spread),
                 frozen: world.robot_frozen(i),
                 goal: r.command.goal.map(pose),
                 scan: r.scan.ranges.iter().map(|v| mm(*v)).collect(),
@@ -994,6 +1002,9 @@ mod tests {
         assert!(e.starts_with("time_limit_s:"), "{e}");
         let e = parse::<CreateMatch>(br#"{"robots": 2}"#).unwrap_err();
         assert!(e.contains("missing field `map`"), "{e}");
+        assert!(!r.config.localisation, "localisation is opt-in for now");
+        let m: CreateMatch = parse(br#"{"map": "office", "localisation": true}"#).unwrap();
+        assert!(m.validate().unwrap().config.localisation);
     }
 
     #[test]

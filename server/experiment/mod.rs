@@ -3,9 +3,11 @@
 //!
 //! - [`filters`]: Fig. 4 — the number of active filters with and without role merging.
 //! - [`capture`]: Fig. 5 — capture time of `coordinated` against `baseline`.
+//! - [`localisation`]: issue 6 — the robots' own pose error with and without landmarks.
 
 pub mod capture;
 pub mod filters;
+pub mod localisation;
 pub mod plot;
 
 use std::sync::Mutex;

@@ -50,6 +50,15 @@ pub struct Physics {
     pub tag_range: f32,
     pub tag_cooldown_ticks: u64,
     pub freeze_ticks: u64,
+    /// Wheel odometry noise per step (std-dev): fraction of the distance travelled, heading
+    /// error per metre travelled (rad/m) and fraction of the turn made.
+    pub odometry_noise: f32,
+    pub odometry_turn_per_metre: f32,
+    pub odometry_turn_noise: f32,
+    /// Landmarks are recognised by identity within this range in line of sight, all round.
+    pub landmark_range: f32,
+    pub landmark_range_noise: f32,
+    pub landmark_bearing_noise: f32,
 }
 
 impl Default for Physics {
@@ -69,6 +78,14 @@ impl Default for Physics {
             tag_range: 6.0,
             tag_cooldown_ticks: TICK_HZ as u64,
             freeze_ticks: 10 * TICK_HZ as u64,
+            // game-rules.md: "about 5% of distance and 2° per metre".
+            odometry_noise: 0.05,
+            odometry_turn_per_metre: 2f32.to_radians(),
+            odometry_turn_noise: 0.02,
+            // game-rules.md gives the 4 m; the noise is ours: like the opponent detector's.
+            landmark_range: 4.0,
+            landmark_range_noise: 0.05,
+            landmark_bearing_noise: 2f32.to_radians(),
         }
     }
 }

@@ -10,6 +10,7 @@
 use nalgebra::{Point2, Vector2};
 use rand::RngExt;
 
+use crate::localise::LandmarkSighting;
 use crate::sim::arena::Arena;
 use crate::sim::{AGENT_RADIUS, AgentId, Physics, Pose, gaussian, wrap_angle};
 
@@ -116,6 +117,72 @@ pub fn scan(
         detections,
         seen,
     }
+}
+
+/// The landmarks `pose` recognises: within `landmark_range` and in line of sight, all round
+/// (game-rules.md), each with range and bearing noise. In map order, so the noise draws are
+/// deterministic.
+pub fn sight_landmarks(
+    arena: &Arena,
+    physics: &Physics,
+    pose: Pose,
+    rng: &mut impl RngExt,
+) -> Vec<LandmarkSighting> {
+    arena
+        .def
+        .landmarks
+        .iter()
+        .enumerate()
+        .filter(|(_, m)| {
+            (*m - pose.pos).norm() <= physics.landmark_range && arena.line_of_sight(pose.pos, **m)
+        })
+        .map(|(id, m)| LandmarkSighting {
+            id,
+            range: ((m - pose.pos).norm() + gaussian(rng, physics.landmark_range_noise)).max(0.0),
+            bearing: wrap_angle(
+                pose.bearing_to(*m) + gaussian(rng, physics.landmark_bearing_noise),
+            ),
+        })
+        .collect()
+}
+
+/// One step of wheel odometry: the true motion from `before` to `after` as (rotate,
+/// translate, rotate), each with noise, applied to the odometry pose `odom`.
+pub fn odometry_step(
+    physics: &Physics,
+    odom: Pose,
+    before: Pose,
+    after: Pose,
+    rng: &mut impl RngExt,
+) -> Pose {
+    let d = after.pos - before.pos;
+    let mut trans = d.norm();
+    let dtheta = wrap_angle(after.theta - before.theta);
+    if trans < 1e-6 && dtheta.abs() < 1e-6 {
+        return odom;
+    }
+    let mut rot1 = if trans < 1e-4 {
+        0.0
+    } else {
+        wrap_angle(d.y.atan2(d.x) - before.theta)
+    };
+    if rot1.abs() > std::f32::consts::FRAC_PI_2 {
+        rot1 = wrap_angle(rot1 + std::f32::consts::PI);
+        trans = -trans;
+    }
+    let rot2 = wrap_angle(dtheta - rot1);
+    let turn_sigma = |rot: f32| {
+        physics.odometry_turn_noise * rot.abs() + physics.odometry_turn_per_metre * trans.abs()
+    };
+    let r1 = rot1 + gaussian(rng, turn_sigma(rot1));
+    let t = trans + gaussian(rng, physics.odometry_noise * trans.abs());
+    let r2 = rot2 + gaussian(rng, turn_sigma(rot2));
+    let a = odom.theta + r1;
+    Pose::new(
+        odom.pos.x + t * a.cos(),
+        odom.pos.y + t * a.sin(),
+        wrap_angle(a + r2),
+    )
 }
 
 #[cfg(test)]

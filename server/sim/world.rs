@@ -5,7 +5,8 @@
 //!    robots' commands decided at the end of the previous tick;
 //! 2. motion — every agent moves, then collisions resolve (robots first, then opponents,
 //!    each in id order, so the result is deterministic);
-//! 3. sensing — every robot that is not frozen scans and detects;
+//! 3. sensing — every robot that is not frozen scans, detects and sights landmarks; then
+//!    each robot localises (odometry, laser and landmarks into its own particle filter);
 //! 4. rules — shots (robots first), freezes, eliminations, the end of the match;
 //! 5. team — the robots' brain reads what they sensed and decides the next tick's commands;
 //! 6. events — appended to the log with increasing `seq`.
@@ -20,6 +21,7 @@ use nalgebra::Point2;
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
+use crate::localise::{LandmarkSighting, LikelihoodField, Localiser, Observation};
 use crate::planner::{PlannerKind, RobotCommand, RobotView, Team, TeamView};
 use crate::sim::arena::Arena;
 use crate::sim::bots::{Bot, BotKind};
@@ -64,6 +66,10 @@ pub struct MatchConfig {
     pub tracker: crate::tracker::Settings,
     /// Weights of the `coordinated` planner.
     pub coordination: crate::planner::coordinated::Settings,
+    /// Robots localise themselves (MCL from odometry, laser and landmarks); when off, each
+    /// robot's estimate is its true pose.
+    pub localisation: bool,
+    pub localiser: crate::localise::Settings,
 }
 
 impl Default for MatchConfig {
@@ -80,6 +86,8 @@ impl Default for MatchConfig {
             physics: Physics::default(),
             tracker: crate::tracker::Settings::default(),
             coordination: crate::planner::coordinated::Settings::default(),
+            localisation: false,
+            localiser: crate::localise::Settings::default(),
         }
     }
 }
@@ -157,8 +165,16 @@ pub struct Event {
 #[derive(Debug, Clone)]
 pub struct Robot {
     pub pose: Pose,
-    /// The robot's own belief about its pose. Until localisation lands it equals `pose`.
+    /// The robot's own belief about its pose: its localiser's point estimate, or `pose`
+    /// when localisation is off.
     pub estimate: Pose,
+    /// Standard deviation of the localiser's position belief (m); 0 when off.
+    pub spread: f32,
+    /// Dead-reckoned pose from the wheel odometry (starts at the true start pose).
+    pub odometry: Pose,
+    /// Landmarks recognised this tick.
+    pub landmarks: Vec<LandmarkSighting>,
+    pub localiser: Option<Box<Localiser>>,
     pub frozen_until: u64,
     pub cooldown_until: u64,
     pub scan: Scan,
@@ -238,6 +254,8 @@ pub struct World {
     events: Vec<Event>,
     rng_sense: ChaCha8Rng,
     rng_bots: ChaCha8Rng,
+    rng_odometry: ChaCha8Rng,
+    rng_localise: ChaCha8Rng,
 }
 
 /// Independent streams of the match seed.
@@ -246,6 +264,10 @@ const STREAM_BOTS: u64 = 2;
 const STREAM_TEAM: u64 = 3;
 const STREAM_SETUP: u64 = 4;
 const STREAM_TRACKER: u64 = 5;
+/// Odometry and landmark-sighting noise (a stream of its own so the laser's draws don't shift).
+const STREAM_ODOMETRY: u64 = 6;
+/// The robots' localisers (the team's side).
+const STREAM_LOCALISE: u64 = 7;
 
 fn stream(seed: u64, id: u64) -> ChaCha8Rng {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
@@ -257,11 +279,32 @@ impl World {
     pub fn new(arena: Arc<Arena>, config: MatchConfig) -> Result<World, SetupError> {
         let mut setup = stream(config.seed, STREAM_SETUP);
         let (robot_starts, opponent_starts) = place_agents(&arena, &config, &mut setup)?;
+        let mut rng_localise = stream(config.seed, STREAM_LOCALISE);
+        let field = config.localisation.then(|| {
+            Arc::new(LikelihoodField::new(
+                &arena,
+                &config.localiser,
+                config.physics.laser_range,
+            ))
+        });
         let robots = robot_starts
             .into_iter()
             .map(|pose| Robot {
                 pose,
                 estimate: pose,
+                spread: 0.0,
+                odometry: pose,
+                landmarks: Vec::new(),
+                localiser: field.as_ref().map(|f| {
+                    Box::new(Localiser::new(
+                        f.clone(),
+                        &arena,
+                        config.localiser.clone(),
+                        pose,
+                        pose,
+                        &mut rng_localise,
+                    ))
+                }),
                 frozen_until: 0,
                 cooldown_until: 0,
                 scan: Scan::default(),
@@ -310,11 +353,14 @@ impl World {
             events: Vec::new(),
             rng_sense: stream(config.seed, STREAM_SENSE),
             rng_bots: stream(config.seed, STREAM_BOTS),
+            rng_odometry: stream(config.seed, STREAM_ODOMETRY),
+            rng_localise,
             arena,
             config,
         };
         // Robots see the world before their first decision.
         world.sense();
+        world.localise();
         world.think();
         Ok(world)
     }
@@ -356,6 +402,7 @@ impl World {
         let motions = self.inputs();
         self.move_agents(&motions);
         self.sense();
+        self.localise();
         self.rules();
         self.think();
     }
@@ -462,9 +509,10 @@ impl World {
             centres[k].1 = pos;
             match *id {
                 AgentId::Robot(i) => {
-                    self.robots[i].pose = new;
-                    // No localisation yet: the robot knows its true pose.
-                    self.robots[i].estimate = new;
+                    let r = &mut self.robots[i];
+                    r.odometry =
+                        sensors::odometry_step(p, r.odometry, r.pose, new, &mut self.rng_odometry);
+                    r.pose = new;
                 }
                 AgentId::Opponent(i) => self.opponents[i].pose = new,
             }
@@ -477,6 +525,7 @@ impl World {
         for i in 0..self.robots.len() {
             if self.robot_frozen(i) {
                 self.robots[i].scan = Scan::default();
+                self.robots[i].landmarks.clear();
                 continue;
             }
             let others: Vec<_> = present
@@ -491,6 +540,36 @@ impl World {
                 &others,
                 &mut self.rng_sense,
             );
+            if self.config.localisation {
+                self.robots[i].landmarks = sensors::sight_landmarks(
+                    &self.arena,
+                    &self.config.physics,
+                    self.robots[i].pose,
+                    &mut self.rng_odometry,
+                );
+            }
+        }
+    }
+
+    /// Stage 3b: every robot updates its belief about its own pose from its odometry and
+    /// what it sensed (the truth stays with the referee).
+    fn localise(&mut self) {
+        let p = &self.config.physics;
+        for r in &mut self.robots {
+            let Some(loc) = r.localiser.as_mut() else {
+                r.estimate = r.pose;
+                continue;
+            };
+            loc.predict(r.odometry, &mut self.rng_localise);
+            let obs = Observation {
+                ranges: &r.scan.ranges,
+                laser_fov: p.laser_fov,
+                laser_range: p.laser_range,
+                landmarks: &r.landmarks,
+            };
+            loc.correct(&obs, &mut self.rng_localise);
+            r.estimate = loc.estimate();
+            r.spread = loc.spread();
         }
     }
 

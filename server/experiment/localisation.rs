@@ -1,0 +1,164 @@
+//! Issue 6: how well the robots localise themselves — mean position error over time on every
+//! map, with the map's landmarks and without them (the drift the laser alone leaves).
+//!
+//! Each run is a full match with localisation on. Tagging is disabled (`tag_range` 0) so that
+//! every run lasts the whole duration: the robots still hunt, which is what moves them.
+
+use std::path::Path;
+use std::sync::Arc;
+
+use crate::experiment::plot::{self, Series};
+use crate::experiment::run_all;
+use crate::sim::arena::{Arena, MapDef};
+use crate::sim::world::MatchConfig;
+use crate::sim::{TICK_HZ, World};
+
+#[derive(Debug, Clone)]
+pub struct LocalisationConfig {
+    pub runs: usize,
+    pub seed: u64,
+    pub seconds: u64,
+    pub robots: usize,
+    pub opponents: usize,
+}
+
+/// Per map and variant: the mean error curve (per second) and summary figures.
+#[derive(Debug, Clone)]
+pub struct Curve {
+    pub map: String,
+    pub landmarks: bool,
+    pub mean_per_second: Vec<f64>,
+    pub mean: f64,
+    /// The largest error of any robot at any tick of any run.
+    pub worst: f64,
+}
+
+/// One run: per second, the mean over robots and that second's ticks of the position error;
+/// and the worst error seen.
+pub fn one_run(
+    arena: Arc<Arena>,
+    cfg: &LocalisationConfig,
+    seed: u64,
+) -> Result<(Vec<f64>, f64), String> {
+    let mut config = MatchConfig {
+        robots: cfg.robots,
+        opponents: cfg.opponents,
+        seed,
+        time_limit_ticks: cfg.seconds * TICK_HZ as u64,
+        localisation: true,
+        ..MatchConfig::default()
+    };
+    config.physics.tag_range = 0.0;
+    let mut world = World::new(arena, config).map_err(|e| e.to_string())?;
+    let mut per_second = Vec::with_capacity(cfg.seconds as usize);
+    let (mut sum, mut n, mut worst) = (0.0f64, 0usize, 0.0f64);
+    for t in 1..=cfg.seconds * TICK_HZ as u64 {
+        world.step();
+        for r in &world.robots {
+            let e = (r.estimate.pos - r.pose.pos).norm() as f64;
+            sum += e;
+            n += 1;
+            worst = worst.max(e);
+        }
+        if t % TICK_HZ as u64 == 0 {
+            per_second.push(sum / n.max(1) as f64);
+            (sum, n) = (0.0, 0);
+        }
+    }
+    Ok((per_second, worst))
+}
+
+/// Runs every map with and without its landmarks; writes `localisation.csv`,
+/// `localisation_summary.csv` and `localisation_<map>.svg` into `out`.
+pub fn run(
+    arenas: &[Arc<Arena>],
+    cfg: &LocalisationConfig,
+    out: &Path,
+) -> Result<Vec<Curve>, String> {
+    std::fs::create_dir_all(out).map_err(|e| format!("creating {}: {e}", out.display()))?;
+    // Variant 0: the map as shipped; variant 1: the same map without landmarks.
+    let variants: Vec<(Arc<Arena>, bool)> = arenas
+        .iter()
+        .flat_map(|a| {
+            let bare = Arc::new(Arena::new(MapDef {
+                landmarks: vec![],
+                ..a.def.clone()
+            }));
+            [(a.clone(), true), (bare, false)]
+        })
+        .collect();
+    let jobs = variants.len() * cfg.runs;
+    let results = run_all("localisation", jobs, |i| {
+        let (arena, _) = &variants[i / cfg.runs];
+        one_run(arena.clone(), cfg, cfg.seed + (i % cfg.runs) as u64)
+    });
+    let results: Vec<(Vec<f64>, f64)> = results.into_iter().collect::<Result<_, _>>()?;
+    let mut curves = Vec::new();
+    for (v, (arena, landmarks)) in variants.iter().enumerate() {
+        let runs = &results[v * cfg.runs..(v + 1) * cfg.runs];
+        let len = runs.iter().map(|r| r.0.len()).max().unwrap_or(0);
+        let mean_per_second: Vec<f64> = (0..len)
+            .map(|t| {
+                let xs: Vec<f64> = runs.iter().filter_map(|r| r.0.get(t).copied()).collect();
+                xs.iter().sum::<f64>() / xs.len().max(1) as f64
+            })
+            .collect();
+        let mean = mean_per_second.iter().sum::<f64>() / mean_per_second.len().max(1) as f64;
+        let worst = runs.iter().map(|r| r.1).fold(0.0, f64::max);
+        curves.push(Curve {
+            map: arena.def.name.clone(),
+            landmarks: *landmarks,
+            mean_per_second,
+            mean,
+            worst,
+        });
+    }
+    let mut csv = String::from("map,landmarks,time_s,mean_position_error_m\n");
+    let mut summary = String::from("map,landmarks,runs,seconds,mean_position_error_m,worst_m\n");
+    for c in &curves {
+        for (t, e) in c.mean_per_second.iter().enumerate() {
+            csv.push_str(&format!("{},{},{},{e:.4}\n", c.map, c.landmarks, t + 1));
+        }
+        summary.push_str(&format!(
+            "{},{},{},{},{:.4},{:.4}\n",
+            c.map, c.landmarks, cfg.runs, cfg.seconds, c.mean, c.worst
+        ));
+    }
+    for (name, text) in [
+        ("localisation.csv", &csv),
+        ("localisation_summary.csv", &summary),
+    ] {
+        let path = out.join(name);
+        std::fs::write(&path, text).map_err(|e| format!("writing {}: {e}", path.display()))?;
+    }
+    for pair in curves.chunks(2) {
+        let series: Vec<Series> = pair
+            .iter()
+            .map(|c| Series {
+                name: if c.landmarks {
+                    "with landmarks"
+                } else {
+                    "without landmarks"
+                },
+                points: c
+                    .mean_per_second
+                    .iter()
+                    .enumerate()
+                    .map(|(t, e)| ((t + 1) as f64, *e))
+                    .collect(),
+            })
+            .collect();
+        let map = &pair[0].map;
+        plot::lines(
+            &out.join(format!("localisation_{map}.svg")),
+            &format!(
+                "Localisation error on {map} ({} runs, {} robots)",
+                cfg.runs, cfg.robots
+            ),
+            "time (s)",
+            "mean position error (m)",
+            &series,
+        )?;
+    }
+    Ok(curves)
+}

@@ -1,0 +1,151 @@
+use super::*;
+use crate::sim::arena::MapDef;
+use crate::sim::{Physics, sensors};
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+
+/// A 10 m × 6 m room with an off-centre box, so that no two poses look alike.
+fn room(landmarks: Vec<Point2<f32>>) -> Arena {
+    Arena::new(MapDef {
+        name: "room".into(),
+        width: 10.0,
+        height: 6.0,
+        obstacles: vec![vec![
+            Point2::new(6.0, 1.0),
+            Point2::new(7.5, 1.0),
+            Point2::new(7.5, 2.0),
+            Point2::new(6.0, 2.0),
+        ]],
+        robot_spawns: vec![[2.0, 3.0, 0.0]],
+        opponent_spawns: vec![Point2::new(8.0, 5.0)],
+        landmarks,
+    })
+}
+
+fn localiser(arena: &Arena, start: Pose, rng: &mut ChaCha8Rng) -> Localiser {
+    let settings = Settings::default();
+    let field = Arc::new(LikelihoodField::new(arena, &settings, 8.0));
+    Localiser::new(field, arena, settings, start, start, rng)
+}
+
+/// Drives a robot round a loop for `ticks`, returning the mean position error of the
+/// localiser and of raw odometry. `laser` false skips measurement updates.
+fn drive(arena: &Arena, laser: bool, ticks: usize, seed: u64) -> (f32, f32) {
+    let physics = Physics::default();
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let mut truth = Pose::new(2.0, 3.0, 0.0);
+    let mut odom = truth;
+    let mut loc = localiser(arena, truth, &mut rng);
+    let (mut err, mut odo_err) = (0.0, 0.0);
+    for t in 0..ticks {
+        // A loop: forward along x, turning at the ends.
+        let turn = if (t / 60) % 2 == 1 { 1.5 } else { 0.0 };
+        let next = Pose::new(
+            truth.pos.x + 0.05 * truth.theta.cos(),
+            truth.pos.y + 0.05 * truth.theta.sin(),
+            wrap_angle(truth.theta + turn * 0.05),
+        );
+        let next = if arena.disc_is_free(next.pos, 0.3) {
+            next
+        } else {
+            Pose::new(truth.pos.x, truth.pos.y, wrap_angle(truth.theta + 0.1))
+        };
+        odom = sensors::odometry_step(&physics, odom, truth, next, &mut rng);
+        truth = next;
+        loc.predict(odom, &mut rng);
+        if laser {
+            let scan = sensors::scan(arena, &physics, truth, &[], &mut rng);
+            let marks = sensors::sight_landmarks(arena, &physics, truth, &mut rng);
+            let obs = Observation {
+                ranges: &scan.ranges,
+                laser_fov: physics.laser_fov,
+                laser_range: physics.laser_range,
+                landmarks: &marks,
+            };
+            loc.correct(&obs, &mut rng);
+        }
+        err += (loc.estimate().pos - truth.pos).norm();
+        odo_err += (odom.pos - truth.pos).norm();
+    }
+    (err / ticks as f32, odo_err / ticks as f32)
+}
+
+#[test]
+fn the_likelihood_field_peaks_on_walls() {
+    let a = room(vec![]);
+    let f = LikelihoodField::new(&a, &Settings::default(), 8.0);
+    let on_wall = f.log_likelihood(0.05, 3.0);
+    let open = f.log_likelihood(3.0, 3.0);
+    let inside_box = f.log_likelihood(6.75, 1.5);
+    assert!(on_wall > open + 2.0, "{on_wall} vs {open}");
+    assert!(
+        inside_box < on_wall - 2.0,
+        "deep inside an obstacle is not a wall: {inside_box}"
+    );
+    assert_eq!(f.log_likelihood(-1.0, 3.0), f.log_outside);
+    assert!(!f.open(6.75, 1.5) && f.open(3.0, 3.0));
+}
+
+#[test]
+fn kld_bound_grows_with_bins() {
+    assert_eq!(kld_bound(1, 0.05, 2.33), 1);
+    let small = kld_bound(10, 0.05, 2.33);
+    let big = kld_bound(100, 0.05, 2.33);
+    assert!(small < big && big > 1000, "{small} {big}");
+}
+
+#[test]
+fn a_stationary_robot_stays_put_and_converges() {
+    let a = room(vec![]);
+    let physics = Physics::default();
+    let mut rng = ChaCha8Rng::seed_from_u64(4);
+    let truth = Pose::new(3.0, 4.0, 0.7);
+    // Start a little wrong: the filter must pull the cloud onto the truth.
+    let mut loc = localiser(&a, Pose::new(3.1, 3.9, 0.75), &mut rng);
+    for _ in 0..200 {
+        loc.predict(truth, &mut rng);
+        let scan = sensors::scan(&a, &physics, truth, &[], &mut rng);
+        let obs = Observation {
+            ranges: &scan.ranges,
+            laser_fov: physics.laser_fov,
+            laser_range: physics.laser_range,
+            landmarks: &[],
+        };
+        loc.correct(&obs, &mut rng);
+    }
+    let e = loc.estimate();
+    assert!((e.pos - truth.pos).norm() < 0.05, "{e:?}");
+    assert!(wrap_angle(e.theta - truth.theta).abs() < 0.05, "{e:?}");
+    assert!(loc.spread() < 0.1, "{}", loc.spread());
+    assert!(loc.particles().len() >= 500 && loc.particles().len() <= 2000);
+}
+
+#[test]
+fn odometry_alone_drifts_but_the_laser_keeps_the_error_small() {
+    let a = room(vec![]);
+    let (loc_err, odo_err) = drive(&a, true, 1200, 7);
+    let (dead_err, _) = drive(&a, false, 1200, 7);
+    eprintln!("localised {loc_err}, odometry {odo_err}, dead reckoning {dead_err}");
+    assert!(loc_err < 0.1, "localised error {loc_err}");
+    assert!(
+        odo_err > loc_err,
+        "odometry {odo_err} vs localised {loc_err}"
+    );
+    assert!(
+        dead_err > loc_err,
+        "dead reckoning {dead_err} vs localised {loc_err}"
+    );
+}
+
+#[test]
+fn landmark_sightings_fit_only_the_true_pose() {
+    let a = room(vec![Point2::new(4.0, 3.0)]);
+    let physics = Physics::default();
+    let mut rng = ChaCha8Rng::seed_from_u64(2);
+    let truth = Pose::new(2.0, 3.0, 0.0);
+    let marks = sensors::sight_landmarks(&a, &physics, truth, &mut rng);
+    assert_eq!(marks.len(), 1);
+    assert!((marks[0].range - 2.0).abs() < 0.2 && marks[0].bearing.abs() < 0.1);
+    let far = Pose::new(9.0, 5.0, 0.0);
+    assert!(sensors::sight_landmarks(&a, &physics, far, &mut rng).is_empty());
+}
