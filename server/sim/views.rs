@@ -265,7 +265,10 @@ mod tests {
         let points = candidate_points(&arena, 1.0);
         assert!(points.len() >= 6, "{points:?}");
         for p in &points {
-            assert!(arena.grid.passable(arena.grid.cell_of(*p).unwrap()), "{p:?}");
+            assert!(
+                arena.grid.passable(arena.grid.cell_of(*p).unwrap()),
+                "{p:?}"
+            );
         }
     }
 
