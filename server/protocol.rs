@@ -534,6 +534,8 @@ pub struct MatchSummary {
     pub planner_active: Planner,
     pub tracker: TrackerConfig,
     pub coordination: CoordinationConfig,
+    /// Whether robots localise themselves (else their estimate is their true pose).
+    pub localisation: bool,
     pub seed: u64,
     pub players: usize,
     /// WebSocket spectators connected now.
@@ -586,6 +588,7 @@ pub fn summary(world: &World, meta: &MatchMeta) -> MatchSummary {
         planner_active: planner_dto(world.team.effective()),
         tracker: TrackerConfig::from(&c.tracker),
         coordination: CoordinationConfig::from(&c.coordination),
+        localisation: c.localisation,
         seed: c.seed,
         players: meta.players,
         spectators: meta.spectators,
