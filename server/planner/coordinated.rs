@@ -13,9 +13,7 @@
 //!    `seen(k) / total − travel_weight · seconds to get there − crowding_weight · crowding`,
 //!    where `seen(k)` sums the mass of the cells `k` sees, weighted up to `1 + centring_weight`
 //!    for cells straight ahead. Robots choose one per tick, the one that chose longest ago
-//!    first; each choice is claimed before the next.
-//!    (`negotiate` also handles several robots in one call — best (robot, pose) pair first —
-//!    but the planner calls it with one.) This is what splits a team across branching
+//!    first; each choice is claimed before the next. This is what splits a team across branching
 //!    corridors: a branch that one robot will search is worth little to the next.
 //!
 //! Rounds happen every `round_ticks` (each searching robot then chooses on its turn), and a
@@ -218,7 +216,6 @@ pub struct Coordinated {
 /// One robot's best choice in a round.
 #[derive(Debug, Clone, Copy)]
 struct Choice {
-    robot: usize,
     pose: usize,
     value: f32,
     worth: f32,
@@ -359,7 +356,7 @@ impl Coordinated {
             if let Some(i) = chooser
                 && total > 0.0
             {
-                self.negotiate(arena, physics, view, &[i], total);
+                self.choose(arena, physics, view, i, total);
             }
         }
         for &i in &searching {
@@ -447,92 +444,56 @@ impl Coordinated {
         Some(i * h + heading)
     }
 
-    /// Stages 2 and 3: claims, then greedy sequential choice among `choosing`.
-    fn negotiate(
-        &mut self,
-        arena: &Arena,
-        physics: &Physics,
-        view: &TeamView,
-        choosing: &[usize],
-        total: f32,
-    ) {
+    /// Stages 2 and 3 for robot `i`: claim what its teammates will see, then choose.
+    fn choose(&mut self, arena: &Arena, physics: &Physics, view: &TeamView, i: usize, total: f32) {
         // Claims of robots that keep what they do: pursuers look where they look; searchers
         // that are not choosing keep their goals.
-        for (i, robot) in view.robots.iter().enumerate() {
-            if robot.frozen || choosing.contains(&i) {
+        for (j, robot) in view.robots.iter().enumerate() {
+            if robot.frozen || j == i {
                 continue;
             }
-            let k = if self.robots[i].seeing {
+            let k = if self.robots[j].seeing {
                 self.nearest_pose(robot.pose)
             } else {
-                self.robots[i].goal.map(|g| g.pose)
+                self.robots[j].goal.map(|g| g.pose)
             };
             if let Some(k) = k {
                 self.claim(k);
             }
         }
-        // One travel field per choosing robot (one robot per call in practice).
-        let fields: Vec<Option<DistanceField>> = choosing
-            .iter()
-            .map(|&i| self.field_for(arena, view, i))
+        let taken: Vec<Point2<f32>> = (0..view.robots.len())
+            .filter(|&j| j != i && !view.robots[j].frozen)
+            .filter_map(|j| self.goal_pose(j).map(|g| g.pos))
             .collect();
-        let mut chosen: Vec<Point2<f32>> = (0..view.robots.len())
-            .filter(|i| !choosing.contains(i) && !view.robots[*i].frozen)
-            .filter_map(|i| self.goal_pose(i).map(|g| g.pos))
-            .collect();
-        let mut left: Vec<usize> = (0..choosing.len()).collect();
-        while !left.is_empty() {
-            self.score_poses(total);
-            let mut best: Option<Choice> = None;
-            for &j in &left {
-                let Some(field) = &fields[j] else { continue };
-                if let Some(c) = self.best_for(arena, physics, choosing[j], field, &chosen)
-                    && best.is_none_or(|b| c.value > b.value)
-                {
-                    best = Some(c);
-                }
-            }
-            let Some(c) = best else {
-                // Nobody can reach anything: leave the rest without goals.
-                for &j in &left {
-                    let state = &mut self.robots[choosing[j]];
-                    state.goal = None;
-                    state.path = PathFollower::default();
-                    state.replan = false;
-                    state.due = false;
-                    state.chosen_at = view.tick;
-                    // Walled in by teammates? Plan without them next time.
-                    state.avoid_team = false;
-                }
-                break;
-            };
-            let j = left
-                .iter()
-                .position(|&j| choosing[j] == c.robot)
-                .expect("the winner was among those left");
-            let field = fields[left[j]].as_ref().expect("the winner had a field");
-            left.swap_remove(j);
-            let (pos, _) = self.views.pose(c.pose);
-            let from = view.robots[c.robot].pose.pos;
-            let path = arena
-                .grid
-                .cell_of(pos)
-                .and_then(|cell| field.path_to(&arena.grid, from, cell))
-                .unwrap_or_else(|| vec![from]);
-            let state = &mut self.robots[c.robot];
-            state.goal = Some(Goal {
-                pose: c.pose,
-                worth: c.worth,
-            });
-            state.path = PathFollower::new(path);
-            state.replan = false;
-            state.due = false;
-            state.avoid_team = false;
-            state.progress = None;
-            state.chosen_at = view.tick;
-            chosen.push(pos);
-            self.claim(c.pose);
-        }
+        self.score_poses(total);
+        let field = self.field_for(arena, view, i);
+        let best = field
+            .as_ref()
+            .and_then(|f| self.best_for(arena, physics, i, f, &taken).map(|c| (c, f)));
+        let from = view.robots[i].pose.pos;
+        let state = &mut self.robots[i];
+        state.replan = false;
+        state.due = false;
+        state.avoid_team = false;
+        state.chosen_at = view.tick;
+        let Some((c, field)) = best else {
+            // Nothing reachable (walled in by teammates? the next try plans without them).
+            state.goal = None;
+            state.path = PathFollower::default();
+            return;
+        };
+        let (pos, _) = self.views.pose(c.pose);
+        let path = arena
+            .grid
+            .cell_of(pos)
+            .and_then(|cell| field.path_to(&arena.grid, from, cell))
+            .unwrap_or_else(|| vec![from]);
+        state.goal = Some(Goal {
+            pose: c.pose,
+            worth: c.worth,
+        });
+        state.path = PathFollower::new(path);
+        state.progress = None;
     }
 
     fn field_for(&self, arena: &Arena, view: &TeamView, i: usize) -> Option<DistanceField> {
@@ -599,7 +560,6 @@ impl Coordinated {
                 let value = self.seen[k] - cost + keep;
                 if best.is_none_or(|b| value > b.value) {
                     best = Some(Choice {
-                        robot: i,
                         pose: k,
                         value,
                         worth: self.seen[k],
