@@ -547,16 +547,10 @@ pub struct MatchSummary {
     pub notes: Vec<String>,
 }
 
-pub fn notes(world: &World) -> Vec<String> {
-    let mut notes = Vec::new();
-    if world.team.requested != world.team.effective() {
-        notes.push(format!(
-            "the {:?} planner is not available: this match runs {:?}",
-            world.team.requested,
-            world.team.effective()
-        ));
-    }
-    notes
+/// Caveats about a match. None today: every planner asked for runs as asked (the field
+/// stays so that a future fallback can be reported without changing the API).
+pub fn notes(_world: &World) -> Vec<String> {
+    Vec::new()
 }
 
 pub fn summary(world: &World, meta: &MatchMeta) -> MatchSummary {
@@ -584,8 +578,8 @@ pub fn summary(world: &World, meta: &MatchMeta) -> MatchSummary {
             BotKind::Evade => OpponentBot::Evade,
             BotKind::Idle => OpponentBot::Idle,
         },
-        planner: planner_dto(world.team.requested),
-        planner_active: planner_dto(world.team.effective()),
+        planner: planner_dto(world.team.kind()),
+        planner_active: planner_dto(world.team.kind()),
         tracker: TrackerConfig::from(&c.tracker),
         coordination: CoordinationConfig::from(&c.coordination),
         localisation: c.localisation,
@@ -696,8 +690,8 @@ pub fn state(world: &World, meta: &MatchMeta) -> MatchState {
         tick_hz: TICK_HZ,
         status: status(world.status),
         winner: winner(world.winner),
-        planner: planner_dto(world.team.requested),
-        planner_active: planner_dto(world.team.effective()),
+        planner: planner_dto(world.team.kind()),
+        planner_active: planner_dto(world.team.kind()),
         notes: notes(world),
         robots: world
             .robots

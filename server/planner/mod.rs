@@ -63,7 +63,6 @@ pub enum PlannerKind {
 /// The team's brain: the opponent tracker, the chosen planner and its memory.
 #[derive(Debug, Clone)]
 pub struct Team {
-    pub requested: PlannerKind,
     pub tracker: Tracker,
     pub(crate) brain: Brain,
 }
@@ -96,14 +95,11 @@ impl Team {
                 coordinated::Coordinated::new(arena, physics, coordination, robots),
             )),
         };
-        Team {
-            requested: kind,
-            tracker,
-            brain,
-        }
+        Team { tracker, brain }
     }
 
-    pub fn effective(&self) -> PlannerKind {
+    /// The planner this team runs (every kind asked for is built, so also the one asked for).
+    pub fn kind(&self) -> PlannerKind {
         match self.brain {
             Brain::Idle => PlannerKind::Idle,
             Brain::Baseline(_) => PlannerKind::Baseline,
