@@ -11,7 +11,7 @@ use crate::nav::{DistanceField, PathFollower, steer, turn_to};
 use crate::planner::pursuit::{engage, nearest_sighting, pursuit_goal};
 use crate::planner::{RobotCommand, TeamView};
 use crate::sim::arena::Arena;
-pub use crate::sim::views::candidate_points;
+use crate::sim::views::candidate_points;
 use crate::sim::{Motion, Physics, Pose};
 
 /// Ticks between negotiation rounds (8 s).
