@@ -113,7 +113,7 @@ async fn play_and_spectate_in_headless_chromium() {
 
     // One more click from the lobby takes over one of the showcase's bots.
     b.navigate(&format!("{base}/#/")).await;
-    b.wait_for("!document.getElementById('showcase').hidden && !document.getElementById('showcase-play').disabled", 20)
+    b.wait_for("__lasertag.page === 'lobby' && !document.getElementById('showcase').hidden && !document.getElementById('showcase-play').disabled", 20)
         .await;
     b.eval("document.getElementById('showcase-play').click()")
         .await;
@@ -133,8 +133,10 @@ async fn play_and_spectate_in_headless_chromium() {
             "opponent_starts": [[3.0, 8.0]]}))
         .await;
     b.navigate(&format!("{base}/#/play/{id}")).await;
+    // Wait for *this* match: until the page has fetched its token, `__lasertag` still
+    // describes the showcase game it was playing (a race seen in CI, stop 9).
     b.wait_for(
-        "__lasertag.role === 'player' && __lasertag.snapshots > 5 && __lasertag.drawn",
+        &format!("__lasertag.matchId === '{id}' && __lasertag.role === 'player' && __lasertag.snapshots > 5 && __lasertag.drawn"),
         20,
     )
     .await;
