@@ -616,9 +616,12 @@ impl Coordinated {
         let k = &self.robots[keeper].path;
         let mut route = vec![keeper_pos];
         route.extend(k.waypoints.iter().skip(k.next).copied());
-        let Some(field) =
-            DistanceField::from_point_avoiding(grid, from, &[(keeper_pos, 2.0 * AGENT_RADIUS)])
-        else {
+        // The keeper's body is a wall for the way out, but no wider than the gap between the
+        // two: pressed together (pushed sideways in a corridor, centres 0.5 m apart) a full
+        // two-radius disc also closed the cells beside the yielder and boxed it in.
+        let gap = (from - keeper_pos).norm() - grid.cell;
+        let keeper_disc = (keeper_pos, gap.clamp(grid.cell, 2.0 * AGENT_RADIUS));
+        let Some(field) = DistanceField::from_point_avoiding(grid, from, &[keeper_disc]) else {
             return false;
         };
         let off_route = |p: Point2<f32>| {
