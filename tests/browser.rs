@@ -85,6 +85,8 @@ async fn play_and_spectate_in_headless_chromium() {
     assert_eq!(drawn["robots"], 2, "{drawn}");
     assert_eq!(drawn["opponents"], 3, "{drawn}");
     assert!(drawn["fans"].as_u64().unwrap() >= 1, "{drawn}");
+    // Each robot's localisation cloud is drawn (issue 6): a sample of its particles.
+    assert!(drawn["localisation"].as_u64().unwrap() >= 20, "{drawn}");
     let px = b.eval(PIXELS).await;
     assert!(px["wall"].as_u64().unwrap() > 2000, "walls drawn: {px}");
     assert!(px["robot"].as_u64().unwrap() > 30, "robots drawn: {px}");
@@ -100,7 +102,7 @@ async fn play_and_spectate_in_headless_chromium() {
     // B switches the belief off: no particle is drawn any more.
     b.tap("KeyB", Duration::from_millis(50)).await;
     b.wait_for(
-        "__lasertag.belief === false && __lasertag.drawn.particles === 0",
+        "__lasertag.belief === false && __lasertag.drawn.particles === 0 && __lasertag.drawn.localisation === 0",
         5,
     )
     .await;

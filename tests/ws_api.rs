@@ -42,6 +42,16 @@ async fn a_spectator_gets_every_tick_with_everything() {
         let r0 = &snap["robots"][0];
         assert_eq!(r0["scan"].as_array().unwrap().len(), 181, "{r0}");
         assert!(r0.get("goal").is_some());
+        // Where the robot believes it is: near the truth, with a cloud of particles around.
+        let (ex, ey) = (
+            r0["estimate"]["x"].as_f64().unwrap(),
+            r0["estimate"]["y"].as_f64().unwrap(),
+        );
+        let (tx, ty) = (r0["x"].as_f64().unwrap(), r0["y"].as_f64().unwrap());
+        assert!((ex - tx).hypot(ey - ty) < 0.5, "{r0}");
+        let cloud = r0["cloud"].as_array().unwrap();
+        assert!(cloud.len() >= 2 * 20 && cloud.len() % 2 == 0, "{r0}");
+        assert!(r0["spread"].as_f64().unwrap() < 0.5, "{r0}");
         if let Some(b) = snap.get("belief") {
             with_belief += 1;
             let roles = b["roles"].as_array().unwrap();
@@ -137,6 +147,10 @@ async fn a_player_never_sees_a_robot_out_of_its_line_of_sight() {
         assert!(
             snap["robots"][0].get("scan").is_none(),
             "players get no scans"
+        );
+        assert!(
+            snap["robots"][0].get("cloud").is_none(),
+            "players get no localisation clouds"
         );
         assert!(
             snap.get("belief").is_none(),

@@ -15,6 +15,8 @@ export const COLORS = {
   fan: "rgba(88, 166, 255, 0.11)",
   fanEdge: "rgba(88, 166, 255, 0.35)",
   goal: "rgba(120, 200, 255, 0.8)",
+  cloud: "rgba(170, 255, 120, 0.85)",
+  estimate: "rgba(170, 255, 120, 0.9)",
   shade: "rgba(3, 5, 9, 0.62)",
   lit: "rgba(255, 225, 160, 0.05)",
 };
@@ -95,7 +97,9 @@ function label(ctx, v, x, y, text, color, dy = -0.42) {
  */
 export function draw(ctx, v, scene) {
   const { map } = scene;
-  const counts = { walls: 0, robots: 0, opponents: 0, particles: 0, roles: 0, fans: 0, beams: 0 };
+  const counts = {
+    walls: 0, robots: 0, opponents: 0, particles: 0, roles: 0, fans: 0, beams: 0, localisation: 0,
+  };
   ctx.setTransform(v.dpr, 0, 0, v.dpr, 0, 0);
   ctx.fillStyle = "#0d1117";
   ctx.fillRect(0, 0, ctx.canvas.width, ctx.canvas.height);
@@ -245,6 +249,28 @@ export function draw(ctx, v, scene) {
     ctx.shadowBlur = 0;
     ctx.globalAlpha = 1;
     counts.beams++;
+  }
+
+  // Where each robot believes it is (spectators, with the belief switched on): its
+  // localisation particles and a ring at its estimate, so one sees a robot unsure or lost.
+  for (const r of scene.belief ? scene.robots : []) {
+    if (!r.cloud || !r.cloud.length) continue;
+    ctx.fillStyle = COLORS.cloud;
+    const size = Math.max(1.5, v.s * 0.04);
+    for (let i = 0; i + 1 < r.cloud.length; i += 2) {
+      ctx.fillRect(v.x(r.cloud[i] / 100) - size / 2, v.y(r.cloud[i + 1] / 100) - size / 2, size, size);
+      counts.localisation++;
+    }
+    if (r.estimate) {
+      ctx.beginPath();
+      ctx.arc(v.x(r.estimate.x), v.y(r.estimate.y), 0.3 * v.s, 0, Math.PI * 2);
+      ctx.setLineDash([2, 3]);
+      ctx.lineWidth = 1.5;
+      ctx.strokeStyle = COLORS.estimate;
+      ctx.stroke();
+      ctx.setLineDash([]);
+      heading(ctx, v, r.estimate.x, r.estimate.y, r.estimate.theta, 0.35, COLORS.estimate);
+    }
   }
 
   // Agents.

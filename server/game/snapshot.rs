@@ -34,6 +34,31 @@ pub struct RobotFrame {
     pub goal: Option<Pose>,
     /// This tick's laser ranges (metres), empty while frozen.
     pub scan: Vec<f32>,
+    /// The robot's own belief about its pose, and that belief's spread (m).
+    pub estimate: Pose,
+    pub spread: f32,
+    /// A thinned sample of its localisation particles, in centimetres (empty when it does
+    /// not localise).
+    pub cloud: Vec<[i32; 2]>,
+}
+
+/// Localisation particles shown per robot.
+pub const CLOUD_POINTS: usize = 40;
+
+/// Every k-th particle, so that about [`CLOUD_POINTS`] are shown (deterministic: resampled
+/// particles carry equal weight, so a stride is a fair sample).
+fn thin_cloud(particles: &[Pose]) -> Vec<[i32; 2]> {
+    let stride = particles.len().div_ceil(CLOUD_POINTS).max(1);
+    particles
+        .iter()
+        .step_by(stride)
+        .map(|p| {
+            [
+                (p.pos.x * 100.0).round() as i32,
+                (p.pos.y * 100.0).round() as i32,
+            ]
+        })
+        .collect()
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -133,6 +158,12 @@ impl Frame {
                     frozen: world.robot_frozen(i),
                     goal: r.command.goal,
                     scan: r.scan.ranges.clone(),
+                    estimate: r.estimate,
+                    spread: r.spread,
+                    cloud: r
+                        .localiser
+                        .as_ref()
+                        .map_or_else(Vec::new, |l| thin_cloud(l.particles())),
                 })
                 .collect(),
             opponents: world

@@ -169,6 +169,14 @@ struct RobotWire {
     /// Spectators only: this tick's ranges in centimetres, beam i at bearing (i - 90)°.
     #[serde(skip_serializing_if = "Option::is_none")]
     scan: Option<Vec<u16>>,
+    /// Spectators only: where the robot believes it is, and how spread out that belief is.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    estimate: Option<PoseDto>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    spread: Option<f64>,
+    /// Spectators only: a sample of its localisation particles, flat `[x0, y0, …]` in cm.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    cloud: Option<Vec<i32>>,
 }
 
 #[derive(Debug, Clone, Serialize)]
@@ -314,6 +322,9 @@ fn snapshot_json(frame: &Frame, you: Option<&str>, visible: Option<&Visible>) ->
                         .map(|v| (v * 100.0).round().clamp(0.0, u16::MAX as f32) as u16)
                         .collect()
                 }),
+                estimate: spectator.then(|| pose(r.estimate)),
+                spread: spectator.then(|| mm(r.spread)),
+                cloud: spectator.then(|| r.cloud.iter().flatten().copied().collect()),
             })
             .collect(),
         opponents: frame
