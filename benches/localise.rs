@@ -52,6 +52,7 @@ fn bench(c: &mut Criterion) {
                         laser_fov: physics.laser_fov,
                         laser_range: physics.laser_range,
                         landmarks: &marks,
+                        movers: &[],
                     };
                     loc.correct(black_box(&obs), &mut rng);
                     black_box(loc.estimate())

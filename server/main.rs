@@ -80,9 +80,12 @@ enum Experiment {
         /// (repeatable; names as in the README's planner section).
         #[arg(long = "set", value_name = "NAME=VALUE")]
         set: Vec<String>,
+        /// Whether robots localise themselves (false: odometry alone, which drifts).
+        #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
+        localisation: bool,
     },
-    /// Issue 6: the robots' localisation error over time, with and without landmarks, on
-    /// every map.
+    /// Issue 6: the robots' localisation error over time on every map: with landmarks,
+    /// without them, and odometry alone.
     Localisation {
         /// Runs per map and variant (with and without landmarks).
         #[arg(long, default_value_t = 3)]
@@ -212,6 +215,7 @@ fn experiment(e: Experiment) -> Result<(), String> {
             maps,
             out,
             set,
+            localisation,
         } => {
             if runs == 0 || time_limit == 0 {
                 return Err("--runs and --time-limit must be at least 1".into());
@@ -240,6 +244,7 @@ fn experiment(e: Experiment) -> Result<(), String> {
                 seed,
                 time_limit_s: time_limit,
                 coordination,
+                localisation,
             };
             let table = lasertag::experiment::capture::run(&chosen, &cfg, &out)?;
             print!("{table}");
@@ -274,11 +279,14 @@ fn experiment(e: Experiment) -> Result<(), String> {
                 opponents,
             };
             let curves = lasertag::experiment::localisation::run(&arenas, &cfg, &out)?;
-            println!("map        landmarks  mean error (m)  worst (m)");
+            println!("map        variant        mean error (m)  worst (m)");
             for c in &curves {
                 println!(
-                    "{:<10} {:<10} {:>14.4} {:>10.4}",
-                    c.map, c.landmarks, c.mean, c.worst
+                    "{:<10} {:<14} {:>14.4} {:>10.4}",
+                    c.map,
+                    c.variant.name(),
+                    c.mean,
+                    c.worst
                 );
             }
             println!(

@@ -272,8 +272,8 @@ pub struct CreateMatch {
     pub opponent_starts: Option<Vec<[f64; 2]>>,
     /// Whether people may take over bot opponents (default false; the showcase allows it).
     pub bots_joinable: Option<bool>,
-    /// Whether robots localise themselves from odometry, laser and landmarks (default
-    /// false: each robot's estimate is its true pose).
+    /// Whether robots localise themselves from odometry, laser and landmarks (default true;
+    /// false leaves each robot its odometry alone, which drifts).
     pub localisation: Option<bool>,
 }
 
@@ -440,7 +440,7 @@ impl CreateMatch {
                 ..crate::tracker::Settings::default()
             },
             coordination: self.coordination.unwrap_or_default().validate()?,
-            localisation: self.localisation.unwrap_or(false),
+            localisation: self.localisation.unwrap_or(true),
             ..config
         };
         Ok(MatchRequest {
@@ -999,9 +999,9 @@ mod tests {
         assert!(e.starts_with("time_limit_s:"), "{e}");
         let e = parse::<CreateMatch>(br#"{"robots": 2}"#).unwrap_err();
         assert!(e.contains("missing field `map`"), "{e}");
-        assert!(!r.config.localisation, "localisation is opt-in for now");
-        let m: CreateMatch = parse(br#"{"map": "office", "localisation": true}"#).unwrap();
-        assert!(m.validate().unwrap().config.localisation);
+        assert!(r.config.localisation, "robots localise unless told not to");
+        let m: CreateMatch = parse(br#"{"map": "office", "localisation": false}"#).unwrap();
+        assert!(!m.validate().unwrap().config.localisation);
     }
 
     #[test]

@@ -154,7 +154,7 @@ async fn coordination_weights_are_taken_and_echoed_with_defaults_filled_in() {
     );
     assert_eq!(r.body["planner_active"], "coordinated");
     assert_eq!(r.body["notes"], json!([]));
-    assert_eq!(r.body["localisation"], false, "opt-in for now");
+    assert_eq!(r.body["localisation"], true, "robots localise by default");
 }
 
 /// Issue 6 (world-model confidence): every role in `belief` carries its confidence and what

@@ -1,5 +1,7 @@
 //! Issue 6: how well the robots localise themselves — mean position error over time on every
-//! map, with the map's landmarks and without them (the drift the laser alone leaves).
+//! map in three variants: the full filter with the map's landmarks, the filter without
+//! landmarks (laser and odometry), and odometry alone (dead reckoning: the drift a robot that
+//! does not localise suffers).
 //!
 //! Each run is a full match with localisation on. Tagging is disabled (`tag_range` 0) so that
 //! every run lasts the whole duration: the robots still hunt, which is what moves them.
@@ -22,11 +24,46 @@ pub struct LocalisationConfig {
     pub opponents: usize,
 }
 
+/// What a robot localises from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Variant {
+    /// Odometry, laser and the map's landmarks (the default).
+    Landmarks,
+    /// Odometry and laser on the same map with its landmarks removed.
+    LaserOnly,
+    /// No filter: the estimate is the robot's odometry.
+    OdometryOnly,
+}
+
+impl Variant {
+    pub const ALL: [Variant; 3] = [
+        Variant::Landmarks,
+        Variant::LaserOnly,
+        Variant::OdometryOnly,
+    ];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Variant::Landmarks => "landmarks",
+            Variant::LaserOnly => "laser_only",
+            Variant::OdometryOnly => "odometry_only",
+        }
+    }
+
+    fn label(self) -> &'static str {
+        match self {
+            Variant::Landmarks => "MCL with landmarks",
+            Variant::LaserOnly => "MCL without landmarks",
+            Variant::OdometryOnly => "odometry alone",
+        }
+    }
+}
+
 /// Per map and variant: the mean error curve (per second) and summary figures.
 #[derive(Debug, Clone)]
 pub struct Curve {
     pub map: String,
-    pub landmarks: bool,
+    pub variant: Variant,
     pub mean_per_second: Vec<f64>,
     pub mean: f64,
     /// The largest error of any robot at any tick of any run.
@@ -38,6 +75,7 @@ pub struct Curve {
 pub fn one_run(
     arena: Arc<Arena>,
     cfg: &LocalisationConfig,
+    localisation: bool,
     seed: u64,
 ) -> Result<(Vec<f64>, f64), String> {
     let mut config = MatchConfig {
@@ -45,7 +83,7 @@ pub fn one_run(
         opponents: cfg.opponents,
         seed,
         time_limit_ticks: cfg.seconds * TICK_HZ as u64,
-        localisation: true,
+        localisation,
         ..MatchConfig::default()
     };
     config.physics.tag_range = 0.0;
@@ -76,25 +114,34 @@ pub fn run(
     out: &Path,
 ) -> Result<Vec<Curve>, String> {
     std::fs::create_dir_all(out).map_err(|e| format!("creating {}: {e}", out.display()))?;
-    // Variant 0: the map as shipped; variant 1: the same map without landmarks.
-    let variants: Vec<(Arc<Arena>, bool)> = arenas
+    let variants: Vec<(Arc<Arena>, Variant)> = arenas
         .iter()
         .flat_map(|a| {
             let bare = Arc::new(Arena::new(MapDef {
                 landmarks: vec![],
                 ..a.def.clone()
             }));
-            [(a.clone(), true), (bare, false)]
+            [
+                (a.clone(), Variant::Landmarks),
+                (bare, Variant::LaserOnly),
+                (a.clone(), Variant::OdometryOnly),
+            ]
         })
         .collect();
     let jobs = variants.len() * cfg.runs;
     let results = run_all("localisation", jobs, |i| {
-        let (arena, _) = &variants[i / cfg.runs];
-        one_run(arena.clone(), cfg, cfg.seed + (i % cfg.runs) as u64)
+        let (arena, variant) = &variants[i / cfg.runs];
+        let localise = *variant != Variant::OdometryOnly;
+        one_run(
+            arena.clone(),
+            cfg,
+            localise,
+            cfg.seed + (i % cfg.runs) as u64,
+        )
     });
     let results: Vec<(Vec<f64>, f64)> = results.into_iter().collect::<Result<_, _>>()?;
     let mut curves = Vec::new();
-    for (v, (arena, landmarks)) in variants.iter().enumerate() {
+    for (v, (arena, variant)) in variants.iter().enumerate() {
         let runs = &results[v * cfg.runs..(v + 1) * cfg.runs];
         let len = runs.iter().map(|r| r.0.len()).max().unwrap_or(0);
         let mean_per_second: Vec<f64> = (0..len)
@@ -107,21 +154,31 @@ pub fn run(
         let worst = runs.iter().map(|r| r.1).fold(0.0, f64::max);
         curves.push(Curve {
             map: arena.def.name.clone(),
-            landmarks: *landmarks,
+            variant: *variant,
             mean_per_second,
             mean,
             worst,
         });
     }
-    let mut csv = String::from("map,landmarks,time_s,mean_position_error_m\n");
-    let mut summary = String::from("map,landmarks,runs,seconds,mean_position_error_m,worst_m\n");
+    let mut csv = String::from("map,variant,time_s,mean_position_error_m\n");
+    let mut summary = String::from("map,variant,runs,seconds,mean_position_error_m,worst_m\n");
     for c in &curves {
         for (t, e) in c.mean_per_second.iter().enumerate() {
-            csv.push_str(&format!("{},{},{},{e:.4}\n", c.map, c.landmarks, t + 1));
+            csv.push_str(&format!(
+                "{},{},{},{e:.4}\n",
+                c.map,
+                c.variant.name(),
+                t + 1
+            ));
         }
         summary.push_str(&format!(
             "{},{},{},{},{:.4},{:.4}\n",
-            c.map, c.landmarks, cfg.runs, cfg.seconds, c.mean, c.worst
+            c.map,
+            c.variant.name(),
+            cfg.runs,
+            cfg.seconds,
+            c.mean,
+            c.worst
         ));
     }
     for (name, text) in [
@@ -131,15 +188,11 @@ pub fn run(
         let path = out.join(name);
         std::fs::write(&path, text).map_err(|e| format!("writing {}: {e}", path.display()))?;
     }
-    for pair in curves.chunks(2) {
-        let series: Vec<Series> = pair
+    for per_map in curves.chunks(Variant::ALL.len()) {
+        let series: Vec<Series> = per_map
             .iter()
             .map(|c| Series {
-                name: if c.landmarks {
-                    "with landmarks"
-                } else {
-                    "without landmarks"
-                },
+                name: c.variant.label(),
                 points: c
                     .mean_per_second
                     .iter()
@@ -148,16 +201,17 @@ pub fn run(
                     .collect(),
             })
             .collect();
-        let map = &pair[0].map;
-        plot::lines(
+        let map = &per_map[0].map;
+        plot::lines_scaled(
             &out.join(format!("localisation_{map}.svg")),
             &format!(
                 "Localisation error on {map} ({} runs, {} robots)",
                 cfg.runs, cfg.robots
             ),
             "time (s)",
-            "mean position error (m)",
+            "mean position error (m, log scale)",
             &series,
+            plot::YScale::Log { floor_milli: 1 },
         )?;
     }
     Ok(curves)

@@ -10,13 +10,35 @@ pub struct Series<'a> {
     pub points: Vec<(f64, f64)>,
 }
 
-/// Draws `series` on one chart and writes it to `path`.
+/// How the y axis is scaled.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum YScale {
+    /// From 0 to a bit above the largest value.
+    Linear,
+    /// Logarithmic from `floor` up: for curves that differ by orders of magnitude (a
+    /// filter's centimetres against dead reckoning's metres).
+    Log { floor_milli: u32 },
+}
+
+/// Draws `series` on one chart with a linear y axis and writes it to `path`.
 pub fn lines(
     path: &Path,
     title: &str,
     x_label: &str,
     y_label: &str,
     series: &[Series],
+) -> Result<(), String> {
+    lines_scaled(path, title, x_label, y_label, series, YScale::Linear)
+}
+
+/// Draws `series` on one chart and writes it to `path`.
+pub fn lines_scaled(
+    path: &Path,
+    title: &str,
+    x_label: &str,
+    y_label: &str,
+    series: &[Series],
+    scale: YScale,
 ) -> Result<(), String> {
     let x_max = series
         .iter()
@@ -30,13 +52,52 @@ pub fn lines(
     let root = SVGBackend::new(path, (800, 500)).into_drawing_area();
     let err = |e: &dyn std::fmt::Display| format!("plotting {}: {e}", path.display());
     root.fill(&WHITE).map_err(|e| err(&e))?;
-    let mut chart = ChartBuilder::on(&root)
+    let mut builder = ChartBuilder::on(&root);
+    builder
         .caption(title, ("sans-serif", 22))
         .margin(15)
         .x_label_area_size(45)
-        .y_label_area_size(55)
-        .build_cartesian_2d(0.0..x_max, 0.0..y_max)
-        .map_err(|e| err(&e))?;
+        .y_label_area_size(55);
+    match scale {
+        YScale::Linear => {
+            let chart = builder
+                .build_cartesian_2d(0.0..x_max, 0.0..y_max)
+                .map_err(|e| err(&e))?;
+            draw_lines(chart, x_label, y_label, series).map_err(|e| err(&e))?;
+        }
+        YScale::Log { floor_milli } => {
+            let floor = floor_milli.max(1) as f64 / 1000.0;
+            let chart = builder
+                .build_cartesian_2d(0.0..x_max, (floor..y_max.max(floor * 10.0)).log_scale())
+                .map_err(|e| err(&e))?;
+            let clamped: Vec<Series> = series
+                .iter()
+                .map(|s| Series {
+                    name: s.name,
+                    points: s.points.iter().map(|&(x, y)| (x, y.max(floor))).collect(),
+                })
+                .collect();
+            draw_lines(chart, x_label, y_label, &clamped).map_err(|e| err(&e))?;
+        }
+    }
+    root.present().map_err(|e| err(&e))?;
+    Ok(())
+}
+
+type Chart<'a, Y> =
+    ChartContext<'a, SVGBackend<'a>, Cartesian2d<plotters::coord::types::RangedCoordf64, Y>>;
+
+/// Mesh, curves and legend on an already built chart (linear or log y).
+fn draw_lines<'a, Y>(
+    mut chart: Chart<'a, Y>,
+    x_label: &str,
+    y_label: &str,
+    series: &[Series],
+) -> Result<(), String>
+where
+    Y: Ranged<ValueType = f64> + plotters::coord::ranged1d::ValueFormatter<f64>,
+{
+    let err = |e: &dyn std::fmt::Display| e.to_string();
     chart
         .configure_mesh()
         .x_desc(x_label)
@@ -69,6 +130,5 @@ pub fn lines(
         .position(SeriesLabelPosition::UpperLeft)
         .draw()
         .map_err(|e| err(&e))?;
-    root.present().map_err(|e| err(&e))?;
     Ok(())
 }

@@ -21,8 +21,8 @@ use nalgebra::{Point2, Vector2};
 use rand::RngExt;
 
 use crate::sim::arena::Arena;
-use crate::sim::sensors::beam_bearing;
-use crate::sim::{Pose, gaussian, wrap_angle};
+use crate::sim::sensors::{Detection, beam_bearing};
+use crate::sim::{AGENT_RADIUS, Pose, gaussian, wrap_angle};
 
 /// A landmark seen by identity: its index in the map's `landmarks`, range and bearing.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -208,6 +208,34 @@ pub struct Observation<'a> {
     pub laser_fov: f32,
     pub laser_range: f32,
     pub landmarks: &'a [LandmarkSighting],
+    /// Agents the robot knows are in view but not on the map (detected opponents, and
+    /// teammates where their estimates say they are), as range and bearing from the robot.
+    /// Beams that end on one are skipped: the likelihood field would read a wall there, and
+    /// an opponent up close blocking half the beams let a stray particle outscore the truth.
+    pub movers: &'a [Detection],
+}
+
+/// Extra angle and range (rad, m) around a mover inside which a beam counts as ending on it:
+/// a teammate's position is only known as well as the two estimates.
+const MOVER_MARGIN: f32 = 0.15;
+
+/// Indices of the beams a measurement update uses: about `wanted` evenly spread, returning
+/// something, and not ending on a known mover.
+fn used_beams(obs: &Observation, wanted: usize) -> impl Iterator<Item = usize> {
+    let n = obs.ranges.len();
+    (0..n).step_by(beam_step(n, wanted)).filter(move |&i| {
+        let r = obs.ranges[i];
+        if r >= obs.laser_range {
+            return false;
+        }
+        let b = beam_bearing(i, n, obs.laser_fov);
+        !obs.movers.iter().any(|m| {
+            let half = ((AGENT_RADIUS + MOVER_MARGIN) / m.range.max(1e-3))
+                .min(1.0)
+                .asin();
+            wrap_angle(b - m.bearing).abs() <= half && r <= m.range + AGENT_RADIUS + MOVER_MARGIN
+        })
+    })
 }
 
 /// One robot's particle filter.
@@ -376,22 +404,14 @@ impl Localiser {
     }
 
     fn observation_count(&self, obs: &Observation) -> usize {
-        let step = beam_step(obs.ranges.len(), self.settings.beams);
-        let beams = (0..obs.ranges.len())
-            .step_by(step)
-            .filter(|&i| obs.ranges[i] < obs.laser_range)
-            .count();
-        beams + 2 * obs.landmarks.len()
+        used_beams(obs, self.settings.beams).count() + 2 * obs.landmarks.len()
     }
 
     /// Log-likelihood of `obs` for every particle.
     fn log_weights(&self, obs: &Observation) -> Vec<f64> {
         let n = obs.ranges.len();
-        let step = beam_step(n, self.settings.beams);
         // Beam end points in the robot's frame, computed once per update, not per particle.
-        let local: Vec<(f32, f32)> = (0..n)
-            .step_by(step)
-            .filter(|&i| obs.ranges[i] < obs.laser_range)
+        let local: Vec<(f32, f32)> = used_beams(obs, self.settings.beams)
             .map(|i| {
                 let b = beam_bearing(i, n, obs.laser_fov);
                 (obs.ranges[i] * b.cos(), obs.ranges[i] * b.sin())
@@ -507,26 +527,96 @@ impl Localiser {
     }
 
     /// Recomputes the point estimate and the spread from the particles.
+    ///
+    /// The estimate is the weighted mean of the heaviest cluster (as AMCL reports), not of
+    /// the whole cloud: while a kidnapped or confused robot holds two hypotheses, the mean
+    /// of both lies between them, often inside a wall. The spread is the whole cloud's, so
+    /// it stays large until the hypotheses have been settled.
     fn summarise(&mut self) {
         let total: f64 = self.weights.iter().sum();
         if total.is_nan() || total <= 0.0 || self.particles.is_empty() {
             return;
         }
-        let (mut x, mut y, mut s, mut c) = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
-        for (p, w) in self.particles.iter().zip(&self.weights) {
+        let keep = heaviest_cluster(&self.particles, &self.weights);
+        let (mut x, mut y, mut s, mut c, mut w_sum) = (0.0f64, 0.0f64, 0.0f64, 0.0f64, 0.0);
+        let (mut ax, mut ay) = (0.0f64, 0.0f64);
+        for (k, (p, w)) in self.particles.iter().zip(&self.weights).enumerate() {
+            ax += w * p.pos.x as f64;
+            ay += w * p.pos.y as f64;
+            if !keep[k] {
+                continue;
+            }
+            w_sum += w;
             x += w * p.pos.x as f64;
             y += w * p.pos.y as f64;
             s += w * p.theta.sin() as f64;
             c += w * p.theta.cos() as f64;
         }
-        let (x, y) = (x / total, y / total);
+        let (ax, ay) = (ax / total, ay / total);
         let mut var = 0.0f64;
         for (p, w) in self.particles.iter().zip(&self.weights) {
-            var += w * ((p.pos.x as f64 - x).powi(2) + (p.pos.y as f64 - y).powi(2));
+            var += w * ((p.pos.x as f64 - ax).powi(2) + (p.pos.y as f64 - ay).powi(2));
         }
-        self.estimate = Pose::new(x as f32, y as f32, s.atan2(c) as f32);
+        if w_sum > 0.0 {
+            self.estimate = Pose::new((x / w_sum) as f32, (y / w_sum) as f32, s.atan2(c) as f32);
+        }
         self.spread = (var / total).sqrt() as f32;
     }
+}
+
+/// Side of the square bins clusters are built from (m): particles in touching bins (8
+/// neighbours) belong to one cluster.
+const CLUSTER_BIN: f32 = 0.5;
+
+/// Marks the particles of the cluster holding the most weight.
+fn heaviest_cluster(particles: &[Pose], weights: &[f64]) -> Vec<bool> {
+    use std::collections::BTreeMap;
+    let key = |p: &Pose| {
+        (
+            (p.pos.x / CLUSTER_BIN).floor() as i32,
+            (p.pos.y / CLUSTER_BIN).floor() as i32,
+        )
+    };
+    // A BTreeMap, not a HashMap: ties between clusters must break the same way every run.
+    let mut bins: BTreeMap<(i32, i32), (f64, usize)> = BTreeMap::new();
+    for (p, w) in particles.iter().zip(weights) {
+        bins.entry(key(p)).or_insert((0.0, usize::MAX)).0 += w;
+    }
+    let keys: Vec<(i32, i32)> = bins.keys().copied().collect();
+    let mut cluster_weight: Vec<f64> = Vec::new();
+    for start in keys {
+        if bins[&start].1 != usize::MAX {
+            continue;
+        }
+        let id = cluster_weight.len();
+        let mut weight = 0.0;
+        let mut stack = vec![start];
+        if let Some(b) = bins.get_mut(&start) {
+            b.1 = id;
+        }
+        while let Some((bx, by)) = stack.pop() {
+            weight += bins[&(bx, by)].0;
+            for dx in -1..=1 {
+                for dy in -1..=1 {
+                    if let Some(b) = bins.get_mut(&(bx + dx, by + dy))
+                        && b.1 == usize::MAX
+                    {
+                        b.1 = id;
+                        stack.push((bx + dx, by + dy));
+                    }
+                }
+            }
+        }
+        cluster_weight.push(weight);
+    }
+    let best = cluster_weight
+        .iter()
+        .enumerate()
+        .fold((0, f64::NEG_INFINITY), |acc, (i, w)| {
+            if *w > acc.1 { (i, *w) } else { acc }
+        })
+        .0;
+    particles.iter().map(|p| bins[&key(p)].1 == best).collect()
 }
 
 /// Every how many beams to use so that about `wanted` of `n` are used.

@@ -61,6 +61,7 @@ fn drive(arena: &Arena, laser: bool, ticks: usize, seed: u64) -> (f32, f32) {
                 laser_fov: physics.laser_fov,
                 laser_range: physics.laser_range,
                 landmarks: &marks,
+                movers: &[],
             };
             loc.correct(&obs, &mut rng);
         }
@@ -110,6 +111,7 @@ fn a_stationary_robot_stays_put_and_converges() {
             laser_fov: physics.laser_fov,
             laser_range: physics.laser_range,
             landmarks: &[],
+            movers: &[],
         };
         loc.correct(&obs, &mut rng);
     }

@@ -10,6 +10,7 @@ use parry2d::shape::Polyline;
 
 use std::sync::{Arc, Mutex};
 
+use crate::localise::{LikelihoodField, Settings};
 use crate::sim::AGENT_RADIUS;
 use crate::sim::views::{ViewSpec, ViewTable};
 
@@ -41,7 +42,13 @@ pub struct Arena {
     pub grid: ClearanceGrid,
     /// Candidate-view tables built so far, one per laser setting (see `views.rs`).
     views: Mutex<Vec<Arc<ViewTable>>>,
+    /// Localisation likelihood fields built so far, one per laser model (see `localise`).
+    fields: Mutex<Vec<(FieldKey, Arc<LikelihoodField>)>>,
 }
+
+/// What a likelihood field depends on besides the map: σ_hit, z_hit, z_rand and the laser's
+/// range, as bit patterns (exact equality is what a cache wants).
+type FieldKey = [u32; 4];
 
 impl Arena {
     pub fn new(def: MapDef) -> Arena {
@@ -68,7 +75,27 @@ impl Arena {
             buckets,
             grid,
             views: Mutex::new(Vec::new()),
+            fields: Mutex::new(Vec::new()),
         }
+    }
+
+    /// The localisation likelihood field for these filter settings and laser range, built on
+    /// first use (15 ms on `office`) and shared by every robot of every match on this map.
+    pub fn likelihood_field(&self, settings: &Settings, laser_range: f32) -> Arc<LikelihoodField> {
+        let key = [
+            settings.sigma_hit.to_bits(),
+            settings.z_hit.to_bits(),
+            settings.z_rand.to_bits(),
+            laser_range.to_bits(),
+        ];
+        // A poisoned lock only means another builder panicked; the list itself is intact.
+        let mut fields = self.fields.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some((_, f)) = fields.iter().find(|(k, _)| *k == key) {
+            return f.clone();
+        }
+        let field = Arc::new(LikelihoodField::new(self, settings, laser_range));
+        fields.push((key, field.clone()));
+        field
     }
 
     /// The candidate-view table for `spec`, built on first use and shared afterwards.

@@ -21,11 +21,11 @@ use nalgebra::Point2;
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-use crate::localise::{LandmarkSighting, LikelihoodField, Localiser, Observation};
+use crate::localise::{LandmarkSighting, Localiser, Observation};
 use crate::planner::{PlannerKind, RobotCommand, RobotView, Team, TeamView};
 use crate::sim::arena::Arena;
 use crate::sim::bots::{Bot, BotKind};
-use crate::sim::sensors::{self, Scan};
+use crate::sim::sensors::{self, Detection, Scan};
 use crate::sim::{AGENT_RADIUS, AgentId, Motion, Physics, Pose, TICK_HZ, motion, rules};
 use crate::tracker::{Tracker, TrackerEvent};
 
@@ -67,7 +67,8 @@ pub struct MatchConfig {
     /// Weights of the `coordinated` planner.
     pub coordination: crate::planner::coordinated::Settings,
     /// Robots localise themselves (MCL from odometry, laser and landmarks); when off, each
-    /// robot's estimate is its true pose.
+    /// robot's estimate is its odometry alone (dead reckoning, which drifts). Either way no
+    /// decision reads the true pose.
     pub localisation: bool,
     pub localiser: crate::localise::Settings,
 }
@@ -86,7 +87,7 @@ impl Default for MatchConfig {
             physics: Physics::default(),
             tracker: crate::tracker::Settings::default(),
             coordination: crate::planner::coordinated::Settings::default(),
-            localisation: false,
+            localisation: true,
             localiser: crate::localise::Settings::default(),
         }
     }
@@ -165,8 +166,8 @@ pub struct Event {
 #[derive(Debug, Clone)]
 pub struct Robot {
     pub pose: Pose,
-    /// The robot's own belief about its pose: its localiser's point estimate, or `pose`
-    /// when localisation is off.
+    /// The robot's own belief about its pose: its localiser's point estimate, or its
+    /// odometry when localisation is off. Everything the team decides starts from this.
     pub estimate: Pose,
     /// Standard deviation of the localiser's position belief (m); 0 when off.
     pub spread: f32,
@@ -280,13 +281,9 @@ impl World {
         let mut setup = stream(config.seed, STREAM_SETUP);
         let (robot_starts, opponent_starts) = place_agents(&arena, &config, &mut setup)?;
         let mut rng_localise = stream(config.seed, STREAM_LOCALISE);
-        let field = config.localisation.then(|| {
-            Arc::new(LikelihoodField::new(
-                &arena,
-                &config.localiser,
-                config.physics.laser_range,
-            ))
-        });
+        let field = config
+            .localisation
+            .then(|| arena.likelihood_field(&config.localiser, config.physics.laser_range));
         let robots = robot_starts
             .into_iter()
             .map(|pose| Robot {
@@ -555,17 +552,33 @@ impl World {
     /// what it sensed (the truth stays with the referee).
     fn localise(&mut self) {
         let p = &self.config.physics;
-        for r in &mut self.robots {
+        // Where the team believed its robots were after the last tick: a robot masks the
+        // beams that end on a teammate (it knows their estimates, not where they truly are).
+        let team: Vec<Point2<f32>> = self.robots.iter().map(|r| r.estimate.pos).collect();
+        for (i, r) in self.robots.iter_mut().enumerate() {
             let Some(loc) = r.localiser.as_mut() else {
-                r.estimate = r.pose;
+                r.estimate = r.odometry;
                 continue;
             };
             loc.predict(r.odometry, &mut self.rng_localise);
+            let own = loc.estimate();
+            let mut movers = r.scan.detections.clone();
+            for (j, mate) in team.iter().enumerate() {
+                let d = mate - own.pos;
+                let range = d.norm();
+                if j != i && range > 1e-3 && range < p.laser_range {
+                    movers.push(Detection {
+                        range,
+                        bearing: own.bearing_to(*mate),
+                    });
+                }
+            }
             let obs = Observation {
                 ranges: &r.scan.ranges,
                 laser_fov: p.laser_fov,
                 laser_range: p.laser_range,
                 landmarks: &r.landmarks,
+                movers: &movers,
             };
             loc.correct(&obs, &mut self.rng_localise);
             r.estimate = loc.estimate();
