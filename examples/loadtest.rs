@@ -156,8 +156,18 @@ async fn run(args: Args) -> Result<(), String> {
         None => {
             let maps = lasertag::maps::MapStore::load_dir(&args.maps)
                 .map_err(|e| format!("loading maps: {e}"))?;
-            let registry = lasertag::game::Registry::new(maps);
-            let app = lasertag::http::app(registry, PathBuf::from("web"));
+            // Every spectator comes from 127.0.0.1: lift the per-address and per-match caps
+            // that would otherwise refuse a load test of one machine.
+            let config = lasertag::config::Config {
+                max_connections_per_address: usize::MAX,
+                max_spectators_per_match: usize::MAX,
+                requests_per_s: 1e6,
+                request_burst: 1e6,
+                ..lasertag::config::Config::default()
+            };
+            let registry = lasertag::game::Registry::with_config(maps, config);
+            let app = lasertag::http::app(registry, PathBuf::from("web"))
+                .into_make_service_with_connect_info::<std::net::SocketAddr>();
             let listener = tokio::net::TcpListener::bind("127.0.0.1:0")
                 .await
                 .map_err(|e| e.to_string())?;

@@ -10,11 +10,13 @@
 //! Invariants: a match is a pure function of (map, settings, seed, inputs by tick); robots'
 //! decisions read only what a robot could know; only a match's own task mutates it.
 
+pub mod config;
 pub mod experiment;
 pub mod game;
 pub mod http;
 pub mod localise;
 pub mod maps;
+pub mod metrics;
 pub mod nav;
 pub mod planner;
 pub mod protocol;

@@ -4,6 +4,7 @@ use std::net::SocketAddr;
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::sync::Arc;
+use std::time::Duration;
 
 use clap::{Parser, Subcommand};
 use lasertag::game::Registry;
@@ -123,6 +124,8 @@ struct ServeArgs {
     /// Start without the showcase match.
     #[arg(long, env = "LASERTAG_NO_SHOWCASE")]
     no_showcase: bool,
+    #[command(flatten)]
+    config: lasertag::config::Config,
 }
 
 fn main() -> ExitCode {
@@ -153,7 +156,11 @@ fn main() -> ExitCode {
             return ExitCode::FAILURE;
         }
     };
-    match runtime.block_on(serve(args)) {
+    let result = runtime.block_on(serve(args));
+    // Whatever is still running (a blocking map build, a client that never closed) must not
+    // hold the exit past the shutdown budget.
+    runtime.shutdown_timeout(Duration::from_millis(200));
+    match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("error: {e}");
@@ -162,10 +169,15 @@ fn main() -> ExitCode {
     }
 }
 
+/// From the signal to the end of `serve`: every client told and closed, or given up on.
+/// The process must exit within 5 s of SIGTERM; this leaves room for the rest.
+const SHUTDOWN_BUDGET: Duration = Duration::from_millis(4000);
+
 async fn serve(args: ServeArgs) -> Result<(), String> {
     let maps = MapStore::load_dir(&args.maps).map_err(|e| format!("loading maps: {e}"))?;
     tracing::info!(maps = maps.len(), dir = %args.maps.display(), "maps loaded");
-    let registry = Registry::new(maps);
+    tracing::info!(config = ?args.config, "settings");
+    let registry = Registry::with_config(maps, args.config);
     if !args.no_showcase {
         tokio::spawn(lasertag::game::showcase::keep_running(registry.clone()));
     }
@@ -175,13 +187,42 @@ async fn serve(args: ServeArgs) -> Result<(), String> {
     let local = listener.local_addr().map_err(|e| e.to_string())?;
     tracing::info!("serving http://{local}");
     let app = lasertag::http::app(registry.clone(), args.web);
-    axum::serve(listener, app)
-        .with_graceful_shutdown(shutdown_signal(registry))
-        .await
-        .map_err(|e| format!("server error: {e}"))
+    let server = axum::serve(
+        listener,
+        app.into_make_service_with_connect_info::<SocketAddr>(),
+    )
+    .with_graceful_shutdown(shutdown_signal(registry.clone()))
+    .into_future();
+    tokio::pin!(server);
+    tokio::select! {
+        // Only an accept loop that failed ends before a signal.
+        r = &mut server => return r.map_err(|e| format!("server error: {e}")),
+        _ = registry.shutdown.cancelled() => {}
+    }
+    // The listener is closed and every match told to stop: wait for the HTTP requests in
+    // flight and for the WebSockets to send `finished` and close, within the budget.
+    let deadline = tokio::time::Instant::now() + SHUTDOWN_BUDGET;
+    let drained = tokio::time::timeout_at(deadline, async {
+        let served = (&mut server).await;
+        registry.connections_closed().await;
+        served
+    })
+    .await;
+    match drained {
+        Ok(r) => {
+            tracing::info!("shut down cleanly");
+            r.map_err(|e| format!("server error: {e}"))
+        }
+        Err(_) => {
+            tracing::warn!(
+                "shutdown budget of {SHUTDOWN_BUDGET:?} spent; exiting with connections open"
+            );
+            Ok(())
+        }
+    }
 }
 
-/// Resolves on Ctrl-C or SIGTERM, after telling every match to stop.
+/// Resolves on Ctrl-C or SIGTERM, after telling every match and connection to stop.
 async fn shutdown_signal(registry: Arc<Registry>) {
     let ctrl_c = async {
         let _ = tokio::signal::ctrl_c().await;
@@ -202,7 +243,7 @@ async fn shutdown_signal(registry: Arc<Registry>) {
         _ = terminate => {},
     }
     tracing::info!("shutting down");
-    registry.stop_all().await;
+    registry.begin_shutdown().await;
 }
 
 fn experiment(e: Experiment) -> Result<(), String> {

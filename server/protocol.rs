@@ -460,6 +460,15 @@ fn planner_kind(p: Planner) -> PlannerKind {
     }
 }
 
+/// The planner's name as the API spells it (also the `kind` label of the tick metrics).
+pub fn planner_name(p: PlannerKind) -> &'static str {
+    match p {
+        PlannerKind::Coordinated => "coordinated",
+        PlannerKind::Baseline => "baseline",
+        PlannerKind::Idle => "idle",
+    }
+}
+
 fn planner_dto(p: PlannerKind) -> Planner {
     match p {
         PlannerKind::Coordinated => Planner::Coordinated,
@@ -818,7 +827,8 @@ pub struct EventDto {
     pub name: Option<String>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub winner: Option<Winner>,
-    /// For `finished`: `all_tagged`, `time_limit` or `stopped`.
+    /// For `finished`: `all_tagged`, `time_limit`, `stopped`, `server_shutdown` or
+    /// `abandoned`.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub reason: Option<&'static str>,
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -890,16 +900,23 @@ pub fn event(e: &crate::sim::Event) -> EventDto {
         }
         EventKind::Finished { winner: w, reason } => {
             dto.kind = "finished";
-            dto.winner = winner(Some(*w));
-            dto.reason = Some(match reason {
-                FinishReason::AllTagged => "all_tagged",
-                FinishReason::TimeLimit => "time_limit",
-                FinishReason::Stopped => "stopped",
-            });
+            dto.winner = winner(*w);
+            dto.reason = Some(finish_reason(*reason));
             dto.time_s = Some(e.tick as f64 / TICK_HZ as f64);
         }
     }
     dto
+}
+
+/// The wire name of why a match ended.
+pub fn finish_reason(reason: FinishReason) -> &'static str {
+    match reason {
+        FinishReason::AllTagged => "all_tagged",
+        FinishReason::TimeLimit => "time_limit",
+        FinishReason::Stopped => "stopped",
+        FinishReason::ServerShutdown => "server_shutdown",
+        FinishReason::Abandoned => "abandoned",
+    }
 }
 
 #[derive(Debug, Clone, Serialize, ToSchema)]

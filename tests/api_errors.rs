@@ -508,6 +508,7 @@ async fn the_openapi_document_lists_every_operation() {
         "/api/matches/{id}/events",
         "/api/matches/{id}/opponents/{oid}/command",
         "/api/matches/{id}/players",
+        "/metrics",
     ] {
         assert!(paths.contains_key(p), "{p} is documented");
     }

@@ -7,7 +7,7 @@ use std::path::Path;
 use std::time::Duration;
 
 use common::{Got, TestServer, WsError, duel_map};
-use lasertag::game::GameSettings;
+use lasertag::config::Config;
 use lasertag::maps::MapStore;
 use nalgebra::Point2;
 use serde_json::{Value, json};
@@ -351,8 +351,9 @@ async fn a_player_who_drops_keeps_the_slot_for_the_grace_period() {
 
 #[tokio::test]
 async fn a_slot_is_freed_after_the_grace_period_and_a_bot_comes_back() {
-    let s = TestServer::start_with(GameSettings {
+    let s = TestServer::start_with(Config {
         reconnect_grace: Duration::from_millis(600),
+        ..common::test_config()
     })
     .await;
     // People may take over the bots of this match (as in the showcase).

@@ -96,8 +96,9 @@ export class Game {
         $("hud-status").textContent = `disconnected: ${e.reason}`;
         return;
       }
-      if (this.ended && e.code === 1000) {
-        return; // the match ended and was removed: the end screen stays
+      if (this.ended && (e.code === 1000 || e.code === 1001)) {
+        // The match ended and was removed, or the server shut down: the end screen stays.
+        return;
       }
       // Players keep their opponent for a while: try to come back.
       if (this.retries++ < 20) {
@@ -188,7 +189,9 @@ export class Game {
       case "role_merge": text = `belief: role ${e.from} merged into ${e.role} (${e.count})`; cls = "role"; break;
       case "player_joined": text = `${e.name} joined as ${e.opponent}`; this.names[e.opponent] = e.name; break;
       case "player_left": text = `${e.name} left`; break;
-      case "finished": text = `match over: ${e.winner} win`; break;
+      case "finished":
+        text = e.winner ? `match over: ${e.winner} win` : `match over: ${e.reason.replace("_", " ")}`;
+        break;
     }
     if (!text) return;
     debug.feed.push({ kind: e.kind, text, seq: e.seq });
@@ -220,14 +223,17 @@ export class Game {
   finished(f) {
     this.ended = f;
     debug.ended = f;
-    const won = f.winner === "robots" ? "The robots win" : "The opponents win";
+    const won = f.winner === "robots" ? "The robots win"
+      : f.winner === "opponents" ? "The opponents win" : "Match over";
     const why = {
       all_tagged: `every opponent was tagged after ${fmtTime(f.time_s)}`,
       time_limit: `the opponents held out for ${fmtTime(f.time_s)}`,
       stopped: `the match was stopped at ${fmtTime(f.time_s)}`,
+      server_shutdown: `the server shut down at ${fmtTime(f.time_s)}`,
+      abandoned: `nobody was playing; the match was ended at ${fmtTime(f.time_s)}`,
     }[f.reason] || `at ${fmtTime(f.time_s)}`;
     let you = "";
-    if (this.role === "player") {
+    if (this.role === "player" && f.winner) {
       you = f.winner === "opponents" ? " — you win!" : " — you lose.";
     }
     $("end-title").textContent = won + you;

@@ -11,16 +11,18 @@ mod task;
 
 use std::collections::BTreeMap;
 use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
-use std::sync::{Arc, RwLock};
-use std::time::Duration;
+use std::sync::{Arc, RwLock, Weak};
 
 use tokio::sync::{mpsc, oneshot, watch};
+use tokio_util::sync::CancellationToken;
 
+use crate::config::Config;
 use crate::maps::MapStore;
+use crate::metrics::Metrics;
 use crate::protocol::{self, Belief, Clock, Events, Joined, MatchState, MatchStats, MatchSummary};
 use crate::sim::World;
 use crate::sim::arena::Arena;
-use crate::sim::world::{HumanInput, OpponentOrder};
+use crate::sim::world::{FinishReason, HumanInput, OpponentOrder};
 use snapshot::Frame;
 
 pub use task::{TaskSettings, spawn_match};
@@ -75,8 +77,8 @@ pub enum Request {
         generation: u64,
         input: HumanInput,
     },
-    /// End the match (it was deleted or the server is shutting down).
-    Stop,
+    /// End the match for this reason (deleted, or the server is shutting down) and its task.
+    Stop(FinishReason),
 }
 
 /// A connection's place at a match: the opponent slot it plays.
@@ -98,6 +100,29 @@ pub struct Hub {
     pub frames: watch::Receiver<Arc<Frame>>,
     pub arena: Arc<Arena>,
     pub spectators: Arc<AtomicUsize>,
+}
+
+impl Hub {
+    /// Counts one more spectator unless there are `max` already; the count falls back when
+    /// the returned guard is dropped.
+    pub fn add_spectator(&self, max: usize) -> Option<SpectatorSeat> {
+        self.spectators
+            .fetch_update(Ordering::AcqRel, Ordering::Acquire, |n| {
+                (n < max).then_some(n + 1)
+            })
+            .ok()
+            .map(|_| SpectatorSeat(self.spectators.clone()))
+    }
+}
+
+/// A spectator counted in its match's [`Hub`] for as long as it lives.
+#[derive(Debug)]
+pub struct SpectatorSeat(Arc<AtomicUsize>);
+
+impl Drop for SpectatorSeat {
+    fn drop(&mut self) {
+        self.0.fetch_sub(1, Ordering::AcqRel);
+    }
 }
 
 /// The way to one match's task.
@@ -177,57 +202,109 @@ impl MatchHandle {
             .is_ok()
     }
 
-    pub async fn stop(&self) {
-        let _ = self.tx.send(Request::Stop).await;
+    /// Ends the match (for `reason`) and its task.
+    pub async fn stop(&self, reason: FinishReason) {
+        let _ = self.tx.send(Request::Stop(reason)).await;
     }
 }
 
-/// Settings of the server's matches that are not part of a match's own settings.
-#[derive(Debug, Clone)]
-pub struct GameSettings {
-    /// How long a player who dropped may take to come back with the same token (30 s).
-    pub reconnect_grace: Duration,
-}
+type Matches = RwLock<BTreeMap<String, MatchHandle>>;
 
-impl Default for GameSettings {
-    fn default() -> Self {
-        GameSettings {
-            reconnect_grace: Duration::from_secs(30),
-        }
-    }
-}
-
-/// Everything the server shares between requests: the maps and the running matches.
+/// Everything the server shares between requests: its settings, metrics, the maps and the
+/// running matches, and the signal that it is shutting down.
 #[derive(Debug, Default)]
 pub struct Registry {
     pub maps: RwLock<MapStore>,
-    pub settings: GameSettings,
-    matches: RwLock<BTreeMap<String, MatchHandle>>,
+    pub config: Config,
+    pub metrics: Metrics,
+    /// Cancelled when the server starts shutting down.
+    pub shutdown: CancellationToken,
+    /// WebSocket connections open now (shutdown waits for it to reach 0).
+    connections: watch::Sender<usize>,
+    matches: Arc<Matches>,
     next_order: AtomicU64,
+}
+
+/// Counts an open WebSocket connection until dropped.
+#[derive(Debug)]
+pub struct ConnectionGuard(watch::Sender<usize>);
+
+impl Drop for ConnectionGuard {
+    fn drop(&mut self) {
+        self.0.send_modify(|n| *n = n.saturating_sub(1));
+    }
 }
 
 impl Registry {
     pub fn new(maps: MapStore) -> Arc<Registry> {
-        Registry::with_settings(maps, GameSettings::default())
+        Registry::with_config(maps, Config::default())
     }
 
-    pub fn with_settings(maps: MapStore, settings: GameSettings) -> Arc<Registry> {
+    pub fn with_config(maps: MapStore, config: Config) -> Arc<Registry> {
         Arc::new(Registry {
             maps: RwLock::new(maps),
-            settings,
+            config,
             ..Registry::default()
         })
     }
 
-    /// Starts a task for `world` and registers it.
+    /// Starts a task for `world` and registers it, whatever the number of matches (the
+    /// showcase's way in; requests go through [`Registry::try_start`]).
     pub fn start(&self, world: World, meta: protocol::MatchMeta) -> MatchHandle {
+        let mut matches = self.matches.write().unwrap_or_else(|e| e.into_inner());
+        self.start_locked(&mut matches, world, meta)
+    }
+
+    /// Starts a match unless the server holds `config.max_matches` already.
+    pub fn try_start(
+        &self,
+        world: World,
+        meta: protocol::MatchMeta,
+    ) -> Result<MatchHandle, MatchesFull> {
+        let mut matches = self.matches.write().unwrap_or_else(|e| e.into_inner());
+        if matches.len() >= self.config.max_matches {
+            self.metrics.refuse(crate::metrics::Refusal::MatchesFull);
+            return Err(MatchesFull(self.config.max_matches));
+        }
+        Ok(self.start_locked(&mut matches, world, meta))
+    }
+
+    /// Whether a new match would be let in now (a cheap check before building one).
+    pub fn has_room(&self) -> Result<(), MatchesFull> {
+        if self.len() >= self.config.max_matches {
+            self.metrics.refuse(crate::metrics::Refusal::MatchesFull);
+            return Err(MatchesFull(self.config.max_matches));
+        }
+        Ok(())
+    }
+
+    fn start_locked(
+        &self,
+        matches: &mut BTreeMap<String, MatchHandle>,
+        world: World,
+        meta: protocol::MatchMeta,
+    ) -> MatchHandle {
         let id = meta.id.clone();
         let clock = meta.clock;
+        let on_exit = {
+            let matches: Weak<Matches> = Arc::downgrade(&self.matches);
+            let id = id.clone();
+            move || {
+                if let Some(m) = matches.upgrade() {
+                    m.write().unwrap_or_else(|e| e.into_inner()).remove(&id);
+                }
+            }
+        };
         let (tx, hub) = spawn_match(
             world,
             meta,
             TaskSettings {
-                reconnect_grace: self.settings.reconnect_grace,
+                reconnect_grace: self.config.reconnect_grace,
+                finished_grace: self.config.finished_grace,
+                abandoned_after: self.config.abandoned_after,
+                max_players: self.config.max_players_per_match,
+                metrics: self.metrics.clone(),
+                on_exit: Box::new(on_exit),
             },
         );
         let handle = MatchHandle {
@@ -237,11 +314,53 @@ impl Registry {
             hub,
             tx,
         };
-        self.matches
-            .write()
-            .unwrap_or_else(|e| e.into_inner())
-            .insert(id, handle.clone());
+        matches.insert(id, handle.clone());
         handle
+    }
+
+    /// Matches held now.
+    pub fn len(&self) -> usize {
+        self.matches.read().unwrap_or_else(|e| e.into_inner()).len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// Counts a WebSocket connection until the guard is dropped.
+    pub fn connection(&self) -> ConnectionGuard {
+        self.connections.send_modify(|n| *n += 1);
+        ConnectionGuard(self.connections.clone())
+    }
+
+    /// Resolves when no WebSocket connection is open.
+    pub async fn connections_closed(&self) {
+        let mut rx = self.connections.subscribe();
+        let _ = rx.wait_for(|n| *n == 0).await;
+    }
+
+    /// Starts shutting down: cancels [`Registry::shutdown`] and ends every match with reason
+    /// `server_shutdown` (their connections send `finished` and close).
+    pub async fn begin_shutdown(&self) {
+        self.shutdown.cancel();
+        for h in self.all() {
+            h.stop(FinishReason::ServerShutdown).await;
+        }
+    }
+
+    /// Refreshes the gauges that are read from the matches themselves.
+    pub fn refresh_metrics(&self) {
+        let (mut running, mut finished) = (0, 0);
+        for h in self.all() {
+            if h.hub.frames.borrow().status == crate::sim::MatchStatus::Finished {
+                finished += 1;
+            } else {
+                running += 1;
+            }
+        }
+        let m = &self.metrics.matches;
+        m.with_label_values(&["running"]).set(running);
+        m.with_label_values(&["finished"]).set(finished);
     }
 
     pub fn get(&self, id: &str) -> Option<MatchHandle> {
@@ -274,19 +393,21 @@ impl Registry {
             .remove(id);
         match handle {
             Some(h) => {
-                h.stop().await;
+                self.metrics
+                    .matches_removed
+                    .with_label_values(&["deleted"])
+                    .inc();
+                h.stop(FinishReason::Stopped).await;
                 true
             }
             None => false,
         }
     }
-
-    pub async fn stop_all(&self) {
-        for h in self.all() {
-            h.stop().await;
-        }
-    }
 }
+
+/// The server holds its most matches (the number).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct MatchesFull(pub usize);
 
 /// A fresh random identifier of `bytes` random bytes, hex-encoded (ids and secret tokens).
 pub fn random_id(bytes: usize) -> String {

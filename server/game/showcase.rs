@@ -63,6 +63,9 @@ pub async fn keep_running(registry: Arc<Registry>) {
     };
     loop {
         tokio::time::sleep(Duration::from_secs(2)).await;
+        if registry.shutdown.is_cancelled() {
+            return; // no new showcase while the server stops
+        }
         let finished = match registry.get(&id) {
             Some(h) => matches!(h.summary().await, Ok(s) if s.status == Status::Finished),
             None => true, // deleted by someone: bring it back

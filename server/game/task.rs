@@ -15,8 +15,9 @@ use tracing::Instrument;
 
 use crate::game::snapshot::{BELIEF_EVERY, Frame};
 use crate::game::{Hub, MatchError, Request, Seat, random_id};
+use crate::metrics::{Metrics, Refusal, TickHistograms};
 use crate::protocol::{self, Clock, Joined, MatchMeta, MatchState, MatchStats};
-use crate::sim::world::{Control, HumanInput};
+use crate::sim::world::{Control, FinishReason, HumanInput, StepMark};
 use crate::sim::{MatchStatus, TICK_HZ, World};
 
 /// Ticks a manual step runs before it lets other requests in.
@@ -55,10 +56,29 @@ struct PendingStep {
 }
 
 /// What a match task needs from the shell besides its world.
-#[derive(Debug, Clone)]
 pub struct TaskSettings {
     /// How long a dropped player may take to come back before the slot is freed.
     pub reconnect_grace: Duration,
+    /// How long a finished match stays before its task ends (and `on_exit` unregisters it).
+    pub finished_grace: Duration,
+    /// How long a match with human slots may go without any client before it is ended.
+    pub abandoned_after: Duration,
+    /// People who may hold a slot at once.
+    pub max_players: usize,
+    pub metrics: Metrics,
+    /// Called once when the task ends by itself (cleaned up, abandoned): unregisters it.
+    pub on_exit: Box<dyn FnOnce() + Send>,
+}
+
+impl std::fmt::Debug for TaskSettings {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("TaskSettings")
+            .field("reconnect_grace", &self.reconnect_grace)
+            .field("finished_grace", &self.finished_grace)
+            .field("abandoned_after", &self.abandoned_after)
+            .field("max_players", &self.max_players)
+            .finish_non_exhaustive()
+    }
 }
 
 /// Spawns the task for `world` and returns the channel to it and the viewers' hub. The task
@@ -80,8 +100,18 @@ pub fn spawn_match(
     let handle = match_runtime()
         .cloned()
         .unwrap_or_else(tokio::runtime::Handle::current);
+    let kind = protocol::planner_name(world.team.kind());
+    let clock = match meta.clock {
+        Clock::Realtime => "realtime",
+        Clock::Manual => "manual",
+    };
+    let histograms = settings.metrics.tick_histograms(kind, clock);
+    let now = Instant::now();
     let task = MatchTask {
         players: (0..world.opponents.len()).map(|_| None).collect(),
+        finished_at: None,
+        last_activity: now,
+        histograms,
         world,
         meta,
         settings,
@@ -122,6 +152,11 @@ fn match_runtime() -> Option<&'static tokio::runtime::Handle> {
 
 struct MatchTask {
     world: World,
+    /// When the world was first seen finished (for the clean-up grace).
+    finished_at: Option<Instant>,
+    /// The last time a request came or a client was connected (for abandonment).
+    last_activity: Instant,
+    histograms: TickHistograms,
     meta: MatchMeta,
     settings: TaskSettings,
     players: Vec<Option<Player>>,
@@ -156,10 +191,13 @@ impl MatchTask {
                 biased;
                 req = rx.recv() => {
                     let Some(req) = req else { break };
-                    if let Request::Stop = req {
-                        self.world.stop();
+                    if let Request::Stop(reason) = req {
+                        self.world.stop_because(reason);
                         self.publish();
                         break;
+                    }
+                    if !matches!(req, Request::Input { .. }) {
+                        self.last_activity = Instant::now();
                     }
                     self.answer(req, realtime, &mut pending);
                 }
@@ -167,9 +205,10 @@ impl MatchTask {
                     let now = Instant::now();
                     if last_tick.is_some_and(|t| now - t > period + period / 2) {
                         self.late_ticks += 1;
+                        self.settings.metrics.late_ticks.inc();
                     }
                     last_tick = Some(now);
-                    self.world.step();
+                    self.step();
                     self.publish();
                     self.record(now.elapsed());
                     if self.world.status == MatchStatus::Finished {
@@ -181,7 +220,7 @@ impl MatchTask {
                         let n = step.remaining.min(STEP_CHUNK);
                         for _ in 0..n {
                             let t = Instant::now();
-                            self.world.step();
+                            self.step();
                             self.record(t.elapsed());
                             if self.world.status == MatchStatus::Finished {
                                 break;
@@ -197,16 +236,46 @@ impl MatchTask {
                         }
                     }
                 }
-                _ = housekeeping.tick() => self.housekeeping(),
+                _ = housekeeping.tick() => {
+                    if let Some(why) = self.housekeeping() {
+                        self.settings.metrics.matches_removed.with_label_values(&[why]).inc();
+                        let on_exit = std::mem::replace(&mut self.settings.on_exit, Box::new(|| {}));
+                        on_exit();
+                        break;
+                    }
+                }
             }
         }
         tracing::info!(tick = self.world.tick, "match ended");
     }
 
+    /// One tick of the world, its team's halves timed into the metrics.
+    fn step(&mut self) {
+        let mut started: Option<Instant> = None;
+        let h = &self.histograms;
+        self.world.step_marked(&mut |m| {
+            let now = Instant::now();
+            match m {
+                StepMark::Tracker => {}
+                StepMark::Planner => {
+                    if let Some(t) = started {
+                        h.tracker.observe((now - t).as_secs_f64());
+                    }
+                }
+                StepMark::Planned => {
+                    if let Some(t) = started {
+                        h.planner.observe((now - t).as_secs_f64());
+                    }
+                }
+            }
+            started = Some(now);
+        });
+    }
+
     fn answer(&mut self, req: Request, realtime: bool, pending: &mut Option<PendingStep>) {
         let id = self.meta.id.clone();
         match req {
-            Request::Stop => {}
+            Request::Stop(_) => {}
             Request::Summary(reply) => {
                 self.refresh_meta();
                 let _ = reply.send(protocol::summary(&self.world, &self.meta));
@@ -338,6 +407,7 @@ impl MatchTask {
     }
 
     fn record(&mut self, took: Duration) {
+        self.histograms.tick.observe(took.as_secs_f64());
         let us = took.as_micros().min(u32::MAX as u128) as u32;
         if self.tick_us.len() < TICK_WINDOW {
             self.tick_us.push(us);
@@ -412,6 +482,13 @@ impl MatchTask {
         if self.world.status == MatchStatus::Finished {
             return Err(MatchError::Conflict(format!("match {id} has finished")));
         }
+        let max = self.settings.max_players;
+        if self.players.iter().flatten().count() >= max {
+            self.settings.metrics.refuse(Refusal::PlayersFull);
+            return Err(MatchError::Conflict(format!(
+                "players: match {id} is at this server's limit of {max} per match"
+            )));
+        }
         let slot = (0..self.players.len())
             .find(|&i| self.slot_free(i))
             .ok_or_else(|| MatchError::Conflict(format!("match {id} has no free opponent slot")))?;
@@ -473,9 +550,25 @@ impl MatchTask {
         })
     }
 
-    /// Notices dropped players (they stand still) and frees the slots of those gone too long.
-    fn housekeeping(&mut self) {
+    /// Notices dropped players (they stand still), frees the slots of those gone too long,
+    /// and says when the match should go: `finished` (its grace is over) or `abandoned`.
+    fn housekeeping(&mut self) -> Option<&'static str> {
         let now = Instant::now();
+        if self.world.status == MatchStatus::Finished {
+            let at = *self.finished_at.get_or_insert(now);
+            if now - at >= self.settings.finished_grace {
+                tracing::info!("removing the match: finished {:?} ago", now - at);
+                return Some("finished");
+            }
+        } else if self.abandoned(now) {
+            tracing::info!(
+                "ending the match: abandoned (no client for {:?})",
+                now - self.last_activity
+            );
+            self.world.stop_because(FinishReason::Abandoned);
+            self.publish();
+            return Some("abandoned");
+        }
         let mut changed = false;
         for slot in 0..self.players.len() {
             let Some(p) = self.players[slot].as_mut() else {
@@ -503,6 +596,28 @@ impl MatchTask {
         if changed {
             self.publish();
         }
+        None
+    }
+
+    /// A match is abandoned when it has human-controlled opponents and for
+    /// `abandoned_after` nobody has been connected (player or spectator) and no request has
+    /// come for it. Matches of bots and API-driven opponents are never abandoned: headless
+    /// users may run them unattended until their time limit.
+    fn abandoned(&mut self, now: Instant) -> bool {
+        let human = self
+            .world
+            .opponents
+            .iter()
+            .any(|o| matches!(o.control, Control::Human(_)));
+        if !human {
+            return false;
+        }
+        let someone = self.spectators.load(Ordering::Relaxed) > 0
+            || self.players.iter().flatten().any(Player::connected);
+        if someone {
+            self.last_activity = now;
+        }
+        now - self.last_activity >= self.settings.abandoned_after
     }
 }
 

@@ -6,25 +6,27 @@ use axum::body::Body;
 use axum::extract::{FromRequest, Request};
 use serde::de::DeserializeOwned;
 
-use crate::http::{ApiError, MAX_BODY_BYTES};
+use crate::http::{ApiError, AppState};
+use crate::metrics::Refusal;
 use crate::protocol;
 
 pub struct JsonBody<T>(pub T);
 
-impl<S, T> FromRequest<S> for JsonBody<T>
+impl<T> FromRequest<AppState> for JsonBody<T>
 where
-    S: Send + Sync,
     T: DeserializeOwned,
 {
     type Rejection = ApiError;
 
-    async fn from_request(req: Request<Body>, _state: &S) -> Result<Self, Self::Rejection> {
-        let bytes = axum::body::to_bytes(req.into_body(), MAX_BODY_BYTES)
+    async fn from_request(req: Request<Body>, state: &AppState) -> Result<Self, Self::Rejection> {
+        let max = state.registry.config.max_body_bytes;
+        let bytes = axum::body::to_bytes(req.into_body(), max)
             .await
             .map_err(|_| {
+                state.registry.metrics.refuse(Refusal::BodyTooLarge);
                 ApiError::new(
                     axum::http::StatusCode::PAYLOAD_TOO_LARGE,
-                    format!("body: larger than the limit of {MAX_BODY_BYTES} bytes"),
+                    format!("body: larger than the limit of {max} bytes"),
                 )
             })?;
         protocol::parse(&bytes)

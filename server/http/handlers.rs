@@ -8,10 +8,11 @@ use axum::extract::{Path, Query, State};
 use axum::http::StatusCode;
 use axum::response::IntoResponse;
 
-use crate::game::{MatchHandle, random_id};
+use crate::game::{MatchHandle, MatchesFull, random_id};
 use crate::http::body::JsonBody;
 use crate::http::{ApiError, AppState};
 use crate::maps::{self, MapFile};
+use crate::metrics::Refusal;
 use crate::protocol::{
     Belief, CreateMatch, ErrorBody, Events, Health, JoinRequest, Joined, MapInfo, MatchMeta,
     MatchState, MatchStats, MatchSummary, OpponentCommand, StepRequest,
@@ -29,6 +30,16 @@ async fn build_arena(def: MapDef) -> Result<Arc<Arena>, ApiError> {
                 format!("building the map failed: {e}"),
             )
         })
+}
+
+fn matches_full(full: MatchesFull) -> ApiError {
+    ApiError::new(
+        StatusCode::SERVICE_UNAVAILABLE,
+        format!(
+            "the server holds {} matches, its most; try again when one has finished (finished matches are removed after a grace period)",
+            full.0
+        ),
+    )
 }
 
 fn find(state: &AppState, id: &str) -> Result<MatchHandle, ApiError> {
@@ -131,12 +142,35 @@ pub async fn list_matches(State(state): State<AppState>) -> Json<Vec<MatchSummar
 
 #[utoipa::path(post, path = "/api/matches", request_body = CreateMatch,
     responses((status = 201, body = MatchSummary), (status = 400, body = ErrorBody), (status = 404, body = ErrorBody),
-              (status = 413, body = ErrorBody)))]
+              (status = 413, body = ErrorBody), (status = 429, body = ErrorBody), (status = 503, body = ErrorBody)))]
 pub async fn create_match(
     State(state): State<AppState>,
     JsonBody(body): JsonBody<CreateMatch>,
 ) -> Result<impl IntoResponse, ApiError> {
     let req = body.validate().map_err(ApiError::bad_request)?;
+    let cfg = &state.registry.config;
+    let metrics = &state.registry.metrics;
+    let agents = req.config.robots + req.config.opponents;
+    if agents > cfg.max_agents_per_match {
+        metrics.refuse(Refusal::TooManyAgents);
+        return Err(ApiError::bad_request(format!(
+            "robots + opponents: {} + {} = {agents} agents is over this server's limit of {} per match",
+            req.config.robots, req.config.opponents, cfg.max_agents_per_match
+        )));
+    }
+    // The tracker holds at most one role per opponent.
+    let particles = req.config.tracker.particles_per_role * req.config.opponents;
+    if particles > cfg.max_particles_per_match {
+        metrics.refuse(Refusal::TooManyParticles);
+        return Err(ApiError::bad_request(format!(
+            "tracker.particles_per_role: {} per role × {} opponents = {particles} particles is over this server's limit of {} per match",
+            req.config.tracker.particles_per_role,
+            req.config.opponents,
+            cfg.max_particles_per_match
+        )));
+    }
+    // Refused before the world is built; `try_start` checks again under the lock.
+    state.registry.has_room().map_err(matches_full)?;
     let arena: Arc<Arena> = match req.map {
         serde_json::Value::String(name) => {
             let maps = state
@@ -186,7 +220,10 @@ pub async fn create_match(
         free_slots: 0,
         bots_joinable: req.bots_joinable,
     };
-    let handle = state.registry.start(world, meta);
+    let handle = state
+        .registry
+        .try_start(world, meta)
+        .map_err(matches_full)?;
     // Asked of the task so that fields it owns (free slots) are filled in.
     let summary = handle.summary().await?;
     Ok((StatusCode::CREATED, Json(summary)))
@@ -276,7 +313,7 @@ pub async fn command(
 
 #[utoipa::path(post, path = "/api/matches/{id}/players", params(("id" = String, Path)), request_body = JoinRequest,
     responses((status = 201, body = Joined), (status = 400, body = ErrorBody), (status = 404, body = ErrorBody),
-              (status = 409, body = ErrorBody)))]
+              (status = 409, body = ErrorBody, description = "no free slot, or the match is at the server's limit of players")))]
 pub async fn join(
     State(state): State<AppState>,
     Path(id): Path<String>,

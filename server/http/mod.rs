@@ -5,6 +5,7 @@
 mod body;
 mod error;
 mod handlers;
+pub mod limits;
 mod openapi;
 pub mod ws;
 
@@ -12,9 +13,10 @@ use std::path::PathBuf;
 use std::sync::Arc;
 
 use axum::Router;
-use axum::extract::{DefaultBodyLimit, OriginalUri};
+use axum::extract::{DefaultBodyLimit, OriginalUri, State};
 use axum::handler::HandlerWithoutStateExt;
-use axum::http::StatusCode;
+use axum::http::{StatusCode, header};
+use axum::response::IntoResponse;
 use axum::routing::{get, post};
 use tower_http::compression::CompressionLayer;
 use tower_http::services::ServeDir;
@@ -23,19 +25,23 @@ use tower_http::trace::TraceLayer;
 use crate::game::Registry;
 pub use error::ApiError;
 
-/// Largest request body accepted (413 past it).
-pub const MAX_BODY_BYTES: usize = 1 << 20;
-
 /// What every handler shares.
 #[derive(Debug, Clone)]
 pub struct AppState {
     pub registry: Arc<Registry>,
+    pub limits: Arc<limits::AddressLimits>,
 }
 
-/// The whole HTTP surface: the API under `/api`, WebSockets under `/ws`, the static client
-/// everywhere else.
+/// The whole HTTP surface: the API under `/api`, WebSockets under `/ws`, metrics at
+/// `/metrics`, the static client everywhere else. The limits and settings are the registry's
+/// `config`. Serve it with `into_make_service_with_connect_info::<SocketAddr>()`: the
+/// per-address limits key on the peer's address.
 pub fn app(registry: Arc<Registry>, web_dir: PathBuf) -> Router {
-    let state = AppState { registry };
+    let max_body = registry.config.max_body_bytes;
+    let state = AppState {
+        registry,
+        limits: Arc::default(),
+    };
     let api = Router::new()
         .route("/health", get(handlers::health))
         .route("/openapi.json", get(openapi::document))
@@ -64,13 +70,34 @@ pub fn app(registry: Arc<Registry>, web_dir: PathBuf) -> Router {
     Router::new()
         .nest("/api", api)
         .route("/ws/matches/{id}", get(ws::upgrade))
+        .route("/metrics", get(metrics))
         .fallback_service(static_files)
         // Bodies are read (and limited) by `JsonBody`; this layer is the outer guard so a huge
         // upload is cut off even on routes that do not read bodies.
-        .layer(DefaultBodyLimit::max(MAX_BODY_BYTES))
+        .layer(DefaultBodyLimit::max(max_body))
         .layer(CompressionLayer::new())
+        // Outside compression and the routes: a refused request costs almost nothing.
+        .layer(axum::middleware::from_fn_with_state(
+            state.clone(),
+            limits::rate_limit,
+        ))
         .layer(TraceLayer::new_for_http())
         .with_state(state)
+}
+
+/// `GET /metrics`: every metric family in the Prometheus text format (version 0.0.4).
+#[utoipa::path(get, path = "/metrics",
+    description = "Prometheus text format: lasertag_matches{state}, lasertag_clients{role}, lasertag_tick_seconds{kind,clock}, lasertag_tracker_seconds{kind}, lasertag_planner_seconds{kind}, lasertag_snapshot_bytes_total{role}, lasertag_refused_total{reason}, lasertag_matches_removed_total{reason}, lasertag_late_ticks_total.",
+    responses((status = 200, content_type = "text/plain", body = String)))]
+pub async fn metrics(State(state): State<AppState>) -> impl IntoResponse {
+    state.registry.refresh_metrics();
+    (
+        [(
+            header::CONTENT_TYPE,
+            "text/plain; version=0.0.4; charset=utf-8",
+        )],
+        state.registry.metrics.render(),
+    )
 }
 
 async fn not_found(OriginalUri(uri): OriginalUri) -> ApiError {

@@ -12,7 +12,7 @@ use crate::protocol::*;
 #[openapi(
     info(
         title = "lasertag",
-        description = "Robots play laser tag against people: the HTTP API. Play and spectate over the WebSocket `GET /ws/matches/{id}` (`?token=` to play); its messages are described in the project's README."
+        description = "Robots play laser tag against people: the HTTP API. Play and spectate over the WebSocket `GET /ws/matches/{id}` (`?token=` to play); its messages are described in the project's README. Every endpoint may answer 429 (too many requests from one address, with Retry-After); the server's limits are its command-line settings (README, Configuration)."
     ),
     paths(
         handlers::health,
@@ -29,6 +29,7 @@ use crate::protocol::*;
         handlers::command,
         handlers::join,
         handlers::stats,
+        crate::http::metrics,
     ),
     components(schemas(
         ErrorBody,

@@ -10,29 +10,25 @@
 //! reason (close code 1008).
 
 use std::collections::HashMap;
-use std::sync::Arc;
-use std::sync::atomic::{AtomicUsize, Ordering};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use axum::extract::ws::{CloseFrame, Message, Utf8Bytes, WebSocket, WebSocketUpgrade};
 use axum::extract::{Path, Query, State};
+use axum::http::StatusCode;
 use axum::response::Response;
+use tokio_util::sync::CancellationToken;
+use tracing::Instrument;
 
+use crate::config::Config;
 use crate::game::snapshot::{BELIEF_EVERY, Frame, visible_to};
-use crate::game::{MatchHandle, Seat};
+use crate::game::{ConnectionGuard, MatchHandle, Seat, SpectatorSeat};
+use crate::http::limits::{AddressConnection, Bucket, ClientIp};
 use crate::http::{ApiError, AppState};
+use crate::metrics::{ClientGuard, Metrics, Refusal};
 use crate::protocol::ws::{self as wire, ClientMessage, Limits, Welcome};
 use crate::sim::MatchStatus;
 use crate::sim::world::HumanInput;
 
-/// Largest message a client may send (the spec's 4 KiB); bigger ones get an `error`.
-pub const MAX_MESSAGE_BYTES: usize = 4096;
-/// Messages past this size are not even read: the connection is closed (code 1009).
-pub const HARD_MESSAGE_BYTES: usize = 64 * 1024;
-/// Sustained messages per second a client may send (input at 20 Hz plus pings fit easily).
-pub const MESSAGES_PER_S: f64 = 30.0;
-/// Messages a client may send at once.
-pub const MESSAGE_BURST: f64 = 40.0;
 /// Bad messages tolerated in a row before the connection is closed...
 pub const STRIKES: f64 = 10.0;
 /// ...recovering one strike every this many seconds.
@@ -42,19 +38,30 @@ pub const SEND_TIMEOUT: Duration = Duration::from_secs(10);
 
 /// How long a closing connection waits for the client's close reply.
 const CLOSE_DRAIN: Duration = Duration::from_secs(3);
-/// Close code for a policy violation (RFC 6455).
+/// ...and when the server is shutting down (it has 5 s in all).
+const SHUTDOWN_DRAIN: Duration = Duration::from_secs(1);
+/// Close codes (RFC 6455): policy violation, message too big, normal, going away.
 const POLICY: u16 = 1008;
 const TOO_BIG: u16 = 1009;
 const NORMAL: u16 = 1000;
+const GOING_AWAY: u16 = 1001;
 
 pub async fn upgrade(
     State(state): State<AppState>,
     Path(id): Path<String>,
     Query(query): Query<HashMap<String, String>>,
+    ClientIp(ip): ClientIp,
     ws: Result<WebSocketUpgrade, axum::extract::ws::rejection::WebSocketUpgradeRejection>,
 ) -> Result<Response, ApiError> {
-    let handle = state
-        .registry
+    let registry = &state.registry;
+    let cfg = &registry.config;
+    if registry.shutdown.is_cancelled() {
+        return Err(ApiError::new(
+            StatusCode::SERVICE_UNAVAILABLE,
+            "the server is shutting down",
+        ));
+    }
+    let handle = registry
         .get(&id)
         .ok_or_else(|| ApiError::not_found(format!("no match {id}")))?;
     if let Some(k) = query.keys().find(|k| k.as_str() != "token") {
@@ -68,60 +75,74 @@ pub async fn upgrade(
             format!("not a WebSocket upgrade: {e}"),
         )
     })?;
-    // A bad token is refused here, before the upgrade (401).
-    let seat = match query.get("token") {
-        Some(token) => Some(handle.connect(token.clone()).await?),
-        None => None,
+    let Some(address) = state
+        .limits
+        .open_connection(ip, cfg.max_connections_per_address)
+    else {
+        registry.metrics.refuse(Refusal::ConnectionsPerAddress);
+        return Err(ApiError::new(
+            StatusCode::TOO_MANY_REQUESTS,
+            format!(
+                "too many connections from {ip}: at most {} WebSockets open at once per address",
+                cfg.max_connections_per_address
+            ),
+        ));
     };
-    let grace = state.registry.settings.reconnect_grace;
+    // A bad token is refused here, before the upgrade (401); so is a spectator past the cap.
+    let seat = match query.get("token") {
+        Some(token) => Seated::Player(handle.connect(token.clone()).await?),
+        None => match handle.hub.add_spectator(cfg.max_spectators_per_match) {
+            Some(s) => Seated::Spectator(s),
+            None => {
+                registry.metrics.refuse(Refusal::SpectatorsFull);
+                return Err(ApiError::new(
+                    StatusCode::SERVICE_UNAVAILABLE,
+                    format!(
+                        "spectators: match {id} is at this server's limit of {} per match",
+                        cfg.max_spectators_per_match
+                    ),
+                ));
+            }
+        },
+    };
+    let role = match seat {
+        Seated::Player(_) => "player",
+        Seated::Spectator(_) => "spectator",
+    };
+    let span = tracing::info_span!("ws", match_id = %id, role, %ip);
+    let registry = state.registry.clone();
+    let hard = cfg.hard_message_bytes();
     Ok(ws
-        .max_message_size(HARD_MESSAGE_BYTES)
-        .max_frame_size(HARD_MESSAGE_BYTES)
-        .on_upgrade(move |socket| async move {
-            Connection::new(socket, handle, seat, grace).run().await;
+        .max_message_size(hard)
+        .max_frame_size(hard)
+        .on_upgrade(move |socket| {
+            async move {
+                tracing::debug!("connected");
+                let guards = Guards {
+                    _address: address,
+                    _open: registry.connection(),
+                    _client: registry.metrics.client(role),
+                };
+                Connection::new(socket, handle, seat, &registry, guards)
+                    .run()
+                    .await;
+                tracing::debug!("disconnected");
+            }
+            .instrument(span)
         }))
 }
 
-/// A token bucket: `capacity` at once, refilled at `rate` per second.
-#[derive(Debug, Clone)]
-struct Bucket {
-    tokens: f64,
-    capacity: f64,
-    rate: f64,
-    last: Instant,
+/// What the connection plays: an opponent slot, or a counted spectator's place.
+enum Seated {
+    Player(Seat),
+    Spectator(SpectatorSeat),
 }
 
-impl Bucket {
-    fn new(capacity: f64, rate: f64) -> Bucket {
-        Bucket {
-            tokens: capacity,
-            capacity,
-            rate,
-            last: Instant::now(),
-        }
-    }
-
-    fn take(&mut self) -> bool {
-        let now = Instant::now();
-        self.tokens =
-            (self.tokens + (now - self.last).as_secs_f64() * self.rate).min(self.capacity);
-        self.last = now;
-        if self.tokens >= 1.0 {
-            self.tokens -= 1.0;
-            true
-        } else {
-            false
-        }
-    }
-}
-
-/// Counts a spectator for as long as it lives.
-struct SpectatorCount(Arc<AtomicUsize>);
-
-impl Drop for SpectatorCount {
-    fn drop(&mut self) {
-        self.0.fetch_sub(1, Ordering::Relaxed);
-    }
+/// Counts a connection holds until it ends: per address, open (for shutdown), per role.
+struct Guards {
+    _address: AddressConnection,
+    _open: ConnectionGuard,
+    _client: ClientGuard,
 }
 
 /// Why a connection ends.
@@ -136,38 +157,62 @@ struct Connection {
     socket: WebSocket,
     handle: MatchHandle,
     seat: Option<Seat>,
-    grace: Duration,
+    config: Config,
+    metrics: Metrics,
+    shutdown: CancellationToken,
+    role: &'static str,
     belief: bool,
     last_seq: u64,
     finished_sent: bool,
     messages: Bucket,
     strikes: Bucket,
-    _spectator: Option<SpectatorCount>,
+    _spectator: Option<SpectatorSeat>,
+    _guards: Guards,
 }
 
 impl Connection {
-    fn new(socket: WebSocket, handle: MatchHandle, seat: Option<Seat>, grace: Duration) -> Self {
-        let spectator = seat.is_none().then(|| {
-            handle.hub.spectators.fetch_add(1, Ordering::Relaxed);
-            SpectatorCount(handle.hub.spectators.clone())
-        });
+    fn new(
+        socket: WebSocket,
+        handle: MatchHandle,
+        seated: Seated,
+        registry: &crate::game::Registry,
+        guards: Guards,
+    ) -> Self {
+        let (seat, spectator) = match seated {
+            Seated::Player(s) => (Some(s), None),
+            Seated::Spectator(s) => (None, Some(s)),
+        };
+        let cfg = registry.config.clone();
         Connection {
             socket,
             belief: seat.is_none(),
+            role: if seat.is_some() {
+                "player"
+            } else {
+                "spectator"
+            },
             seat,
             handle,
-            grace,
+            messages: Bucket::new(cfg.message_burst, cfg.messages_per_s),
+            strikes: Bucket::new(STRIKES, 1.0 / STRIKE_RECOVERY_S),
+            config: cfg,
+            metrics: registry.metrics.clone(),
+            shutdown: registry.shutdown.clone(),
             last_seq: 0,
             finished_sent: false,
-            messages: Bucket::new(MESSAGE_BURST, MESSAGES_PER_S),
-            strikes: Bucket::new(STRIKES, 1.0 / STRIKE_RECOVERY_S),
             _spectator: spectator,
+            _guards: guards,
         }
     }
 
     async fn run(mut self) {
         let end = self.serve().await;
         if let Err(End::Close(code, reason)) = end {
+            let drain = if self.shutdown.is_cancelled() {
+                SHUTDOWN_DRAIN
+            } else {
+                CLOSE_DRAIN
+            };
             let close = Message::Close(Some(CloseFrame {
                 code,
                 reason: Utf8Bytes::from(reason),
@@ -175,14 +220,14 @@ impl Connection {
             if let Ok(Ok(())) = tokio::time::timeout(SEND_TIMEOUT, self.socket.send(close)).await {
                 // Finish the closing handshake: read (and drop) what the client still sends
                 // until its close, so the socket is not reset under the close frame.
-                let drain = async {
+                let drain_fut = async {
                     while let Some(Ok(m)) = self.socket.recv().await {
                         if matches!(m, Message::Close(_)) {
                             break;
                         }
                     }
                 };
-                let _ = tokio::time::timeout(CLOSE_DRAIN, drain).await;
+                let _ = tokio::time::timeout(drain, drain_fut).await;
             }
         }
         // Dropping the seat's `kicked` receiver tells the match task the player has gone.
@@ -214,10 +259,10 @@ impl Connection {
             belief_every: BELIEF_EVERY,
             belief: self.belief,
             limits: Limits {
-                max_message_bytes: MAX_MESSAGE_BYTES,
-                messages_per_s: MESSAGES_PER_S,
-                burst: MESSAGE_BURST,
-                reconnect_s: self.grace.as_secs_f64(),
+                max_message_bytes: self.config.max_message_bytes,
+                messages_per_s: self.config.messages_per_s,
+                burst: self.config.message_burst,
+                reconnect_s: self.config.reconnect_grace.as_secs_f64(),
             },
         };
         self.send(wire::welcome(&welcome)).await?;
@@ -233,12 +278,14 @@ impl Connection {
             tokio::select! {
                 changed = frames.changed() => {
                     if changed.is_err() {
-                        // The match's task has ended (deleted, or the server is stopping).
+                        // The match's task has ended (deleted, cleaned up, or the server is
+                        // stopping).
                         let last = frames.borrow().clone();
                         if !self.finished_sent {
+                            self.finished_sent = true;
                             self.send(wire::finished(&last)).await?;
                         }
-                        return Err(End::Close(NORMAL, "the match has ended".into()));
+                        return Err(self.ended());
                     }
                     let frame = frames.borrow_and_update().clone();
                     self.deliver(&frame, true).await?;
@@ -248,7 +295,8 @@ impl Connection {
                     Some(Err(e)) => {
                         let text = e.to_string();
                         return Err(if text.contains("too long") || text.contains("Space limit") || text.contains("capacity") {
-                            End::Close(TOO_BIG, format!("message over {HARD_MESSAGE_BYTES} bytes"))
+                            self.metrics.refuse(Refusal::MessageTooLarge);
+                            End::Close(TOO_BIG, format!("message over {} bytes", self.config.hard_message_bytes()))
                         } else {
                             End::Gone
                         });
@@ -256,10 +304,18 @@ impl Connection {
                     Some(Ok(Message::Text(text))) => self.on_text(text.as_str()).await?,
                     Some(Ok(Message::Binary(b))) => {
                         let why = format!("binary message of {} bytes: send JSON text", b.len());
-                        self.strike(&why).await?;
+                        self.strike(Refusal::MessageInvalid, &why).await?;
                     }
                     Some(Ok(_)) => {} // pings are answered by the socket itself
                 },
+                _ = self.shutdown.cancelled(), if !self.finished_sent => {
+                    // The match task is being stopped too and will publish its end; this
+                    // tells the client even if the task's last frame is not seen first.
+                    self.finished_sent = true;
+                    let last = frames.borrow().clone();
+                    self.send(wire::finished_by_shutdown(&last)).await?;
+                    return Err(self.ended());
+                }
                 kick = async {
                     match kicked.as_mut() {
                         Some(k) => k.await,
@@ -275,6 +331,15 @@ impl Connection {
         }
     }
 
+    /// How to close once the match has ended.
+    fn ended(&self) -> End {
+        if self.shutdown.is_cancelled() {
+            End::Close(GOING_AWAY, "the server is shutting down".into())
+        } else {
+            End::Close(NORMAL, "the match has ended".into())
+        }
+    }
+
     /// Sends a frame's snapshot, the events since the last one sent, and `finished` once.
     async fn deliver(&mut self, frame: &Frame, with_events: bool) -> Result<(), End> {
         let snapshot = match &self.seat {
@@ -285,6 +350,10 @@ impl Connection {
                 None => wire::spectator_snapshot(frame, self.belief),
             },
         };
+        self.metrics
+            .snapshot_bytes
+            .with_label_values(&[self.role])
+            .inc_by(snapshot.len() as u64);
         self.send(snapshot).await?;
         if with_events && frame.last_seq > self.last_seq {
             if self.last_seq < frame.since_seq {
@@ -313,8 +382,9 @@ impl Connection {
     }
 
     /// A bad message: an `error` now, a close when it happens too often.
-    async fn strike(&mut self, why: &str) -> Result<(), End> {
-        if !self.strikes.take() {
+    async fn strike(&mut self, refusal: Refusal, why: &str) -> Result<(), End> {
+        self.metrics.refuse(refusal);
+        if self.strikes.take().is_err() {
             return Err(End::Close(
                 POLICY,
                 truncate(&format!("too many bad messages; last: {why}"), 120),
@@ -324,22 +394,24 @@ impl Connection {
     }
 
     async fn on_text(&mut self, text: &str) -> Result<(), End> {
-        if text.len() > MAX_MESSAGE_BYTES {
+        let max = self.config.max_message_bytes;
+        if text.len() > max {
             let why = format!(
-                "message of {} bytes is over the {MAX_MESSAGE_BYTES}-byte limit",
+                "message of {} bytes is over the {max}-byte limit",
                 text.len()
             );
-            return self.strike(&why).await;
+            return self.strike(Refusal::MessageTooLarge, &why).await;
         }
-        if !self.messages.take() {
+        if self.messages.take().is_err() {
             let why = format!(
-                "rate limit: at most {MESSAGES_PER_S} messages per second (bursts of {MESSAGE_BURST})"
+                "rate limit: at most {} messages per second (bursts of {})",
+                self.config.messages_per_s, self.config.message_burst
             );
-            return self.strike(&why).await;
+            return self.strike(Refusal::MessageRate, &why).await;
         }
         let msg = match ClientMessage::parse(text) {
             Ok(m) => m,
-            Err(e) => return self.strike(&e).await,
+            Err(e) => return self.strike(Refusal::MessageInvalid, &e).await,
         };
         match msg {
             ClientMessage::Ping { t } => self.send(wire::pong(t)).await,
@@ -349,7 +421,12 @@ impl Connection {
             }
             ClientMessage::Input { forward, turn, tag } => {
                 let Some(seat) = &self.seat else {
-                    return self.strike("input: spectators cannot move anyone").await;
+                    return self
+                        .strike(
+                            Refusal::MessageInvalid,
+                            "input: spectators cannot move anyone",
+                        )
+                        .await;
                 };
                 let (slot, generation) = (seat.slot, seat.generation);
                 let frame = self.handle.hub.frames.borrow().clone();

@@ -124,6 +124,18 @@ impl Team {
         physics: &Physics,
         view: &TeamView,
     ) -> (Vec<RobotCommand>, Vec<TrackerEvent>) {
+        let events = self.track(arena, physics, view);
+        (self.plan(arena, physics, view), events)
+    }
+
+    /// The first half of [`Team::decide`]: the tracker's update from what the robots sensed.
+    /// (Split so the shell can time the two halves; the pair is exactly `decide`.)
+    pub fn track(
+        &mut self,
+        arena: &Arena,
+        physics: &Physics,
+        view: &TeamView,
+    ) -> Vec<TrackerEvent> {
         let sightings: Vec<Sighting> = view
             .robots
             .iter()
@@ -141,13 +153,16 @@ impl Team {
             fov: physics.laser_fov,
             range: physics.laser_range,
         };
-        let events = self.tracker.update(arena, laser, &sightings);
-        let commands = match &mut self.brain {
+        self.tracker.update(arena, laser, &sightings)
+    }
+
+    /// The second half of [`Team::decide`]: each robot's command from the updated belief.
+    pub fn plan(&mut self, arena: &Arena, physics: &Physics, view: &TeamView) -> Vec<RobotCommand> {
+        match &mut self.brain {
             Brain::Idle => vec![RobotCommand::default(); view.robots.len()],
             Brain::Baseline(b) => b.decide(arena, physics, view),
             Brain::Coordinated(c) => c.decide(arena, physics, &self.tracker, view),
-        };
-        (commands, events)
+        }
     }
 }
 

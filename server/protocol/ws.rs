@@ -437,6 +437,21 @@ pub fn finished(frame: &Frame) -> Utf8Bytes {
     }))
 }
 
+/// The `finished` a client gets when the server shuts down before its match has ended:
+/// nobody won, reason `server_shutdown` (the same as the match's own `finished` event then).
+pub fn finished_by_shutdown(frame: &Frame) -> Utf8Bytes {
+    if frame.status == crate::sim::MatchStatus::Finished {
+        return finished(frame);
+    }
+    Utf8Bytes::from(to_json(&Finished {
+        kind: "finished",
+        tick: frame.tick,
+        winner: None,
+        reason: Some("server_shutdown"),
+        time_s: frame.time_s,
+    }))
+}
+
 pub fn error(message: &str) -> Utf8Bytes {
     Utf8Bytes::from(to_json(&ErrorWire {
         kind: "error",

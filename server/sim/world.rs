@@ -110,8 +110,24 @@ pub enum MatchStatus {
 pub enum FinishReason {
     AllTagged,
     TimeLimit,
-    /// Ended from outside (deleted, server shutdown).
+    /// Ended from outside (deleted through the API).
     Stopped,
+    /// The server is shutting down: nobody won.
+    ServerShutdown,
+    /// Nobody took part for too long (the server's clean-up): nobody won.
+    Abandoned,
+}
+
+/// Points within a tick where [`World::step_marked`] calls its observer, so that the shell
+/// can time the team's halves without the core reading a clock.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum StepMark {
+    /// The tracker's update is about to start.
+    Tracker,
+    /// The tracker is done; the planner is about to start.
+    Planner,
+    /// The planner is done.
+    Planned,
 }
 
 #[derive(Debug, Clone, PartialEq)]
@@ -151,7 +167,7 @@ pub enum EventKind {
         name: String,
     },
     Finished {
-        winner: Side,
+        winner: Option<Side>,
         reason: FinishReason,
     },
 }
@@ -358,7 +374,7 @@ impl World {
         // Robots see the world before their first decision.
         world.sense();
         world.localise();
-        world.think();
+        world.think(&mut |_| {});
         Ok(world)
     }
 
@@ -392,6 +408,12 @@ impl World {
 
     /// Advances the match by one tick (see the module docs for the stages).
     pub fn step(&mut self) {
+        self.step_marked(&mut |_| {});
+    }
+
+    /// [`World::step`], calling `mark` at the [`StepMark`]s of the team stage (not at all in
+    /// a tick that ends the match before it). The match is the same whatever `mark` does.
+    pub fn step_marked(&mut self, mark: &mut dyn FnMut(StepMark)) {
         if self.status == MatchStatus::Finished {
             return;
         }
@@ -401,7 +423,7 @@ impl World {
         self.sense();
         self.localise();
         self.rules();
-        self.think();
+        self.think(mark);
     }
 
     /// Stage 1: this tick's motion of every agent (robots first, then opponents).
@@ -655,21 +677,35 @@ impl World {
     }
 
     fn finish(&mut self, winner: Side, reason: FinishReason) {
+        self.end(Some(winner), reason);
+    }
+
+    fn end(&mut self, winner: Option<Side>, reason: FinishReason) {
         if self.status == MatchStatus::Finished {
             return;
         }
         self.status = MatchStatus::Finished;
-        self.winner = Some(winner);
+        self.winner = winner;
         self.push(EventKind::Finished { winner, reason });
     }
 
-    /// Ends a running match from outside (deletion, shutdown): the opponents were not all caught.
+    /// Ends a running match from outside (deletion): the opponents were not all caught.
     pub fn stop(&mut self) {
         self.finish(Side::Opponents, FinishReason::Stopped);
     }
 
+    /// Ends a running match from outside for `reason`: [`FinishReason::Stopped`] as
+    /// [`World::stop`]; a shutdown or abandonment has no winner. A finished match is left
+    /// as it is.
+    pub fn stop_because(&mut self, reason: FinishReason) {
+        match reason {
+            FinishReason::ServerShutdown | FinishReason::Abandoned => self.end(None, reason),
+            _ => self.stop(),
+        }
+    }
+
     /// Stage 5: the robots' brain decides from what they sensed.
-    fn think(&mut self) {
+    fn think(&mut self, mark: &mut dyn FnMut(StepMark)) {
         let tick = self.tick;
         // A tag device reports its own hits: the robots that tagged an opponent this tick.
         let hits: Vec<usize> = self
@@ -701,7 +737,11 @@ impl World {
                 })
                 .collect(),
         };
-        let (commands, tracker_events) = self.team.decide(&self.arena, &self.config.physics, &view);
+        mark(StepMark::Tracker);
+        let tracker_events = self.team.track(&self.arena, &self.config.physics, &view);
+        mark(StepMark::Planner);
+        let commands = self.team.plan(&self.arena, &self.config.physics, &view);
+        mark(StepMark::Planned);
         for (r, c) in self.robots.iter_mut().zip(commands) {
             r.command = c;
         }

@@ -7,7 +7,8 @@ use std::path::Path;
 use std::time::Duration;
 
 use futures_util::{SinkExt, StreamExt};
-use lasertag::game::{GameSettings, Registry};
+use lasertag::config::Config;
+use lasertag::game::Registry;
 use lasertag::maps::MapStore;
 use serde_json::{Value, json};
 
@@ -15,6 +16,17 @@ pub struct TestServer {
     pub addr: SocketAddr,
     pub client: reqwest::Client,
     pub registry: std::sync::Arc<Registry>,
+}
+
+/// The default settings, except the per-address request rate: tests step manual matches
+/// tick by tick and read the state after each, thousands of requests a second from one
+/// address. The rate limit itself is crossed in `tests/limits.rs`.
+pub fn test_config() -> Config {
+    Config {
+        requests_per_s: 1e6,
+        request_burst: 1e6,
+        ..Config::default()
+    }
 }
 
 pub struct Reply {
@@ -25,18 +37,21 @@ pub struct Reply {
 impl TestServer {
     /// The app of `lasertag::http::app` with the shipped maps, on 127.0.0.1:0, without a showcase.
     pub async fn start() -> TestServer {
-        TestServer::start_with(GameSettings::default()).await
+        TestServer::start_with(test_config()).await
     }
 
-    /// Like [`TestServer::start`], with other game settings (e.g. a short reconnect grace).
-    pub async fn start_with(settings: GameSettings) -> TestServer {
+    /// Like [`TestServer::start`], with other settings (e.g. a short reconnect grace, tiny
+    /// limits).
+    pub async fn start_with(config: Config) -> TestServer {
         let root = Path::new(env!("CARGO_MANIFEST_DIR"));
         let maps = MapStore::load_dir(&root.join("maps")).expect("shipped maps load");
-        let registry = Registry::with_settings(maps, settings);
+        let registry = Registry::with_config(maps, config);
         let app = lasertag::http::app(registry.clone(), root.join("web"));
         let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
         let addr = listener.local_addr().unwrap();
-        tokio::spawn(async move { axum::serve(listener, app).await });
+        // As the binary serves it: the per-address limits need the peer's address.
+        let service = app.into_make_service_with_connect_info::<SocketAddr>();
+        tokio::spawn(async move { axum::serve(listener, service).await });
         TestServer {
             addr,
             client: reqwest::Client::new(),

@@ -1,0 +1,208 @@
+//! The server's settings: every limit, grace period and time-out of the shell in one struct.
+//!
+//! [`Config`] is both the `serve` command's flags (each with a `LASERTAG_*` environment
+//! variable, shown by `--help`) and what the tests build with tiny values. The defaults are
+//! written once, here, and used by both [`Default`] and clap. None of this reaches the core:
+//! a match's own settings (robots, particles, time limit) are checked against it at the edge.
+
+use std::time::Duration;
+
+// For `.map` on the integer parsers of the flags.
+use clap::builder::TypedValueParser as _;
+
+/// Default of each setting (see the field docs of [`Config`]).
+pub mod defaults {
+    pub const MAX_MATCHES: usize = 100;
+    pub const MAX_AGENTS_PER_MATCH: usize = 40;
+    pub const MAX_PARTICLES_PER_MATCH: usize = 200_000;
+    pub const MAX_PLAYERS_PER_MATCH: usize = 32;
+    pub const MAX_SPECTATORS_PER_MATCH: usize = 200;
+    pub const MAX_CONNECTIONS_PER_ADDRESS: usize = 64;
+    pub const REQUESTS_PER_S: f64 = 100.0;
+    pub const REQUEST_BURST: f64 = 200.0;
+    pub const MESSAGES_PER_S: f64 = 30.0;
+    pub const MESSAGE_BURST: f64 = 40.0;
+    pub const MAX_BODY_BYTES: usize = 1 << 20;
+    pub const MAX_MESSAGE_BYTES: usize = 4096;
+    pub const FINISHED_GRACE: &str = "300";
+    pub const ABANDONED_AFTER: &str = "120";
+    pub const RECONNECT_GRACE: &str = "30";
+}
+
+/// Every setting of the server (flags of `lasertag serve`).
+#[derive(Debug, Clone, clap::Args)]
+pub struct Config {
+    /// Matches the server holds at once, finished ones included until they are cleaned up
+    /// (the showcase is always let in); more are refused with 503.
+    #[arg(long, env = "LASERTAG_MAX_MATCHES", default_value_t = defaults::MAX_MATCHES,
+          value_parser = clap::value_parser!(u64).range(1..).map(|v| v as usize))]
+    pub max_matches: usize,
+    /// Robots plus opponents in one match; a larger match is refused with 400.
+    #[arg(long, env = "LASERTAG_MAX_AGENTS_PER_MATCH", default_value_t = defaults::MAX_AGENTS_PER_MATCH,
+          value_parser = clap::value_parser!(u64).range(2..).map(|v| v as usize))]
+    pub max_agents_per_match: usize,
+    /// Tracker particles of one match (particles per role × opponents: the tracker holds at
+    /// most one role per opponent); more are refused with 400.
+    #[arg(long, env = "LASERTAG_MAX_PARTICLES_PER_MATCH", default_value_t = defaults::MAX_PARTICLES_PER_MATCH,
+          value_parser = clap::value_parser!(u64).range(10..).map(|v| v as usize))]
+    pub max_particles_per_match: usize,
+    /// People holding an opponent slot in one match; joining past it is refused with 409.
+    #[arg(long, env = "LASERTAG_MAX_PLAYERS_PER_MATCH", default_value_t = defaults::MAX_PLAYERS_PER_MATCH,
+          value_parser = clap::value_parser!(u64).range(1..).map(|v| v as usize))]
+    pub max_players_per_match: usize,
+    /// WebSocket spectators of one match; more are refused with 503 before the upgrade.
+    #[arg(long, env = "LASERTAG_MAX_SPECTATORS_PER_MATCH", default_value_t = defaults::MAX_SPECTATORS_PER_MATCH,
+          value_parser = clap::value_parser!(u64).map(|v| v as usize))]
+    pub max_spectators_per_match: usize,
+    /// Open WebSocket connections from one IP address; more are refused with 429.
+    #[arg(long, env = "LASERTAG_MAX_CONNECTIONS_PER_ADDRESS", default_value_t = defaults::MAX_CONNECTIONS_PER_ADDRESS,
+          value_parser = clap::value_parser!(u64).range(1..).map(|v| v as usize))]
+    pub max_connections_per_address: usize,
+    /// Sustained HTTP requests per second from one IP address (WebSocket upgrades included);
+    /// more get 429 with `Retry-After`.
+    #[arg(long, env = "LASERTAG_REQUESTS_PER_S", default_value_t = defaults::REQUESTS_PER_S,
+          value_parser = positive)]
+    pub requests_per_s: f64,
+    /// HTTP requests one IP address may send at once before the rate applies.
+    #[arg(long, env = "LASERTAG_REQUEST_BURST", default_value_t = defaults::REQUEST_BURST,
+          value_parser = at_least_one)]
+    pub request_burst: f64,
+    /// Sustained WebSocket messages per second from one connection; more get an `error`,
+    /// and a connection that keeps it up is closed (1008).
+    #[arg(long, env = "LASERTAG_MESSAGES_PER_S", default_value_t = defaults::MESSAGES_PER_S,
+          value_parser = positive)]
+    pub messages_per_s: f64,
+    /// WebSocket messages one connection may send at once before the rate applies.
+    #[arg(long, env = "LASERTAG_MESSAGE_BURST", default_value_t = defaults::MESSAGE_BURST,
+          value_parser = at_least_one)]
+    pub message_burst: f64,
+    /// Largest HTTP request body in bytes (413 past it).
+    #[arg(long, env = "LASERTAG_MAX_BODY_BYTES", default_value_t = defaults::MAX_BODY_BYTES,
+          value_parser = clap::value_parser!(u64).range(64..).map(|v| v as usize))]
+    pub max_body_bytes: usize,
+    /// Largest WebSocket message a client may send, in bytes: bigger ones get an `error`
+    /// (and count towards a 1008 close); over 16 times this (at least 64 KiB) the connection
+    /// is closed at once (1009).
+    #[arg(long, env = "LASERTAG_MAX_MESSAGE_BYTES", default_value_t = defaults::MAX_MESSAGE_BYTES,
+          value_parser = clap::value_parser!(u64).range(64..).map(|v| v as usize))]
+    pub max_message_bytes: usize,
+    /// Seconds a finished match stays readable (state, events, end screen) before it is
+    /// removed.
+    #[arg(long = "finished-grace-s", value_name = "SECONDS", env = "LASERTAG_FINISHED_GRACE_S",
+          default_value = defaults::FINISHED_GRACE, value_parser = seconds)]
+    pub finished_grace: Duration,
+    /// Seconds a match with human-controlled opponents may go without any client (no
+    /// WebSocket connected, no API request for it) before it is ended and removed. Matches
+    /// without human slots (bots, API) are never abandoned: they end at their time limit.
+    #[arg(long = "abandoned-after-s", value_name = "SECONDS", env = "LASERTAG_ABANDONED_AFTER_S",
+          default_value = defaults::ABANDONED_AFTER, value_parser = seconds)]
+    pub abandoned_after: Duration,
+    /// Seconds a player whose connection dropped may take to come back with the same token
+    /// before the slot is freed.
+    #[arg(long = "reconnect-grace-s", value_name = "SECONDS", env = "LASERTAG_RECONNECT_GRACE_S",
+          default_value = defaults::RECONNECT_GRACE, value_parser = seconds)]
+    pub reconnect_grace: Duration,
+}
+
+impl Default for Config {
+    fn default() -> Config {
+        let secs = |s: &str| seconds(s).unwrap_or(Duration::ZERO);
+        Config {
+            max_matches: defaults::MAX_MATCHES,
+            max_agents_per_match: defaults::MAX_AGENTS_PER_MATCH,
+            max_particles_per_match: defaults::MAX_PARTICLES_PER_MATCH,
+            max_players_per_match: defaults::MAX_PLAYERS_PER_MATCH,
+            max_spectators_per_match: defaults::MAX_SPECTATORS_PER_MATCH,
+            max_connections_per_address: defaults::MAX_CONNECTIONS_PER_ADDRESS,
+            requests_per_s: defaults::REQUESTS_PER_S,
+            request_burst: defaults::REQUEST_BURST,
+            messages_per_s: defaults::MESSAGES_PER_S,
+            message_burst: defaults::MESSAGE_BURST,
+            max_body_bytes: defaults::MAX_BODY_BYTES,
+            max_message_bytes: defaults::MAX_MESSAGE_BYTES,
+            finished_grace: secs(defaults::FINISHED_GRACE),
+            abandoned_after: secs(defaults::ABANDONED_AFTER),
+            reconnect_grace: secs(defaults::RECONNECT_GRACE),
+        }
+    }
+}
+
+impl Config {
+    /// Messages over this many bytes are not even read: the connection is closed (1009).
+    pub fn hard_message_bytes(&self) -> usize {
+        (self.max_message_bytes * 16).max(64 * 1024)
+    }
+}
+
+/// A number of seconds (`30`, `0.5`) as a duration.
+fn seconds(s: &str) -> Result<Duration, String> {
+    let v: f64 = s
+        .trim()
+        .parse()
+        .map_err(|_| format!("{s:?} is not a number of seconds"))?;
+    if !(v.is_finite() && (0.0..=1e7).contains(&v)) {
+        return Err(format!("{s}: must be between 0 and 10000000 seconds"));
+    }
+    Ok(Duration::from_secs_f64(v))
+}
+
+fn positive(s: &str) -> Result<f64, String> {
+    let v: f64 = s
+        .trim()
+        .parse()
+        .map_err(|_| format!("{s:?} is not a number"))?;
+    if v.is_finite() && v > 0.0 {
+        Ok(v)
+    } else {
+        Err(format!("{s}: must be a positive number"))
+    }
+}
+
+fn at_least_one(s: &str) -> Result<f64, String> {
+    let v = positive(s)?;
+    if v >= 1.0 {
+        Ok(v)
+    } else {
+        Err(format!("{s}: must be at least 1"))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser;
+
+    #[derive(Parser)]
+    struct Cli {
+        #[command(flatten)]
+        config: Config,
+    }
+
+    #[test]
+    fn clap_defaults_are_the_default_config() {
+        // No LASERTAG_* variables are set in the test environment for these names... but a
+        // developer's shell might: only compare when none is.
+        if std::env::vars().any(|(k, _)| k.starts_with("LASERTAG_")) {
+            return;
+        }
+        let parsed = Cli::try_parse_from(["lasertag"]).map(|c| c.config);
+        let parsed = parsed.unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(format!("{parsed:?}"), format!("{:?}", Config::default()));
+    }
+
+    #[test]
+    fn bad_values_are_refused_with_their_name() {
+        let e = Cli::try_parse_from(["lasertag", "--finished-grace-s", "soon"])
+            .err()
+            .map(|e| e.to_string())
+            .unwrap_or_default();
+        assert!(e.contains("finished-grace-s") && e.contains("soon"), "{e}");
+        let e = Cli::try_parse_from(["lasertag", "--requests-per-s", "0"])
+            .err()
+            .map(|e| e.to_string())
+            .unwrap_or_default();
+        assert!(e.contains("positive"), "{e}");
+        let ok = Cli::try_parse_from(["lasertag", "--reconnect-grace-s", "0.5"]);
+        assert!(ok.is_ok_and(|c| c.config.reconnect_grace == Duration::from_millis(500)));
+    }
+}

@@ -1,0 +1,191 @@
+//! Graceful shutdown of the real binary (issue 7, point 6): on SIGTERM it stops accepting,
+//! tells every client of a running match `finished` with reason `server_shutdown`, closes
+//! every socket with a close frame, and exits within 5 s of the signal.
+
+#![cfg(unix)]
+
+mod common;
+
+use std::io::{BufRead, BufReader};
+use std::net::SocketAddr;
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+use common::{Got, Ws};
+use serde_json::{Value, json};
+
+/// The binary serving the shipped maps on an ephemeral port; its address read from its log.
+struct Server {
+    child: Child,
+    addr: SocketAddr,
+}
+
+impl Drop for Server {
+    fn drop(&mut self) {
+        // Only if the test failed before it exited.
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+fn start() -> Server {
+    let root = env!("CARGO_MANIFEST_DIR");
+    let mut child = Command::new(env!("CARGO_BIN_EXE_lasertag"))
+        .current_dir(root)
+        .args(["serve", "--addr", "127.0.0.1:0", "--no-showcase"])
+        .env("RUST_LOG", "info")
+        .env("NO_COLOR", "1")
+        .stdout(Stdio::piped())
+        .stderr(Stdio::inherit())
+        .spawn()
+        .expect("the lasertag binary starts");
+    let stdout = child.stdout.take().expect("piped stdout");
+    let (tx, rx) = std::sync::mpsc::channel();
+    // Keep reading the log (so the pipe never fills) and pass the address on.
+    std::thread::spawn(move || {
+        for line in BufReader::new(stdout).lines().map_while(Result::ok) {
+            if let Some(rest) = line.split("serving http://").nth(1) {
+                let addr: String = rest
+                    .chars()
+                    .take_while(|c| !c.is_whitespace() && *c != '\u{1b}')
+                    .collect();
+                let _ = tx.send(addr);
+            }
+        }
+    });
+    let addr = rx
+        .recv_timeout(Duration::from_secs(60))
+        .expect("the server logs its address")
+        .parse()
+        .expect("a socket address");
+    Server { child, addr }
+}
+
+async fn post(client: &reqwest::Client, addr: SocketAddr, path: &str, body: Value) -> Value {
+    let r = client
+        .post(format!("http://{addr}{path}"))
+        .json(&body)
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 201);
+    r.json().await.unwrap()
+}
+
+async fn ws(addr: SocketAddr, path: &str) -> Ws {
+    let (stream, _) = tokio_tungstenite::connect_async(format!("ws://{addr}{path}"))
+        .await
+        .expect("WebSocket handshake");
+    Ws { stream }
+}
+
+/// Reads until the close: the `finished` message seen (if any) and the close frame.
+async fn until_close(ws: &mut Ws) -> (Option<Value>, Got) {
+    let mut finished = None;
+    loop {
+        match ws.next().await {
+            Got::Json(v) if v["type"] == "finished" => finished = Some(v),
+            Got::Json(_) => {}
+            other => return (finished, other),
+        }
+    }
+}
+
+#[tokio::test]
+async fn sigterm_tells_every_client_closes_cleanly_and_exits_within_5_s() {
+    let mut server = start();
+    let addr = server.addr;
+    let client = reqwest::Client::new();
+    // A running real-time match with a player and a spectator; a finished manual match with
+    // a spectator still on its end screen.
+    let live = post(
+        &client,
+        addr,
+        "/api/matches",
+        json!({"map": "office", "opponent_control": "human", "planner": "idle"}),
+    )
+    .await["id"]
+        .as_str()
+        .unwrap()
+        .to_string();
+    let joined = post(
+        &client,
+        addr,
+        &format!("/api/matches/{live}/players"),
+        json!({"name": "alice"}),
+    )
+    .await;
+    let token = joined["token"].as_str().unwrap();
+    let done = post(
+        &client,
+        addr,
+        "/api/matches",
+        json!({"map": "office", "clock": "manual", "time_limit_s": 1}),
+    )
+    .await["id"]
+        .as_str()
+        .unwrap()
+        .to_string();
+    let r = client
+        .post(format!("http://{addr}/api/matches/{done}/step"))
+        .json(&json!({"ticks": 100}))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 200);
+    let mut player = ws(addr, &format!("/ws/matches/{live}?token={token}")).await;
+    let mut spectator = ws(addr, &format!("/ws/matches/{live}")).await;
+    let mut late = ws(addr, &format!("/ws/matches/{done}")).await;
+    player.next_of("snapshot").await;
+    spectator.next_of("snapshot").await;
+    assert_eq!(late.next_of("finished").await["reason"], "time_limit");
+
+    let signalled = Instant::now();
+    let status = Command::new("kill")
+        .args(["-TERM", &server.child.id().to_string()])
+        .status()
+        .expect("kill runs");
+    assert!(status.success());
+
+    for (who, ws) in [("player", &mut player), ("spectator", &mut spectator)] {
+        let (finished, closed) = until_close(ws).await;
+        let finished = finished.unwrap_or_else(|| panic!("{who}: no finished before the close"));
+        assert_eq!(finished["reason"], "server_shutdown", "{who}: {finished}");
+        assert_eq!(finished["winner"], Value::Null, "{who}: nobody won");
+        assert!(
+            matches!(&closed, Got::Closed { code: 1001, reason } if reason.contains("shutting down")),
+            "{who}: {closed:?}"
+        );
+    }
+    // The client of the finished match had its `finished` already; it gets the close.
+    let (again, closed) = until_close(&mut late).await;
+    assert!(again.is_none(), "{again:?}");
+    assert!(
+        matches!(&closed, Got::Closed { code: 1001, .. }),
+        "{closed:?}"
+    );
+
+    // The process exits, successfully, within 5 s of the signal.
+    let exit = loop {
+        if let Some(status) = server.child.try_wait().unwrap() {
+            break status;
+        }
+        assert!(
+            signalled.elapsed() < Duration::from_secs(5),
+            "still running 5 s after SIGTERM"
+        );
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    };
+    let took = signalled.elapsed();
+    assert!(exit.success(), "{exit}");
+    assert!(
+        took < Duration::from_secs(5),
+        "exited {took:?} after SIGTERM"
+    );
+    eprintln!("exited {took:?} after SIGTERM");
+    // Nothing listens any more.
+    assert!(
+        tokio::net::TcpStream::connect(addr).await.is_err(),
+        "still accepting after shutdown"
+    );
+}
