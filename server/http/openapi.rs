@@ -38,6 +38,8 @@ use crate::protocol::*;
         CreateMatch,
         TrackerSettings,
         TrackerConfig,
+        RadioSettings,
+        RadioConfig,
         MatchSummary,
         MatchState,
         RobotState,
