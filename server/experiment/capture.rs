@@ -25,6 +25,8 @@ pub struct CaptureConfig {
     pub time_limit_s: u64,
     /// Weights of the coordinated planner (the defaults unless tuning).
     pub coordination: crate::planner::coordinated::Settings,
+    /// The team radio (perfect unless asked: `--radio-latency`, `--radio-loss`).
+    pub radio: crate::radio::Settings,
 }
 
 /// One setting of the experiment.
@@ -68,6 +70,7 @@ fn one_run(
         seed,
         time_limit_ticks: limit_s * TICK_HZ as u64,
         coordination: cfg.coordination.clone(),
+        radio: cfg.radio.clone(),
         ..MatchConfig::default()
     };
     let mut world = World::new(arena, config).map_err(|e| e.to_string())?;

@@ -51,6 +51,9 @@ pub struct Settings {
     /// The robots' tag device (to tell which opponent a hit took out).
     pub tag_half_angle: f32,
     pub tag_range: f32,
+    /// Predict where unseen opponents go (the motion stage). Off, hypotheses stay where
+    /// they were last supported: the reacquire experiment's "no prediction" conditions.
+    pub predict: bool,
 }
 
 impl Default for Settings {
@@ -65,6 +68,7 @@ impl Default for Settings {
             opponent_speed: 1.0,
             tag_half_angle: 5f32.to_radians(),
             tag_range: 6.0,
+            predict: true,
         }
     }
 }
@@ -404,6 +408,9 @@ impl Tracker {
     /// and speed (at most top speed); a step that would leave free space is refused and the
     /// particle picks anew.
     fn motion(&mut self, arena: &Arena) {
+        if !self.settings.predict {
+            return;
+        }
         let max_step = self.settings.opponent_speed * DT;
         let turn_below = (TURN_PROBABILITY * (1u32 << 16) as f32) as u32;
         let g = &arena.grid;
