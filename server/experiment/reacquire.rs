@@ -19,7 +19,10 @@
 //! first tick B detects it again (capped at `limit_s`; runs that never do are counted at the
 //! cap and reported). Robots cannot tag (tag range 0), so nothing ends the search early; both
 //! run the `coordinated` planner with its own tracker (the per-robot machinery of
-//! `crate::radio`, latency `latency_ticks`).
+//! `crate::radio`, latency `latency_ticks`), with `claim_keep` 1: by default a robot leaves
+//! an opponent its teammate watches to that teammate (the pursuer's view is claimed, so it
+//! is worth little to anyone else), which is right for a team hunting opponents but means B
+//! would not try to see it again. The paper's robots, too, each look at the ball.
 //!
 //! Four conditions, each `runs` times with the same seeds and routes:
 //!
@@ -159,6 +162,10 @@ fn one_run(
         seed,
         time_limit_ticks: u64::MAX / 2,
         physics: physics.clone(),
+        coordination: crate::planner::coordinated::Settings {
+            claim_keep: 1.0,
+            ..Default::default()
+        },
         tracker: crate::tracker::Settings {
             predict: c.predicted,
             ..crate::tracker::Settings::default()
@@ -339,7 +346,7 @@ mod tests {
     fn a_teammates_sightings_shorten_the_search() {
         let cfg = ReacquireConfig {
             runs: 1,
-            seed: 3,
+            seed: 1,
             limit_s: 60,
             latency_ticks: 2,
         };
@@ -353,7 +360,10 @@ mod tests {
         );
         let (none_s, shared_s) = (none.time_s.unwrap_or(60.0), shared.time_s.unwrap_or(60.0));
         assert!(shared_s < 5.0, "B found it within 5 s: {shared_s}");
-        assert!(shared_s < none_s, "shared {shared_s} s, alone {none_s} s");
+        assert!(
+            shared_s * 5.0 < none_s,
+            "shared {shared_s} s, alone {none_s} s"
+        );
     }
 
     #[test]
