@@ -2,8 +2,9 @@
 //! `coordinated` matches against `evade` bots, every tick timed. The rare heavy ticks are
 //! the planner's negotiation turns; this is where to see them.
 //!
-//! `cargo run --release --example tick_times -- [robots] [opponents] [map] [matches]`
-//! (defaults: 2 robots, 1 opponent, office, 10 matches of up to 2 minutes).
+//! `cargo run --release --example tick_times -- [robots] [opponents] [map] [matches]
+//! [radio latency ticks] [radio loss]` (defaults: 2 robots, 1 opponent, office, 10 matches of
+//! up to 2 minutes, perfect radio; a latency or loss gives every robot its own tracker).
 
 use std::path::Path;
 use std::time::Instant;
@@ -24,6 +25,16 @@ fn main() -> Result<(), String> {
     let (robots, opponents) = (num(0, 2)?, num(1, 1)?);
     let map = args.get(2).map_or("office", String::as_str);
     let matches = num(3, 10)? as u64;
+    let latency_ticks = num(4, 0)? as u32;
+    let loss: f32 = args.get(5).map_or(Ok(0.0), |s| {
+        s.parse().map_err(|_| format!("not a number: {s}"))
+    })?;
+    let radio = lasertag::radio::Settings {
+        latency_ticks,
+        loss,
+        ..Default::default()
+    };
+    radio.validate()?;
     let store = MapStore::load_dir(Path::new("maps")).map_err(|e| e.to_string())?;
     let arena = store
         .get(map)
@@ -39,6 +50,7 @@ fn main() -> Result<(), String> {
             planner: PlannerKind::Coordinated,
             placement: Placement::Random,
             seed,
+            radio: radio.clone(),
             ..MatchConfig::default()
         };
         let mut world = World::new(arena.clone(), config).map_err(|e| e.to_string())?;

@@ -2,7 +2,8 @@
 //!
 //! The crate is a functional core wrapped in an imperative shell:
 //! - core (deterministic, no tokio, no clocks, no I/O): [`sim`] (the world and its tick
-//!   pipeline), [`nav`] (shortest paths), [`tracker`] (role-factored particle filters), [`localise`] (each robot's own pose by MCL), [`planner`] (the robot team's decisions);
+//!   pipeline), [`nav`] (shortest paths), [`tracker`] (role-factored particle filters), [`localise`] (each robot's own pose by MCL), [`planner`] (the robot team's decisions), [`radio`] (what
+//!   robots tell each other, delayed and dropped);
 //! - edge: [`maps`] (map files), [`protocol`] (every JSON shape of the API);
 //! - shell: [`game`] (one tokio task per match), [`http`] (the axum router), [`experiment`]
 //!   (the paper's experiments over all cores), `main.rs` (CLI).
@@ -20,5 +21,6 @@ pub mod metrics;
 pub mod nav;
 pub mod planner;
 pub mod protocol;
+pub mod radio;
 pub mod sim;
 pub mod tracker;

@@ -84,6 +84,35 @@ enum Experiment {
         /// Whether robots localise themselves (false: odometry alone, which drifts).
         #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
         localisation: bool,
+        /// Team radio latency in ticks (0..=100); with a latency or loss each robot keeps
+        /// its own tracker.
+        #[arg(long, default_value_t = 0)]
+        radio_latency: u32,
+        /// Probability that a robot misses one teammate message (0..=1).
+        #[arg(long, default_value_t = 0.0)]
+        radio_loss: f32,
+    },
+    /// Issue 6, Coltin et al.'s Table I: time for a robot to see an opponent again that a
+    /// teammate sees, with and without shared hypotheses and the tracker's prediction.
+    Reacquire {
+        /// Runs per condition (the same seeds and routes in every condition).
+        #[arg(long, default_value_t = 50)]
+        runs: usize,
+        /// Seed of the first run (run i uses seed + i).
+        #[arg(long, default_value_t = 0)]
+        seed: u64,
+        /// Longest search counted, seconds (runs that reach it count at it).
+        #[arg(long, default_value_t = 60)]
+        limit: u64,
+        /// Radio latency in ticks (no loss).
+        #[arg(long, default_value_t = 2)]
+        latency: u32,
+        /// Directory of map files (the experiment runs on `office`).
+        #[arg(long, default_value = "maps")]
+        maps: PathBuf,
+        /// Where to write the CSV files and the plot.
+        #[arg(long, default_value = "out/reacquire")]
+        out: PathBuf,
     },
     /// Issue 6: the robots' localisation error over time on every map: with landmarks,
     /// without them, and odometry alone.
@@ -257,6 +286,8 @@ fn experiment(e: Experiment) -> Result<(), String> {
             out,
             set,
             localisation,
+            radio_latency,
+            radio_loss,
         } => {
             if runs == 0 || time_limit == 0 {
                 return Err("--runs and --time-limit must be at least 1".into());
@@ -280,18 +311,83 @@ fn experiment(e: Experiment) -> Result<(), String> {
                     .set(k, v)
                     .map_err(|e| format!("--set {kv}: {e}"))?;
             }
+            let radio = lasertag::radio::Settings {
+                latency_ticks: radio_latency,
+                loss: radio_loss,
+                ..Default::default()
+            };
+            radio.validate().map_err(|e| {
+                format!(
+                    "--{}",
+                    e.replacen("radio.", "radio-", 1).replacen("_ticks", "", 1)
+                )
+            })?;
             let cfg = lasertag::experiment::capture::CaptureConfig {
                 runs,
                 seed,
                 time_limit_s: time_limit,
                 coordination,
                 localisation,
+                radio,
             };
             let table = lasertag::experiment::capture::run(&chosen, &cfg, &out)?;
             print!("{table}");
             println!(
                 "ratio: median capture time / baseline's; p: two-sided Mann–Whitney U against baseline\n\
                  wrote {0}/capture.csv, {0}/capture_summary.csv and {0}/capture_<map>_<bot>.svg",
+                out.display()
+            );
+            Ok(())
+        }
+        Experiment::Reacquire {
+            runs,
+            seed,
+            limit,
+            latency,
+            maps,
+            out,
+        } => {
+            if runs == 0 || limit == 0 {
+                return Err("--runs and --limit must be at least 1".into());
+            }
+            if latency > lasertag::radio::MAX_LATENCY_TICKS {
+                return Err(format!(
+                    "--latency {latency} must be in 0..={}",
+                    lasertag::radio::MAX_LATENCY_TICKS
+                ));
+            }
+            let store = MapStore::load_dir(&maps).map_err(|e| format!("loading maps: {e}"))?;
+            let arena = store
+                .get("office")
+                .ok_or_else(|| format!("no office map in {}", maps.display()))?
+                .arena
+                .clone();
+            let cfg = lasertag::experiment::reacquire::ReacquireConfig {
+                runs,
+                seed,
+                limit_s: limit,
+                latency_ticks: latency,
+            };
+            let summaries = lasertag::experiment::reacquire::run(arena, &cfg, &out)?;
+            println!(
+                "condition   shared  predicted  found    mean ± std (s)  median (s)  teammate saw"
+            );
+            for s in &summaries {
+                println!(
+                    "{:<11} {:<7} {:<10} {:>3}/{:<3} {:>7.2} ± {:<5.2} {:>10.2} {:>12.0}%",
+                    s.condition.name,
+                    s.condition.shared,
+                    s.condition.predicted,
+                    s.found,
+                    s.runs,
+                    s.mean_s,
+                    s.std_s,
+                    s.median_s,
+                    100.0 * s.teammate_saw
+                );
+            }
+            println!(
+                "wrote {0}/reacquire.csv, {0}/reacquire_summary.csv and {0}/reacquire.svg",
                 out.display()
             );
             Ok(())

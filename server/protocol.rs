@@ -243,6 +243,61 @@ impl CoordinationSettings {
     }
 }
 
+/// The team radio (issue 6). Perfect by default: with a latency or a loss each robot keeps
+/// its own tracker, fed by what it senses and what it receives.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct RadioSettings {
+    /// Ticks between a robot's broadcast and its teammates' receiving it (0..=100, default 0).
+    pub latency_ticks: Option<i64>,
+    /// Probability that one teammate misses one message, independently per receiver
+    /// ([0, 1], default 0).
+    pub loss: Option<f64>,
+}
+
+/// The radio a match runs with, defaults filled in.
+#[derive(Debug, Clone, PartialEq, Serialize, ToSchema)]
+pub struct RadioConfig {
+    pub latency_ticks: u32,
+    pub loss: f64,
+}
+
+impl From<&crate::radio::Settings> for RadioConfig {
+    fn from(s: &crate::radio::Settings) -> Self {
+        RadioConfig {
+            latency_ticks: s.latency_ticks,
+            // f32 → f64 would print 0.2 as 0.20000000298: round to what was asked.
+            loss: (s.loss as f64 * 1e6).round() / 1e6,
+        }
+    }
+}
+
+impl RadioSettings {
+    fn validate(self) -> Result<crate::radio::Settings, String> {
+        let d = crate::radio::Settings::default();
+        let latency_ticks = match self.latency_ticks {
+            None => d.latency_ticks,
+            Some(v) => in_range(
+                "radio.latency_ticks",
+                v,
+                0,
+                crate::radio::MAX_LATENCY_TICKS as i64,
+            )? as u32,
+        };
+        let loss = match self.loss {
+            None => d.loss,
+            Some(v) => finite_in("radio.loss", v, 0.0, 1.0, false)? as f32,
+        };
+        let settings = crate::radio::Settings {
+            latency_ticks,
+            loss,
+            ..d
+        };
+        settings.validate()?;
+        Ok(settings)
+    }
+}
+
 /// Body of `POST /api/matches`. Every field but `map` is optional.
 #[derive(Debug, Clone, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
@@ -275,6 +330,8 @@ pub struct CreateMatch {
     /// Whether robots localise themselves from odometry, laser and landmarks (default true;
     /// false leaves each robot its odometry alone, which drifts).
     pub localisation: Option<bool>,
+    /// The team radio (default perfect: `{"latency_ticks": 0, "loss": 0.0}`).
+    pub radio: Option<RadioSettings>,
 }
 
 /// The tracker settings a match runs with, defaults filled in.
@@ -441,6 +498,7 @@ impl CreateMatch {
             },
             coordination: self.coordination.unwrap_or_default().validate()?,
             localisation: self.localisation.unwrap_or(true),
+            radio: self.radio.unwrap_or_default().validate()?,
             ..config
         };
         Ok(MatchRequest {
@@ -545,6 +603,8 @@ pub struct MatchSummary {
     pub coordination: CoordinationConfig,
     /// Whether robots localise themselves (else their estimate is their true pose).
     pub localisation: bool,
+    /// The team radio; with a latency or loss each robot keeps its own belief.
+    pub radio: RadioConfig,
     pub seed: u64,
     pub players: usize,
     /// WebSocket spectators connected now.
@@ -592,6 +652,7 @@ pub fn summary(world: &World, meta: &MatchMeta) -> MatchSummary {
         tracker: TrackerConfig::from(&c.tracker),
         coordination: CoordinationConfig::from(&c.coordination),
         localisation: c.localisation,
+        radio: RadioConfig::from(&c.radio),
         seed: c.seed,
         players: meta.players,
         spectators: meta.spectators,
@@ -778,20 +839,39 @@ impl From<crate::tracker::Confidence> for ConfidenceState {
     }
 }
 
-/// The robot team's belief about the opponents.
+/// The robot team's belief about the opponents: one robot's own (`?robot=r1`), or the
+/// team's merged view.
 #[derive(Debug, Clone, Serialize, ToSchema)]
 pub struct Belief {
     pub tick: u64,
+    /// The robot whose belief this is; absent for the team's merged view.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub robot: Option<String>,
     pub roles: Vec<Role>,
 }
 
-pub fn belief(world: &World) -> Belief {
-    Belief {
+/// Parses a robot id (`r0`, `r1`, …) into its index.
+pub fn robot_index(id: &str) -> Option<usize> {
+    let digits = id.strip_prefix('r')?;
+    if digits.is_empty() || !digits.bytes().all(|b| b.is_ascii_digit()) || digits.len() > 6 {
+        return None;
+    }
+    digits.parse().ok()
+}
+
+/// Robot `robot`'s belief, or the team's merged one (with a perfect radio both are the
+/// shared tracker's; see `Team::merged_belief`). `None` for a robot the match does not have.
+pub fn belief(world: &World, robot: Option<usize>) -> Option<Belief> {
+    let roles = match robot {
+        Some(i) => {
+            std::borrow::Cow::Borrowed(&world.team.belief_of(i, world.robots.len())?.roles[..])
+        }
+        None => world.team.merged_belief(),
+    };
+    Some(Belief {
         tick: world.tick,
-        roles: world
-            .team
-            .tracker
-            .roles
+        robot: robot.map(|i| AgentId::Robot(i).to_string()),
+        roles: roles
             .iter()
             .map(|r| Role {
                 id: r.id,
@@ -803,7 +883,7 @@ pub fn belief(world: &World) -> Belief {
                 weights: r.weights.iter().map(|w| *w as f64).collect(),
             })
             .collect(),
-    }
+    })
 }
 
 /// One entry of the event log. Fields beyond `seq`, `tick` and `kind` depend on the kind.

@@ -191,6 +191,22 @@ async fn every_error_class_is_answered_and_nothing_running_is_disturbed() {
             field,
         );
     }
+    for (bad, field) in [
+        (json!({"latency_ticks": 101}), "radio.latency_ticks"),
+        (json!({"latency_ticks": -1}), "radio.latency_ticks"),
+        (json!({"loss": 1.5}), "radio.loss"),
+        (json!({"loss": -0.1}), "radio.loss"),
+        (json!({"loss": "some"}), "radio.loss"),
+        (json!({"delay": 3}), "radio"),
+    ] {
+        assert_error(
+            &server
+                .post("/api/matches", &json!({"map": "office", "radio": bad}))
+                .await,
+            400,
+            field,
+        );
+    }
     assert_error(
         &server
             .post(

@@ -176,3 +176,119 @@ async fn belief_roles_carry_confidence_and_state() {
         assert_eq!(r["confidence"], 0.0);
     }
 }
+
+/// The role of `belief` that stands for an opponent seen where `at` is, if any: a valid
+/// role whose weighted mean is within a metre of it.
+fn role_near(belief: &serde_json::Value, at: [f64; 2]) -> bool {
+    belief["roles"].as_array().unwrap().iter().any(|r| {
+        let (ps, ws) = (
+            r["particles"].as_array().unwrap(),
+            r["weights"].as_array().unwrap(),
+        );
+        let (mut x, mut y) = (0.0, 0.0);
+        for (p, w) in ps.iter().zip(ws) {
+            let w = w.as_f64().unwrap();
+            x += p[0].as_f64().unwrap() * w;
+            y += p[1].as_f64().unwrap() * w;
+        }
+        r["state"] == "valid" && (x - at[0]).hypot(y - at[1]) < 1.0
+    })
+}
+
+/// Issue 6 (team radio): `radio` is echoed with defaults filled in; with a latency, each
+/// robot keeps its own belief, `belief?robot=r1` shows it, and r1 learns of an opponent only
+/// r0 sees exactly `latency_ticks` later.
+#[tokio::test]
+async fn a_robot_learns_what_its_teammate_sees_over_the_radio_after_the_latency() {
+    let server = TestServer::start().await;
+    let r = server
+        .post(
+            "/api/matches",
+            &json!({"map": "office", "clock": "manual", "planner": "idle",
+                    "opponent_control": "api",
+                    "robot_starts": [[2.0, 8.0, 0.0], [1.0, 4.5, 3.0]],
+                    "opponent_starts": [[8.0, 8.0]],
+                    "radio": {"latency_ticks": 5}}),
+        )
+        .await;
+    assert_eq!(r.status, 201, "{}", r.body);
+    assert_eq!(r.body["radio"], json!({"latency_ticks": 5, "loss": 0.0}));
+    let id = r.body["id"].as_str().unwrap().to_string();
+    let opponent = [8.0, 8.0];
+    let belief = |robot: &'static str| {
+        let (server, id) = (&server, id.clone());
+        async move {
+            let path = match robot {
+                "" => format!("/api/matches/{id}/belief"),
+                r => format!("/api/matches/{id}/belief?robot={r}"),
+            };
+            let reply = server.get(&path).await;
+            assert_eq!(reply.status, 200, "{}", reply.body);
+            reply.body
+        }
+    };
+    // Robots sense (and broadcast) at tick 0, when the match is created.
+    let r0 = belief("r0").await;
+    assert_eq!(r0["robot"], "r0");
+    assert!(
+        role_near(&r0, opponent),
+        "r0 sees the opponent: {}",
+        r0["roles"]
+    );
+    // r1 faces a wall in another room: what r0 saw is still in flight for 5 ticks.
+    for tick in 0..5 {
+        assert!(
+            !role_near(&belief("r1").await, opponent),
+            "tick {tick}: too early"
+        );
+        server.step(&id, 1).await;
+    }
+    assert!(
+        role_near(&belief("r1").await, opponent),
+        "r1 heard of o0 at tick 5"
+    );
+    let merged = belief("").await;
+    assert!(merged.get("robot").is_none(), "the team's merged view");
+    let untagged: u64 = merged["roles"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|r| r["tagged"] == false)
+        .map(|r| r["count"].as_u64().unwrap())
+        .sum();
+    assert_eq!(untagged, 1, "counts add up in the merged view");
+    let unknown = server
+        .get(&format!("/api/matches/{id}/belief?robot=r2"))
+        .await;
+    assert_eq!(unknown.status, 404, "{}", unknown.body);
+    assert!(unknown.body["error"].as_str().unwrap().contains("r2"));
+    let bad = server
+        .get(&format!("/api/matches/{id}/belief?robot=o0"))
+        .await;
+    assert_eq!(bad.status, 400, "{}", bad.body);
+    assert!(bad.body["error"].as_str().unwrap().starts_with("robot:"));
+}
+
+/// With the default (perfect) radio every robot's view is the team's one shared belief.
+#[tokio::test]
+async fn with_a_perfect_radio_each_robots_belief_is_the_teams() {
+    let server = TestServer::start().await;
+    let r = server
+        .post(
+            "/api/matches",
+            &json!({"map": "office", "clock": "manual", "planner": "idle",
+                    "robot_starts": [[2.0, 8.0, 0.0], [1.0, 4.5, 3.0]],
+                    "opponent_starts": [[8.0, 8.0]]}),
+        )
+        .await;
+    assert_eq!(r.body["radio"], json!({"latency_ticks": 0, "loss": 0.0}));
+    let id = r.body["id"].as_str().unwrap();
+    server.step(id, 3).await;
+    let team = server.get(&format!("/api/matches/{id}/belief")).await.body;
+    let r1 = server
+        .get(&format!("/api/matches/{id}/belief?robot=r1"))
+        .await
+        .body;
+    assert_eq!(team["roles"], r1["roles"]);
+    assert!(role_near(&r1, [8.0, 8.0]), "r1 shares what r0 sees at once");
+}

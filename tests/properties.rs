@@ -49,8 +49,8 @@ proptest! {
         for _ in 0..600 {
             world.step();
             let untagged = world.opponents.iter().filter(|o| !o.tagged).count() as u32;
-            prop_assert_eq!(world.team.tracker.untagged_count(), untagged, "tick {}", world.tick);
-            for role in world.team.tracker.roles.iter().filter(|r| !r.tagged) {
+            prop_assert_eq!(world.team.trackers[0].untagged_count(), untagged, "tick {}", world.tick);
+            for role in world.team.trackers[0].roles.iter().filter(|r| !r.tagged) {
                 let sum: f32 = role.weights.iter().sum();
                 prop_assert!(role.weights.iter().all(|w| w.is_finite() && *w >= 0.0));
                 prop_assert!((sum - 1.0).abs() < 1e-3, "weights sum to {}", sum);

@@ -27,6 +27,8 @@ pub struct CaptureConfig {
     pub coordination: crate::planner::coordinated::Settings,
     /// Robots localise themselves (the default); false leaves them their odometry.
     pub localisation: bool,
+    /// The team radio (perfect unless asked: `--radio-latency`, `--radio-loss`).
+    pub radio: crate::radio::Settings,
 }
 
 /// One setting of the experiment.
@@ -71,6 +73,7 @@ fn one_run(
         time_limit_ticks: limit_s * TICK_HZ as u64,
         coordination: cfg.coordination.clone(),
         localisation: cfg.localisation,
+        radio: cfg.radio.clone(),
         ..MatchConfig::default()
     };
     let mut world = World::new(arena, config).map_err(|e| e.to_string())?;

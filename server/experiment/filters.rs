@@ -159,9 +159,7 @@ pub fn one_run(
         }
         if world.tick.is_multiple_of(TICK_HZ as u64) {
             samples.push(
-                world
-                    .team
-                    .tracker
+                world.team.trackers[0]
                     .roles
                     .iter()
                     .filter(|r| !r.tagged)

@@ -4,11 +4,14 @@
 //! - [`filters`]: Fig. 4 — the number of active filters with and without role merging.
 //! - [`capture`]: Fig. 5 — capture time of `coordinated` against `baseline`.
 //! - [`localisation`]: issue 6 — the robots' own pose error with and without landmarks.
+//! - [`reacquire`]: issue 6 — Coltin et al.'s Table I: time to see an opponent again with
+//!   and without a teammate's hypotheses and the tracker's prediction.
 
 pub mod capture;
 pub mod filters;
 pub mod localisation;
 pub mod plot;
+pub mod reacquire;
 
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicUsize, Ordering};

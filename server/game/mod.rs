@@ -47,7 +47,11 @@ pub enum MatchError {
 pub enum Request {
     Summary(oneshot::Sender<MatchSummary>),
     State(oneshot::Sender<MatchState>),
-    Belief(oneshot::Sender<Belief>),
+    /// One robot's belief (by index), or the team's merged one.
+    Belief {
+        robot: Option<usize>,
+        reply: oneshot::Sender<Result<Belief, MatchError>>,
+    },
     Events {
         since: u64,
         reply: oneshot::Sender<Events>,
@@ -157,8 +161,9 @@ impl MatchHandle {
         self.ask(Request::State).await
     }
 
-    pub async fn belief(&self) -> Result<Belief, MatchError> {
-        self.ask(Request::Belief).await
+    /// Robot `robot`'s own belief, or the team's merged view when `None`.
+    pub async fn belief(&self, robot: Option<usize>) -> Result<Belief, MatchError> {
+        self.ask(|reply| Request::Belief { robot, reply }).await?
     }
 
     pub async fn events(&self, since: u64) -> Result<Events, MatchError> {

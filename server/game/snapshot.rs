@@ -235,9 +235,9 @@ pub struct Visible {
     pub opponents: Vec<bool>,
 }
 
-/// The team's belief, thinned for display (see the module docs).
+/// The team's (merged) belief, thinned for display (see the module docs).
 pub fn belief_view(world: &World) -> BeliefView {
-    let roles = &world.team.tracker.roles;
+    let roles = world.team.merged_belief();
     let live = roles.iter().filter(|r| !r.tagged).count().max(1);
     let per_role = (BELIEF_BUDGET / live).max(BELIEF_MIN_PER_ROLE);
     BeliefView {

@@ -283,8 +283,15 @@ impl MatchTask {
             Request::State(reply) => {
                 let _ = reply.send(protocol::state(&self.world, &self.meta));
             }
-            Request::Belief(reply) => {
-                let _ = reply.send(protocol::belief(&self.world));
+            Request::Belief { robot, reply } => {
+                let belief = protocol::belief(&self.world, robot).ok_or_else(|| {
+                    MatchError::NotFound(format!(
+                        "robot: no robot r{} in this match (it has {})",
+                        robot.unwrap_or_default(),
+                        self.world.robots.len()
+                    ))
+                });
+                let _ = reply.send(belief);
             }
             Request::Events { since, reply } => {
                 let events = self

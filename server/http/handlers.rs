@@ -269,13 +269,22 @@ pub async fn step(
     Ok(Json(handle.step(body.ticks as u64).await?))
 }
 
-#[utoipa::path(get, path = "/api/matches/{id}/belief", params(("id" = String, Path)),
-    responses((status = 200, body = Belief), (status = 404, body = ErrorBody)))]
+#[utoipa::path(get, path = "/api/matches/{id}/belief",
+    params(("id" = String, Path), ("robot" = Option<String>, Query, description = "a robot id (r0, r1, …): that robot's own belief; without it the team's merged view")),
+    responses((status = 200, body = Belief), (status = 400, body = ErrorBody), (status = 404, body = ErrorBody)))]
 pub async fn belief(
     State(state): State<AppState>,
     Path(id): Path<String>,
+    Query(query): Query<HashMap<String, String>>,
 ) -> Result<Json<Belief>, ApiError> {
-    Ok(Json(find(&state, &id)?.belief().await?))
+    let handle = find(&state, &id)?;
+    let robot = match query.get("robot") {
+        None => None,
+        Some(r) => Some(crate::protocol::robot_index(r).ok_or_else(|| {
+            ApiError::bad_request(format!("robot: {r:?} is not a robot id (r0, r1, …)"))
+        })?),
+    };
+    Ok(Json(handle.belief(robot).await?))
 }
 
 #[utoipa::path(get, path = "/api/matches/{id}/events",

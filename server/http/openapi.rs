@@ -39,6 +39,8 @@ use crate::protocol::*;
         CreateMatch,
         TrackerSettings,
         TrackerConfig,
+        RadioSettings,
+        RadioConfig,
         MatchSummary,
         MatchState,
         RobotState,

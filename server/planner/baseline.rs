@@ -9,7 +9,8 @@ use rand_chacha::ChaCha8Rng;
 
 use crate::nav::{DistanceField, PathFollower, steer, turn_to};
 use crate::planner::pursuit::{engage, nearest_sighting, pursuit_goal};
-use crate::planner::{RobotCommand, TeamView};
+use crate::planner::{Knowledge, RobotCommand, TeamView};
+use crate::radio::Status;
 use crate::sim::arena::Arena;
 use crate::sim::views::candidate_points;
 use crate::sim::{Motion, Physics, Pose};
@@ -57,10 +58,21 @@ impl Baseline {
         }
     }
 
+    /// Robot `i`'s plans as it announces them over the radio: only its goal matters here.
+    pub fn status(&self, i: usize) -> Status {
+        Status {
+            goal: self.robots[i].goal,
+            ..Status::default()
+        }
+    }
+
+    /// This tick's commands. Teammates' goals (the only thing a robot reads of them) come
+    /// from `know`: read directly with a perfect radio, as last heard otherwise.
     pub fn decide(
         &mut self,
         arena: &Arena,
         physics: &Physics,
+        know: &Knowledge,
         view: &TeamView,
     ) -> Vec<RobotCommand> {
         let tick = view.tick;
@@ -112,7 +124,7 @@ impl Baseline {
                 _ => {}
             }
             if state.needs_goal || state.goal.is_none() {
-                self.choose_goal(arena, physics, i, robot.pose);
+                self.choose_goal(arena, physics, know, i, robot.pose);
             }
             let state = &mut self.robots[i];
             let motion = match state.path.target(robot.pose.pos) {
@@ -137,8 +149,30 @@ impl Baseline {
         commands
     }
 
-    /// Robot `i` picks its next destination, taking its teammates' current ones into account.
-    fn choose_goal(&mut self, arena: &Arena, physics: &Physics, i: usize, from: Pose) {
+    /// Robot `i` picks its next destination, taking its teammates' current ones into account
+    /// (as it knows them: see [`Knowledge`]).
+    fn choose_goal(
+        &mut self,
+        arena: &Arena,
+        physics: &Physics,
+        know: &Knowledge,
+        i: usize,
+        from: Pose,
+    ) {
+        let taken: Vec<Point2<f32>> = if know.shared_memory() {
+            self.robots
+                .iter()
+                .enumerate()
+                .filter(|(j, _)| *j != i)
+                .filter_map(|(_, r)| r.goal.map(|g| g.pos))
+                .collect()
+        } else {
+            (0..self.robots.len())
+                .filter(|&j| j != i)
+                .filter_map(|j| know.heard(i, j).and_then(|m| m.status.goal))
+                .map(|g| g.pos)
+                .collect()
+        };
         let state = &mut self.robots[i];
         state.needs_goal = false;
         state.progress = None;
@@ -147,13 +181,6 @@ impl Baseline {
             state.path = PathFollower::default();
             return;
         };
-        let taken: Vec<Point2<f32>> = self
-            .robots
-            .iter()
-            .enumerate()
-            .filter(|(j, _)| *j != i)
-            .filter_map(|(_, r)| r.goal.map(|g| g.pos))
-            .collect();
         let mut best: Option<(f32, Point2<f32>, usize)> = None;
         for p in &self.candidates {
             let Some(cell) = arena.grid.cell_of(*p) else {

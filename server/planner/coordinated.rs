@@ -23,6 +23,12 @@
 //!
 //! A robot that detects an opponent leaves the negotiation and pursues it ([`pursuit`]); the
 //! others keep searching, with the pursuer's view claimed.
+//!
+//! What a robot reads of its teammates (their poses, goals, claims, routes, whether they
+//! pursue or make way) goes through [`Knowledge`]: read directly with a perfect radio, as
+//! last heard otherwise ([`Mate`]). With an imperfect radio a robot also scores with its own
+//! tracker, and nobody moves a teammate: a robot stuck behind one with a higher index asks
+//! it over the radio to step aside, and that robot does so itself when it hears.
 
 use std::sync::Arc;
 
@@ -30,7 +36,8 @@ use nalgebra::Point2;
 
 use crate::nav::{DistanceField, PathFollower, steer, turn_to};
 use crate::planner::pursuit::{engage, nearest_sighting, pursuit_goal};
-use crate::planner::{RobotCommand, RobotView, TeamView};
+use crate::planner::{Knowledge, RobotCommand, RobotView, TeamView};
+use crate::radio::Status;
 use crate::sim::arena::Arena;
 use crate::sim::views::{ViewSpec, ViewTable};
 use crate::sim::{AGENT_RADIUS, Motion, Physics, Pose, wrap_angle};
@@ -200,6 +207,24 @@ struct RobotState {
     chosen_at: u64,
     /// A full round asked it to choose again; it will, on its turn.
     due: bool,
+    /// Radio only: the teammate it asks to step aside in its next message.
+    yield_request: Option<usize>,
+    /// Radio only: whom it last asked to step aside, and when.
+    asked: Option<(usize, u64)>,
+}
+
+/// What a robot knows of a teammate when it plans (see [`Knowledge`]).
+#[derive(Debug, Clone, Copy)]
+struct Mate {
+    index: usize,
+    pos: Point2<f32>,
+    frozen: bool,
+    pursuing: bool,
+    /// Where it is going.
+    goal: Option<Point2<f32>>,
+    /// It still follows a path.
+    moving: bool,
+    making_way: bool,
 }
 
 #[derive(Debug, Clone)]
@@ -248,11 +273,83 @@ impl Coordinated {
         })
     }
 
+    /// Robot `i`'s plans as it announces them over the radio. Takes its pending request
+    /// to a teammate to step aside: it is asked once per stuck check.
+    pub fn status(&mut self, i: usize, pose: Pose) -> Status {
+        let s = &self.robots[i];
+        let claim = if s.seeing {
+            self.nearest_pose(pose)
+        } else {
+            s.goal.map(|g| g.pose)
+        };
+        let route = if s.path.finished() {
+            Vec::new()
+        } else {
+            let mut r = vec![pose.pos];
+            r.extend(s.path.waypoints.iter().skip(s.path.next).copied());
+            r
+        };
+        let status = Status {
+            goal: self.goal_pose(i),
+            claim,
+            pursuing: s.seeing,
+            route,
+            making_way: s.making_way.is_some(),
+            yield_request: s.yield_request,
+        };
+        self.robots[i].yield_request = None;
+        status
+    }
+
+    /// Teammates as robot `i` knows them, in index order: read directly with shared memory,
+    /// as last heard otherwise (a teammate never heard from is unknown and left out).
+    fn mates(&self, know: &Knowledge, view: &TeamView, i: usize) -> Vec<Mate> {
+        (0..view.robots.len())
+            .filter(|&j| j != i)
+            .filter_map(|j| {
+                if know.shared_memory() {
+                    let r = &self.robots[j];
+                    Some(Mate {
+                        index: j,
+                        pos: view.robots[j].pose.pos,
+                        frozen: view.robots[j].frozen,
+                        pursuing: r.seeing,
+                        goal: self.goal_pose(j).map(|g| g.pos),
+                        moving: !r.path.finished(),
+                        making_way: r.making_way.is_some(),
+                    })
+                } else {
+                    know.heard(i, j).map(|m| Mate {
+                        index: j,
+                        pos: m.pose.pos,
+                        frozen: m.frozen,
+                        pursuing: m.status.pursuing,
+                        goal: m.status.goal.map(|g| g.pos),
+                        moving: !m.status.route.is_empty(),
+                        making_way: m.status.making_way,
+                    })
+                }
+            })
+            .collect()
+    }
+
+    /// The centralised team's decisions, from the shared `tracker` (a perfect radio).
     pub fn decide(
         &mut self,
         arena: &Arena,
         physics: &Physics,
         tracker: &Tracker,
+        view: &TeamView,
+    ) -> Vec<RobotCommand> {
+        self.decide_with(arena, physics, &Knowledge::shared(tracker), view)
+    }
+
+    /// This tick's commands, each robot deciding from what it knows (see [`Knowledge`]).
+    pub fn decide_with(
+        &mut self,
+        arena: &Arena,
+        physics: &Physics,
+        know: &Knowledge,
         view: &TeamView,
     ) -> Vec<RobotCommand> {
         let tick = view.tick;
@@ -299,9 +396,22 @@ impl Coordinated {
             if state.goal.is_none() {
                 state.replan = true;
             }
+            // A teammate stuck behind this robot asked it to step aside (radio only: with
+            // shared memory the stuck robot moves it directly).
+            if state.making_way.is_none()
+                && let Some(&keeper) = know.yield_requests(i).first()
+            {
+                self.make_way(arena, view, know, i, keeper, tick);
+            }
+            let state = &mut self.robots[i];
             if let Some((keeper, until)) = state.making_way {
-                let keeper_pos = view.robots[keeper].pose.pos;
-                let passed = state.path.finished() && (keeper_pos - robot.pose.pos).norm() > 2.5;
+                let keeper_pos = if know.shared_memory() {
+                    Some(view.robots[keeper].pose.pos)
+                } else {
+                    know.heard(i, keeper).map(|m| m.pose.pos)
+                };
+                let passed = state.path.finished()
+                    && keeper_pos.is_none_or(|k| (k - robot.pose.pos).norm() > 2.5);
                 if tick >= until || passed {
                     state.making_way = None;
                     state.replan = true;
@@ -320,7 +430,7 @@ impl Coordinated {
             }
         }
         for i in stuck {
-            self.unstick(arena, view, i, tick);
+            self.unstick(arena, view, know, i, tick);
         }
         let searching: Vec<usize> = (0..n).filter(|&i| commands[i].is_none()).collect();
         if tick >= self.next_round {
@@ -347,16 +457,35 @@ impl Coordinated {
         };
         let mut chooser = pick(&self.robots);
         // Binning is cheap but not free: only when a goal is checked or chosen.
-        if check || chooser.is_some() {
-            let total = self.bin_mass(tracker);
-            if total > 0.0 && check {
-                self.drop_worthless(&searching, total);
+        if know.shared_memory() {
+            if check || chooser.is_some() {
+                let total = self.bin_mass(know.tracker(0));
+                if total > 0.0 && check {
+                    self.drop_worthless(&searching, total);
+                    chooser = pick(&self.robots);
+                }
+                if let Some(i) = chooser
+                    && total > 0.0
+                {
+                    self.choose(arena, physics, view, know, i, total);
+                }
+            }
+        } else {
+            // Each robot judges its goal and chooses by its own tracker.
+            if check {
+                for &i in &searching {
+                    let total = self.bin_mass(know.tracker(i));
+                    if total > 0.0 {
+                        self.drop_worthless(&[i], total);
+                    }
+                }
                 chooser = pick(&self.robots);
             }
-            if let Some(i) = chooser
-                && total > 0.0
-            {
-                self.choose(arena, physics, view, i, total);
+            if let Some(i) = chooser {
+                let total = self.bin_mass(know.tracker(i));
+                if total > 0.0 {
+                    self.choose(arena, physics, view, know, i, total);
+                }
             }
         }
         for &i in &searching {
@@ -445,28 +574,40 @@ impl Coordinated {
     }
 
     /// Stages 2 and 3 for robot `i`: claim what its teammates will see, then choose.
-    fn choose(&mut self, arena: &Arena, physics: &Physics, view: &TeamView, i: usize, total: f32) {
+    fn choose(
+        &mut self,
+        arena: &Arena,
+        physics: &Physics,
+        view: &TeamView,
+        know: &Knowledge,
+        i: usize,
+        total: f32,
+    ) {
         // Claims of robots that keep what they do: pursuers look where they look; searchers
         // that are not choosing keep their goals.
-        for (j, robot) in view.robots.iter().enumerate() {
-            if robot.frozen || j == i {
-                continue;
-            }
-            let k = if self.robots[j].seeing {
-                self.nearest_pose(robot.pose)
+        let mates = self.mates(know, view, i);
+        for m in mates.iter().filter(|m| !m.frozen) {
+            let j = m.index;
+            let k = if know.shared_memory() {
+                if self.robots[j].seeing {
+                    self.nearest_pose(view.robots[j].pose)
+                } else {
+                    self.robots[j].goal.map(|g| g.pose)
+                }
             } else {
-                self.robots[j].goal.map(|g| g.pose)
+                know.heard(i, j).and_then(|h| h.status.claim)
             };
-            if let Some(k) = k {
+            if let Some(k) = k.filter(|&k| k < self.views.len()) {
                 self.claim(k);
             }
         }
-        let taken: Vec<Point2<f32>> = (0..view.robots.len())
-            .filter(|&j| j != i && !view.robots[j].frozen)
-            .filter_map(|j| self.goal_pose(j).map(|g| g.pos))
+        let taken: Vec<Point2<f32>> = mates
+            .iter()
+            .filter(|m| !m.frozen)
+            .filter_map(|m| m.goal)
             .collect();
         self.score_poses(total);
-        let field = self.field_for(arena, view, i);
+        let field = self.field_for(arena, view, know, i);
         let best = field
             .as_ref()
             .and_then(|f| self.best_for(arena, physics, i, f, &taken).map(|c| (c, f)));
@@ -496,19 +637,23 @@ impl Coordinated {
         state.progress = None;
     }
 
-    fn field_for(&self, arena: &Arena, view: &TeamView, i: usize) -> Option<DistanceField> {
+    fn field_for(
+        &self,
+        arena: &Arena,
+        view: &TeamView,
+        know: &Knowledge,
+        i: usize,
+    ) -> Option<DistanceField> {
         let from = view.robots[i].pose.pos;
         if self.robots[i].avoid_team {
-            let others: Vec<(Point2<f32>, f32)> = view
-                .robots
+            let others: Vec<(Point2<f32>, f32)> = self
+                .mates(know, view, i)
                 .iter()
-                .enumerate()
-                .filter(|(j, _)| *j != i)
                 // A teammate pressed against this robot must not wall in its start cell:
                 // the disc stops short of it.
-                .map(|(_, r)| {
-                    let gap = (r.pose.pos - from).norm() - 1.5 * arena.grid.cell;
-                    (r.pose.pos, (3.0 * AGENT_RADIUS).min(gap.max(0.0)))
+                .map(|m| {
+                    let gap = (m.pos - from).norm() - 1.5 * arena.grid.cell;
+                    (m.pos, (3.0 * AGENT_RADIUS).min(gap.max(0.0)))
                 })
                 .collect();
             if let Some(f) = DistanceField::from_point_avoiding(&arena.grid, from, &others) {
@@ -575,23 +720,38 @@ impl Coordinated {
     /// higher index steps off the other's path and waits for it to pass: a fixed order, so
     /// the two never both give way or both insist. Blocked by anything else (a frozen or
     /// parked teammate, a tight corner), it re-plans around its teammates.
-    fn unstick(&mut self, arena: &Arena, view: &TeamView, i: usize, tick: u64) {
+    ///
+    /// Over an imperfect radio a robot moves only itself: with the higher index it steps
+    /// aside; with the lower it asks the blocker to (in its next message) and waits, and
+    /// re-plans around the team if it is still stuck at the next check after asking.
+    fn unstick(&mut self, arena: &Arena, view: &TeamView, know: &Knowledge, i: usize, tick: u64) {
         let pos = view.robots[i].pose.pos;
-        let blocker = (0..view.robots.len())
-            .filter(|&j| j != i)
-            .filter(|&j| (view.robots[j].pose.pos - pos).norm() < 1.2)
-            .filter(|&j| !view.robots[j].frozen && !self.robots[j].path.finished())
-            .filter(|&j| !self.robots[j].seeing) // a pursuer follows its target, not its path
-            .filter(|&j| self.robots[j].making_way.is_none())
-            .min_by(|&a, &b| {
-                let da = (view.robots[a].pose.pos - pos).norm();
-                let db = (view.robots[b].pose.pos - pos).norm();
-                da.total_cmp(&db)
-            });
+        let blocker = self
+            .mates(know, view, i)
+            .into_iter()
+            .filter(|m| (m.pos - pos).norm() < 1.2)
+            .filter(|m| !m.frozen && m.moving)
+            .filter(|m| !m.pursuing) // a pursuer follows its target, not its path
+            .filter(|m| !m.making_way)
+            .min_by(|a, b| (a.pos - pos).norm().total_cmp(&(b.pos - pos).norm()))
+            .map(|m| m.index);
         if let Some(j) = blocker {
-            let (yielder, keeper) = (i.max(j), i.min(j));
-            if self.make_way(arena, view, yielder, keeper, tick) {
-                return;
+            if know.shared_memory() || i > j {
+                let (yielder, keeper) = (i.max(j), i.min(j));
+                if self.make_way(arena, view, know, yielder, keeper, tick) {
+                    return;
+                }
+            } else {
+                let asked_already = self.robots[i]
+                    .asked
+                    .is_some_and(|(k, at)| k == j && tick < at + 2 * STUCK_TICKS);
+                if !asked_already {
+                    let state = &mut self.robots[i];
+                    state.yield_request = Some(j);
+                    state.asked = Some((j, tick));
+                    state.progress = None;
+                    return;
+                }
             }
         }
         self.robots[i].replan = true;
@@ -604,6 +764,7 @@ impl Coordinated {
         &mut self,
         arena: &Arena,
         view: &TeamView,
+        know: &Knowledge,
         yielder: usize,
         keeper: usize,
         tick: u64,
@@ -612,10 +773,24 @@ impl Coordinated {
         const REACH: f32 = 8.0;
         let grid = &arena.grid;
         let from = view.robots[yielder].pose.pos;
-        let keeper_pos = view.robots[keeper].pose.pos;
-        let k = &self.robots[keeper].path;
-        let mut route = vec![keeper_pos];
-        route.extend(k.waypoints.iter().skip(k.next).copied());
+        // The keeper's position and remaining route, as the yielder knows them.
+        let (keeper_pos, route) = if know.shared_memory() {
+            let keeper_pos = view.robots[keeper].pose.pos;
+            let k = &self.robots[keeper].path;
+            let mut route = vec![keeper_pos];
+            route.extend(k.waypoints.iter().skip(k.next).copied());
+            (keeper_pos, route)
+        } else {
+            let Some(m) = know.heard(yielder, keeper) else {
+                return false;
+            };
+            let route = if m.status.route.is_empty() {
+                vec![m.pose.pos]
+            } else {
+                m.status.route.clone()
+            };
+            (m.pose.pos, route)
+        };
         // The keeper's body is a wall for the way out, but no wider than the gap between the
         // two: pressed together (pushed sideways in a corridor, centres 0.5 m apart) a full
         // two-radius disc also closed the cells beside the yielder and boxed it in.
@@ -642,7 +817,10 @@ impl Coordinated {
         state.making_way = Some((keeper, tick + MAKE_WAY_TICKS));
         state.replan = false;
         state.progress = None;
-        self.robots[keeper].progress = None;
+        if know.shared_memory() {
+            // Over a radio the keeper reset its own when it asked.
+            self.robots[keeper].progress = None;
+        }
         true
     }
 

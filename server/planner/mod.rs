@@ -14,13 +14,18 @@ pub mod baseline;
 pub mod coordinated;
 pub mod pursuit;
 
+use std::borrow::Cow;
+use std::sync::Arc;
+
 use nalgebra::Point2;
 use rand_chacha::ChaCha8Rng;
+
+use crate::radio::{Message, OwnedSighting, Radio, Status};
 
 use crate::sim::arena::Arena;
 use crate::sim::sensors::Detection;
 use crate::sim::{Motion, Physics, Pose};
-use crate::tracker::{LaserModel, Sighting, Tracker, TrackerEvent};
+use crate::tracker::{LaserModel, Role, Sighting, Tracker, TrackerEvent};
 
 /// What the team may know about one robot this tick.
 #[derive(Debug, Clone, Copy)]
@@ -60,11 +65,82 @@ pub enum PlannerKind {
     Coordinated,
 }
 
-/// The team's brain: the opponent tracker, the chosen planner and its memory.
+/// The team's brain: the opponent tracker(s), the chosen planner and its memory, and the
+/// radio between the robots.
+///
+/// With a perfect radio (the default) the team is centralised: one tracker fed by every
+/// robot's sensing, and planners that read each other's state directly. With a latency or
+/// loss (see [`crate::radio`]) each robot keeps its own tracker, fed by its own sensing and
+/// the sightings it receives, and plans from that tracker and from what it last heard of its
+/// teammates ([`Knowledge`]); the planners' per-robot memories stay in one `Brain`, but a
+/// robot's decisions read only its own entry and what it heard.
 #[derive(Debug, Clone)]
 pub struct Team {
-    pub tracker: Tracker,
+    /// One tracker shared by the team (perfect radio), or one per robot, in robot order.
+    pub trackers: Vec<Tracker>,
     pub(crate) brain: Brain,
+    /// The channel and what each robot has heard; `None` while the team shares one tracker.
+    channel: Option<Box<Channel>>,
+}
+
+/// What travels over the radio and what each robot made of it.
+#[derive(Debug, Clone)]
+struct Channel {
+    radio: Radio,
+    /// `heard[i][j]`: the last message robot `i` received from robot `j`.
+    heard: Vec<Vec<Option<Arc<Message>>>>,
+    /// `hits_heard[i][j]`: robot `j`'s hit count as robot `i` last heard it.
+    hits_heard: Vec<Vec<u32>>,
+    /// Each robot's own hit count.
+    hits: Vec<u32>,
+    /// `requests[i]`: teammates whose message of this tick asked robot `i` to step aside
+    /// (filled by [`Team::track`], read by [`Team::plan`]).
+    requests: Vec<Vec<usize>>,
+}
+
+/// What the robots know when they plan, besides their own sensing: their tracker(s) and,
+/// with an imperfect radio, what each heard from its teammates.
+#[derive(Debug, Clone, Copy)]
+pub struct Knowledge<'a> {
+    trackers: &'a [Tracker],
+    /// `None`: a perfect radio, so teammates' plans are read directly (shared memory).
+    heard: Option<&'a [Vec<Option<Arc<Message>>>]>,
+    /// `requests[i]`: teammates whose message of this tick asked robot `i` to step aside.
+    requests: &'a [Vec<usize>],
+}
+
+impl<'a> Knowledge<'a> {
+    /// The centralised team: one tracker, plans shared.
+    pub fn shared(tracker: &'a Tracker) -> Knowledge<'a> {
+        Knowledge {
+            trackers: std::slice::from_ref(tracker),
+            heard: None,
+            requests: &[],
+        }
+    }
+
+    /// Robot `i`'s tracker (the shared one when there is only one).
+    pub fn tracker(&self, i: usize) -> &'a Tracker {
+        &self.trackers[i.min(self.trackers.len() - 1)]
+    }
+
+    /// Whether teammates' plans are read directly (a perfect radio).
+    pub fn shared_memory(&self) -> bool {
+        self.heard.is_none()
+    }
+
+    /// The last message robot `i` heard from robot `j` (always `None` with shared memory).
+    pub fn heard(&self, i: usize, j: usize) -> Option<&'a Message> {
+        self.heard
+            .and_then(|h| h.get(i))
+            .and_then(|row| row.get(j))
+            .and_then(|m| m.as_deref())
+    }
+
+    /// Teammates that asked robot `i` this tick to step off their path.
+    pub fn yield_requests(&self, i: usize) -> &'a [usize] {
+        self.requests.get(i).map_or(&[], |v| v.as_slice())
+    }
 }
 
 #[derive(Debug, Clone)]
@@ -74,9 +150,21 @@ pub(crate) enum Brain {
     Coordinated(Box<coordinated::Coordinated>),
 }
 
+impl Brain {
+    /// Robot `i`'s plans as it announces them (see [`Status`]).
+    fn status(&mut self, i: usize, pose: Pose) -> Status {
+        match self {
+            Brain::Idle => Status::default(),
+            Brain::Baseline(b) => b.status(i),
+            Brain::Coordinated(c) => c.status(i, pose),
+        }
+    }
+}
+
 impl Team {
     /// `rng` feeds the planner; the tracker has its own stream, so that tracker settings do
-    /// not change the planner's random choices.
+    /// not change the planner's random choices. The team shares `tracker` (a perfect radio)
+    /// until [`Team::with_radio`] says otherwise.
     pub fn new(
         kind: PlannerKind,
         arena: &Arena,
@@ -95,7 +183,31 @@ impl Team {
                 coordinated::Coordinated::new(arena, physics, coordination, robots),
             )),
         };
-        Team { tracker, brain }
+        Team {
+            trackers: vec![tracker],
+            brain,
+            channel: None,
+        }
+    }
+
+    /// Puts a radio between the `robots` robots. When it is not perfect (or asks for the
+    /// per-robot machinery anyway), every robot gets its own copy of the tracker: the same
+    /// particles and the same random stream, so that robots fed the same sightings in the
+    /// same order hold the same belief as the shared tracker would.
+    pub fn with_radio(mut self, radio: Radio, robots: usize) -> Team {
+        if !radio.settings.uses_channel() {
+            return self;
+        }
+        let tracker = self.trackers[0].clone();
+        self.trackers = vec![tracker; robots];
+        self.channel = Some(Box::new(Channel {
+            radio,
+            heard: vec![vec![None; robots]; robots],
+            hits_heard: vec![vec![0; robots]; robots],
+            hits: vec![0; robots],
+            requests: vec![Vec::new(); robots],
+        }));
+        self
     }
 
     /// The planner this team runs (every kind asked for is built, so also the one asked for).
@@ -107,6 +219,70 @@ impl Team {
         }
     }
 
+    /// Whether each robot keeps its own tracker (an imperfect radio).
+    pub fn per_robot(&self) -> bool {
+        self.channel.is_some()
+    }
+
+    /// Robot `robot`'s belief: its own tracker, or the team's when it is shared. `None` for
+    /// a robot the team does not have.
+    pub fn belief_of(&self, robot: usize, robots: usize) -> Option<&Tracker> {
+        if robot >= robots {
+            return None;
+        }
+        self.trackers.get(robot.min(self.trackers.len() - 1))
+    }
+
+    /// The team's merged belief. Shared tracker: its roles. Per-robot trackers: the roles of
+    /// the robot that knows of the most tags (the lowest index among equals), so that the
+    /// untagged counts still add up to the opponents it knows are left; each untagged role's
+    /// cloud is the equal mixture of that role and the roles of the same id in the other
+    /// robots' trackers (ids agree while robots split roles on the same sightings, which
+    /// they do, later or earlier, unless a message is lost). Its confidence is the
+    /// reference robot's.
+    pub fn merged_belief(&self) -> Cow<'_, [Role]> {
+        if self.trackers.len() == 1 {
+            return Cow::Borrowed(&self.trackers[0].roles);
+        }
+        let Some(reference) = self
+            .trackers
+            .iter()
+            .enumerate()
+            .min_by_key(|(i, t)| (t.untagged_count(), *i))
+            .map(|(i, _)| i)
+        else {
+            return Cow::Borrowed(&[]);
+        };
+        let roles = self.trackers[reference]
+            .roles
+            .iter()
+            .map(|role| {
+                if role.tagged {
+                    return role.clone();
+                }
+                let parts: Vec<&Role> = self
+                    .trackers
+                    .iter()
+                    .filter_map(|t| t.roles.iter().find(|r| r.id == role.id && !r.tagged))
+                    .collect();
+                let share = 1.0 / parts.len() as f32;
+                let mut mixed = Role {
+                    particles: Vec::new(),
+                    weights: Vec::new(),
+                    steps: Vec::new(),
+                    ..role.clone()
+                };
+                for p in parts {
+                    mixed.particles.extend_from_slice(&p.particles);
+                    mixed.weights.extend(p.weights.iter().map(|w| w * share));
+                    mixed.steps.extend_from_slice(&p.steps);
+                }
+                mixed
+            })
+            .collect();
+        Cow::Owned(roles)
+    }
+
     /// Starts a full negotiation round on the next tick (searching robots then choose one per
     /// tick), as after a change of
     /// the belief from outside (a test that sets up a belief, a restored match).
@@ -116,8 +292,9 @@ impl Team {
         }
     }
 
-    /// Updates the tracker with what the robots sensed, then plans. Returns the commands and
-    /// what happened to the roles.
+    /// Updates the tracker(s) with what the robots sensed (and, with a radio, heard), then
+    /// plans. Returns the commands and what happened to the roles (of robot 0's tracker when
+    /// every robot has its own).
     pub fn decide(
         &mut self,
         arena: &Arena,
@@ -128,41 +305,142 @@ impl Team {
         (self.plan(arena, physics, view), events)
     }
 
-    /// The first half of [`Team::decide`]: the tracker's update from what the robots sensed.
-    /// (Split so the shell can time the two halves; the pair is exactly `decide`.)
+    /// The first half of [`Team::decide`]: the radio's traffic of this tick and the
+    /// trackers' updates from what the robots sensed and heard. (Split so the shell can time
+    /// the two halves; the pair is exactly `decide`.)
     pub fn track(
         &mut self,
         arena: &Arena,
         physics: &Physics,
         view: &TeamView,
     ) -> Vec<TrackerEvent> {
-        let sightings: Vec<Sighting> = view
+        let own: Vec<Option<Sighting>> = view
             .robots
             .iter()
             // A robot frozen before it sensed has an empty scan and nothing to say; one hit
             // after sensing still reports what it saw, and whether its own shot hit.
-            .filter(|r| !r.scan.is_empty() || r.hit)
-            .map(|r| Sighting {
-                pose: r.pose,
-                scan: r.scan,
-                detections: r.detections,
-                tagged: r.hit,
+            .map(|r| {
+                (!r.scan.is_empty() || r.hit).then_some(Sighting {
+                    pose: r.pose,
+                    scan: r.scan,
+                    detections: r.detections,
+                    tagged: r.hit,
+                })
             })
             .collect();
         let laser = LaserModel {
             fov: physics.laser_fov,
             range: physics.laser_range,
         };
-        self.tracker.update(arena, laser, &sightings)
+        let Some(channel) = self.channel.as_deref_mut() else {
+            let sightings: Vec<Sighting> = own.iter().flatten().copied().collect();
+            return self.trackers[0].update(arena, laser, &sightings);
+        };
+        let n = view.robots.len();
+        // Every robot broadcasts what it sensed and its plans as of its last decision.
+        for (i, r) in view.robots.iter().enumerate() {
+            channel.hits[i] += r.hit as u32;
+            let sighting = own[i]
+                .filter(|_| channel.radio.settings.share_sightings)
+                .map(|s| OwnedSighting::from_sighting(&s));
+            let message = Message {
+                from: i,
+                sent: view.tick,
+                pose: r.pose,
+                frozen: r.frozen,
+                sighting,
+                hits: channel.hits[i],
+                status: self.brain.status(i, r.pose),
+            };
+            channel.radio.send(message, n);
+        }
+        let mut inbox: Vec<Vec<Arc<Message>>> = vec![Vec::new(); n];
+        for (to, m) in channel.radio.deliver(view.tick) {
+            if let Some(b) = inbox.get_mut(to) {
+                b.push(m);
+            }
+        }
+        let mut requests: Vec<Vec<usize>> = vec![Vec::new(); n];
+        let mut events = Vec::new();
+        for (i, received) in inbox.iter_mut().enumerate() {
+            // By sender, each sender's in the order sent: with a perfect radio exactly the
+            // order the shared tracker takes the robots' sightings in.
+            received.sort_by_key(|m| m.from);
+            // A hit whose message was lost still takes an opponent off: known from the next
+            // message's count, placed in the sender's tag cone as it is now.
+            let mut missed: Vec<(usize, OwnedSighting)> = Vec::new();
+            for m in received.iter() {
+                let expected = channel.hits_heard[i][m.from]
+                    + m.sighting.as_ref().is_some_and(|s| s.tagged) as u32;
+                for _ in expected..m.hits {
+                    missed.push((
+                        m.from,
+                        OwnedSighting {
+                            pose: m.pose,
+                            scan: Vec::new(),
+                            detections: Vec::new(),
+                            tagged: true,
+                        },
+                    ));
+                }
+                channel.hits_heard[i][m.from] = m.hits;
+                if m.status.yield_request == Some(i) {
+                    requests[i].push(m.from);
+                }
+                channel.heard[i][m.from] = Some(m.clone());
+            }
+            let mut sightings: Vec<Sighting> = Vec::new();
+            for k in 0..n {
+                if k == i {
+                    sightings.extend(own[i]);
+                    continue;
+                }
+                for m in received.iter().filter(|m| m.from == k) {
+                    sightings.extend(m.sighting.as_ref().map(OwnedSighting::as_sighting));
+                }
+                sightings.extend(
+                    missed
+                        .iter()
+                        .filter(|(from, _)| *from == k)
+                        .map(|(_, s)| s.as_sighting()),
+                );
+            }
+            let e = self.trackers[i].update(arena, laser, &sightings);
+            if i == 0 {
+                events = e;
+            }
+        }
+        channel.requests = requests;
+        events
     }
 
-    /// The second half of [`Team::decide`]: each robot's command from the updated belief.
+    /// The second half of [`Team::decide`]: each robot's command from the updated belief(s)
+    /// and what it heard.
     pub fn plan(&mut self, arena: &Arena, physics: &Physics, view: &TeamView) -> Vec<RobotCommand> {
-        match &mut self.brain {
-            Brain::Idle => vec![RobotCommand::default(); view.robots.len()],
-            Brain::Baseline(b) => b.decide(arena, physics, view),
-            Brain::Coordinated(c) => c.decide(arena, physics, &self.tracker, view),
-        }
+        let Some(channel) = self.channel.as_deref() else {
+            let know = Knowledge::shared(&self.trackers[0]);
+            return plan(&mut self.brain, arena, physics, &know, view);
+        };
+        let know = Knowledge {
+            trackers: &self.trackers,
+            heard: (!channel.radio.settings.perfect()).then_some(&channel.heard[..]),
+            requests: &channel.requests,
+        };
+        plan(&mut self.brain, arena, physics, &know, view)
+    }
+}
+
+fn plan(
+    brain: &mut Brain,
+    arena: &Arena,
+    physics: &Physics,
+    know: &Knowledge,
+    view: &TeamView,
+) -> Vec<RobotCommand> {
+    match brain {
+        Brain::Idle => vec![RobotCommand::default(); view.robots.len()],
+        Brain::Baseline(b) => b.decide(arena, physics, know, view),
+        Brain::Coordinated(c) => c.decide_with(arena, physics, know, view),
     }
 }
 
@@ -170,4 +448,138 @@ impl Team {
 pub fn detection_point(pose: Pose, d: &Detection) -> Point2<f32> {
     let a = pose.theta + d.bearing;
     pose.pos + nalgebra::Vector2::new(a.cos(), a.sin()) * d.range
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::radio::Settings as RadioSettings;
+    use crate::sim::arena::MapDef;
+    use rand::SeedableRng;
+
+    fn open_room() -> Arena {
+        Arena::new(MapDef {
+            name: "open".into(),
+            width: 12.0,
+            height: 6.0,
+            obstacles: vec![],
+            robot_spawns: vec![[1.0, 3.0, 0.0]],
+            opponent_spawns: vec![Point2::new(11.0, 3.0)],
+            landmarks: vec![],
+        })
+    }
+
+    fn team(arena: &Arena, radio: RadioSettings) -> Team {
+        let physics = Physics::default();
+        let tracker = Tracker::new(
+            arena,
+            crate::tracker::Settings {
+                particles_per_role: 200,
+                ..Default::default()
+            },
+            2,
+            ChaCha8Rng::seed_from_u64(1),
+        );
+        Team::new(
+            PlannerKind::Idle,
+            arena,
+            &physics,
+            coordinated::Settings::default(),
+            2,
+            tracker,
+            ChaCha8Rng::seed_from_u64(2),
+        )
+        .with_radio(Radio::new(radio, ChaCha8Rng::seed_from_u64(3)), 2)
+    }
+
+    fn view<'a>(tick: u64, scan: &'a [f32], seen: &'a [Detection], hit: bool) -> TeamView<'a> {
+        let robot = |pose: Pose, detections: &'a [Detection], hit: bool| RobotView {
+            pose,
+            frozen: false,
+            can_fire: true,
+            scan,
+            detections,
+            hit,
+        };
+        TeamView {
+            tick,
+            robots: vec![
+                robot(Pose::new(1.0, 3.0, 0.0), seen, hit),
+                robot(Pose::new(1.0, 1.0, std::f32::consts::PI), &[], false),
+            ],
+        }
+    }
+
+    /// A hit is a fact the team must not lose: a receiver that missed the message of the
+    /// hit learns of it from the sender's next message (its hit count), so its roles still
+    /// add up to the opponents left.
+    #[test]
+    fn a_teammate_learns_of_a_hit_whose_message_was_lost_from_the_next_one() {
+        let arena = open_room();
+        let physics = Physics::default();
+        let mut t = team(
+            &arena,
+            RadioSettings {
+                loss: 1.0,
+                ..RadioSettings::default()
+            },
+        );
+        assert!(t.per_robot());
+        let scan = vec![8.0; 181];
+        let seen = [Detection {
+            range: 3.0,
+            bearing: 0.0,
+        }];
+        t.decide(&arena, &physics, &view(1, &scan, &seen, true));
+        assert_eq!(
+            t.trackers[0].untagged_count(),
+            1,
+            "the shooter knows at once"
+        );
+        assert_eq!(
+            t.trackers[1].untagged_count(),
+            2,
+            "its teammate heard nothing"
+        );
+        // The radio recovers; the next message says nothing of the hit but its count.
+        t.channel.as_mut().unwrap().radio.settings.loss = 0.0;
+        t.decide(&arena, &physics, &view(2, &scan, &[], false));
+        assert_eq!(
+            t.trackers[1].untagged_count(),
+            1,
+            "learnt from the hit count"
+        );
+        t.decide(&arena, &physics, &view(3, &scan, &[], false));
+        assert_eq!(t.trackers[1].untagged_count(), 1, "and only once");
+    }
+
+    /// Without shared sightings (the reacquire experiment's first condition) a robot's
+    /// tracker never takes in what a teammate saw.
+    #[test]
+    fn without_shared_sightings_a_robot_keeps_only_its_own() {
+        let arena = open_room();
+        let physics = Physics::default();
+        let mut t = team(
+            &arena,
+            RadioSettings {
+                share_sightings: false,
+                ..RadioSettings::default()
+            },
+        );
+        let scan = vec![8.0; 181];
+        let seen = [Detection {
+            range: 4.0,
+            bearing: 0.0,
+        }];
+        for tick in 1..=5 {
+            t.decide(&arena, &physics, &view(tick, &scan, &seen, false));
+        }
+        let confirmed = |tr: &Tracker| tr.roles.iter().any(|r| r.confidence > 0.9);
+        assert!(confirmed(&t.trackers[0]), "robot 0 saw the opponent");
+        assert!(!confirmed(&t.trackers[1]), "robot 1 was not told");
+        // The merged view still accounts for both opponents.
+        let merged = t.merged_belief();
+        let untagged: u32 = merged.iter().filter(|r| !r.tagged).map(|r| r.count).sum();
+        assert_eq!(untagged, 2);
+    }
 }

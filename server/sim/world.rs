@@ -12,7 +12,8 @@
 //! 6. events — appended to the log with increasing `seq`.
 //!
 //! Randomness comes from one seed split into independent ChaCha streams (sensing, bots,
-//! team), so changing, say, a bot's behaviour does not shift the laser noise.
+//! team, tracker, set-up, odometry, localisers, radio), so changing, say, a bot's behaviour
+//! does not shift the laser noise.
 
 use std::collections::VecDeque;
 use std::sync::Arc;
@@ -71,6 +72,9 @@ pub struct MatchConfig {
     /// decision reads the true pose.
     pub localisation: bool,
     pub localiser: crate::localise::Settings,
+    /// The team radio: perfect (the default) keeps one shared tracker; a latency or loss
+    /// gives every robot its own (see `crate::radio`).
+    pub radio: crate::radio::Settings,
 }
 
 impl Default for MatchConfig {
@@ -89,6 +93,7 @@ impl Default for MatchConfig {
             coordination: crate::planner::coordinated::Settings::default(),
             localisation: true,
             localiser: crate::localise::Settings::default(),
+            radio: crate::radio::Settings::default(),
         }
     }
 }
@@ -285,6 +290,9 @@ const STREAM_TRACKER: u64 = 5;
 const STREAM_ODOMETRY: u64 = 6;
 /// The robots' localisers (the team's side).
 const STREAM_LOCALISE: u64 = 7;
+/// The team radio's losses (a stream of its own: a perfect radio draws from it too, and
+/// no other stream shifts when the radio changes).
+const STREAM_RADIO: u64 = 8;
 
 fn stream(seed: u64, id: u64) -> ChaCha8Rng {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
@@ -355,6 +363,10 @@ impl World {
             config.robots,
             tracker,
             stream(config.seed, STREAM_TEAM),
+        )
+        .with_radio(
+            crate::radio::Radio::new(config.radio.clone(), stream(config.seed, STREAM_RADIO)),
+            config.robots,
         );
         let mut world = World {
             team,
@@ -1247,6 +1259,6 @@ mod tests {
             w.robot_frozen(0),
             "and the robot was frozen in the same tick"
         );
-        assert_eq!(w.team.tracker.untagged_count(), 1);
+        assert_eq!(w.team.trackers[0].untagged_count(), 1);
     }
 }

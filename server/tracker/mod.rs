@@ -51,6 +51,9 @@ pub struct Settings {
     /// The robots' tag device (to tell which opponent a hit took out).
     pub tag_half_angle: f32,
     pub tag_range: f32,
+    /// Predict where unseen opponents go (the motion stage). Off, hypotheses stay where
+    /// they were last supported: the reacquire experiment's "no prediction" conditions.
+    pub predict: bool,
 }
 
 impl Default for Settings {
@@ -65,6 +68,7 @@ impl Default for Settings {
             opponent_speed: 1.0,
             tag_half_angle: 5f32.to_radians(),
             tag_range: 6.0,
+            predict: true,
         }
     }
 }
@@ -179,6 +183,10 @@ const MIN_SPEED_FRACTION: f32 = 0.3;
 /// opponent is elsewhere.
 const CONTRADICTED_TICKS: u32 = 10;
 const CONTRADICTED_KEEP: f32 = 0.02;
+
+/// Likelihood of a detection 4σ from every particle: a prior with less weight near a
+/// detection than that has nothing to say about it, and is re-drawn around it.
+const FAR_LIKELIHOOD: f32 = 3.354_626_3e-4; // exp(-4² / 2)
 
 /// Spread used to decide which role a detection belongs to: generous, because a tracked
 /// opponent's cloud lags a running opponent by a little.
@@ -404,6 +412,9 @@ impl Tracker {
     /// and speed (at most top speed); a step that would leave free space is refused and the
     /// particle picks anew.
     fn motion(&mut self, arena: &Arena) {
+        if !self.settings.predict {
+            return;
+        }
         let max_step = self.settings.opponent_speed * DT;
         let turn_below = (TURN_PROBABILITY * (1u32 << 16) as f32) as u32;
         let g = &arena.grid;
@@ -626,8 +637,13 @@ impl Tracker {
             0.0
         };
         // Keep the Bayes update only if it left a usable cloud: weights that underflowed would
-        // otherwise be mistaken for an impossible role and scattered over the map.
-        if total > 1e-30 && ess >= 0.05 * n {
+        // otherwise be mistaken for an impossible role and scattered over the map. And only
+        // if the prior had any weight near the detection: `total` is the detection's
+        // likelihood under the prior, and below that of a cloud lying wholly 4σ away the
+        // Bayes update would just renormalise the cloud where it is — a tight cloud metres
+        // from a confirmed detection (found by the reacquire experiment, whose
+        // no-prediction tracker has no motion to carry its cloud to a teammate's detections).
+        if total > FAR_LIKELIHOOD && ess >= 0.05 * n {
             return;
         }
         let count = role.particles.len();
@@ -891,6 +907,49 @@ mod tests {
             t.update(&a, laser(), &[looking]);
         }
         assert_eq!(t.roles[0].confidence_state(), Confidence::Suspicious);
+    }
+
+    /// Regression (reacquire experiment): a tight cloud 2 m from a detection kept its place
+    /// (the Bayes update only renormalised it) although the detection confirmed the role
+    /// every tick; without motion to carry it there, it never followed a teammate's
+    /// sightings. A detection 4σ from every particle now re-draws the cloud around it.
+    #[test]
+    fn a_detection_far_from_a_tight_cloud_redraws_the_cloud_there() {
+        let a = open_room();
+        let mut t = Tracker::new(
+            &a,
+            Settings {
+                predict: false,
+                ..Settings::default()
+            },
+            1,
+            ChaCha8Rng::seed_from_u64(4),
+        );
+        let tight: Vec<Point2<f32>> = (0..1000)
+            .map(|i| Point2::new(4.0 + (i % 10) as f32 * 0.01, 3.0 + (i / 100) as f32 * 0.01))
+            .collect();
+        t.roles[0].reset(tight);
+        let seen = [Detection {
+            range: 5.0,
+            bearing: 0.0,
+        }];
+        let s = Sighting {
+            pose: Pose::new(1.0, 3.0, 0.0),
+            scan: &[],
+            detections: &seen,
+            tagged: false,
+        };
+        t.update(&a, laser(), &[s]);
+        let r = &t.roles[0];
+        let mean = r
+            .particles
+            .iter()
+            .zip(&r.weights)
+            .fold(Vector2::zeros(), |m, (p, w)| m + p.coords * *w);
+        assert!(
+            (mean - Vector2::new(6.0, 3.0)).norm() < 0.2,
+            "the cloud moved to the detection: {mean:?}"
+        );
     }
 
     #[test]
