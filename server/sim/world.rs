@@ -1033,6 +1033,85 @@ mod tests {
     use super::*;
     use crate::sim::arena::MapDef;
 
+    /// Issue 6: no decision reads ground truth. Every tick, after sensing, localisation and
+    /// the referee, a copy of the match has every true pose (robots and opponents) and the
+    /// referee's record of who was seen moved behind the robots' backs; the team stage then
+    /// runs on both. Its commands and its belief must not change, with a perfect radio and
+    /// with per-robot trackers over a lossy one, for both search planners.
+    #[test]
+    fn the_team_decides_from_its_estimates_never_from_the_truth() {
+        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("maps");
+        let store = crate::maps::MapStore::load_dir(&dir).unwrap();
+        let office = store.get("office").unwrap().arena.clone();
+        let radios = [
+            crate::radio::Settings::default(),
+            crate::radio::Settings {
+                latency_ticks: 3,
+                loss: 0.2,
+                ..Default::default()
+            },
+        ];
+        let (mut compared, mut fired) = (0, false);
+        for (planner, radio) in [
+            (PlannerKind::Coordinated, radios[0].clone()),
+            (PlannerKind::Coordinated, radios[1].clone()),
+            (PlannerKind::Baseline, radios[1].clone()),
+        ] {
+            let config = MatchConfig {
+                robots: 3,
+                opponents: 2,
+                opponent_bot: BotKind::Wander,
+                planner,
+                placement: Placement::Random,
+                seed: 11,
+                localisation: true,
+                radio,
+                ..MatchConfig::default()
+            };
+            let mut world = World::new(office.clone(), config).unwrap();
+            for _ in 0..400 {
+                if world.status == MatchStatus::Finished {
+                    break;
+                }
+                world.tick += 1;
+                let motions = world.inputs();
+                world.move_agents(&motions);
+                world.sense();
+                world.localise();
+                world.rules();
+                let mut moved = world.clone();
+                for r in &mut moved.robots {
+                    r.pose = Pose::new(r.pose.pos.x + 3.0, r.pose.pos.y - 2.0, r.pose.theta + 1.0);
+                    r.scan.seen.reverse();
+                    r.scan.seen.iter_mut().for_each(|o| *o += 1);
+                }
+                for o in &mut moved.opponents {
+                    o.pose = Pose::new(o.pose.pos.y, o.pose.pos.x, -o.pose.theta);
+                }
+                world.think(&mut |_| {});
+                moved.think(&mut |_| {});
+                for (a, b) in world.robots.iter().zip(&moved.robots) {
+                    assert_eq!(a.command, b.command, "tick {}", world.tick);
+                    fired |= a.command.tag;
+                }
+                if world.tick.is_multiple_of(50) {
+                    assert_eq!(
+                        format!("{:?}", world.team),
+                        format!("{:?}", moved.team),
+                        "belief at tick {}",
+                        world.tick
+                    );
+                }
+                compared += 1;
+            }
+        }
+        // Searching, pursuing and firing all happened (the matches end in captures).
+        assert!(
+            compared > 300 && fired,
+            "{compared} ticks compared, fired: {fired}"
+        );
+    }
+
     /// A 12 m × 6 m room with one pillar.
     fn duel() -> Arc<Arena> {
         Arc::new(Arena::new(MapDef {
