@@ -1,10 +1,17 @@
 //! Chasing a detected opponent: turn to it, close in, fire once it is inside the tag cone.
+//!
+//! [`engage`] is the plain rule every planner uses. The coordinated planner wraps it in
+//! [`engage_looking_ahead`], Fabiani & Latombe's one-step decision: of a few candidate
+//! motions it takes the one most likely to keep the opponent in view ([`keeps_in_view`]),
+//! given where the opponent may go and how unsure the robot is of its own position.
 
-use nalgebra::Point2;
+use nalgebra::{Point2, Vector2};
 
 use crate::nav::{steer, turn_to};
 use crate::planner::{RobotView, detection_point};
-use crate::sim::{Motion, Physics, Pose};
+use crate::sim::arena::Arena;
+use crate::sim::motion::propose;
+use crate::sim::{AGENT_RADIUS, DT, Motion, Physics, Pose, wrap_angle};
 
 /// Range the pursuer closes to before it stops driving: well inside the 6 m tag range so a
 /// target that steps away is still hittable.
@@ -38,6 +45,126 @@ pub fn engage(
         turn_to(robot.pose, d.y.atan2(d.x), physics.robot_turn_rate)
     };
     (motion, fire)
+}
+
+/// Motions the look-ahead weighs besides [`engage`]'s own: forward at none, half and full
+/// speed, each turning hard either way or not at all.
+const LOOKAHEAD_FORWARD: [f32; 3] = [0.0, 0.5, 1.0];
+const LOOKAHEAD_TURN: [f32; 3] = [-1.0, 0.0, 1.0];
+/// How much likelier another motion must keep the target in view before it replaces
+/// [`engage`]'s: closing in and facing the target is what tags it, so only a clear gain in
+/// visibility is worth a detour.
+const LOOKAHEAD_MARGIN: f32 = 0.1;
+/// Bearings this close to the edge of the laser's field of view count as out of it: a
+/// detection there is the first to be lost to noise.
+const FOV_MARGIN: f32 = 0.1;
+
+/// [`engage`] with Fabiani & Latombe's one-step look-ahead: besides `engage`'s motion the
+/// robot weighs a few others, each held for `horizon` seconds, by the probability that it
+/// still sees the target afterwards ([`keeps_in_view`]), and takes the best when it beats
+/// `engage`'s by [`LOOKAHEAD_MARGIN`]. A robot about to fire keeps `engage`'s motion, and a
+/// `horizon` of 0 is plain `engage`. Deterministic: the probability is a fixed quadrature,
+/// not a sample.
+pub fn engage_looking_ahead(
+    arena: &Arena,
+    robot: &RobotView,
+    physics: &Physics,
+    horizon: f32,
+    (target, range, bearing): (Point2<f32>, f32, f32),
+) -> (Motion, bool) {
+    let (plain, fire) = engage(robot, physics, target, range, bearing);
+    if horizon <= 0.0 || fire {
+        return (plain, fire);
+    }
+    let keep =
+        |m: Motion| keeps_in_view(arena, physics, robot.pose, robot.spread, target, m, horizon);
+    let p_plain = keep(plain);
+    let mut best = (plain, p_plain);
+    for forward in LOOKAHEAD_FORWARD {
+        for turn in LOOKAHEAD_TURN {
+            let m = Motion::Drive { forward, turn };
+            let p = keep(m);
+            if p > best.1 {
+                best = (m, p);
+            }
+        }
+    }
+    if best.1 > p_plain + LOOKAHEAD_MARGIN {
+        (best.0, fire)
+    } else {
+        (plain, fire)
+    }
+}
+
+/// Probability that a robot at `pose`, position uncertain by `spread` (m, std-dev), still
+/// sees the opponent now at `target` after holding `motion` for `horizon` seconds.
+///
+/// The quadrature: the robot's true position is its estimate or one `spread` off along
+/// either axis (weights 1/3 and 1/6 each); the opponent stays or walks `horizon` at top speed
+/// in one of 8 directions, wherever it could walk (weights equal). The detection is relative,
+/// so an error in the robot's position shifts the opponent with it: what the error changes
+/// is where the walls are, which may hide the opponent or stop the robot. A sample counts as
+/// seen when the robot is clear of walls there and the opponent is within range, inside the
+/// field of view (less [`FOV_MARGIN`]) and in line of sight. A motion whose nominal path
+/// runs into a wall scores 0.
+pub fn keeps_in_view(
+    arena: &Arena,
+    physics: &Physics,
+    pose: Pose,
+    spread: f32,
+    target: Point2<f32>,
+    motion: Motion,
+    horizon: f32,
+) -> f32 {
+    let ticks = (horizon / DT).round().max(1.0) as usize;
+    let mut next = pose;
+    for _ in 0..ticks {
+        next = propose(next, motion, physics.robot_speed, physics.robot_turn_rate);
+        if arena.clearance(next.pos) < AGENT_RADIUS {
+            return 0.0;
+        }
+    }
+    let reach = physics.opponent_speed * ticks as f32 * DT;
+    let mut moves: Vec<Vector2<f32>> = vec![Vector2::zeros()];
+    for k in 0..8 {
+        let a = k as f32 * std::f32::consts::FRAC_PI_4;
+        let d = Vector2::new(a.cos(), a.sin()) * reach;
+        let q = target + d;
+        if arena.clearance(q) >= AGENT_RADIUS && arena.line_of_sight(target, q) {
+            moves.push(d);
+        }
+    }
+    let offsets: &[(Vector2<f32>, f32)] = if spread > 0.0 {
+        &[
+            (Vector2::new(0.0, 0.0), 1.0 / 3.0),
+            (Vector2::new(spread, 0.0), 1.0 / 6.0),
+            (Vector2::new(-spread, 0.0), 1.0 / 6.0),
+            (Vector2::new(0.0, spread), 1.0 / 6.0),
+            (Vector2::new(0.0, -spread), 1.0 / 6.0),
+        ]
+    } else {
+        &[(Vector2::new(0.0, 0.0), 1.0)]
+    };
+    let half_fov = physics.laser_fov * 0.5 - FOV_MARGIN;
+    let mut p = 0.0;
+    for &(o, w) in offsets {
+        let at = next.pos + o;
+        if arena.clearance(at) < AGENT_RADIUS {
+            continue; // it would be in a wall: stopped, and lost
+        }
+        let seen = moves
+            .iter()
+            .filter(|&&d| {
+                let q = target + d + o;
+                let rel = q - at;
+                rel.norm() <= physics.laser_range
+                    && wrap_angle(rel.y.atan2(rel.x) - next.theta).abs() <= half_fov
+                    && arena.line_of_sight(at, q)
+            })
+            .count();
+        p += w * seen as f32 / moves.len() as f32;
+    }
+    p
 }
 
 /// The goal shown while pursuing: the target, facing it.
