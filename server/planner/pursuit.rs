@@ -175,3 +175,115 @@ pub fn pursuit_goal(from: Pose, target: Point2<f32>) -> Pose {
         theta: d.y.atan2(d.x),
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::sim::arena::MapDef;
+    use crate::sim::sensors::Detection;
+
+    /// An open 12 m × 6 m room.
+    fn room() -> Arena {
+        Arena::new(MapDef {
+            name: "room".into(),
+            width: 12.0,
+            height: 6.0,
+            obstacles: vec![],
+            robot_spawns: vec![[1.0, 1.0, 0.0]],
+            opponent_spawns: vec![Point2::new(9.0, 1.0)],
+            landmarks: vec![],
+        })
+    }
+
+    fn robot<'a>(pose: Pose, spread: f32, seen: &'a [Detection]) -> RobotView<'a> {
+        RobotView {
+            pose,
+            spread,
+            frozen: false,
+            can_fire: false,
+            scan: &[],
+            detections: seen,
+            hit: false,
+        }
+    }
+
+    #[test]
+    fn an_uncertain_pursuer_along_a_wall_steps_off_it_and_keeps_its_target_in_view() {
+        let arena = room();
+        let physics = Physics::default();
+        // Driving east 0.35 m from the south wall at an opponent 6 m ahead, also by the wall.
+        let pose = Pose::new(2.0, 0.35, 0.0);
+        let seen = [Detection {
+            range: 6.0,
+            bearing: 0.0,
+        }];
+        let (target, range, bearing) = nearest_sighting(&robot(pose, 0.0, &seen)).unwrap();
+        let horizon = 0.5;
+        for (spread, moves_off) in [(0.0, false), (0.3, true)] {
+            let view = robot(pose, spread, &seen);
+            let (plain, _) = engage(&view, &physics, target, range, bearing);
+            let (chosen, _) =
+                engage_looking_ahead(&arena, &view, &physics, horizon, (target, range, bearing));
+            let keep = |m| keeps_in_view(&arena, &physics, pose, spread, target, m, horizon);
+            if moves_off {
+                // Straight on, a robot a spread further south would be in the wall: the
+                // naive (plain) motion keeps the target in view less often.
+                assert!(keep(plain) < 0.9, "plain {plain:?}: {}", keep(plain));
+                assert!(keep(chosen) > keep(plain) + LOOKAHEAD_MARGIN, "{chosen:?}");
+                let next = (0..10).fold(pose, |p, _| {
+                    propose(p, chosen, physics.robot_speed, physics.robot_turn_rate)
+                });
+                assert!(next.pos.y > pose.pos.y, "steps off the wall: {next:?}");
+            } else {
+                // Sure of its position, nothing beats closing in: the plain motion.
+                assert_eq!(chosen, plain);
+            }
+        }
+    }
+
+    #[test]
+    fn a_pursuer_about_to_fire_or_with_no_horizon_engages_plainly() {
+        let arena = room();
+        let physics = Physics::default();
+        let pose = Pose::new(2.0, 0.35, 0.0);
+        let seen = [Detection {
+            range: 4.0,
+            bearing: 0.0,
+        }];
+        let (target, range, bearing) = nearest_sighting(&robot(pose, 0.0, &seen)).unwrap();
+        let mut view = robot(pose, 0.3, &seen);
+        let plain = engage(&view, &physics, target, range, bearing);
+        let off = engage_looking_ahead(&arena, &view, &physics, 0.0, (target, range, bearing));
+        assert_eq!(off, plain);
+        view.can_fire = true;
+        let firing = engage(&view, &physics, target, range, bearing);
+        assert!(firing.1, "in the cone and in range");
+        let ahead = engage_looking_ahead(&arena, &view, &physics, 0.5, (target, range, bearing));
+        assert_eq!(ahead, firing, "a shot is not spoilt by a detour");
+    }
+
+    #[test]
+    fn an_opponent_at_the_edge_of_the_view_is_kept_in_it() {
+        let arena = room();
+        let physics = Physics::default();
+        let pose = Pose::new(3.0, 1.0, 0.0);
+        // 80° to the left, 3 m away: 10° inside the laser's edge.
+        let seen = [Detection {
+            range: 3.0,
+            bearing: 80f32.to_radians(),
+        }];
+        let view = robot(pose, 0.1, &seen);
+        let (target, range, bearing) = nearest_sighting(&view).unwrap();
+        let (chosen, _) =
+            engage_looking_ahead(&arena, &view, &physics, 0.5, (target, range, bearing));
+        let keep = |m| keeps_in_view(&arena, &physics, pose, 0.1, target, m, 0.5);
+        let naive = Motion::Drive {
+            forward: 1.0,
+            turn: 0.0,
+        };
+        // Driving on, the opponent slips out of the side of the view whenever it walks
+        // back; the look-ahead turns towards it and keeps it.
+        assert!(keep(naive) < 0.8, "naive: {}", keep(naive));
+        assert!(keep(chosen) > 0.99, "{chosen:?}: {}", keep(chosen));
+    }
+}
