@@ -83,8 +83,8 @@ pub struct Settings {
     /// Worth lost, times the uncertainty, per metre of the path through narrow passages
     /// (see [`NARROW_HALF_WIDTH`]), where a robot unsure of its pose scrapes walls.
     pub narrow_weight: f32,
-    /// Pursuit look-ahead (seconds, 0 = off): while it sees an opponent, a robot weighs a
-    /// few motions held this long by the chance of still seeing it (see
+    /// Pursuit look-ahead (seconds, 0 = off): while it sees an opponent, an uncertain robot
+    /// weighs a few motions held this long by the chance of still seeing it (see
     /// [`crate::planner::pursuit::engage_looking_ahead`]).
     pub lookahead: f32,
 }
@@ -430,13 +430,16 @@ impl Coordinated {
                 state.seeing = true;
                 state.lost_at = None;
                 state.progress = None; // turning to a target in place is not being stuck
-                let (motion, tag) = engage_looking_ahead(
-                    arena,
-                    robot,
-                    physics,
-                    self.settings.lookahead,
-                    (target, range, bearing),
-                );
+                // Only an uncertain robot looks ahead: always on, the look-ahead's detours
+                // to keep a target in view cost more tags than they saved (capture medians
+                // against `evade` rose by half; see the README).
+                let horizon = if self.uncertainty(robot.spread) > 0.0 {
+                    self.settings.lookahead
+                } else {
+                    0.0
+                };
+                let (motion, tag) =
+                    engage_looking_ahead(arena, robot, physics, horizon, (target, range, bearing));
                 commands[i] = Some(RobotCommand {
                     motion,
                     tag,

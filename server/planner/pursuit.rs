@@ -62,8 +62,9 @@ const FOV_MARGIN: f32 = 0.1;
 /// [`engage`] with Fabiani & Latombe's one-step look-ahead: besides `engage`'s motion the
 /// robot weighs a few others, each held for `horizon` seconds, by the probability that it
 /// still sees the target afterwards ([`keeps_in_view`]), and takes the best when it beats
-/// `engage`'s by [`LOOKAHEAD_MARGIN`]. A robot about to fire keeps `engage`'s motion, and a
-/// `horizon` of 0 is plain `engage`. Deterministic: the probability is a fixed quadrature,
+/// `engage`'s by [`LOOKAHEAD_MARGIN`]. A robot within tag range (about to fire, or aiming
+/// while its device cools down) keeps `engage`'s motion, and a `horizon` of 0 is plain
+/// `engage`. Deterministic: the probability is a fixed quadrature,
 /// not a sample.
 pub fn engage_looking_ahead(
     arena: &Arena,
@@ -73,7 +74,9 @@ pub fn engage_looking_ahead(
     (target, range, bearing): (Point2<f32>, f32, f32),
 ) -> (Motion, bool) {
     let (plain, fire) = engage(robot, physics, target, range, bearing);
-    if horizon <= 0.0 || fire {
+    // Within tag range the plain rule aims, and aim is what tags (also while the device
+    // cools down: a detour then spoils the next shot).
+    if horizon <= 0.0 || fire || range <= physics.tag_range - 0.3 {
         return (plain, fire);
     }
     let keep =
@@ -266,11 +269,12 @@ mod tests {
     fn an_opponent_at_the_edge_of_the_view_is_kept_in_it() {
         let arena = room();
         let physics = Physics::default();
-        let pose = Pose::new(3.0, 1.0, 0.0);
-        // 80° to the left, 3 m away: 10° inside the laser's edge.
+        let pose = Pose::new(3.0, 1.0, std::f32::consts::FRAC_PI_2);
+        // Facing north; 80° to the right, 7 m away (beyond tag range): 10° inside the
+        // laser's edge.
         let seen = [Detection {
-            range: 3.0,
-            bearing: 80f32.to_radians(),
+            range: 7.0,
+            bearing: -80f32.to_radians(),
         }];
         let view = robot(pose, 0.1, &seen);
         let (target, range, bearing) = nearest_sighting(&view).unwrap();
