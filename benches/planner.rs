@@ -74,6 +74,7 @@ fn planner(c: &mut Criterion) {
             .zip(&scans)
             .map(|(pose, scan)| RobotView {
                 pose: *pose,
+                spread: 0.0,
                 frozen: false,
                 can_fire: true,
                 scan: &scan.ranges,

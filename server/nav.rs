@@ -164,6 +164,40 @@ impl DistanceField {
         Some(cells)
     }
 
+    /// For every cell, the metres of its shortest path from the start that run through
+    /// `narrow` cells (see [`narrow_cells`]); infinite for unreachable cells. One pass over
+    /// the predecessor tree, each cell's sum built on its predecessor's, so all cells cost
+    /// about what one long path would.
+    pub fn narrow_metres(&self, narrow: &[bool]) -> Vec<f32> {
+        let n = self.dist.len();
+        let mut out = vec![f32::NAN; n];
+        out[self.start] = 0.0;
+        let mut stack = Vec::new();
+        for c in 0..n {
+            if !self.reachable(c) || !out[c].is_nan() {
+                continue;
+            }
+            let mut at = c;
+            while out[at].is_nan() {
+                stack.push(at);
+                at = self.prev[at] as usize;
+            }
+            let mut acc = out[at];
+            while let Some(x) = stack.pop() {
+                if narrow.get(x).copied().unwrap_or(false) {
+                    acc += self.dist[x] - self.dist[self.prev[x] as usize];
+                }
+                out[x] = acc;
+            }
+        }
+        for v in &mut out {
+            if v.is_nan() {
+                *v = f32::INFINITY;
+            }
+        }
+        out
+    }
+
     /// A smoothed path of waypoints from `from` to the centre of `goal`.
     pub fn path_to(
         &self,
@@ -177,6 +211,34 @@ impl DistanceField {
         pts.extend(cells.iter().map(|&c| grid.centre(c)));
         Some(smooth(grid, &pts))
     }
+}
+
+/// Cells of narrow passages: passable cells with no cell of clearance `half_width` or more
+/// within `reach` metres (a square window). A cell's own clearance is not enough: shortest
+/// paths hug corners, so every path through a wide room would pass low-clearance cells, but
+/// a short step off such a path is roomy; in a passage narrower than `2 · half_width` even
+/// the middle is close to a wall. Keep `reach` well under `half_width`, or the room in
+/// front of a door in a thin wall makes the door itself look wide.
+pub fn narrow_cells(grid: &ClearanceGrid, half_width: f32, reach: f32) -> Vec<bool> {
+    let k = (reach / grid.cell).round().max(0.0) as usize;
+    let (cols, rows) = (grid.cols, grid.rows);
+    // Separable max filter over a (2k+1)² square: rows, then columns.
+    let mut across = vec![0.0f32; grid.len()];
+    for r in 0..rows {
+        for c in 0..cols {
+            let (a, b) = (c.saturating_sub(k), (c + k).min(cols - 1));
+            across[r * cols + c] = grid.clearance[r * cols + a..=r * cols + b]
+                .iter()
+                .fold(f32::NEG_INFINITY, |m, &v| m.max(v));
+        }
+    }
+    (0..grid.len())
+        .map(|idx| {
+            let (r, c) = (idx / cols, idx % cols);
+            let (a, b) = (r.saturating_sub(k), (r + k).min(rows - 1));
+            grid.passable(idx) && (a..=b).all(|rr| across[rr * cols + c] < half_width)
+        })
+        .collect()
 }
 
 /// True when every point of the segment `a`–`b` lies in a passable cell (sampled at half-cell steps).
@@ -328,6 +390,31 @@ mod tests {
         }
         // The travel distance exceeds the straight-line 8 m because of the detour.
         assert!(f.dist[goal] > 10.0);
+    }
+
+    #[test]
+    fn only_a_narrow_door_counts_as_narrow() {
+        let wide = two_rooms(); // a 1.2 m door
+        let mut def = wide.def.clone();
+        def.obstacles[1][0].y = 4.9; // a 0.9 m door
+        def.obstacles[1][1].y = 4.9;
+        let tight = Arena::new(def);
+        let (from, to) = (Point2::new(1.0, 1.0), Point2::new(9.0, 1.0));
+        let through = |a: &Arena| {
+            let narrow = narrow_cells(&a.grid, 0.5, 0.2);
+            let f = DistanceField::from_point(&a.grid, from).unwrap();
+            let m = f.narrow_metres(&narrow);
+            (
+                m[a.grid.cell_of(to).unwrap()],
+                m[a.grid.cell_of(Point2::new(2.0, 2.0)).unwrap()],
+            )
+        };
+        let (wide_door, wide_room) = through(&wide);
+        let (tight_door, tight_room) = through(&tight);
+        // Hugging the door's corners in a wide door is not a narrow passage; the tight door
+        // is, over about its wall's thickness and a little either side.
+        assert_eq!((wide_door, wide_room, tight_room), (0.0, 0.0, 0.0));
+        assert!(tight_door > 0.15 && tight_door < 1.5, "{tight_door}");
     }
 
     #[test]

@@ -139,6 +139,14 @@ pub struct CoordinationSettings {
     pub worthless_share: Option<f64>,
     /// ... or less than this share of all hypotheses (0..=1, default 0.01).
     pub worthless_floor: Option<f64>,
+    /// Localisation spread (m) above which a robot counts as uncertain ((0, 10], default 0.15).
+    pub uncertainty_spread: Option<f64>,
+    /// Worth an uncertain robot adds to a destination that sees a landmark (0..=1, default 0.1).
+    pub landmark_weight: Option<f64>,
+    /// Worth an uncertain robot loses per metre of path through narrow passages (0..=1, default 0.02).
+    pub narrow_weight: Option<f64>,
+    /// Seconds a pursuer looks ahead to keep its target in view, 0 = off (0..=2, default 0.5).
+    pub lookahead: Option<f64>,
 }
 
 /// The coordinated planner's weights a match runs with, defaults filled in.
@@ -154,6 +162,10 @@ pub struct CoordinationConfig {
     pub round_ticks: u64,
     pub worthless_share: f64,
     pub worthless_floor: f64,
+    pub uncertainty_spread: f64,
+    pub landmark_weight: f64,
+    pub narrow_weight: f64,
+    pub lookahead: f64,
 }
 
 impl From<&crate::planner::coordinated::Settings> for CoordinationConfig {
@@ -169,6 +181,10 @@ impl From<&crate::planner::coordinated::Settings> for CoordinationConfig {
             round_ticks: s.round_ticks,
             worthless_share: s.worthless_share as f64,
             worthless_floor: s.worthless_floor as f64,
+            uncertainty_spread: s.uncertainty_spread as f64,
+            landmark_weight: s.landmark_weight as f64,
+            narrow_weight: s.narrow_weight as f64,
+            lookahead: s.lookahead as f64,
         }
     }
 }
@@ -204,6 +220,16 @@ impl CoordinationSettings {
             // hypotheses at all, and stand still.
             return Err("coordination.suspicious_weight: must be greater than 0".into());
         }
+        let uncertainty_spread = f(
+            "uncertainty_spread",
+            self.uncertainty_spread,
+            d.uncertainty_spread,
+            10.0,
+        )?;
+        if uncertainty_spread <= 0.0 {
+            // Every robot, even a perfectly localised one, would count as uncertain.
+            return Err("coordination.uncertainty_spread: must be greater than 0".into());
+        }
         Ok(crate::planner::coordinated::Settings {
             centring_weight: f(
                 "centring_weight",
@@ -237,6 +263,20 @@ impl CoordinationSettings {
                 self.worthless_floor,
                 d.worthless_floor,
                 1.0,
+            )?,
+            uncertainty_spread,
+            landmark_weight: f(
+                "landmark_weight",
+                self.landmark_weight,
+                d.landmark_weight,
+                1.0,
+            )?,
+            narrow_weight: f("narrow_weight", self.narrow_weight, d.narrow_weight, 1.0)?,
+            lookahead: f(
+                "lookahead",
+                self.lookahead,
+                d.lookahead,
+                crate::planner::coordinated::MAX_LOOKAHEAD as f64,
             )?,
             ..d
         })

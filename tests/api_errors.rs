@@ -178,6 +178,16 @@ async fn every_error_class_is_answered_and_nothing_running_is_disturbed() {
             "coordination.crowding_radius",
         ),
         (json!({"travel_weight": -1.0}), "coordination.travel_weight"),
+        (
+            json!({"uncertainty_spread": 0.0}),
+            "coordination.uncertainty_spread",
+        ),
+        (
+            json!({"landmark_weight": 2.0}),
+            "coordination.landmark_weight",
+        ),
+        (json!({"narrow_weight": -0.1}), "coordination.narrow_weight"),
+        (json!({"lookahead": 3.0}), "coordination.lookahead"),
         (json!({"claim": 0.5}), "coordination"),
     ] {
         assert_error(

@@ -34,8 +34,8 @@ use std::sync::Arc;
 
 use nalgebra::Point2;
 
-use crate::nav::{DistanceField, PathFollower, steer, turn_to};
-use crate::planner::pursuit::{engage, nearest_sighting, pursuit_goal};
+use crate::nav::{self, DistanceField, PathFollower, steer, turn_to};
+use crate::planner::pursuit::{engage_looking_ahead, nearest_sighting, pursuit_goal};
 use crate::planner::{Knowledge, RobotCommand, RobotView, TeamView};
 use crate::radio::Status;
 use crate::sim::arena::Arena;
@@ -73,6 +73,20 @@ pub struct Settings {
     /// than `worthless_floor` of all hypotheses) is dropped for a new one.
     pub worthless_share: f32,
     pub worthless_floor: f32,
+    /// Uncertainty-aware motion (Fabiani & Latombe): a robot whose localisation spread is
+    /// above `uncertainty_spread` (m) counts as uncertain, fully so at twice that. Below it
+    /// the two terms here vanish and the choice is the plain one.
+    pub uncertainty_spread: f32,
+    /// Worth added, times the uncertainty, to a destination that sees a landmark (within
+    /// the landmark range, in line of sight): there the robot localises itself again.
+    pub landmark_weight: f32,
+    /// Worth lost, times the uncertainty, per metre of the path through narrow passages
+    /// (see [`NARROW_HALF_WIDTH`]), where a robot unsure of its pose scrapes walls.
+    pub narrow_weight: f32,
+    /// Pursuit look-ahead (seconds, 0 = off): while it sees an opponent, an uncertain robot
+    /// weighs a few motions held this long by the chance of still seeing it (see
+    /// [`crate::planner::pursuit::engage_looking_ahead`]).
+    pub lookahead: f32,
 }
 
 impl Default for Settings {
@@ -91,9 +105,23 @@ impl Default for Settings {
             round_ticks: 60,
             worthless_share: 0.3,
             worthless_floor: 0.01,
+            uncertainty_spread: 0.15,
+            landmark_weight: 0.1,
+            narrow_weight: 0.02,
+            lookahead: 0.5,
         }
     }
 }
+
+/// Longest pursuit look-ahead (seconds): beyond it a held motion says little about the next
+/// decision, which comes every tick anyway.
+pub const MAX_LOOKAHEAD: f32 = 2.0;
+
+/// A narrow passage is under twice this wide (metres): a robot disc (0.5 m) has under a
+/// quarter metre either side, less than an uncertain robot's error.
+pub const NARROW_HALF_WIDTH: f32 = 0.5;
+/// How far around a cell [`nav::narrow_cells`] looks for room (metres).
+const NARROW_REACH: f32 = 0.2;
 
 /// Most candidate positions a map gets: a 500 m × 500 m map would otherwise need gigabytes
 /// of views, so big maps get a coarser candidate grid (and scoring grid) instead.
@@ -130,11 +158,23 @@ impl Settings {
             "round_ticks" => self.round_ticks = num::<u64>(value)?.max(1),
             "worthless_share" => self.worthless_share = positive(num(value)?)?,
             "worthless_floor" => self.worthless_floor = positive(num(value)?)?,
+            "uncertainty_spread" => {
+                let w = positive(num(value)?)?;
+                if w == 0.0 {
+                    // Every robot, even a perfectly localised one, would count as uncertain.
+                    return Err("must be greater than 0".into());
+                }
+                self.uncertainty_spread = w;
+            }
+            "landmark_weight" => self.landmark_weight = positive(num(value)?)?,
+            "narrow_weight" => self.narrow_weight = positive(num(value)?)?,
+            "lookahead" => self.lookahead = positive(num(value)?)?.min(MAX_LOOKAHEAD),
             _ => {
                 return Err(format!(
                     "unknown setting {name:?} (known: centring_weight, travel_weight, \
                      crowding_weight, crowding_radius, claim_keep, keep_bonus, \
-                     suspicious_weight, round_ticks, worthless_share, worthless_floor)"
+                     suspicious_weight, round_ticks, worthless_share, worthless_floor, \
+                     uncertainty_spread, landmark_weight, narrow_weight, lookahead)"
                 ));
             }
         }
@@ -236,6 +276,10 @@ pub struct Coordinated {
     /// Scratch: expected opponents per scoring cell, and per-pose worth.
     mass: Vec<f32>,
     seen: Vec<f32>,
+    /// Per candidate position of `views`: whether a landmark is recognisable from there.
+    sees_landmark: Vec<bool>,
+    /// Per clearance-grid cell: whether it lies in a narrow passage.
+    narrow: Vec<bool>,
 }
 
 /// One robot's best choice in a round.
@@ -250,6 +294,18 @@ impl Coordinated {
     pub fn new(arena: &Arena, physics: &Physics, settings: Settings, robots: usize) -> Self {
         let views = arena.view_table(settings.view_spec(arena, physics));
         let (cells, poses) = (views.cell_count(), views.len());
+        // Landmarks are recognised all round, so a position sees one whatever its heading.
+        let sees_landmark =
+            views
+                .positions
+                .iter()
+                .map(|&p| {
+                    arena.def.landmarks.iter().any(|&m| {
+                        (m - p).norm() <= physics.landmark_range && arena.line_of_sight(p, m)
+                    })
+                })
+                .collect();
+        let narrow = nav::narrow_cells(&arena.grid, NARROW_HALF_WIDTH, NARROW_REACH);
         Coordinated {
             settings,
             views,
@@ -257,6 +313,8 @@ impl Coordinated {
             next_round: 0,
             mass: vec![0.0; cells],
             seen: vec![0.0; poses],
+            sees_landmark,
+            narrow,
         }
     }
 
@@ -372,7 +430,16 @@ impl Coordinated {
                 state.seeing = true;
                 state.lost_at = None;
                 state.progress = None; // turning to a target in place is not being stuck
-                let (motion, tag) = engage(robot, physics, target, range, bearing);
+                // Only an uncertain robot looks ahead: always on, the look-ahead's detours
+                // to keep a target in view cost more tags than they saved (capture medians
+                // against `evade` rose by half; see the README).
+                let horizon = if self.uncertainty(robot.spread) > 0.0 {
+                    self.settings.lookahead
+                } else {
+                    0.0
+                };
+                let (motion, tag) =
+                    engage_looking_ahead(arena, robot, physics, horizon, (target, range, bearing));
                 commands[i] = Some(RobotCommand {
                     motion,
                     tag,
@@ -608,9 +675,11 @@ impl Coordinated {
             .collect();
         self.score_poses(total);
         let field = self.field_for(arena, view, know, i);
-        let best = field
-            .as_ref()
-            .and_then(|f| self.best_for(arena, physics, i, f, &taken).map(|c| (c, f)));
+        let uncertainty = self.uncertainty(view.robots[i].spread);
+        let best = field.as_ref().and_then(|f| {
+            self.best_for(arena, physics, i, f, &taken, uncertainty)
+                .map(|c| (c, f))
+        });
         let from = view.robots[i].pose.pos;
         let state = &mut self.robots[i];
         state.replan = false;
@@ -670,7 +739,20 @@ impl Coordinated {
         }
     }
 
-    /// Robot `i`'s best pose given the scored worths.
+    /// How uncertain a robot with localisation `spread` counts as: 0 up to
+    /// `uncertainty_spread`, rising to 1 at twice that.
+    fn uncertainty(&self, spread: f32) -> f32 {
+        let t = self.settings.uncertainty_spread;
+        if spread > t {
+            ((spread - t) / t).min(1.0)
+        } else {
+            0.0
+        }
+    }
+
+    /// Robot `i`'s best pose given the scored worths. An `uncertainty` above 0 adds
+    /// Fabiani & Latombe's trade: destinations that see a landmark gain, paths through
+    /// narrow passages lose.
     fn best_for(
         &self,
         arena: &Arena,
@@ -678,10 +760,15 @@ impl Coordinated {
         i: usize,
         field: &DistanceField,
         chosen: &[Point2<f32>],
+        uncertainty: f32,
     ) -> Option<Choice> {
         let s = &self.settings;
         let h = s.headings;
         let current = self.robots[i].goal.map(|g| g.pose);
+        // Only for an uncertain robot: a certain one skips the pass (and the terms vanish
+        // exactly, so its choices are the plain planner's).
+        let narrow =
+            (uncertainty > 0.0 && s.narrow_weight > 0.0).then(|| field.narrow_metres(&self.narrow));
         let mut best: Option<Choice> = None;
         for (p_idx, p) in self.views.positions.iter().enumerate() {
             let Some(cell) = arena.grid.cell_of(*p) else {
@@ -695,7 +782,16 @@ impl Coordinated {
                 .iter()
                 .map(|q| (1.0 - (q - p).norm() / s.crowding_radius).max(0.0))
                 .sum();
-            let cost = s.travel_weight * travel_s + s.crowding_weight * crowding;
+            let mut cost = s.travel_weight * travel_s + s.crowding_weight * crowding;
+            if uncertainty > 0.0 {
+                let landmark = if self.sees_landmark[p_idx] {
+                    s.landmark_weight
+                } else {
+                    0.0
+                };
+                let narrow_m = narrow.as_ref().map_or(0.0, |n| n[cell]);
+                cost += uncertainty * (s.narrow_weight * narrow_m - landmark);
+            }
             for k in p_idx * h..(p_idx + 1) * h {
                 let keep = if current == Some(k) {
                     s.keep_bonus
@@ -969,6 +1065,107 @@ mod tests {
             a_through.is_some() && b_through.is_some(),
             "robot 0 through at {a_through:?}, robot 1 at {b_through:?}; poses {:?}",
             world.robots.iter().map(|r| r.pose).collect::<Vec<_>>()
+        );
+    }
+
+    /// Robot 0's choice from `from` with `spread`, the mass set by hand.
+    fn choice(
+        arena: &Arena,
+        settings: Settings,
+        from: Point2<f32>,
+        mass: &[(Point2<f32>, f32)],
+        spread: f32,
+    ) -> (Point2<f32>, Choice) {
+        let physics = Physics::default();
+        let mut c = Coordinated::new(arena, &physics, settings, 1);
+        let mut total = 0.0;
+        for &(p, m) in mass {
+            let cell = c.views.cell_of(p).unwrap();
+            c.mass[cell] += m;
+            total += m;
+        }
+        c.score_poses(total);
+        let field = DistanceField::from_point(&arena.grid, from).unwrap();
+        let u = c.uncertainty(spread);
+        let best = c.best_for(arena, &physics, 0, &field, &[], u).unwrap();
+        (c.views.pose(best.pose).0, best)
+    }
+
+    /// An open 10 m × 6 m room with one landmark by its west wall.
+    fn room_with_landmark() -> Arena {
+        Arena::new(MapDef {
+            name: "room".into(),
+            width: 10.0,
+            height: 6.0,
+            obstacles: vec![],
+            robot_spawns: vec![[5.0, 3.0, 0.0]],
+            opponent_spawns: vec![Point2::new(9.0, 3.0)],
+            landmarks: vec![Point2::new(0.5, 3.0)],
+        })
+    }
+
+    #[test]
+    fn an_uncertain_robot_prefers_a_destination_that_sees_a_landmark() {
+        let arena = room_with_landmark();
+        let from = Point2::new(5.0, 3.0);
+        // Hypotheses at either end, too far apart (8.8 m) for one view; a little more of
+        // them east, away from the landmark.
+        let mass = [(Point2::new(0.6, 3.0), 0.48), (Point2::new(9.4, 3.0), 0.52)];
+        let landmark = Point2::new(0.5, 3.0);
+        let range = Physics::default().landmark_range;
+        let plain = Settings {
+            landmark_weight: 0.0,
+            narrow_weight: 0.0,
+            ..Settings::default()
+        };
+        let (old, old_choice) = choice(&arena, plain, from, &mass, 0.0);
+        assert!(
+            old.x > 5.0,
+            "without the landmark term it goes east: {old:?}"
+        );
+        // Localised (spread under the threshold): exactly the old choice, value and all.
+        for spread in [0.0, 0.05, 0.15] {
+            let (_, c) = choice(&arena, Settings::default(), from, &mass, spread);
+            assert_eq!(
+                (c.pose, c.value, c.worth),
+                (old_choice.pose, old_choice.value, old_choice.worth)
+            );
+        }
+        // Lost (spread twice the threshold): it goes where it can see the landmark.
+        let (new, _) = choice(&arena, Settings::default(), from, &mass, 0.3);
+        assert!(
+            (new - landmark).norm() <= range,
+            "goes within sight of the landmark: {new:?}"
+        );
+    }
+
+    #[test]
+    fn an_uncertain_robot_avoids_a_narrow_corridor() {
+        let arena = corridor();
+        let from = Point2::new(3.0, 3.0);
+        // Slightly more hypotheses in the far room's corner (out of sight of the corridor)
+        // than in this room's; travel is free, so only the corridor can tell them apart.
+        let mass = [
+            (Point2::new(15.5, 0.5), 0.53),
+            (Point2::new(3.0, 0.5), 0.47),
+        ];
+        let settings = Settings {
+            travel_weight: 0.0,
+            ..Settings::default()
+        };
+        let (sure, sure_choice) = choice(&arena, settings.clone(), from, &mass, 0.1);
+        assert!(sure.x > 10.0, "a localised robot goes through: {sure:?}");
+        let plain = Settings {
+            narrow_weight: 0.0,
+            landmark_weight: 0.0,
+            ..settings.clone()
+        };
+        let (_, old) = choice(&arena, plain, from, &mass, 0.1);
+        assert_eq!((sure_choice.pose, sure_choice.value), (old.pose, old.value));
+        let (unsure, _) = choice(&arena, settings, from, &mass, 0.3);
+        assert!(
+            unsure.x < 6.0,
+            "an uncertain one stays out of the corridor: {unsure:?}"
         );
     }
 }

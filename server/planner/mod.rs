@@ -32,6 +32,9 @@ use crate::tracker::{LaserModel, Role, Sighting, Tracker, TrackerEvent};
 pub struct RobotView<'a> {
     /// The robot's own estimate of its pose (not the truth).
     pub pose: Pose,
+    /// How unsure it is of that estimate: the std-dev of its localiser's particle positions
+    /// (m; 0 when localisation is off, which is no claim of certainty, only of no knowledge).
+    pub spread: f32,
     pub frozen: bool,
     /// True when its tag device has cooled down.
     pub can_fire: bool,
@@ -495,6 +498,7 @@ mod tests {
     fn view<'a>(tick: u64, scan: &'a [f32], seen: &'a [Detection], hit: bool) -> TeamView<'a> {
         let robot = |pose: Pose, detections: &'a [Detection], hit: bool| RobotView {
             pose,
+            spread: 0.0,
             frozen: false,
             can_fire: true,
             scan,

@@ -742,6 +742,7 @@ impl World {
                 .map(|(i, r)| RobotView {
                     hit: hits.contains(&i),
                     pose: r.estimate,
+                    spread: r.spread,
                     frozen: tick < r.frozen_until,
                     can_fire: tick + 1 >= r.cooldown_until,
                     scan: &r.scan.ranges,
