@@ -189,3 +189,28 @@ async fn sigterm_tells_every_client_closes_cleanly_and_exits_within_5_s() {
         "still accepting after shutdown"
     );
 }
+
+/// `lasertag healthcheck` (the container's HEALTHCHECK) passes against a live server, also
+/// when given the listen-everywhere address, and fails once the server is gone.
+#[test]
+fn healthcheck_subcommand_tells_a_live_server_from_a_dead_one() {
+    let check = |addr: &str| {
+        Command::new(env!("CARGO_BIN_EXE_lasertag"))
+            .args(["healthcheck", "--addr", addr, "--timeout-s", "5"])
+            .env_remove("LASERTAG_ADDR")
+            .output()
+            .expect("the lasertag binary runs")
+    };
+    let mut server = start();
+    let addr = server.addr;
+    let out = check(&addr.to_string());
+    assert!(out.status.success(), "{out:?}");
+    let out = check(&format!("0.0.0.0:{}", addr.port()));
+    assert!(out.status.success(), "{out:?}");
+    let _ = server.child.kill();
+    let _ = server.child.wait();
+    let out = check(&addr.to_string());
+    assert!(!out.status.success(), "{out:?}");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("unhealthy: cannot connect"), "{err}");
+}
