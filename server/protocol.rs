@@ -285,7 +285,7 @@ pub struct CreateMatch {
     pub clock: Option<Clock>,
     /// 0..=18446744073709551615 (default 0).
     #[serde(default, deserialize_with = "schema::opt_seed")]
-    #[schema(minimum = 0, maximum = 18_446_744_073_709_551_615u64)]
+    #[schema(schema_with = schema::seed)]
     pub seed: Option<u64>,
     /// Seconds, in (0, 86400] (default 300).
     #[schema(exclusive_minimum = 0.0, maximum = 86_400.0)]

@@ -70,6 +70,18 @@ pub fn waypoints() -> RefOr<Schema> {
         .into()
 }
 
+/// `seed`: any u64. No `format`: `int64` is signed, and tools bound it to `i64::MAX`.
+pub fn seed() -> RefOr<Schema> {
+    ObjectBuilder::new()
+        .schema_type(SchemaType::from_iter([Type::Integer, Type::Null]))
+        .minimum(Some(0u64))
+        .maximum(Some(u64::MAX))
+        .description(Some(
+            "0..=18446744073709551615 (default 0): the same seed and inputs give the same match.",
+        ))
+        .into()
+}
+
 /// A map's name: what `maps::validate` allows.
 pub const MAP_NAME_PATTERN: &str = "^[a-z0-9_-]{1,64}$";
 
