@@ -23,13 +23,23 @@ pub const MAX_VERTICES: usize = 10_000;
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq, utoipa::ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct MapFile {
+    /// 1 to 64 characters of a-z 0-9 - _ (a map file is `<name>.json`).
+    #[schema(pattern = "^[a-z0-9_-]{1,64}$")]
     pub name: String,
+    /// Metres, in (0, 500].
+    #[schema(exclusive_minimum = 0.0, maximum = 500.0)]
     pub width: f64,
+    /// Metres, in (0, 500].
+    #[schema(exclusive_minimum = 0.0, maximum = 500.0)]
     pub height: f64,
+    #[schema(schema_with = crate::protocol::schema::obstacles)]
     pub obstacles: Vec<Vec<[f64; 2]>>,
+    #[schema(schema_with = crate::protocol::schema::robot_spawns)]
     pub robot_spawns: Vec<[f64; 3]>,
+    #[schema(schema_with = crate::protocol::schema::opponent_spawns)]
     pub opponent_spawns: Vec<[f64; 2]>,
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    #[schema(schema_with = crate::protocol::schema::landmarks)]
     pub landmarks: Vec<[f64; 2]>,
 }
 

@@ -5,6 +5,7 @@
 //! Requests are parsed strictly: unknown fields are errors, and every error names the field
 //! ([`parse`] wraps serde with the JSON path of the failure).
 
+pub mod schema;
 pub mod ws;
 
 use serde::de::DeserializeOwned;
@@ -104,14 +105,20 @@ pub enum StartPlacement {
 #[serde(deny_unknown_fields)]
 pub struct TrackerSettings {
     /// Particles in each role's filter (10..=100000, default 1000).
+    #[serde(default, deserialize_with = "schema::opt_int")]
+    #[schema(minimum = 10, maximum = 100_000)]
     pub particles_per_role: Option<i64>,
     /// Merge roles whose clouds become indistinguishable (default true).
     pub merge: Option<bool>,
     /// Ticks between merge checks (1..=10000, default 20).
+    #[serde(default, deserialize_with = "schema::opt_int")]
+    #[schema(minimum = 1, maximum = 10_000)]
     pub merge_interval: Option<i64>,
-    /// Symmetric KL divergence under which two roles merge (> 0, default 0.7).
+    /// Symmetric KL divergence under which two roles merge ((0, 1e6], default 0.7).
+    #[schema(exclusive_minimum = 0.0, maximum = 1e6)]
     pub kl_cutoff: Option<f64>,
     /// Cell size in metres of the merge histogram (0.1..=10, default 1.0).
+    #[schema(minimum = 0.1, maximum = 10.0)]
     pub grid_cell: Option<f64>,
 }
 
@@ -120,24 +127,35 @@ pub struct TrackerSettings {
 #[serde(deny_unknown_fields)]
 pub struct CoordinationSettings {
     /// Extra worth of a hypothesis straight ahead over one at the edge of view (0..=10, default 0.5).
+    #[schema(minimum = 0.0, maximum = 10.0)]
     pub centring_weight: Option<f64>,
     /// Worth lost per second of travel, in shares of all hypotheses (0..=1, default 0.01).
+    #[schema(minimum = 0.0, maximum = 1.0)]
     pub travel_weight: Option<f64>,
     /// Worth lost for a destination on top of a teammate's (0..=10, default 0.05).
+    #[schema(minimum = 0.0, maximum = 10.0)]
     pub crowding_weight: Option<f64>,
     /// Metres over which the crowding penalty falls to 0 ((0, 50], default 3).
+    #[schema(exclusive_minimum = 0.0, maximum = 50.0)]
     pub crowding_radius: Option<f64>,
     /// Share of a hypothesis that still counts once a teammate will observe it (0..=1, default 0.2).
+    #[schema(minimum = 0.0, maximum = 1.0)]
     pub claim_keep: Option<f64>,
     /// Extra worth of the goal a robot already has (0..=1, default 0).
+    #[schema(minimum = 0.0, maximum = 1.0)]
     pub keep_bonus: Option<f64>,
     /// Weight of a suspicious role's hypotheses relative to others' ((0, 100], default 2).
+    #[schema(exclusive_minimum = 0.0, maximum = 100.0)]
     pub suspicious_weight: Option<f64>,
     /// Ticks between full negotiation rounds (1..=12000, default 60).
+    #[serde(default, deserialize_with = "schema::opt_int")]
+    #[schema(minimum = 1, maximum = 12_000)]
     pub round_ticks: Option<i64>,
     /// A goal is dropped when its view holds less than this share of its worth when chosen (0..=1, default 0.3).
+    #[schema(minimum = 0.0, maximum = 1.0)]
     pub worthless_share: Option<f64>,
     /// ... or less than this share of all hypotheses (0..=1, default 0.01).
+    #[schema(minimum = 0.0, maximum = 1.0)]
     pub worthless_floor: Option<f64>,
     /// Localisation spread (m) above which a robot counts as uncertain ((0, 10], default 0.15).
     pub uncertainty_spread: Option<f64>,
@@ -343,11 +361,15 @@ impl RadioSettings {
 #[serde(deny_unknown_fields)]
 pub struct CreateMatch {
     /// A map name, or an inline map object.
-    #[schema(value_type = Object)]
+    #[schema(schema_with = schema::map_or_name)]
     pub map: serde_json::Value,
     /// 1..=8 robots (default 2).
+    #[serde(default, deserialize_with = "schema::opt_int")]
+    #[schema(minimum = 1, maximum = 8)]
     pub robots: Option<i64>,
     /// 1..=32 opponents (default 1).
+    #[serde(default, deserialize_with = "schema::opt_int")]
+    #[schema(minimum = 1, maximum = 32)]
     pub opponents: Option<i64>,
     pub opponent_control: Option<OpponentControl>,
     pub opponent_bot: Option<OpponentBot>,
@@ -356,14 +378,20 @@ pub struct CreateMatch {
     /// Weights of the `coordinated` planner (ignored by the others).
     pub coordination: Option<CoordinationSettings>,
     pub clock: Option<Clock>,
+    /// 0..=18446744073709551615 (default 0).
+    #[serde(default, deserialize_with = "schema::opt_seed")]
+    #[schema(schema_with = schema::seed)]
     pub seed: Option<u64>,
     /// Seconds, in (0, 86400] (default 300).
+    #[schema(exclusive_minimum = 0.0, maximum = 86_400.0)]
     pub time_limit_s: Option<f64>,
     /// Where agents start when no explicit starts are given (default `spawns`).
     pub placement: Option<StartPlacement>,
     /// Explicit robot starts `[x, y, heading]`, one per robot.
+    #[schema(schema_with = schema::robot_starts)]
     pub robot_starts: Option<Vec<[f64; 3]>>,
     /// Explicit opponent starts `[x, y]`, one per opponent.
+    #[schema(schema_with = schema::opponent_starts)]
     pub opponent_starts: Option<Vec<[f64; 2]>>,
     /// Whether people may take over bot opponents (default false; the showcase allows it).
     pub bots_joinable: Option<bool>,
@@ -476,7 +504,10 @@ impl CreateMatch {
         };
         let check_points = |field: &str, pts: &[&[f64]]| -> Result<(), String> {
             for (i, p) in pts.iter().enumerate() {
-                if let Some(v) = p.iter().find(|v| !v.is_finite() || v.abs() > 1e6) {
+                if let Some(v) = p
+                    .iter()
+                    .find(|v| !v.is_finite() || v.abs() > schema::MAX_COORDINATE)
+                {
                     return Err(format!("{field}[{i}]: {v} is not a finite coordinate"));
                 }
             }
@@ -1049,6 +1080,8 @@ pub struct Events {
 #[serde(deny_unknown_fields)]
 pub struct StepRequest {
     /// 1..=100000
+    #[serde(deserialize_with = "schema::int")]
+    #[schema(minimum = 1, maximum = 100_000)]
     pub ticks: i64,
 }
 
@@ -1057,6 +1090,7 @@ pub struct StepRequest {
 #[serde(deny_unknown_fields)]
 pub struct OpponentCommand {
     /// Replaces the route: straight legs at top speed, stopping at the last point.
+    #[schema(schema_with = schema::waypoints)]
     pub waypoints: Option<Vec<[f64; 2]>>,
     /// `true` halts the opponent.
     pub stop: Option<bool>,
@@ -1074,8 +1108,8 @@ impl OpponentCommand {
                 }
                 for (i, p) in w.iter().enumerate() {
                     if !(p[0].is_finite() && p[1].is_finite())
-                        || p[0].abs() > 1e6
-                        || p[1].abs() > 1e6
+                        || p[0].abs() > schema::MAX_COORDINATE
+                        || p[1].abs() > schema::MAX_COORDINATE
                     {
                         return Err(format!(
                             "waypoints[{i}]: [{}, {}] is not a finite point",
@@ -1102,7 +1136,13 @@ impl OpponentCommand {
 #[derive(Debug, Clone, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct JoinRequest {
-    /// 1 to 32 printable characters.
+    /// 1 to 32 characters, none of them control characters, not all whitespace (leading
+    /// and trailing whitespace is trimmed off).
+    #[schema(
+        min_length = 1,
+        max_length = 32,
+        pattern = r"^[^\u0000-\u001F\u007F-\u009F]*[^\s\u0000-\u001F\u007F-\u009F][^\u0000-\u001F\u007F-\u009F]*$"
+    )]
     pub name: String,
 }
 

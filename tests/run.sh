@@ -14,3 +14,41 @@ if ! command -v chromium >/dev/null 2>&1 && [ -z "${LASERTAG_CHROMIUM:-}" ]; the
   DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq chromium >/dev/null
 fi
 cargo test --locked --all-targets
+
+# API conformance: schemathesis (from PyPI, pinned) against the real server's OpenAPI
+# document, every operation, every check (exceptions and reasons in tests/schemathesis.toml).
+# Any failure (a 5xx, a response off its schema, ...) fails the run.
+SCHEMATHESIS_VERSION=4.32.5
+ST_DIR=target/schemathesis
+ST="$ST_DIR/venv/bin/schemathesis"
+if ! { [ -x "$ST" ] && "$ST" --version 2>/dev/null | grep -q "$SCHEMATHESIS_VERSION"; }; then
+  echo "tests/run.sh: installing schemathesis $SCHEMATHESIS_VERSION (PyPI) into $ST_DIR"
+  rm -rf "$ST_DIR"
+  if python3 -m venv "$ST_DIR/venv" >/dev/null 2>&1; then
+    "$ST_DIR/venv/bin/pip" install -q --disable-pip-version-check "schemathesis==$SCHEMATHESIS_VERSION"
+  else
+    # A Python without venv (Debian's python3 without python3-venv): install into a folder.
+    python3 -m pip install -q --disable-pip-version-check --target "$ST_DIR/pkgs" "schemathesis==$SCHEMATHESIS_VERSION"
+    mkdir -p "$ST_DIR/venv/bin"
+    printf '#!/bin/sh\nPYTHONPATH="%s" exec python3 -m schemathesis.cli "$@"\n' "$PWD/$ST_DIR/pkgs" > "$ST"
+    chmod +x "$ST"
+  fi
+fi
+# The server `cargo test` built, on a free loopback port, without the showcase. Every request
+# comes from 127.0.0.1, so the per-address request rate is lifted, and so is the number of
+# matches (schemathesis creates many; a full server would rightly answer 503, which is not
+# what this run is about); finished matches are removed after 5 s.
+PORT=$(python3 -c 'import socket; s = socket.socket(); s.bind(("127.0.0.1", 0)); print(s.getsockname()[1])')
+LASERTAG_ADDR="127.0.0.1:$PORT" LASERTAG_NO_SHOWCASE=true \
+  LASERTAG_REQUESTS_PER_S=1000000 LASERTAG_REQUEST_BURST=1000000 \
+  LASERTAG_MAX_MATCHES=100000 LASERTAG_FINISHED_GRACE_S=5 RUST_LOG=warn \
+  target/debug/lasertag serve > target/schemathesis/server.log 2>&1 &
+SERVER_PID=$!
+trap 'kill "$SERVER_PID" 2>/dev/null || true' EXIT
+# Bounded: 40 examples per operation and phase keep the run to a few minutes.
+(cd tests && SCHEMATHESIS_HOOKS=schemathesis_hooks "../$ST" --config-file schemathesis.toml \
+  run "http://127.0.0.1:$PORT/api/openapi.json" --wait-for-schema 60 \
+  --checks all --max-examples 40 --request-timeout 60 --workers 2 --no-color)
+kill "$SERVER_PID" 2>/dev/null || true
+wait "$SERVER_PID" 2>/dev/null || true
+echo "tests/run.sh: schemathesis passed"

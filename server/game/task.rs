@@ -480,8 +480,11 @@ impl MatchTask {
 
     fn join(&mut self, name: String) -> Result<Joined, MatchError> {
         let id = &self.meta.id;
+        // The length counts what was sent, as the OpenAPI schema (`maxLength`) does; the
+        // name kept is trimmed.
+        let sent = name.chars().count();
         let name = name.trim().to_string();
-        if name.is_empty() || name.chars().count() > 32 || name.chars().any(char::is_control) {
+        if name.is_empty() || sent > 32 || name.chars().any(char::is_control) {
             return Err(MatchError::BadRequest(
                 "name: must be 1 to 32 printable characters".into(),
             ));

@@ -92,7 +92,9 @@ pub async fn get_map(
 }
 
 #[utoipa::path(post, path = "/api/maps", request_body = MapFile,
-    responses((status = 201, body = MapInfo), (status = 400, body = ErrorBody), (status = 409, body = ErrorBody),
+    responses((status = 201, body = MapInfo, links(
+                  ("GetMap" = (operation_id = "get_map", parameters(("name" = "$response.body#/name")))))),
+              (status = 400, body = ErrorBody), (status = 409, body = ErrorBody),
               (status = 413, body = ErrorBody)))]
 pub async fn add_map(
     State(state): State<AppState>,
@@ -141,7 +143,16 @@ pub async fn list_matches(State(state): State<AppState>) -> Json<Vec<MatchSummar
 }
 
 #[utoipa::path(post, path = "/api/matches", request_body = CreateMatch,
-    responses((status = 201, body = MatchSummary), (status = 400, body = ErrorBody), (status = 404, body = ErrorBody),
+    responses((status = 201, body = MatchSummary, links(
+                  ("GetMatch" = (operation_id = "get_match", parameters(("id" = "$response.body#/id")))),
+                  ("DeleteMatch" = (operation_id = "delete_match", parameters(("id" = "$response.body#/id")))),
+                  ("Step" = (operation_id = "step", parameters(("id" = "$response.body#/id")))),
+                  ("Belief" = (operation_id = "belief", parameters(("id" = "$response.body#/id")))),
+                  ("Events" = (operation_id = "events", parameters(("id" = "$response.body#/id")))),
+                  ("Command" = (operation_id = "command", parameters(("id" = "$response.body#/id")))),
+                  ("Join" = (operation_id = "join", parameters(("id" = "$response.body#/id")))),
+                  ("Stats" = (operation_id = "stats", parameters(("id" = "$response.body#/id")))))),
+              (status = 400, body = ErrorBody), (status = 404, body = ErrorBody),
               (status = 413, body = ErrorBody), (status = 429, body = ErrorBody), (status = 503, body = ErrorBody)))]
 pub async fn create_match(
     State(state): State<AppState>,

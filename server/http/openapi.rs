@@ -60,6 +60,60 @@ use crate::protocol::*;
 )]
 pub struct ApiDoc;
 
-pub async fn document() -> Json<utoipa::openapi::OpenApi> {
-    Json(ApiDoc::openapi())
+pub async fn document() -> Json<serde_json::Value> {
+    static DOC: std::sync::OnceLock<serde_json::Value> = std::sync::OnceLock::new();
+    Json(DOC.get_or_init(json).clone())
+}
+
+/// The document as JSON. utoipa 5 writes the fields of a response link in snake case
+/// (`operation_id`); OpenAPI spells them in camel case (`operationId`), and tools such as
+/// schemathesis follow links only when they are spelt right. (utoipa 6 fixes it.)
+pub fn json() -> serde_json::Value {
+    let mut doc = serde_json::to_value(ApiDoc::openapi()).unwrap_or_default();
+    let operations = doc
+        .get_mut("paths")
+        .and_then(|p| p.as_object_mut())
+        .into_iter()
+        .flat_map(|paths| paths.values_mut())
+        .filter_map(|path| path.as_object_mut())
+        .flat_map(|path| path.values_mut());
+    for op in operations {
+        let responses = op
+            .get_mut("responses")
+            .and_then(|r| r.as_object_mut())
+            .into_iter()
+            .flat_map(|r| r.values_mut());
+        for response in responses {
+            let links = response
+                .get_mut("links")
+                .and_then(|l| l.as_object_mut())
+                .into_iter()
+                .flat_map(|l| l.values_mut())
+                .filter_map(|l| l.as_object_mut());
+            for link in links {
+                for (snake, camel) in [
+                    ("operation_id", "operationId"),
+                    ("operation_ref", "operationRef"),
+                    ("request_body", "requestBody"),
+                ] {
+                    if let Some(v) = link.remove(snake) {
+                        link.insert(camel.to_string(), v);
+                    }
+                }
+            }
+        }
+    }
+    doc
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn response_links_are_spelt_as_openapi_spells_them() {
+        let doc = super::json();
+        let link = &doc["paths"]["/api/matches"]["post"]["responses"]["201"]["links"]["GetMatch"];
+        assert_eq!(link["operationId"], "get_match", "{link}");
+        assert!(link.get("operation_id").is_none(), "{link}");
+        assert_eq!(link["parameters"]["id"], "$response.body#/id");
+    }
 }
