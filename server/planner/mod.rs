@@ -457,19 +457,10 @@ pub fn detection_point(pose: Pose, d: &Detection) -> Point2<f32> {
 mod tests {
     use super::*;
     use crate::radio::Settings as RadioSettings;
-    use crate::sim::arena::MapDef;
     use rand::SeedableRng;
 
     fn open_room() -> Arena {
-        Arena::new(MapDef {
-            name: "open".into(),
-            width: 12.0,
-            height: 6.0,
-            obstacles: vec![],
-            robot_spawns: vec![[1.0, 3.0, 0.0]],
-            opponent_spawns: vec![Point2::new(11.0, 3.0)],
-            landmarks: vec![],
-        })
+        crate::sim::arena::open_room([1.0, 3.0, 0.0])
     }
 
     fn team(arena: &Arena, radio: RadioSettings) -> Team {

@@ -406,6 +406,21 @@ impl ClearanceGrid {
     }
 }
 
+/// An empty 12 m × 6 m room with one robot spawn and one opponent spawn at (11, 3): the
+/// fixture of the tracker's and the team's unit tests.
+#[cfg(test)]
+pub(crate) fn open_room(robot_spawn: [f32; 3]) -> Arena {
+    Arena::new(MapDef {
+        name: "open".into(),
+        width: 12.0,
+        height: 6.0,
+        obstacles: vec![],
+        robot_spawns: vec![robot_spawn],
+        opponent_spawns: vec![Point2::new(11.0, 3.0)],
+        landmarks: vec![],
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -766,19 +766,10 @@ pub fn low_variance_resample(role: &mut Role, offset: f32) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::sim::arena::MapDef;
     use rand::SeedableRng;
 
     fn open_room() -> Arena {
-        Arena::new(MapDef {
-            name: "open".into(),
-            width: 12.0,
-            height: 6.0,
-            obstacles: vec![],
-            robot_spawns: vec![[6.0, 3.0, 0.0]],
-            opponent_spawns: vec![Point2::new(11.0, 3.0)],
-            landmarks: vec![],
-        })
+        crate::sim::arena::open_room([6.0, 3.0, 0.0])
     }
 
     fn laser() -> LaserModel {
