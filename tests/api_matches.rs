@@ -265,8 +265,8 @@ async fn a_robot_learns_what_its_teammate_sees_over_the_radio_after_the_latency(
     let bad = server
         .get(&format!("/api/matches/{id}/belief?robot=o0"))
         .await;
-    assert_eq!(bad.status, 400, "{}", bad.body);
-    assert!(bad.body["error"].as_str().unwrap().starts_with("robot:"));
+    assert_eq!(bad.status, 404, "{}", bad.body);
+    assert!(bad.body["error"].as_str().unwrap().contains("\"o0\""));
 }
 
 /// With the default (perfect) radio every robot's view is the team's one shared belief.

@@ -281,7 +281,7 @@ pub async fn step(
 }
 
 #[utoipa::path(get, path = "/api/matches/{id}/belief",
-    params(("id" = String, Path), ("robot" = Option<String>, Query, description = "a robot id (r0, r1, …): that robot's own belief; without it the team's merged view")),
+    params(("id" = String, Path), ("robot" = Option<String>, Query, description = "a robot id (r0, r1, …): that robot's own belief (404 for anything that is not one of the match's robots); without it the team's merged view")),
     responses((status = 200, body = Belief), (status = 400, body = ErrorBody), (status = 404, body = ErrorBody)))]
 pub async fn belief(
     State(state): State<AppState>,
@@ -291,15 +291,18 @@ pub async fn belief(
     let handle = find(&state, &id)?;
     let robot = match query.get("robot") {
         None => None,
+        // Anything that is not one of the match's robots is a robot it does not have: 404,
+        // like `r9` in a two-robot match. (A 400 for a malformed id made schema-valid strings
+        // fail schemathesis, and a `pattern` on the parameter crashed its generator.)
         Some(r) => Some(crate::protocol::robot_index(r).ok_or_else(|| {
-            ApiError::bad_request(format!("robot: {r:?} is not a robot id (r0, r1, …)"))
+            ApiError::not_found(format!("robot: no robot {r:?} in this match (r0, r1, …)"))
         })?),
     };
     Ok(Json(handle.belief(robot).await?))
 }
 
 #[utoipa::path(get, path = "/api/matches/{id}/events",
-    params(("id" = String, Path), ("since" = Option<u64>, Query, description = "only events with a greater seq")),
+    params(("id" = String, Path), ("since" = Option<i64>, Query, minimum = 0, description = "only events with a greater seq")),
     responses((status = 200, body = Events), (status = 400, body = ErrorBody), (status = 404, body = ErrorBody)))]
 pub async fn events(
     State(state): State<AppState>,
@@ -309,9 +312,17 @@ pub async fn events(
     let handle = find(&state, &id)?;
     let since = match query.get("since") {
         None => 0,
-        Some(s) => s.parse::<u64>().map_err(|_| {
-            ApiError::bad_request(format!("since: {s:?} is not a non-negative integer"))
-        })?,
+        // 0..=i64::MAX, as the OpenAPI document states (`format: int64`; schemathesis sent
+        // 2^63 and saw it accepted). Event numbers never come near it.
+        Some(s) => s
+            .parse::<i64>()
+            .ok()
+            .and_then(|v| u64::try_from(v).ok())
+            .ok_or_else(|| {
+                ApiError::bad_request(format!(
+                    "since: {s:?} is not an integer in 0..=9223372036854775807"
+                ))
+            })?,
     };
     Ok(Json(handle.events(since).await?))
 }
