@@ -3,19 +3,8 @@
 
 mod common;
 
-use common::{TestServer, duel_map};
+use common::{TestServer, assert_error, duel_map};
 use serde_json::{Value, json};
-
-fn assert_error(r: &common::Reply, status: u16, mentions: &str) {
-    assert_eq!(r.status, status, "{}", r.body);
-    let msg = r.body["error"]
-        .as_str()
-        .unwrap_or_else(|| panic!("no error field: {}", r.body));
-    assert!(
-        msg.contains(mentions),
-        "{msg:?} should mention {mentions:?}"
-    );
-}
 
 fn with(mut map: Value, f: impl FnOnce(&mut Value)) -> Value {
     f(&mut map);

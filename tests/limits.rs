@@ -8,20 +8,9 @@ mod common;
 use std::net::{IpAddr, Ipv4Addr, SocketAddr};
 use std::time::Duration;
 
-use common::{Got, TestServer, Ws, WsError, test_config};
+use common::{Got, TestServer, Ws, WsError, assert_error, test_config};
 use lasertag::config::Config;
 use serde_json::{Value, json};
-
-fn assert_error(r: &common::Reply, status: u16, mentions: &str) {
-    assert_eq!(r.status, status, "{}", r.body);
-    let msg = r.body["error"]
-        .as_str()
-        .unwrap_or_else(|| panic!("no error field: {}", r.body));
-    assert!(
-        msg.contains(mentions),
-        "{msg:?} should mention {mentions:?}"
-    );
-}
 
 /// A real-time bot match to check the server's health against (idle robots: it never ends
 /// before its time limit).

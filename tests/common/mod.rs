@@ -259,3 +259,15 @@ pub fn one_door_room() -> Value {
         "opponent_spawns": [[2.0, 8.0]]
     })
 }
+
+/// Asserts an API error reply: its status, and an `error` message that mentions `mentions`.
+pub fn assert_error(r: &Reply, status: u16, mentions: &str) {
+    assert_eq!(r.status, status, "{}", r.body);
+    let msg = r.body["error"]
+        .as_str()
+        .unwrap_or_else(|| panic!("no error field: {}", r.body));
+    assert!(
+        msg.contains(mentions),
+        "{msg:?} should mention {mentions:?}"
+    );
+}
