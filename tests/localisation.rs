@@ -65,7 +65,11 @@ fn robots_on_office_stay_localised_for_three_minutes() {
 
 #[test]
 fn a_kidnapped_robot_recovers_within_thirty_seconds() {
-    let mut world = World::new(arena("office"), config(5, 120)).expect("match sets up");
+    // Tagging off, so that the match cannot end (every opponent tagged) while the robot is
+    // still lost: with AMCL's update thresholds the old seed finished at 6 s, mid-recovery.
+    let mut kidnap_config = config(5, 120);
+    kidnap_config.physics.tag_range = 0.0;
+    let mut world = World::new(arena("office"), kidnap_config).expect("match sets up");
     for _ in 0..10 * TICK_HZ {
         world.step();
     }
@@ -78,6 +82,11 @@ fn a_kidnapped_robot_recovers_within_thirty_seconds() {
     let mut recovered_at = None;
     for t in 0..30 * TICK_HZ {
         world.step();
+        assert_eq!(
+            world.status,
+            MatchStatus::Running,
+            "the match outlasts the test"
+        );
         if position_error(&world, 0) < 0.2 {
             recovered_at.get_or_insert(t);
         } else {

@@ -222,6 +222,26 @@ impl Team {
         }
     }
 
+    /// Where robot `i` believes its teammate `j` is: with a perfect radio the teammate's
+    /// current estimate (`estimates[j]`, shared memory); otherwise the pose in the last
+    /// message `i` heard from `j`, however old, or nothing before the first one arrives.
+    pub fn believed_teammate(
+        &self,
+        i: usize,
+        j: usize,
+        estimates: &[Point2<f32>],
+    ) -> Option<Point2<f32>> {
+        match &self.channel {
+            None => estimates.get(j).copied(),
+            Some(c) => c
+                .heard
+                .get(i)
+                .and_then(|row| row.get(j))
+                .and_then(|m| m.as_ref())
+                .map(|m| m.pose.pos),
+        }
+    }
+
     /// Whether each robot keeps its own tracker (an imperfect radio).
     pub fn per_robot(&self) -> bool {
         self.channel.is_some()

@@ -586,9 +586,9 @@ impl World {
     /// what it sensed (the truth stays with the referee).
     fn localise(&mut self) {
         let p = &self.config.physics;
-        // Where the team believed its robots were after the last tick: a robot masks the
-        // beams that end on a teammate (it knows their estimates, not where they truly are).
-        let team: Vec<Point2<f32>> = self.robots.iter().map(|r| r.estimate.pos).collect();
+        // A robot masks the beams that end on a teammate where it believes that teammate is:
+        // its estimate after the last tick, as the radio last told (never the truth).
+        let estimates: Vec<Point2<f32>> = self.robots.iter().map(|r| r.estimate.pos).collect();
         for (i, r) in self.robots.iter_mut().enumerate() {
             let Some(loc) = r.localiser.as_mut() else {
                 r.estimate = r.odometry;
@@ -597,13 +597,16 @@ impl World {
             loc.predict(r.odometry, &mut self.rng_localise);
             let own = loc.estimate();
             let mut movers = r.scan.detections.clone();
-            for (j, mate) in team.iter().enumerate() {
+            for j in 0..estimates.len() {
+                let Some(mate) = self.team.believed_teammate(i, j, &estimates) else {
+                    continue;
+                };
                 let d = mate - own.pos;
                 let range = d.norm();
                 if j != i && range > 1e-3 && range < p.laser_range {
                     movers.push(Detection {
                         range,
-                        bearing: own.bearing_to(*mate),
+                        bearing: own.bearing_to(mate),
                     });
                 }
             }
