@@ -1,5 +1,6 @@
 //! The `lasertag` binary: parse the command line, load the maps, serve, shut down cleanly.
 
+use std::io::IsTerminal;
 use std::net::SocketAddr;
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -168,7 +169,11 @@ struct ServeArgs {
 }
 
 fn main() -> ExitCode {
+    // Colour only for a person at a terminal: `docker logs` and log collectors got escape
+    // codes in every line. NO_COLOR (no-color.org) turns it off at a terminal too.
+    let colour = std::io::stdout().is_terminal() && std::env::var_os("NO_COLOR").is_none();
     tracing_subscriber::fmt()
+        .with_ansi(colour)
         .with_env_filter(
             tracing_subscriber::EnvFilter::try_from_default_env()
                 .unwrap_or_else(|_| "info,tower_http=warn".into()),
