@@ -1,20 +1,30 @@
-# Build: the release binary (the lock file pins every dependency).
-FROM rust:1-bookworm AS build
+# Build: the release binary. The toolchain is pinned (the one the project is tested with)
+# and the lock file pins every dependency, so a rebuild gives the same binary.
+FROM rust:1.95-bookworm AS build
 WORKDIR /src
 COPY Cargo.toml Cargo.lock ./
 # Cargo reads every target the manifest declares: the benchmarks are declared by name.
 COPY server server
 COPY benches benches
-RUN cargo build --release --locked --bin lasertag \
- && strip --strip-debug target/release/lasertag
+# The registry and target/ are build caches (BuildKit, podman): a change under server/
+# recompiles the crate, not its 160 dependencies. A cache is not part of the layer, so the
+# binary is copied out of it.
+RUN --mount=type=cache,target=/usr/local/cargo/registry \
+    --mount=type=cache,target=/src/target \
+    cargo build --release --locked --bin lasertag \
+ && strip --strip-debug target/release/lasertag \
+ && cp target/release/lasertag /usr/local/bin/lasertag
 
 # Run: only the binary, the maps and the web client, as a non-root user. The same Debian
 # release as the builder, so the binary's glibc is there; nothing else is installed (the
 # health check is the binary's own `healthcheck` command, so no curl).
 FROM debian:bookworm-slim
-RUN useradd --system --uid 10001 --no-create-home --home-dir /app lasertag
+# A fixed uid and gid (10001, outside the system range) with no login shell.
+RUN groupadd --gid 10001 lasertag \
+ && useradd --uid 10001 --gid 10001 --no-create-home --home-dir /app \
+      --shell /usr/sbin/nologin lasertag
 WORKDIR /app
-COPY --from=build /src/target/release/lasertag /usr/local/bin/lasertag
+COPY --from=build /usr/local/bin/lasertag /usr/local/bin/lasertag
 COPY maps maps
 COPY web web
 USER lasertag
