@@ -58,6 +58,7 @@ fn planner(c: &mut Criterion) {
             scan: &scan.ranges,
             detections: &[],
             tagged: false,
+            age_ticks: 0,
         })
         .collect();
     let laser = LaserModel {

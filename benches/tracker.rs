@@ -75,6 +75,7 @@ fn update(
             scan: &scan.ranges,
             detections: &[],
             tagged: false,
+            age_ticks: 0,
         })
         .collect();
     let laser = LaserModel {

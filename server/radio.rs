@@ -104,12 +104,14 @@ impl OwnedSighting {
         }
     }
 
-    pub fn as_sighting(&self) -> Sighting<'_> {
+    /// The sighting as a tracker takes it, `age_ticks` after it was sensed.
+    pub fn as_sighting(&self, age_ticks: u32) -> Sighting<'_> {
         Sighting {
             pose: self.pose,
             scan: &self.scan,
             detections: &self.detections,
             tagged: self.tagged,
+            age_ticks,
         }
     }
 }

@@ -348,6 +348,7 @@ impl Team {
                     scan: r.scan,
                     detections: r.detections,
                     tagged: r.hit,
+                    age_ticks: 0,
                 })
             })
             .collect();
@@ -377,6 +378,9 @@ impl Team {
             };
             channel.radio.send(message, n);
         }
+        // A teammate's sighting is as old as the radio made it: the trackers widen it by
+        // how far an opponent could have moved since.
+        let age = |m: &Message| view.tick.saturating_sub(m.sent).min(u32::MAX as u64) as u32;
         let mut inbox: Vec<Vec<Arc<Message>>> = vec![Vec::new(); n];
         for (to, m) in channel.radio.deliver(view.tick) {
             if let Some(b) = inbox.get_mut(to) {
@@ -391,13 +395,14 @@ impl Team {
             received.sort_by_key(|m| m.from);
             // A hit whose message was lost still takes an opponent off: known from the next
             // message's count, placed in the sender's tag cone as it is now.
-            let mut missed: Vec<(usize, OwnedSighting)> = Vec::new();
+            let mut missed: Vec<(usize, u32, OwnedSighting)> = Vec::new();
             for m in received.iter() {
                 let expected = channel.hits_heard[i][m.from]
                     + m.sighting.as_ref().is_some_and(|s| s.tagged) as u32;
                 for _ in expected..m.hits {
                     missed.push((
                         m.from,
+                        age(m),
                         OwnedSighting {
                             pose: m.pose,
                             scan: Vec::new(),
@@ -419,13 +424,13 @@ impl Team {
                     continue;
                 }
                 for m in received.iter().filter(|m| m.from == k) {
-                    sightings.extend(m.sighting.as_ref().map(OwnedSighting::as_sighting));
+                    sightings.extend(m.sighting.as_ref().map(|s| s.as_sighting(age(m))));
                 }
                 sightings.extend(
                     missed
                         .iter()
-                        .filter(|(from, _)| *from == k)
-                        .map(|(_, s)| s.as_sighting()),
+                        .filter(|(from, _, _)| *from == k)
+                        .map(|(_, age, s)| s.as_sighting(*age)),
                 );
             }
             let e = self.trackers[i].update(arena, laser, &sightings);

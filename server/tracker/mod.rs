@@ -147,6 +147,18 @@ pub struct Sighting<'a> {
     pub detections: &'a [Detection],
     /// True when this robot's shot tagged an opponent this tick.
     pub tagged: bool,
+    /// Ticks since it was sensed: 0 for a robot's own sensing, the radio's latency for a
+    /// teammate's. An opponent may have moved up to `age × top speed` since, so a late
+    /// sighting contradicts only hypotheses that far inside what it saw, and places what it
+    /// detected that much less sharply.
+    pub age_ticks: u32,
+}
+
+impl Sighting<'_> {
+    /// How far an opponent may have moved since this was sensed (m).
+    fn reach(&self, opponent_speed: f32) -> f32 {
+        self.age_ticks as f32 * opponent_speed * DT
+    }
 }
 
 /// Laser geometry the negative-information update needs.
@@ -207,32 +219,64 @@ pub struct Tracker {
 }
 
 /// Particles that a robot's scan would have seen: negative information.
-fn would_be_seen(p: Point2<f32>, s: &Sighting, laser: LaserModel, cos: f32, sin: f32) -> bool {
+/// `reach`: how far an opponent may have moved since the scan (0 for a fresh one). A
+/// hypothesis at `p` is contradicted only if every point within `reach` of it was seen, so
+/// that an opponent there now could not have stood outside the seen area then.
+fn would_be_seen(
+    p: Point2<f32>,
+    s: &Sighting,
+    laser: LaserModel,
+    cos: f32,
+    sin: f32,
+    reach: f32,
+) -> bool {
     if s.scan.is_empty() {
         return false; // a robot frozen while sensing saw nothing
     }
     let dx = p.x - s.pose.pos.x;
     let dy = p.y - s.pose.pos.y;
     let d2 = dx * dx + dy * dy;
-    if d2 > laser.range * laser.range {
+    let far = laser.range - reach;
+    if far <= 0.0 || d2 > far * far {
         return false;
     }
     let forward = dx * cos + dy * sin;
     let lateral = -dx * sin + dy * cos;
     let bearing = fast_atan2(lateral, forward);
+    let d = d2.sqrt();
+    // The bearings the disc of radius `reach` around `p` spans (all of them when it holds
+    // the robot).
+    let spread = if reach <= 0.0 {
+        0.0
+    } else if reach >= d {
+        return false;
+    } else {
+        (reach / d).asin()
+    };
     let half = laser.fov / 2.0;
-    if bearing.abs() > half {
+    if bearing.abs() + spread > half {
         return false;
     }
     let n = s.scan.len();
-    let i = (((bearing + half) / laser.fov) * (n - 1) as f32).round() as usize;
-    let beam = s.scan[i.min(n - 1)];
+    let beam_at = |b: f32| -> f32 {
+        let i = (((b + half) / laser.fov) * (n - 1) as f32).round() as usize;
+        s.scan[i.min(n - 1)]
+    };
+    let mut beam = beam_at(bearing);
+    if spread > 0.0 {
+        // Every beam across the disc must have reached past its far side.
+        let beams = ((2.0 * spread / laser.fov) * (n - 1) as f32).ceil() as usize + 1;
+        for k in 0..=beams {
+            let b = bearing - spread + 2.0 * spread * k as f32 / beams as f32;
+            beam = beam.min(beam_at(b));
+        }
+    }
     // An opponent centred at `p` would have stopped this beam at its near edge, d − R, and
     // been detected. So the beam reaching past d − R (with a margin for the laser's noise and
     // the beam not passing exactly through p) means nobody stands at `p`. Requiring the beam
     // to reach d + R instead would hide every hypothesis hugging a wall from negative
     // information for ever: robots would stare at an empty strip along a wall.
-    d2.sqrt() < beam + AGENT_RADIUS - SEEN_MARGIN
+    d + reach < beam + AGENT_RADIUS - SEEN_MARGIN
 }
 
 /// Laser noise (3σ = 0.06 m), the bit a beam that passes a little off a particle's centre
@@ -360,10 +404,16 @@ impl Tracker {
                 continue;
             }
             // After many failures (the team sees nearly everything) accept seen places too.
-            let visible = seen
-                .iter()
-                .zip(&trig)
-                .any(|(s, (cos, sin))| would_be_seen(p, s, laser, *cos, *sin));
+            let visible = seen.iter().zip(&trig).any(|(s, (cos, sin))| {
+                would_be_seen(
+                    p,
+                    s,
+                    laser,
+                    *cos,
+                    *sin,
+                    s.reach(self.settings.opponent_speed),
+                )
+            });
             if visible && tries < 50 * n {
                 continue;
             }
@@ -566,9 +616,10 @@ impl Tracker {
         let before: Vec<f32> = self.roles.iter().map(|r| r.weights.iter().sum()).collect();
         for s in sightings.iter().filter(|s| !s.scan.is_empty()) {
             let (cos, sin) = (s.pose.theta.cos(), s.pose.theta.sin());
+            let reach = s.reach(self.settings.opponent_speed);
             for role in self.roles.iter_mut().filter(|r| !r.tagged) {
                 for (p, w) in role.particles.iter().zip(role.weights.iter_mut()) {
-                    if would_be_seen(*p, s, laser, cos, sin) {
+                    if would_be_seen(*p, s, laser, cos, sin, reach) {
                         *w *= p_miss;
                     }
                 }
@@ -611,7 +662,8 @@ impl Tracker {
                 let z = detection_point(s.pose, d);
                 let Some(i) = self.associate(z) else { continue };
                 let i = self.split_one(i, events);
-                self.observe(arena, i, z, detection_sigma(d.range));
+                let sigma = detection_sigma(d.range).hypot(s.reach(self.settings.opponent_speed));
+                self.observe(arena, i, z, sigma);
             }
         }
     }
@@ -788,6 +840,91 @@ mod tests {
         )
     }
 
+    /// Radio gap (session 3's note): a teammate's scan that arrives late says where nobody
+    /// stood *then*; an opponent may since have walked in from the edge of what it saw. So
+    /// it contradicts only hypotheses deep inside the seen area, and a fresh scan all of it.
+    #[test]
+    fn a_late_scan_contradicts_only_what_nobody_could_have_entered_since() {
+        let robot = Pose::new(1.0, 3.0, 0.0);
+        let scan = vec![5.0; 181];
+        let fresh = Sighting {
+            pose: robot,
+            scan: &scan,
+            detections: &[],
+            tagged: false,
+            age_ticks: 0,
+        };
+        // 10 ticks late: an opponent at top speed (1 m/s) may have moved 0.5 m.
+        let late = Sighting {
+            age_ticks: 10,
+            ..fresh
+        };
+        let (cos, sin) = (robot.theta.cos(), robot.theta.sin());
+        let speed = Settings::default().opponent_speed;
+        let seen =
+            |p: Point2<f32>, s: &Sighting| would_be_seen(p, s, laser(), cos, sin, s.reach(speed));
+        let deep = Point2::new(3.0, 3.0); // 2 m ahead, far from every edge of the scan
+        let near_end = Point2::new(5.8, 3.0); // 0.2 m short of where the beams ended
+        let near_side = Point2::new(1.3, 4.5); // just inside the field of view's edge
+        for p in [deep, near_end, near_side] {
+            assert!(seen(p, &fresh), "a fresh scan sees {p}");
+        }
+        assert!(seen(deep, &late), "deep inside is still contradicted");
+        assert!(
+            !seen(near_end, &late),
+            "someone may have come in past the beams' ends"
+        );
+        assert!(
+            !seen(near_side, &late),
+            "someone may have come in from the side"
+        );
+        // And a late detection places the opponent less sharply.
+        let mut sharp = tracker(&open_room(), 1);
+        let mut blurred = sharp.clone();
+        let det = [Detection {
+            range: 3.0,
+            bearing: 0.0,
+        }];
+        let a = open_room();
+        sharp.update(
+            &a,
+            laser(),
+            &[Sighting {
+                detections: &det,
+                ..fresh
+            }],
+        );
+        blurred.update(
+            &a,
+            laser(),
+            &[Sighting {
+                detections: &det,
+                ..late
+            }],
+        );
+        let spread = |t: &Tracker| {
+            let r = &t.roles[0];
+            let total: f32 = r.weights.iter().sum();
+            let mean = r
+                .particles
+                .iter()
+                .zip(&r.weights)
+                .fold(Vector2::zeros(), |m, (p, w)| m + p.coords * (w / total));
+            r.particles
+                .iter()
+                .zip(&r.weights)
+                .map(|(p, w)| (p.coords - mean).norm_squared() * w / total)
+                .sum::<f32>()
+                .sqrt()
+        };
+        assert!(
+            spread(&blurred) > 1.5 * spread(&sharp),
+            "late {} vs fresh {}",
+            spread(&blurred),
+            spread(&sharp)
+        );
+    }
+
     /// Regression (review of the tracker): a hit whose target the laser did not detect (a
     /// teammate blocked the beams but not the shot) must still take one opponent off.
     #[test]
@@ -800,6 +937,7 @@ mod tests {
             scan: &scan,
             detections: &[],
             tagged: true,
+            age_ticks: 0,
         };
         t.update(&a, laser(), &[s]);
         assert_eq!(t.untagged_count(), 1);
@@ -832,6 +970,7 @@ mod tests {
             scan: &scan,
             detections: &[],
             tagged: false,
+            age_ticks: 0,
         };
         for _ in 0..CONTRADICTED_TICKS {
             t.update(&a, laser(), &[s]);
@@ -874,6 +1013,7 @@ mod tests {
             scan: &scan,
             detections: &seen,
             tagged: false,
+            age_ticks: 0,
         };
         t.update(&a, laser(), &[watching]);
         assert_eq!(t.roles[0].confidence, 1.0);
@@ -929,6 +1069,7 @@ mod tests {
             scan: &[],
             detections: &seen,
             tagged: false,
+            age_ticks: 0,
         };
         t.update(&a, laser(), &[s]);
         let r = &t.roles[0];
