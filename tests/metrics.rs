@@ -85,7 +85,18 @@ async fn metrics_expose_every_family_and_they_move() {
         .await;
     assert_eq!(r.status, 400);
 
-    let (_, mid) = scrape(&s).await;
+    // Ten snapshots are not ten ticks: a frame is also published when a player connects, and
+    // a tick's duration is recorded just after its frame goes out. The match keeps ticking,
+    // so wait (a bounded while) for the tenth tick to be counted.
+    let realtime = "{clock=\"realtime\",kind=\"coordinated\"}";
+    let mut mid = scrape(&s).await.1;
+    for _ in 0..100 {
+        if get(&mid, &format!("lasertag_tick_seconds_count{realtime}")) >= 10.0 {
+            break;
+        }
+        tokio::time::sleep(std::time::Duration::from_millis(20)).await;
+        mid = scrape(&s).await.1;
+    }
     assert_eq!(get(&mid, "lasertag_matches{state=\"running\"}"), 2.0);
     assert_eq!(get(&mid, "lasertag_clients{role=\"spectator\"}"), 1.0);
     assert_eq!(get(&mid, "lasertag_clients{role=\"player\"}"), 1.0);
@@ -93,7 +104,6 @@ async fn metrics_expose_every_family_and_they_move() {
         get(&mid, "lasertag_refused_total{reason=\"message_invalid\"}"),
         1.0
     );
-    let realtime = "{clock=\"realtime\",kind=\"coordinated\"}";
     let ticks = get(&mid, &format!("lasertag_tick_seconds_count{realtime}"));
     assert!(ticks >= 10.0, "{ticks} real-time ticks counted");
     assert_eq!(
