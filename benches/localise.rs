@@ -46,7 +46,7 @@ fn bench(c: &mut Criterion) {
             |b, _| {
                 b.iter(|| {
                     odom.pos.x += 0.01;
-                    loc.predict(odom, &mut rng);
+                    loc.predict(odom);
                     let obs = Observation {
                         ranges: &scan.ranges,
                         laser_fov: physics.laser_fov,

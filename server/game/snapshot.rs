@@ -14,6 +14,7 @@ use std::sync::Arc;
 
 use nalgebra::Point2;
 
+use crate::localise::Localiser;
 use crate::protocol::EventDto;
 use crate::protocol::ws::WireCache;
 use crate::sim::arena::Arena;
@@ -47,11 +48,14 @@ pub const CLOUD_POINTS: usize = 40;
 
 /// Every k-th particle, so that about [`CLOUD_POINTS`] are shown (deterministic: resampled
 /// particles carry equal weight, so a stride is a fair sample).
-fn thin_cloud(particles: &[Pose]) -> Vec<[i32; 2]> {
+fn thin_cloud(localiser: &Localiser) -> Vec<[i32; 2]> {
+    let particles = localiser.particles();
     let stride = particles.len().div_ceil(CLOUD_POINTS).max(1);
     particles
         .iter()
         .step_by(stride)
+        // Particles move only at measurement updates; drawn where they would be now.
+        .map(|p| localiser.carried(*p))
         .map(|p| {
             [
                 (p.pos.x * 100.0).round() as i32,
@@ -163,7 +167,7 @@ impl Frame {
                     cloud: r
                         .localiser
                         .as_ref()
-                        .map_or_else(Vec::new, |l| thin_cloud(l.particles())),
+                        .map_or_else(Vec::new, |l| thin_cloud(l)),
                 })
                 .collect(),
             opponents: world

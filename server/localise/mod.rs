@@ -250,8 +250,12 @@ pub struct Localiser {
     weights: Vec<f64>,
     w_slow: f64,
     w_fast: f64,
-    /// Odometry pose at the last motion update, and at the last measurement update.
+    /// The latest odometry reading.
     last_odom: Pose,
+    /// The odometry reading the particles were last moved to. As in AMCL, particles move
+    /// only before a measurement update, by the whole odometry change since the last one:
+    /// moving hundreds of particles with fresh noise at every tick was a fifth of a tick.
+    particles_odom: Pose,
     moved_since_update: (f32, f32),
     calls_since_update: u32,
     estimate: Pose,
@@ -288,6 +292,7 @@ impl Localiser {
             w_slow: 0.0,
             w_fast: 0.0,
             last_odom: odom,
+            particles_odom: odom,
             moved_since_update: (0.0, 0.0),
             calls_since_update: 0,
             estimate: start,
@@ -312,50 +317,48 @@ impl Localiser {
         self.spread
     }
 
-    /// Moves every particle by the odometry change since the last call (odometry motion
-    /// model, Probabilistic Robotics table 5.6, in std-dev form).
-    pub fn predict(&mut self, odom: Pose, rng: &mut impl RngExt) {
+    /// Takes in the odometry reading of this tick. The estimate follows it at once (noiseless);
+    /// the particles follow it, with the motion model's noise, at the next measurement update.
+    pub fn predict(&mut self, odom: Pose) {
         let prev = self.last_odom;
         self.last_odom = odom;
-        let d = odom.pos - prev.pos;
-        let mut trans = d.norm();
-        let dtheta = wrap_angle(odom.theta - prev.theta);
-        if trans < 1e-5 && dtheta.abs() < 1e-5 {
+        let Some(step) = OdometryStep::between(prev, odom) else {
             return;
-        }
-        let mut rot1 = if trans < 1e-4 {
-            0.0
-        } else {
-            wrap_angle(d.y.atan2(d.x) - prev.theta)
         };
-        // Driving backwards is a small negative translation, not a half turn and back.
-        if rot1.abs() > std::f32::consts::FRAC_PI_2 {
-            rot1 = wrap_angle(rot1 + std::f32::consts::PI);
-            trans = -trans;
-        }
-        let rot2 = wrap_angle(dtheta - rot1);
-        self.moved_since_update.0 += trans.abs();
-        self.moved_since_update.1 += dtheta.abs();
+        self.moved_since_update.0 += step.trans.abs();
+        self.moved_since_update.1 += wrap_angle(odom.theta - prev.theta).abs();
+        // The estimate moves by the noiseless odometry rather than being re-averaged: the
+        // cloud may hold freshly injected particles that no measurement has weighed yet.
+        self.estimate = step.apply(self.estimate);
+    }
+
+    /// Moves every particle by the odometry change since they last moved (odometry motion
+    /// model, Probabilistic Robotics table 5.6, in std-dev form).
+    fn move_particles(&mut self, rng: &mut impl RngExt) {
+        let from = self.particles_odom;
+        self.particles_odom = self.last_odom;
+        let Some(step) = OdometryStep::between(from, self.last_odom) else {
+            return;
+        };
+        let OdometryStep { rot1, trans, rot2 } = step;
         let [a1, a2, a3, a4] = self.settings.alpha;
         let s_rot1 = a1 * rot1.abs() + a2 * trans.abs();
         let s_trans = a3 * trans.abs() + a4 * (rot1.abs() + rot2.abs());
         let s_rot2 = a1 * rot2.abs() + a2 * trans.abs();
         for p in &mut self.particles {
-            let r1 = rot1 + gaussian(rng, s_rot1);
-            let t = trans + gaussian(rng, s_trans);
-            let r2 = rot2 + gaussian(rng, s_rot2);
-            let a = p.theta + r1;
-            p.pos.x += t * a.cos();
-            p.pos.y += t * a.sin();
-            p.theta = wrap_angle(a + r2);
+            let noisy = OdometryStep {
+                rot1: rot1 + gaussian(rng, s_rot1),
+                trans: trans + gaussian(rng, s_trans),
+                rot2: rot2 + gaussian(rng, s_rot2),
+            };
+            *p = noisy.apply(*p);
         }
-        // The estimate moves by the noiseless odometry rather than being re-averaged: the
-        // cloud may hold freshly injected particles that no measurement has weighed yet.
-        let e = &mut self.estimate;
-        let a = e.theta + rot1;
-        e.pos.x += trans * a.cos();
-        e.pos.y += trans * a.sin();
-        e.theta = wrap_angle(a + rot2);
+    }
+
+    /// `p` carried on by the odometry the particles have not moved by yet, without noise:
+    /// where a particle would be drawn now (the cloud spectators see).
+    pub fn carried(&self, p: Pose) -> Pose {
+        OdometryStep::between(self.particles_odom, self.last_odom).map_or(p, |s| s.apply(p))
     }
 
     /// Weighs the particles by what the robot senses and resamples. Skipped while the robot
@@ -374,6 +377,7 @@ impl Localiser {
         }
         self.moved_since_update = (0.0, 0.0);
         self.calls_since_update = 0;
+        self.move_particles(rng);
         let log_w = self.log_weights(obs);
         let max = log_w.iter().copied().fold(f64::NEG_INFINITY, f64::max);
         if !max.is_finite() {
@@ -563,6 +567,50 @@ impl Localiser {
             self.estimate = Pose::new((x / w_sum) as f32, (y / w_sum) as f32, s.atan2(c) as f32);
         }
         self.spread = (var / total).sqrt() as f32;
+    }
+}
+
+/// An odometry change as the motion model splits it: turn, drive straight, turn.
+#[derive(Debug, Clone, Copy)]
+struct OdometryStep {
+    rot1: f32,
+    trans: f32,
+    rot2: f32,
+}
+
+impl OdometryStep {
+    /// The change from `prev` to `odom`, or `None` when there is none.
+    fn between(prev: Pose, odom: Pose) -> Option<OdometryStep> {
+        let d = odom.pos - prev.pos;
+        let mut trans = d.norm();
+        let dtheta = wrap_angle(odom.theta - prev.theta);
+        if trans < 1e-5 && dtheta.abs() < 1e-5 {
+            return None;
+        }
+        let mut rot1 = if trans < 1e-4 {
+            0.0
+        } else {
+            wrap_angle(d.y.atan2(d.x) - prev.theta)
+        };
+        // Driving backwards is a small negative translation, not a half turn and back.
+        if rot1.abs() > std::f32::consts::FRAC_PI_2 {
+            rot1 = wrap_angle(rot1 + std::f32::consts::PI);
+            trans = -trans;
+        }
+        Some(OdometryStep {
+            rot1,
+            trans,
+            rot2: wrap_angle(dtheta - rot1),
+        })
+    }
+
+    fn apply(self, p: Pose) -> Pose {
+        let a = p.theta + self.rot1;
+        Pose::new(
+            p.pos.x + self.trans * a.cos(),
+            p.pos.y + self.trans * a.sin(),
+            wrap_angle(a + self.rot2),
+        )
     }
 }
 

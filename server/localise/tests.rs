@@ -52,7 +52,7 @@ fn drive(arena: &Arena, laser: bool, ticks: usize, seed: u64) -> (f32, f32) {
         };
         odom = sensors::odometry_step(&physics, odom, truth, next, &mut rng);
         truth = next;
-        loc.predict(odom, &mut rng);
+        loc.predict(odom);
         if laser {
             let scan = sensors::scan(arena, &physics, truth, &[], &mut rng);
             let marks = sensors::sight_landmarks(arena, &physics, truth, &mut rng);
@@ -104,7 +104,7 @@ fn a_stationary_robot_stays_put_and_converges() {
     // Start a little wrong: the filter must pull the cloud onto the truth.
     let mut loc = localiser(&a, Pose::new(3.1, 3.9, 0.75), &mut rng);
     for _ in 0..200 {
-        loc.predict(truth, &mut rng);
+        loc.predict(truth);
         let scan = sensors::scan(&a, &physics, truth, &[], &mut rng);
         let obs = Observation {
             ranges: &scan.ranges,

@@ -594,7 +594,7 @@ impl World {
                 r.estimate = r.odometry;
                 continue;
             };
-            loc.predict(r.odometry, &mut self.rng_localise);
+            loc.predict(r.odometry);
             let own = loc.estimate();
             let mut movers = r.scan.detections.clone();
             for j in 0..estimates.len() {
