@@ -361,8 +361,9 @@ impl Localiser {
         OdometryStep::between(self.particles_odom, self.last_odom).map_or(p, |s| s.apply(p))
     }
 
-    /// Weighs the particles by what the robot senses and resamples. Skipped while the robot
-    /// has barely moved (as AMCL does), except every `update_every` calls.
+    /// Moves the particles by the odometry since they last moved, weighs them by what the
+    /// robot senses and resamples. Skipped while the robot has barely moved (as AMCL does),
+    /// except every `update_every` calls.
     pub fn correct(&mut self, obs: &Observation, rng: &mut impl RngExt) {
         self.calls_since_update += 1;
         let (md, ma) = self.moved_since_update;
