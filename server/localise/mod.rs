@@ -21,7 +21,7 @@ use nalgebra::{Point2, Vector2};
 use rand::RngExt;
 
 use crate::sim::arena::Arena;
-use crate::sim::sensors::{Detection, beam_bearing};
+use crate::sim::sensors::{Detection, OdometryStep, beam_bearing};
 use crate::sim::{AGENT_RADIUS, Pose, gaussian, wrap_angle};
 
 /// A landmark seen by identity: its index in the map's `landmarks`, range and bearing.
@@ -217,6 +217,9 @@ pub struct Observation<'a> {
     pub movers: &'a [Detection],
 }
 
+/// Odometry changes below this (m and rad) are no motion.
+const STILL: f32 = 1e-5;
+
 /// Extra angle and range (rad, m) around a mover inside which a beam counts as ending on it:
 /// a teammate's position is only known as well as the two estimates.
 const MOVER_MARGIN: f32 = 0.15;
@@ -322,7 +325,7 @@ impl Localiser {
     pub fn predict(&mut self, odom: Pose) {
         let prev = self.last_odom;
         self.last_odom = odom;
-        let Some(step) = OdometryStep::between(prev, odom) else {
+        let Some(step) = OdometryStep::between(prev, odom, STILL) else {
             return;
         };
         self.moved_since_update.0 += step.trans.abs();
@@ -337,7 +340,7 @@ impl Localiser {
     fn move_particles(&mut self, rng: &mut impl RngExt) {
         let from = self.particles_odom;
         self.particles_odom = self.last_odom;
-        let Some(step) = OdometryStep::between(from, self.last_odom) else {
+        let Some(step) = OdometryStep::between(from, self.last_odom, STILL) else {
             return;
         };
         let OdometryStep { rot1, trans, rot2 } = step;
@@ -358,7 +361,7 @@ impl Localiser {
     /// `p` carried on by the odometry the particles have not moved by yet, without noise:
     /// where a particle would be drawn now (the cloud spectators see).
     pub fn carried(&self, p: Pose) -> Pose {
-        OdometryStep::between(self.particles_odom, self.last_odom).map_or(p, |s| s.apply(p))
+        OdometryStep::between(self.particles_odom, self.last_odom, STILL).map_or(p, |s| s.apply(p))
     }
 
     /// Moves the particles by the odometry since they last moved, weighs them by what the
@@ -568,50 +571,6 @@ impl Localiser {
             self.estimate = Pose::new((x / w_sum) as f32, (y / w_sum) as f32, s.atan2(c) as f32);
         }
         self.spread = (var / total).sqrt() as f32;
-    }
-}
-
-/// An odometry change as the motion model splits it: turn, drive straight, turn.
-#[derive(Debug, Clone, Copy)]
-struct OdometryStep {
-    rot1: f32,
-    trans: f32,
-    rot2: f32,
-}
-
-impl OdometryStep {
-    /// The change from `prev` to `odom`, or `None` when there is none.
-    fn between(prev: Pose, odom: Pose) -> Option<OdometryStep> {
-        let d = odom.pos - prev.pos;
-        let mut trans = d.norm();
-        let dtheta = wrap_angle(odom.theta - prev.theta);
-        if trans < 1e-5 && dtheta.abs() < 1e-5 {
-            return None;
-        }
-        let mut rot1 = if trans < 1e-4 {
-            0.0
-        } else {
-            wrap_angle(d.y.atan2(d.x) - prev.theta)
-        };
-        // Driving backwards is a small negative translation, not a half turn and back.
-        if rot1.abs() > std::f32::consts::FRAC_PI_2 {
-            rot1 = wrap_angle(rot1 + std::f32::consts::PI);
-            trans = -trans;
-        }
-        Some(OdometryStep {
-            rot1,
-            trans,
-            rot2: wrap_angle(dtheta - rot1),
-        })
-    }
-
-    fn apply(self, p: Pose) -> Pose {
-        let a = p.theta + self.rot1;
-        Pose::new(
-            p.pos.x + self.trans * a.cos(),
-            p.pos.y + self.trans * a.sin(),
-            wrap_angle(a + self.rot2),
-        )
     }
 }
 

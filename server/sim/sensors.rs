@@ -155,34 +155,67 @@ pub fn odometry_step(
     after: Pose,
     rng: &mut impl RngExt,
 ) -> Pose {
-    let d = after.pos - before.pos;
-    let mut trans = d.norm();
-    let dtheta = wrap_angle(after.theta - before.theta);
-    if trans < 1e-6 && dtheta.abs() < 1e-6 {
+    let Some(OdometryStep { rot1, trans, rot2 }) = OdometryStep::between(before, after, 1e-6)
+    else {
         return odom;
-    }
-    let mut rot1 = if trans < 1e-4 {
-        0.0
-    } else {
-        wrap_angle(d.y.atan2(d.x) - before.theta)
     };
-    if rot1.abs() > std::f32::consts::FRAC_PI_2 {
-        rot1 = wrap_angle(rot1 + std::f32::consts::PI);
-        trans = -trans;
-    }
-    let rot2 = wrap_angle(dtheta - rot1);
     let turn_sigma = |rot: f32| {
         physics.odometry_turn_noise * rot.abs() + physics.odometry_turn_per_metre * trans.abs()
     };
-    let r1 = rot1 + gaussian(rng, turn_sigma(rot1));
-    let t = trans + gaussian(rng, physics.odometry_noise * trans.abs());
-    let r2 = rot2 + gaussian(rng, turn_sigma(rot2));
-    let a = odom.theta + r1;
-    Pose::new(
-        odom.pos.x + t * a.cos(),
-        odom.pos.y + t * a.sin(),
-        wrap_angle(a + r2),
-    )
+    // Fields are evaluated in order, so the noise is drawn rotate, translate, rotate.
+    OdometryStep {
+        rot1: rot1 + gaussian(rng, turn_sigma(rot1)),
+        trans: trans + gaussian(rng, physics.odometry_noise * trans.abs()),
+        rot2: rot2 + gaussian(rng, turn_sigma(rot2)),
+    }
+    .apply(odom)
+}
+
+/// A change of pose as the odometry motion model splits it: turn, drive straight, turn. The
+/// sim's odometry draws its noise on these three, and so does a localiser's motion update.
+#[derive(Debug, Clone, Copy)]
+pub struct OdometryStep {
+    pub rot1: f32,
+    pub trans: f32,
+    pub rot2: f32,
+}
+
+impl OdometryStep {
+    /// The change from `prev` to `next`, or `None` when both the distance and the turn are
+    /// below `still`.
+    pub fn between(prev: Pose, next: Pose, still: f32) -> Option<OdometryStep> {
+        let d = next.pos - prev.pos;
+        let mut trans = d.norm();
+        let dtheta = wrap_angle(next.theta - prev.theta);
+        if trans < still && dtheta.abs() < still {
+            return None;
+        }
+        let mut rot1 = if trans < 1e-4 {
+            0.0
+        } else {
+            wrap_angle(d.y.atan2(d.x) - prev.theta)
+        };
+        // Driving backwards is a small negative translation, not a half turn and back.
+        if rot1.abs() > std::f32::consts::FRAC_PI_2 {
+            rot1 = wrap_angle(rot1 + std::f32::consts::PI);
+            trans = -trans;
+        }
+        Some(OdometryStep {
+            rot1,
+            trans,
+            rot2: wrap_angle(dtheta - rot1),
+        })
+    }
+
+    /// `p` moved by this step (in its own frame).
+    pub fn apply(self, p: Pose) -> Pose {
+        let a = p.theta + self.rot1;
+        Pose::new(
+            p.pos.x + self.trans * a.cos(),
+            p.pos.y + self.trans * a.sin(),
+            wrap_angle(a + self.rot2),
+        )
+    }
 }
 
 #[cfg(test)]
