@@ -43,8 +43,11 @@ pub struct RobotFrame {
     pub cloud: Vec<[i32; 2]>,
 }
 
-/// Localisation particles shown per robot.
-pub const CLOUD_POINTS: usize = 40;
+/// Localisation particles shown per robot. Every spectator snapshot carries them, so they
+/// count against the 8 KB a snapshot with the belief may take: 40 per robot took the
+/// largest of those to 8.2 KB in the load test (`examples/loadtest.rs`), and a converged
+/// cloud is a few centimetres across, where 24 dots show it as well.
+pub const CLOUD_POINTS: usize = 24;
 
 /// Every k-th particle, so that about [`CLOUD_POINTS`] are shown (deterministic: resampled
 /// particles carry equal weight, so a stride is a fair sample).
