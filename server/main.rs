@@ -289,16 +289,27 @@ async fn serve(args: ServeArgs) -> Result<(), String> {
     .with_graceful_shutdown(shutdown_signal(registry.clone()))
     .into_future();
     tokio::pin!(server);
-    tokio::select! {
-        // Only an accept loop that failed ends before a signal.
-        r = &mut server => return r.map_err(|e| format!("server error: {e}")),
-        _ = registry.shutdown.cancelled() => {}
+    // Before a signal only an accept loop that failed ends the server. After one, the server
+    // future may well be the branch that finishes first (it has no HTTP request left to wait
+    // for), and returning then dropped every WebSocket task mid-close: clients got a bare
+    // EOF instead of `finished` and their close frame (issue 7, 2 to 7 runs in 30).
+    let served_early = tokio::select! {
+        r = &mut server => Some(r),
+        _ = registry.shutdown.cancelled() => None,
+    };
+    if !registry.shutdown.is_cancelled() {
+        return served_early
+            .unwrap_or(Ok(()))
+            .map_err(|e| format!("server error: {e}"));
     }
     // The listener is closed and every match told to stop: wait for the HTTP requests in
     // flight and for the WebSockets to send `finished` and close, within the budget.
     let deadline = tokio::time::Instant::now() + SHUTDOWN_BUDGET;
     let drained = tokio::time::timeout_at(deadline, async {
-        let served = (&mut server).await;
+        let served = match served_early {
+            Some(r) => r,
+            None => (&mut server).await,
+        };
         registry.connections_closed().await;
         served
     })
