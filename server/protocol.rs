@@ -356,6 +356,61 @@ impl RadioSettings {
     }
 }
 
+/// The robots' wheel odometry noise (game-rules.md: "about 5% of distance and 2° per metre,
+/// configurable"). Each is a standard deviation drawn every tick on the tick's motion. The
+/// robots' localisers model the same noise, inflated as filters should be.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct OdometrySettings {
+    /// Error of the distance driven, as a fraction of it (0..=1, default 0.05).
+    #[schema(minimum = 0.0, maximum = 1.0)]
+    pub distance: Option<f64>,
+    /// Heading error per metre driven, degrees (0..=45, default 2).
+    #[schema(minimum = 0.0, maximum = 45.0)]
+    pub heading_deg_per_m: Option<f64>,
+    /// Error of a turn, as a fraction of it (0..=1, default 0.02).
+    #[schema(minimum = 0.0, maximum = 1.0)]
+    pub turn: Option<f64>,
+}
+
+/// The odometry noise a match runs with, defaults filled in.
+#[derive(Debug, Clone, PartialEq, Serialize, ToSchema)]
+pub struct OdometryConfig {
+    pub distance: f64,
+    pub heading_deg_per_m: f64,
+    pub turn: f64,
+}
+
+impl From<&crate::sim::Physics> for OdometryConfig {
+    fn from(p: &crate::sim::Physics) -> Self {
+        // f32 → f64 would print 0.05 as 0.0500000007: round to what was asked.
+        let round = |v: f32| (v as f64 * 1e6).round() / 1e6;
+        OdometryConfig {
+            distance: round(p.odometry_noise),
+            heading_deg_per_m: round(p.odometry_turn_per_metre.to_degrees()),
+            turn: round(p.odometry_turn_noise),
+        }
+    }
+}
+
+impl OdometrySettings {
+    /// `physics` with this odometry noise.
+    fn validate(self, physics: crate::sim::Physics) -> Result<crate::sim::Physics, String> {
+        let mut p = physics;
+        if let Some(v) = self.distance {
+            p.odometry_noise = finite_in("odometry.distance", v, 0.0, 1.0, false)? as f32;
+        }
+        if let Some(v) = self.heading_deg_per_m {
+            p.odometry_turn_per_metre =
+                (finite_in("odometry.heading_deg_per_m", v, 0.0, 45.0, false)? as f32).to_radians();
+        }
+        if let Some(v) = self.turn {
+            p.odometry_turn_noise = finite_in("odometry.turn", v, 0.0, 1.0, false)? as f32;
+        }
+        Ok(p)
+    }
+}
+
 /// Body of `POST /api/matches`. Every field but `map` is optional.
 #[derive(Debug, Clone, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
@@ -400,6 +455,9 @@ pub struct CreateMatch {
     pub localisation: Option<bool>,
     /// The team radio (default perfect: `{"latency_ticks": 0, "loss": 0.0}`).
     pub radio: Option<RadioSettings>,
+    /// The robots' wheel odometry noise (default
+    /// `{"distance": 0.05, "heading_deg_per_m": 2, "turn": 0.02}`).
+    pub odometry: Option<OdometrySettings>,
 }
 
 /// The tracker settings a match runs with, defaults filled in.
@@ -572,6 +630,12 @@ impl CreateMatch {
             radio: self.radio.unwrap_or_default().validate()?,
             ..config
         };
+        let physics = self.odometry.unwrap_or_default().validate(config.physics)?;
+        let config = MatchConfig {
+            localiser: crate::localise::Settings::for_odometry(&physics),
+            physics,
+            ..config
+        };
         Ok(MatchRequest {
             map: self.map,
             config,
@@ -672,10 +736,12 @@ pub struct MatchSummary {
     pub planner_active: Planner,
     pub tracker: TrackerConfig,
     pub coordination: CoordinationConfig,
-    /// Whether robots localise themselves (else their estimate is their true pose).
+    /// Whether robots localise themselves (else their estimate is their odometry alone).
     pub localisation: bool,
     /// The team radio; with a latency or loss each robot keeps its own belief.
     pub radio: RadioConfig,
+    /// The robots' wheel odometry noise.
+    pub odometry: OdometryConfig,
     pub seed: u64,
     pub players: usize,
     /// WebSocket spectators connected now.
@@ -724,6 +790,7 @@ pub fn summary(world: &World, meta: &MatchMeta) -> MatchSummary {
         coordination: CoordinationConfig::from(&c.coordination),
         localisation: c.localisation,
         radio: RadioConfig::from(&c.radio),
+        odometry: OdometryConfig::from(&c.physics),
         seed: c.seed,
         players: meta.players,
         spectators: meta.spectators,

@@ -292,3 +292,77 @@ async fn with_a_perfect_radio_each_robots_belief_is_the_teams() {
     assert_eq!(team["roles"], r1["roles"]);
     assert!(role_near(&r1, [8.0, 8.0]), "r1 shares what r0 sees at once");
 }
+
+/// game-rules.md: odometry noise is "configurable". `odometry` is echoed with defaults filled
+/// in and refused by name when out of range. Robots without a localiser dead-reckon: with
+/// noiseless wheels they know their pose exactly, with noisy ones they drift and their
+/// `spread` says by about how much.
+#[tokio::test]
+async fn odometry_noise_is_a_match_setting_and_dead_reckoning_knows_its_spread() {
+    let server = TestServer::start().await;
+    let r = server
+        .post("/api/matches", &json!({"map": "office", "clock": "manual"}))
+        .await;
+    assert_eq!(
+        r.body["odometry"],
+        json!({"distance": 0.05, "heading_deg_per_m": 2.0, "turn": 0.02})
+    );
+    let r = server
+        .post(
+            "/api/matches",
+            &json!({"map": "office", "odometry": {"heading_deg_per_m": 90}}),
+        )
+        .await;
+    assert_eq!(r.status, 400, "{}", r.body);
+    let error = r.body["error"].as_str().unwrap();
+    assert!(
+        error.starts_with("odometry.heading_deg_per_m: 90"),
+        "{error}"
+    );
+
+    let run = |odometry: serde_json::Value| {
+        let server = &server;
+        async move {
+            let r = server
+                .post(
+                    "/api/matches",
+                    &json!({"map": "office", "clock": "manual", "planner": "baseline",
+                            "localisation": false, "odometry": odometry, "seed": 3,
+                            "opponent_bot": "idle", "opponent_starts": [[1.0, 1.0]],
+                            "time_limit_s": 60}),
+                )
+                .await;
+            assert_eq!(r.status, 201, "{}", r.body);
+            assert_eq!(r.body["odometry"], odometry);
+            let id = r.body["id"].as_str().unwrap().to_string();
+            server.step(&id, 600).await
+        }
+    };
+    let exact = run(json!({"distance": 0.0, "heading_deg_per_m": 0.0, "turn": 0.0})).await;
+    let noisy = run(json!({"distance": 0.2, "heading_deg_per_m": 10.0, "turn": 0.1})).await;
+    let error = |state: &serde_json::Value, i: usize| {
+        let r = &state["robots"][i];
+        let e = &r["estimate"];
+        (
+            (r["x"].as_f64().unwrap() - e["x"].as_f64().unwrap())
+                .hypot(r["y"].as_f64().unwrap() - e["y"].as_f64().unwrap()),
+            r["spread"].as_f64().unwrap(),
+        )
+    };
+    for i in 0..2 {
+        let (e, spread) = error(&exact, i);
+        assert!(
+            e < 1e-3 && spread == 0.0,
+            "r{i}: off by {e} m, spread {spread}"
+        );
+    }
+    let (e0, s0) = error(&noisy, 0);
+    let (e1, s1) = error(&noisy, 1);
+    assert!(
+        s0 > 0.1 && s1 > 0.1,
+        "spreads {s0}, {s1} after 30 s of noisy driving"
+    );
+    assert!(e0.max(e1) > 0.05, "noisy wheels drift: {e0}, {e1}");
+    // The spread is a standard deviation, so an error of many spreads means it is wrong.
+    assert!(e0 < 4.0 * s0 && e1 < 4.0 * s1, "{e0} vs {s0}, {e1} vs {s1}");
+}

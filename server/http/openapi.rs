@@ -41,6 +41,8 @@ use crate::protocol::*;
         TrackerConfig,
         RadioSettings,
         RadioConfig,
+        OdometrySettings,
+        OdometryConfig,
         MatchSummary,
         MatchState,
         RobotState,

@@ -14,6 +14,8 @@
 //!
 //! Pure core: no clock, no I/O; all randomness comes from the caller's RNG.
 
+pub mod dead_reckoning;
+
 use std::collections::HashSet;
 use std::sync::Arc;
 
@@ -77,6 +79,38 @@ pub struct Settings {
     pub roughen_theta: f32,
 }
 
+impl Settings {
+    /// The defaults, with a motion model for the robot's odometry noise in `physics`.
+    pub fn for_odometry(physics: &crate::sim::Physics) -> Settings {
+        Settings {
+            alpha: Settings::alpha_for(physics),
+            ..Settings::default()
+        }
+    }
+
+    /// The motion model tuned for the default odometry noise (game-rules.md: about 5% of
+    /// distance and 2° per metre), scaled with the noise in `p`. The tuned values are the
+    /// sim's noise inflated by about half, as filters should be: an over-confident motion
+    /// model loses the robot. (The translation-from-rotation term has no counterpart in the
+    /// sim; a little keeps turning on the spot from being certain.)
+    fn alpha_for(p: &crate::sim::Physics) -> [f32; 4] {
+        const TUNED: [f32; 4] = [0.05, 0.052_359_88, 0.08, 0.01]; // 0.052… = 3° in radians
+        let d = crate::sim::Physics::default();
+        // Ratios, so that the default noise gives the tuned values to the last bit.
+        let scaled = |tuned: f32, v: f32, default: f32| tuned * (v / default);
+        [
+            scaled(TUNED[0], p.odometry_turn_noise, d.odometry_turn_noise),
+            scaled(
+                TUNED[1],
+                p.odometry_turn_per_metre,
+                d.odometry_turn_per_metre,
+            ),
+            scaled(TUNED[2], p.odometry_noise, d.odometry_noise),
+            TUNED[3],
+        ]
+    }
+}
+
 impl Default for Settings {
     fn default() -> Self {
         Settings {
@@ -86,9 +120,7 @@ impl Default for Settings {
             sigma_hit: 0.1,
             z_hit: 0.9,
             z_rand: 0.1,
-            // The sim's odometry noise (game-rules.md: ~5 % of distance, 2°/m) inflated by
-            // half, as filters should be: an over-confident motion model loses the robot.
-            alpha: [0.05, 3f32.to_radians(), 0.08, 0.01],
+            alpha: Settings::alpha_for(&crate::sim::Physics::default()),
             landmark_range_sigma: 0.1,
             landmark_bearing_sigma: 4f32.to_radians(),
             kld_err: 0.05,

@@ -151,3 +151,25 @@ fn landmark_sightings_fit_only_the_true_pose() {
     let far = Pose::new(9.0, 5.0, 0.0);
     assert!(sensors::sight_landmarks(&a, &physics, far, &mut rng).is_empty());
 }
+
+/// The default motion model is the one the filter was tuned with before the odometry noise
+/// became a match setting: matches with default settings replay exactly.
+#[test]
+fn the_default_motion_model_is_the_tuned_one() {
+    assert_eq!(
+        Settings::for_odometry(&Physics::default()).alpha,
+        [0.05, 3f32.to_radians(), 0.08, 0.01]
+    );
+    assert_eq!(
+        Settings::default().alpha,
+        [0.05, 3f32.to_radians(), 0.08, 0.01]
+    );
+    let noisy = Physics {
+        odometry_noise: 0.2,
+        ..Physics::default()
+    };
+    assert!(
+        Settings::for_odometry(&noisy).alpha[2] > 0.3,
+        "follows the wheels"
+    );
+}

@@ -22,6 +22,7 @@ use nalgebra::Point2;
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
+use crate::localise::dead_reckoning::DeadReckoning;
 use crate::localise::{LandmarkSighting, Localiser, Observation};
 use crate::planner::{PlannerKind, RobotCommand, RobotView, Team, TeamView};
 use crate::sim::arena::Arena;
@@ -190,10 +191,13 @@ pub struct Robot {
     /// The robot's own belief about its pose: its localiser's point estimate, or its
     /// odometry when localisation is off. Everything the team decides starts from this.
     pub estimate: Pose,
-    /// Standard deviation of the localiser's position belief (m); 0 when off.
+    /// Standard deviation of the robot's position belief (m): its localiser's, or with
+    /// localisation off the dead-reckoning uncertainty, which only grows.
     pub spread: f32,
     /// Dead-reckoned pose from the wheel odometry (starts at the true start pose).
     pub odometry: Pose,
+    /// The uncertainty of `odometry` (used for `spread` when there is no localiser).
+    pub dead_reckoning: DeadReckoning,
     /// Landmarks recognised this tick.
     pub landmarks: Vec<LandmarkSighting>,
     pub localiser: Option<Box<Localiser>>,
@@ -315,6 +319,7 @@ impl World {
                 estimate: pose,
                 spread: 0.0,
                 odometry: pose,
+                dead_reckoning: DeadReckoning::new(pose),
                 landmarks: Vec::new(),
                 localiser: field.as_ref().map(|f| {
                     Box::new(Localiser::new(
@@ -359,7 +364,16 @@ impl World {
             config.planner,
             &arena,
             &config.physics,
-            config.coordination.clone(),
+            crate::planner::coordinated::Settings {
+                // Without a localiser a landmark in view corrects nothing: an uncertain robot
+                // still avoids narrow passages, but has no reason to seek landmarks.
+                landmark_weight: if config.localisation {
+                    config.coordination.landmark_weight
+                } else {
+                    0.0
+                },
+                ..config.coordination.clone()
+            },
             config.robots,
             tracker,
             stream(config.seed, STREAM_TEAM),
@@ -592,6 +606,8 @@ impl World {
         for (i, r) in self.robots.iter_mut().enumerate() {
             let Some(loc) = r.localiser.as_mut() else {
                 r.estimate = r.odometry;
+                r.dead_reckoning.update(p, r.odometry);
+                r.spread = r.dead_reckoning.spread();
                 continue;
             };
             loc.predict(r.odometry);
