@@ -148,6 +148,37 @@ enum Experiment {
         #[arg(long, default_value = "out/localisation")]
         out: PathBuf,
     },
+    /// Issue 6, point 2: uncertainty-aware motion on and off, for robots that localise from
+    /// landmarks and odometry alone (Fabiani & Latombe's setting).
+    Uncertainty {
+        /// Runs per map, opponent bot and variant (the same seeds in both variants).
+        #[arg(long, default_value_t = 100)]
+        runs: usize,
+        /// Seed of the first run (run i uses seed + i).
+        #[arg(long, default_value_t = 0)]
+        seed: u64,
+        /// Time limit of each run in seconds (runs that reach it count as not captured).
+        #[arg(long, default_value_t = 300)]
+        time_limit: u64,
+        /// Laser beams the localiser uses (0: landmarks and odometry alone).
+        #[arg(long, default_value_t = 0)]
+        beams: usize,
+        /// Odometry noise as a multiple of the default (5% of distance, 2°/m, 2% of turns).
+        #[arg(long, default_value_t = 4.0)]
+        odometry_scale: f32,
+        /// Length of each hunt (tagging off) in seconds.
+        #[arg(long, default_value_t = 120)]
+        hunt_s: u64,
+        /// Maps to run on.
+        #[arg(long, value_delimiter = ',', default_value = "office,warehouse")]
+        on: Vec<String>,
+        /// Directory of map files.
+        #[arg(long, default_value = "maps")]
+        maps: PathBuf,
+        /// Where to write the CSV files and plots.
+        #[arg(long, default_value = "out/uncertainty")]
+        out: PathBuf,
+    },
 }
 
 #[derive(Debug, Clone, clap::Args)]
@@ -505,6 +536,52 @@ fn experiment(e: Experiment) -> Result<(), String> {
             }
             println!(
                 "wrote {0}/localisation.csv, {0}/localisation_summary.csv and {0}/localisation_<map>.svg",
+                out.display()
+            );
+            Ok(())
+        }
+        Experiment::Uncertainty {
+            runs,
+            seed,
+            time_limit,
+            beams,
+            odometry_scale,
+            hunt_s,
+            on,
+            maps,
+            out,
+        } => {
+            if runs == 0 || time_limit == 0 || hunt_s == 0 {
+                return Err("--runs, --time-limit and --hunt-s must be at least 1".into());
+            }
+            // The noise scaled past the API's ranges (heading 45°/m, fractions 1) is nonsense.
+            if !(0.0..=20.0).contains(&odometry_scale) {
+                return Err(format!(
+                    "--odometry-scale {odometry_scale}: must be in [0, 20]"
+                ));
+            }
+            let store = MapStore::load_dir(&maps).map_err(|e| format!("loading maps: {e}"))?;
+            let chosen = on
+                .iter()
+                .map(|name| {
+                    store
+                        .get(name)
+                        .map(|m| (name.clone(), m.arena.clone()))
+                        .ok_or_else(|| format!("no map {name:?} in {}", maps.display()))
+                })
+                .collect::<Result<Vec<_>, _>>()?;
+            let cfg = lasertag::experiment::uncertainty::UncertaintyConfig {
+                runs,
+                seed,
+                time_limit_s: time_limit,
+                beams,
+                odometry_scale,
+                hunt_s,
+            };
+            let table = lasertag::experiment::uncertainty::run(&chosen, &cfg, &out)?;
+            print!("{table}");
+            println!(
+                "wrote {0}/uncertainty_{{hunt,capture}}{{,_summary}}.csv, {0}/uncertainty_lost.svg and {0}/uncertainty_error_<map>.svg",
                 out.display()
             );
             Ok(())

@@ -85,7 +85,7 @@ fn one_run(
 
 /// Median, mean and the 95% confidence interval of the mean (normal approximation), with
 /// runs that timed out counted at the time limit (so the mean is a lower bound for them).
-fn stats(times: &[Option<f64>], limit: f64) -> (f64, f64, f64, f64) {
+pub(crate) fn stats(times: &[Option<f64>], limit: f64) -> (f64, f64, f64, f64) {
     let mut xs: Vec<f64> = times.iter().map(|t| t.unwrap_or(limit)).collect();
     xs.sort_by(f64::total_cmp);
     let n = xs.len().max(1) as f64;

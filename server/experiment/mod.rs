@@ -6,12 +6,15 @@
 //! - [`localisation`]: issue 6 — the robots' own pose error with and without landmarks.
 //! - [`reacquire`]: issue 6 — Coltin et al.'s Table I: time to see an opponent again with
 //!   and without a teammate's hypotheses and the tracker's prediction.
+//! - [`uncertainty`]: issue 6 — uncertainty-aware motion on and off, for robots that
+//!   localise from landmarks alone.
 
 pub mod capture;
 pub mod filters;
 pub mod localisation;
 pub mod plot;
 pub mod reacquire;
+pub mod uncertainty;
 
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicUsize, Ordering};

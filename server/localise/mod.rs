@@ -259,7 +259,8 @@ const MOVER_MARGIN: f32 = 0.15;
 /// Indices of the beams a measurement update uses: about `wanted` evenly spread, returning
 /// something, and not ending on a known mover.
 fn used_beams(obs: &Observation, wanted: usize) -> impl Iterator<Item = usize> {
-    let n = obs.ranges.len();
+    // No beams wanted: a robot that localises from landmarks (and odometry) alone.
+    let n = if wanted == 0 { 0 } else { obs.ranges.len() };
     (0..n).step_by(beam_step(n, wanted)).filter(move |&i| {
         let r = obs.ranges[i];
         if r >= obs.laser_range {

@@ -173,3 +173,19 @@ fn the_default_motion_model_is_the_tuned_one() {
         "follows the wheels"
     );
 }
+
+/// `beams: 0` is a robot that localises from landmarks and odometry alone (the uncertainty
+/// experiment's weak robot): no beam is weighed, not beam 0 alone.
+#[test]
+fn zero_beams_weighs_no_beam() {
+    let ranges = vec![2.0; 181];
+    let obs = Observation {
+        ranges: &ranges,
+        laser_fov: std::f32::consts::PI,
+        laser_range: 8.0,
+        landmarks: &[],
+        movers: &[],
+    };
+    assert_eq!(used_beams(&obs, 0).count(), 0);
+    assert_eq!(used_beams(&obs, 30).count(), 31);
+}
