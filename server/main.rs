@@ -383,6 +383,22 @@ async fn shutdown_signal(registry: Arc<Registry>) {
     registry.begin_shutdown().await;
 }
 
+/// The maps named in `on`, loaded from the directory `maps`.
+fn chosen_maps(
+    maps: &std::path::Path,
+    on: &[String],
+) -> Result<Vec<(String, Arc<lasertag::sim::arena::Arena>)>, String> {
+    let store = MapStore::load_dir(maps).map_err(|e| format!("loading maps: {e}"))?;
+    on.iter()
+        .map(|name| {
+            store
+                .get(name)
+                .map(|m| (name.clone(), m.arena.clone()))
+                .ok_or_else(|| format!("no map {name:?} in {}", maps.display()))
+        })
+        .collect()
+}
+
 fn experiment(e: Experiment) -> Result<(), String> {
     match e {
         Experiment::Capture {
@@ -400,16 +416,7 @@ fn experiment(e: Experiment) -> Result<(), String> {
             if runs == 0 || time_limit == 0 {
                 return Err("--runs and --time-limit must be at least 1".into());
             }
-            let store = MapStore::load_dir(&maps).map_err(|e| format!("loading maps: {e}"))?;
-            let chosen = on
-                .iter()
-                .map(|name| {
-                    store
-                        .get(name)
-                        .map(|m| (name.clone(), m.arena.clone()))
-                        .ok_or_else(|| format!("no map {name:?} in {}", maps.display()))
-                })
-                .collect::<Result<Vec<_>, _>>()?;
+            let chosen = chosen_maps(&maps, &on)?;
             let mut coordination = lasertag::planner::coordinated::Settings::default();
             for kv in &set {
                 let (k, v) = kv
@@ -560,16 +567,7 @@ fn experiment(e: Experiment) -> Result<(), String> {
                     "--odometry-scale {odometry_scale}: must be in [0, 20]"
                 ));
             }
-            let store = MapStore::load_dir(&maps).map_err(|e| format!("loading maps: {e}"))?;
-            let chosen = on
-                .iter()
-                .map(|name| {
-                    store
-                        .get(name)
-                        .map(|m| (name.clone(), m.arena.clone()))
-                        .ok_or_else(|| format!("no map {name:?} in {}", maps.display()))
-                })
-                .collect::<Result<Vec<_>, _>>()?;
+            let chosen = chosen_maps(&maps, &on)?;
             let cfg = lasertag::experiment::uncertainty::UncertaintyConfig {
                 runs,
                 seed,

@@ -39,7 +39,7 @@ struct Setting {
     planner: PlannerKind,
 }
 
-fn bot_name(b: BotKind) -> &'static str {
+pub(crate) fn bot_name(b: BotKind) -> &'static str {
     match b {
         BotKind::Wander => "wander",
         BotKind::Evade => "evade",
@@ -88,7 +88,6 @@ fn one_run(
 pub(crate) fn stats(times: &[Option<f64>], limit: f64) -> (f64, f64, f64, f64) {
     let mut xs: Vec<f64> = times.iter().map(|t| t.unwrap_or(limit)).collect();
     xs.sort_by(f64::total_cmp);
-    let n = xs.len().max(1) as f64;
     let median = if xs.is_empty() {
         f64::NAN
     } else if xs.len() % 2 == 1 {
@@ -96,10 +95,16 @@ pub(crate) fn stats(times: &[Option<f64>], limit: f64) -> (f64, f64, f64, f64) {
     } else {
         (xs[xs.len() / 2 - 1] + xs[xs.len() / 2]) / 2.0
     };
+    let (mean, half) = mean_ci(&xs);
+    (median, mean, mean - half, mean + half)
+}
+
+/// Mean and the half-width of its 95% confidence interval (normal approximation).
+pub(crate) fn mean_ci(xs: &[f64]) -> (f64, f64) {
+    let n = xs.len().max(1) as f64;
     let mean = xs.iter().sum::<f64>() / n;
     let var = xs.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0).max(1.0);
-    let half = 1.96 * (var / n).sqrt();
-    (median, mean, mean - half, mean + half)
+    (mean, 1.96 * (var / n).sqrt())
 }
 
 /// Two-sided p-value of the Mann–Whitney U test (normal approximation with tie correction).

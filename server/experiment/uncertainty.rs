@@ -21,7 +21,7 @@
 use std::path::Path;
 use std::sync::Arc;
 
-use crate::experiment::capture::{mann_whitney_p, stats};
+use crate::experiment::capture::{bot_name, mann_whitney_p, mean_ci, stats};
 use crate::experiment::plot::{self, Bar, Series};
 use crate::experiment::run_all;
 use crate::planner::PlannerKind;
@@ -172,22 +172,6 @@ pub fn hunt_run(
         lost_share: lost as f64 / n,
         uncertain_share: uncertain as f64 / n,
     })
-}
-
-fn bot_name(b: BotKind) -> &'static str {
-    match b {
-        BotKind::Wander => "wander",
-        BotKind::Evade => "evade",
-        BotKind::Idle => "idle",
-    }
-}
-
-/// Mean and the half-width of its 95% confidence interval (normal approximation).
-fn mean_ci(xs: &[f64]) -> (f64, f64) {
-    let n = xs.len().max(1) as f64;
-    let mean = xs.iter().sum::<f64>() / n;
-    let var = xs.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0).max(1.0);
-    (mean, 1.96 * (var / n).sqrt())
 }
 
 fn p_text(v: f64) -> String {
