@@ -411,6 +411,23 @@ impl OdometrySettings {
     }
 }
 
+/// The robots' localisers (used when `localisation` is on).
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct LocaliserSettings {
+    /// Laser beams weighed per update, evenly spread over the scan (0..=181, default 30);
+    /// 0 localises from landmarks and odometry alone.
+    #[serde(default, deserialize_with = "schema::opt_int")]
+    #[schema(minimum = 0, maximum = 181)]
+    pub beams: Option<i64>,
+}
+
+/// The localiser settings a match runs with, defaults filled in.
+#[derive(Debug, Clone, PartialEq, Serialize, ToSchema)]
+pub struct LocaliserConfig {
+    pub beams: usize,
+}
+
 /// Body of `POST /api/matches`. Every field but `map` is optional.
 #[derive(Debug, Clone, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
@@ -458,6 +475,8 @@ pub struct CreateMatch {
     /// The robots' wheel odometry noise (default
     /// `{"distance": 0.05, "heading_deg_per_m": 2, "turn": 0.02}`).
     pub odometry: Option<OdometrySettings>,
+    /// The robots' localisers (default `{"beams": 30}`).
+    pub localiser: Option<LocaliserSettings>,
 }
 
 /// The tracker settings a match runs with, defaults filled in.
@@ -631,8 +650,12 @@ impl CreateMatch {
             ..config
         };
         let physics = self.odometry.unwrap_or_default().validate(config.physics)?;
+        let mut localiser = crate::localise::Settings::for_odometry(&physics);
+        if let Some(beams) = self.localiser.unwrap_or_default().beams {
+            localiser.beams = in_range("localiser.beams", beams, 0, 181)? as usize;
+        }
         let config = MatchConfig {
-            localiser: crate::localise::Settings::for_odometry(&physics),
+            localiser,
             physics,
             ..config
         };
@@ -742,6 +765,8 @@ pub struct MatchSummary {
     pub radio: RadioConfig,
     /// The robots' wheel odometry noise.
     pub odometry: OdometryConfig,
+    /// The robots' localisers (what they weigh when `localisation` is on).
+    pub localiser: LocaliserConfig,
     pub seed: u64,
     pub players: usize,
     /// WebSocket spectators connected now.
@@ -791,6 +816,9 @@ pub fn summary(world: &World, meta: &MatchMeta) -> MatchSummary {
         localisation: c.localisation,
         radio: RadioConfig::from(&c.radio),
         odometry: OdometryConfig::from(&c.physics),
+        localiser: LocaliserConfig {
+            beams: c.localiser.beams,
+        },
         seed: c.seed,
         players: meta.players,
         spectators: meta.spectators,

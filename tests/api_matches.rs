@@ -366,3 +366,37 @@ async fn odometry_noise_is_a_match_setting_and_dead_reckoning_knows_its_spread()
     // The spread is a standard deviation, so an error of many spreads means it is wrong.
     assert!(e0 < 4.0 * s0 && e1 < 4.0 * s1, "{e0} vs {s0}, {e1} vs {s1}");
 }
+
+/// The uncertainty experiment's weak robot can be had over the API too: `localiser.beams`
+/// (0 = landmarks and odometry alone) is echoed, checked by name, and such a match runs.
+#[tokio::test]
+async fn a_match_of_robots_that_localise_from_landmarks_alone() {
+    let server = TestServer::start().await;
+    let r = server
+        .post("/api/matches", &json!({"map": "office", "clock": "manual"}))
+        .await;
+    assert_eq!(r.body["localiser"], json!({"beams": 30}));
+    let r = server
+        .post(
+            "/api/matches",
+            &json!({"map": "office", "localiser": {"beams": 200}}),
+        )
+        .await;
+    assert_eq!(r.status, 400, "{}", r.body);
+    assert_eq!(r.body["error"], "localiser.beams: 200 must be in 0..=181");
+    let r = server
+        .post(
+            "/api/matches",
+            &json!({"map": "office", "clock": "manual", "localiser": {"beams": 0},
+                    "odometry": {"distance": 0.2, "heading_deg_per_m": 8.0, "turn": 0.08}}),
+        )
+        .await;
+    assert_eq!(r.status, 201, "{}", r.body);
+    assert_eq!(r.body["localiser"], json!({"beams": 0}));
+    let id = r.body["id"].as_str().unwrap();
+    let state = server.step(id, 400).await;
+    for robot in state["robots"].as_array().unwrap() {
+        let spread = robot["spread"].as_f64().unwrap();
+        assert!(spread.is_finite() && spread > 0.0, "{robot}");
+    }
+}

@@ -43,6 +43,8 @@ use crate::protocol::*;
         RadioConfig,
         OdometrySettings,
         OdometryConfig,
+        LocaliserSettings,
+        LocaliserConfig,
         MatchSummary,
         MatchState,
         RobotState,
