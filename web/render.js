@@ -253,17 +253,20 @@ export function draw(ctx, v, scene) {
 
   // Where each robot believes it is (spectators, with the belief switched on): its
   // localisation particles and a ring at its estimate, so one sees a robot unsure or lost.
+  // The ring is as wide as the belief's spread (at least the robot's size): a robot without
+  // a localiser has no particles, only its dead-reckoning spread, which keeps growing.
   for (const r of scene.belief ? scene.robots : []) {
-    if (!r.cloud || !r.cloud.length) continue;
     ctx.fillStyle = COLORS.cloud;
     const size = Math.max(1.5, v.s * 0.04);
-    for (let i = 0; i + 1 < r.cloud.length; i += 2) {
-      ctx.fillRect(v.x(r.cloud[i] / 100) - size / 2, v.y(r.cloud[i + 1] / 100) - size / 2, size, size);
+    const cloud = r.cloud || [];
+    for (let i = 0; i + 1 < cloud.length; i += 2) {
+      ctx.fillRect(v.x(cloud[i] / 100) - size / 2, v.y(cloud[i + 1] / 100) - size / 2, size, size);
       counts.localisation++;
     }
     if (r.estimate) {
+      const radius = Math.max(0.3, Math.min(r.spread || 0, 50));
       ctx.beginPath();
-      ctx.arc(v.x(r.estimate.x), v.y(r.estimate.y), 0.3 * v.s, 0, Math.PI * 2);
+      ctx.arc(v.x(r.estimate.x), v.y(r.estimate.y), radius * v.s, 0, Math.PI * 2);
       ctx.setLineDash([2, 3]);
       ctx.lineWidth = 1.5;
       ctx.strokeStyle = COLORS.estimate;
