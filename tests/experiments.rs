@@ -1,0 +1,155 @@
+//! The experiment commands, as a researcher runs them: the real binary, tiny runs, and the
+//! files each promises (CSV headers and row counts, the plots), plus a clear refusal of a
+//! bad argument.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+/// A fresh output directory under the system's temporary directory.
+fn out_dir(name: &str) -> PathBuf {
+    let dir =
+        std::env::temp_dir().join(format!("lasertag-experiment-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    dir
+}
+
+fn experiment(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_lasertag"))
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .arg("experiment")
+        .args(args)
+        .output()
+        .expect("the lasertag binary runs")
+}
+
+/// The CSV at `path`: its header and its number of data rows.
+fn csv(path: &Path) -> (String, usize) {
+    let text =
+        std::fs::read_to_string(path).unwrap_or_else(|e| panic!("reading {}: {e}", path.display()));
+    let mut lines = text.lines();
+    let header = lines.next().unwrap_or_default().to_string();
+    (header, lines.count())
+}
+
+fn svg(path: &Path) {
+    let text =
+        std::fs::read_to_string(path).unwrap_or_else(|e| panic!("reading {}: {e}", path.display()));
+    assert!(text.contains("<svg"), "{} is no SVG", path.display());
+}
+
+#[test]
+fn uncertainty_writes_hunts_captures_and_plots() {
+    let out = out_dir("uncertainty");
+    let o = experiment(&[
+        "uncertainty",
+        "--runs",
+        "2",
+        "--hunt-s",
+        "3",
+        "--time-limit",
+        "5",
+        "--on",
+        "office",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{o:?}");
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(stdout.contains("hunts (3 s"), "{stdout}");
+    let (header, rows) = csv(&out.join("uncertainty_hunt.csv"));
+    assert_eq!(
+        header,
+        "map,variant,seed,mean_error_m,lost_share,uncertain_share"
+    );
+    assert_eq!(rows, 2 * 2, "2 variants × 2 runs");
+    let (header, rows) = csv(&out.join("uncertainty_capture.csv"));
+    assert_eq!(header, "map,bot,variant,seed,captured,time_s");
+    assert_eq!(rows, 2 * 2 * 2, "2 bots × 2 variants × 2 runs");
+    assert_eq!(csv(&out.join("uncertainty_hunt_summary.csv")).1, 2);
+    assert_eq!(csv(&out.join("uncertainty_capture_summary.csv")).1, 4);
+    svg(&out.join("uncertainty_lost.svg"));
+    svg(&out.join("uncertainty_error_office.svg"));
+    let _ = std::fs::remove_dir_all(&out);
+}
+
+#[test]
+fn capture_writes_every_run_and_a_summary() {
+    let out = out_dir("capture");
+    let o = experiment(&[
+        "capture",
+        "--runs",
+        "2",
+        "--time-limit",
+        "5",
+        "--on",
+        "office",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{o:?}");
+    let (header, rows) = csv(&out.join("capture.csv"));
+    assert_eq!(header, "map,bot,planner,seed,captured,time_s");
+    assert_eq!(rows, 2 * 2 * 2, "2 bots × 2 planners × 2 runs");
+    assert_eq!(csv(&out.join("capture_summary.csv")).1, 4);
+    svg(&out.join("capture_office_wander.svg"));
+    let _ = std::fs::remove_dir_all(&out);
+}
+
+#[test]
+fn localisation_and_reacquire_write_their_files() {
+    let out = out_dir("localisation");
+    let o = experiment(&[
+        "localisation",
+        "--runs",
+        "1",
+        "--seconds",
+        "2",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{o:?}");
+    let (_, rows) = csv(&out.join("localisation_summary.csv"));
+    assert_eq!(rows, 4 * 3, "4 shipped maps × 3 variants");
+    svg(&out.join("localisation_office.svg"));
+    let _ = std::fs::remove_dir_all(&out);
+
+    let out = out_dir("reacquire");
+    let o = experiment(&[
+        "reacquire",
+        "--runs",
+        "1",
+        "--limit",
+        "2",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{o:?}");
+    let (header, rows) = csv(&out.join("reacquire.csv"));
+    assert!(header.starts_with("condition,seed,"), "{header}");
+    assert!(rows >= 3, "a run per condition: {rows}");
+    let _ = std::fs::remove_dir_all(&out);
+}
+
+#[test]
+fn a_bad_argument_is_refused_by_name_and_writes_nothing() {
+    let out = out_dir("refused");
+    for (args, says) in [
+        (
+            vec!["uncertainty", "--odometry-scale", "30"],
+            "--odometry-scale 30: must be in [0, 20]",
+        ),
+        (
+            vec!["uncertainty", "--on", "atlantis"],
+            "no map \"atlantis\"",
+        ),
+        (vec!["capture", "--runs", "0"], "--runs and --time-limit"),
+    ] {
+        let mut all = args.clone();
+        all.extend(["--out", out.to_str().unwrap()]);
+        let o = experiment(&all);
+        assert!(!o.status.success(), "{args:?} succeeded");
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(err.contains(says), "{args:?}: {err}");
+    }
+    assert!(!out.exists(), "a refused run wrote {}", out.display());
+}
