@@ -561,6 +561,11 @@ fn experiment(e: Experiment) -> Result<(), String> {
             if runs == 0 || time_limit == 0 || hunt_s == 0 {
                 return Err("--runs, --time-limit and --hunt-s must be at least 1".into());
             }
+            if beams > 181 {
+                return Err(format!(
+                    "--beams {beams}: must be in 0..=181 (the laser has 181)"
+                ));
+            }
             // The noise scaled past the API's ranges (heading 45°/m, fractions 1) is nonsense.
             if !(0.0..=20.0).contains(&odometry_scale) {
                 return Err(format!(

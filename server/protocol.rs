@@ -387,7 +387,8 @@ impl From<&crate::sim::Physics> for OdometryConfig {
         let round = |v: f32| (v as f64 * 1e6).round() / 1e6;
         OdometryConfig {
             distance: round(p.odometry_noise),
-            heading_deg_per_m: round(p.odometry_turn_per_metre.to_degrees()),
+            // Degrees → radians → degrees in f32 gives 30.000002 back for 30.
+            heading_deg_per_m: (p.odometry_turn_per_metre.to_degrees() as f64 * 1e4).round() / 1e4,
             turn: round(p.odometry_turn_noise),
         }
     }
@@ -778,10 +779,21 @@ pub struct MatchSummary {
     pub notes: Vec<String>,
 }
 
-/// Caveats about a match. None today: every planner asked for runs as asked (the field
-/// stays so that a future fallback can be reported without changing the API).
-pub fn notes(_world: &World) -> Vec<String> {
-    Vec::new()
+/// Caveats about a match: settings that were accepted but do nothing as asked.
+pub fn notes(world: &World) -> Vec<String> {
+    let c = &world.config;
+    let mut notes = Vec::new();
+    if !c.localisation
+        && c.planner == PlannerKind::Coordinated
+        && c.coordination.landmark_weight > 0.0
+    {
+        notes.push(
+            "coordination.landmark_weight has no effect without localisation: a landmark in \
+             view corrects nothing when robots dead-reckon"
+                .to_string(),
+        );
+    }
+    notes
 }
 
 pub fn summary(world: &World, meta: &MatchMeta) -> MatchSummary {

@@ -307,6 +307,18 @@ async fn odometry_noise_is_a_match_setting_and_dead_reckoning_knows_its_spread()
         r.body["odometry"],
         json!({"distance": 0.05, "heading_deg_per_m": 2.0, "turn": 0.02})
     );
+    // Echoed as asked (not 30.000002 after a trip through radians).
+    let r = server
+        .post(
+            "/api/matches",
+            &json!({"map": "office", "clock": "manual", "localisation": false,
+                    "odometry": {"heading_deg_per_m": 30}}),
+        )
+        .await;
+    assert_eq!(r.body["odometry"]["heading_deg_per_m"], json!(30.0));
+    // A weight that cannot act is accepted, and the summary says so.
+    let notes = r.body["notes"].to_string();
+    assert!(notes.contains("landmark_weight has no effect"), "{notes}");
     let r = server
         .post(
             "/api/matches",

@@ -142,6 +142,10 @@ fn a_bad_argument_is_refused_by_name_and_writes_nothing() {
             vec!["uncertainty", "--on", "atlantis"],
             "no map \"atlantis\"",
         ),
+        (
+            vec!["uncertainty", "--beams", "200"],
+            "--beams 200: must be in 0..=181",
+        ),
         (vec!["capture", "--runs", "0"], "--runs and --time-limit"),
     ] {
         let mut all = args.clone();

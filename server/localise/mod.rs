@@ -89,9 +89,9 @@ impl Settings {
     }
 
     /// The motion model tuned for the default odometry noise (game-rules.md: about 5% of
-    /// distance and 2° per metre), scaled with the noise in `p`. The tuned values are the
-    /// sim's noise inflated by about half, as filters should be: an over-confident motion
-    /// model loses the robot. (The translation-from-rotation term has no counterpart in the
+    /// distance and 2° per metre), scaled with the noise in `p`. The tuned values inflate the
+    /// sim's noise (1.5× per metre, 1.6× of distance, 2.5× of turns), as filters should: an
+    /// over-confident motion model loses the robot. (The translation-from-rotation term has no counterpart in the
     /// sim; a little keeps turning on the spot from being certain.)
     fn alpha_for(p: &crate::sim::Physics) -> [f32; 4] {
         const TUNED: [f32; 4] = [0.05, 0.052_359_88, 0.08, 0.01]; // 0.052… = 3° in radians
@@ -415,6 +415,15 @@ impl Localiser {
         self.moved_since_update = (0.0, 0.0);
         self.calls_since_update = 0;
         self.move_particles(rng);
+        let n_obs = self.observation_count(obs);
+        if n_obs == 0 {
+            // Nothing to weigh (no beam used, no landmark in view: a robot localising from
+            // landmarks alone, between landmarks). The cloud spreads by the motion and that is
+            // all: an "average likelihood" of 1 here would be the best fit possible, and the
+            // next real measurement would look like a kidnapping and inject random particles.
+            self.summarise();
+            return;
+        }
         let log_w = self.log_weights(obs);
         let max = log_w.iter().copied().fold(f64::NEG_INFINITY, f64::max);
         if !max.is_finite() {
@@ -422,7 +431,7 @@ impl Localiser {
         }
         // Average per-observation likelihood (geometric mean over beams) for augmented MCL,
         // so that it does not depend on how many beams returned.
-        let n_obs = self.observation_count(obs).max(1) as f64;
+        let n_obs = n_obs as f64;
         let w_avg = log_w.iter().map(|l| (l / n_obs).exp()).sum::<f64>() / log_w.len() as f64;
         if self.w_slow == 0.0 {
             self.w_slow = w_avg;

@@ -189,3 +189,43 @@ fn zero_beams_weighs_no_beam() {
     assert_eq!(used_beams(&obs, 0).count(), 0);
     assert_eq!(used_beams(&obs, 30).count(), 31);
 }
+
+/// A robot localising from landmarks alone, with none in view, has nothing to weigh: its
+/// cloud moves and spreads, and the update is not taken for a perfect fit (which made the
+/// next real sighting look like a kidnapping and inject random particles).
+#[test]
+fn an_update_with_nothing_to_weigh_only_moves_the_cloud() {
+    let arena = room(vec![]);
+    let mut rng = ChaCha8Rng::seed_from_u64(5);
+    let start = Pose::new(2.0, 3.0, 0.0);
+    let settings = Settings {
+        beams: 0,
+        ..Settings::default()
+    };
+    let field = Arc::new(LikelihoodField::new(&arena, &settings, 8.0));
+    let mut loc = Localiser::new(field, &arena, settings, start, start, &mut rng);
+    let ranges = vec![2.0; 181];
+    let obs = Observation {
+        ranges: &ranges,
+        laser_fov: std::f32::consts::PI,
+        laser_range: 8.0,
+        landmarks: &[],
+        movers: &[],
+    };
+    let spread0 = loc.spread();
+    for k in 1..=40 {
+        loc.predict(Pose::new(2.0 + 0.05 * k as f32, 3.0, 0.0));
+        loc.correct(&obs, &mut rng);
+    }
+    assert_eq!(
+        (loc.w_slow, loc.w_fast),
+        (0.0, 0.0),
+        "no likelihood was averaged"
+    );
+    assert!(loc.spread() > spread0, "{} → {}", spread0, loc.spread());
+    assert!(
+        (loc.estimate().pos.x - 4.0).abs() < 0.2,
+        "{:?}",
+        loc.estimate()
+    );
+}
