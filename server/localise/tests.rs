@@ -174,18 +174,23 @@ fn the_default_motion_model_is_the_tuned_one() {
     );
 }
 
+/// A scan of `ranges` with no landmark and nobody in view.
+fn scan_only(ranges: &[f32]) -> Observation<'_> {
+    Observation {
+        ranges,
+        laser_fov: std::f32::consts::PI,
+        laser_range: 8.0,
+        landmarks: &[],
+        movers: &[],
+    }
+}
+
 /// `beams: 0` is a robot that localises from landmarks and odometry alone (the uncertainty
 /// experiment's weak robot): no beam is weighed, not beam 0 alone.
 #[test]
 fn zero_beams_weighs_no_beam() {
     let ranges = vec![2.0; 181];
-    let obs = Observation {
-        ranges: &ranges,
-        laser_fov: std::f32::consts::PI,
-        laser_range: 8.0,
-        landmarks: &[],
-        movers: &[],
-    };
+    let obs = scan_only(&ranges);
     assert_eq!(used_beams(&obs, 0).count(), 0);
     assert_eq!(used_beams(&obs, 30).count(), 31);
 }
@@ -205,13 +210,7 @@ fn an_update_with_nothing_to_weigh_only_moves_the_cloud() {
     let field = Arc::new(LikelihoodField::new(&arena, &settings, 8.0));
     let mut loc = Localiser::new(field, &arena, settings, start, start, &mut rng);
     let ranges = vec![2.0; 181];
-    let obs = Observation {
-        ranges: &ranges,
-        laser_fov: std::f32::consts::PI,
-        laser_range: 8.0,
-        landmarks: &[],
-        movers: &[],
-    };
+    let obs = scan_only(&ranges);
     let spread0 = loc.spread();
     for k in 1..=40 {
         loc.predict(Pose::new(2.0 + 0.05 * k as f32, 3.0, 0.0));
