@@ -126,7 +126,7 @@ fn localisation_and_reacquire_write_their_files() {
     assert!(o.status.success(), "{o:?}");
     let (header, rows) = csv(&out.join("reacquire.csv"));
     assert!(header.starts_with("condition,seed,"), "{header}");
-    assert!(rows >= 3, "a run per condition: {rows}");
+    assert_eq!(rows, 4, "a run per condition");
     let _ = std::fs::remove_dir_all(&out);
 }
 
