@@ -406,9 +406,30 @@ async fn a_match_of_robots_that_localise_from_landmarks_alone() {
     assert_eq!(r.status, 201, "{}", r.body);
     assert_eq!(r.body["localiser"], json!({"beams": 0}));
     let id = r.body["id"].as_str().unwrap();
-    let state = server.step(id, 400).await;
-    for robot in state["robots"].as_array().unwrap() {
-        let spread = robot["spread"].as_f64().unwrap();
-        assert!(spread.is_finite() && spread > 0.0, "{robot}");
-    }
+    let blind = server.step(id, 400).await;
+    // The same match with the laser: the beams are what keeps the spread at centimetres.
+    let r = server
+        .post(
+            "/api/matches",
+            &json!({"map": "office", "clock": "manual",
+                    "odometry": {"distance": 0.2, "heading_deg_per_m": 8.0, "turn": 0.08}}),
+        )
+        .await;
+    let id = r.body["id"].as_str().unwrap();
+    let sighted = server.step(id, 400).await;
+    let spreads = |state: &serde_json::Value| -> Vec<f64> {
+        state["robots"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|r| r["spread"].as_f64().unwrap())
+            .collect()
+    };
+    let (blind, sighted) = (spreads(&blind), spreads(&sighted));
+    let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;
+    assert!(blind.iter().all(|s| s.is_finite() && *s > 0.0), "{blind:?}");
+    assert!(
+        mean(&blind) > 2.0 * mean(&sighted),
+        "landmarks alone {blind:?}, with 30 beams {sighted:?}"
+    );
 }
