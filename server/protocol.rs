@@ -41,6 +41,13 @@ fn rad(v: f32) -> f64 {
     ((v as f64) * 10_000.0).round() / 10_000.0
 }
 
+/// A setting echoed as it was asked: f32 → f64 would print 0.2 as 0.20000000298, and a
+/// trip through another unit adds noise digits of its own.
+fn as_asked(v: f32, places: i32) -> f64 {
+    let k = 10f64.powi(places);
+    (v as f64 * k).round() / k
+}
+
 #[derive(Debug, Serialize, ToSchema)]
 pub struct ErrorBody {
     /// What is wrong, naming the field.
@@ -324,8 +331,7 @@ impl From<&crate::radio::Settings> for RadioConfig {
     fn from(s: &crate::radio::Settings) -> Self {
         RadioConfig {
             latency_ticks: s.latency_ticks,
-            // f32 → f64 would print 0.2 as 0.20000000298: round to what was asked.
-            loss: (s.loss as f64 * 1e6).round() / 1e6,
+            loss: as_asked(s.loss, 6),
         }
     }
 }
@@ -383,13 +389,11 @@ pub struct OdometryConfig {
 
 impl From<&crate::sim::Physics> for OdometryConfig {
     fn from(p: &crate::sim::Physics) -> Self {
-        // f32 → f64 would print 0.05 as 0.0500000007: round to what was asked.
-        let round = |v: f32| (v as f64 * 1e6).round() / 1e6;
         OdometryConfig {
-            distance: round(p.odometry_noise),
+            distance: as_asked(p.odometry_noise, 6),
             // Degrees → radians → degrees in f32 gives 30.000002 back for 30.
-            heading_deg_per_m: (p.odometry_turn_per_metre.to_degrees() as f64 * 1e4).round() / 1e4,
-            turn: round(p.odometry_turn_noise),
+            heading_deg_per_m: as_asked(p.odometry_turn_per_metre.to_degrees(), 4),
+            turn: as_asked(p.odometry_turn_noise, 6),
         }
     }
 }

@@ -34,19 +34,12 @@ impl DeadReckoning {
     /// Takes in this tick's odometry pose: the uncertainty grows by the step's noise.
     pub fn update(&mut self, physics: &Physics, odom: Pose) {
         let prev = std::mem::replace(&mut self.last, odom);
-        let Some(OdometryStep { rot1, trans, rot2 }) = OdometryStep::between(prev, odom, STILL)
-        else {
+        let Some(step) = OdometryStep::between(prev, odom, STILL) else {
             return;
         };
-        // The same noise as the sim draws: std-devs of the turn, drive and turn.
-        let turn_sigma = |rot: f32| {
-            physics.odometry_turn_noise * rot.abs() + physics.odometry_turn_per_metre * trans.abs()
-        };
-        let noise = Vector3::new(
-            turn_sigma(rot1).powi(2),
-            (physics.odometry_noise * trans).powi(2),
-            turn_sigma(rot2).powi(2),
-        );
+        let OdometryStep { rot1, trans, .. } = step;
+        // The same noise as the sim draws on the turn, drive and turn.
+        let noise = Vector3::from(step.wheel_noise(physics)).map(|s| s * s);
         let heading = prev.theta + rot1;
         let (s, c) = heading.sin_cos();
         // x' = x + trans cos(θ + rot1), y' = y + trans sin(θ + rot1), θ' = θ + rot1 + rot2.

@@ -91,8 +91,8 @@ impl Settings {
     /// The motion model tuned for the default odometry noise (game-rules.md: about 5% of
     /// distance and 2° per metre), scaled with the noise in `p`. The tuned values inflate the
     /// sim's noise (1.5× per metre, 1.6× of distance, 2.5× of turns), as filters should: an
-    /// over-confident motion model loses the robot. (The translation-from-rotation term has no counterpart in the
-    /// sim; a little keeps turning on the spot from being certain.)
+    /// over-confident motion model loses the robot. (The translation-from-rotation term has
+    /// no counterpart in the sim; a little keeps turning on the spot from being certain.)
     fn alpha_for(p: &crate::sim::Physics) -> [f32; 4] {
         const TUNED: [f32; 4] = [0.05, 0.052_359_88, 0.08, 0.01]; // 0.052… = 3° in radians
         let d = crate::sim::Physics::default();

@@ -155,18 +155,15 @@ pub fn odometry_step(
     after: Pose,
     rng: &mut impl RngExt,
 ) -> Pose {
-    let Some(OdometryStep { rot1, trans, rot2 }) = OdometryStep::between(before, after, 1e-6)
-    else {
+    let Some(step) = OdometryStep::between(before, after, 1e-6) else {
         return odom;
     };
-    let turn_sigma = |rot: f32| {
-        physics.odometry_turn_noise * rot.abs() + physics.odometry_turn_per_metre * trans.abs()
-    };
+    let [s_rot1, s_trans, s_rot2] = step.wheel_noise(physics);
     // Fields are evaluated in order, so the noise is drawn rotate, translate, rotate.
     OdometryStep {
-        rot1: rot1 + gaussian(rng, turn_sigma(rot1)),
-        trans: trans + gaussian(rng, physics.odometry_noise * trans.abs()),
-        rot2: rot2 + gaussian(rng, turn_sigma(rot2)),
+        rot1: step.rot1 + gaussian(rng, s_rot1),
+        trans: step.trans + gaussian(rng, s_trans),
+        rot2: step.rot2 + gaussian(rng, s_rot2),
     }
     .apply(odom)
 }
@@ -205,6 +202,20 @@ impl OdometryStep {
             trans,
             rot2: wrap_angle(dtheta - rot1),
         })
+    }
+
+    /// Standard deviations of the noise the robots' wheels put on each part of this step
+    /// (rot1, trans, rot2): what the sim's odometry draws, and what dead reckoning predicts.
+    pub fn wheel_noise(&self, physics: &Physics) -> [f32; 3] {
+        let turn = |rot: f32| {
+            physics.odometry_turn_noise * rot.abs()
+                + physics.odometry_turn_per_metre * self.trans.abs()
+        };
+        [
+            turn(self.rot1),
+            physics.odometry_noise * self.trans.abs(),
+            turn(self.rot2),
+        ]
     }
 
     /// `p` moved by this step (in its own frame).
