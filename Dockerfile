@@ -3,11 +3,14 @@
 FROM rust:1.95-bookworm AS build
 WORKDIR /src
 COPY Cargo.toml Cargo.lock ./
-# Cargo reads every target the manifest declares: the benchmarks are declared by name.
+# The workspace's crates (the server, the core, the lab); cargo reads every target the
+# manifest declares, and the benchmarks are declared by name.
 COPY server server
+COPY core core
+COPY lab lab
 COPY benches benches
 # The registry and target/ are build caches (BuildKit, podman): a change under server/
-# recompiles the crate, not its 160 dependencies. A cache is not part of the layer, so the
+# recompiles the workspace's crates, not their 160 dependencies. A cache is not part of the layer, so the
 # binary is copied out of it.
 RUN --mount=type=cache,target=/usr/local/cargo/registry \
     --mount=type=cache,target=/src/target \

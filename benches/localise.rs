@@ -9,10 +9,10 @@ use std::path::Path;
 use std::sync::Arc;
 
 use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
-use lasertag::localise::{LikelihoodField, Localiser, Observation, Settings};
 use lasertag::maps::MapStore;
-use lasertag::sim::arena::Arena;
-use lasertag::sim::{Physics, Pose, sensors};
+use lasertag_core::localise::{LikelihoodField, Localiser, Observation, Settings};
+use lasertag_core::sim::arena::Arena;
+use lasertag_core::sim::{Physics, Pose, sensors};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 

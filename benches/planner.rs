@@ -12,12 +12,12 @@ use std::path::Path;
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use lasertag::maps::MapStore;
-use lasertag::planner::coordinated::{Coordinated, Settings};
-use lasertag::planner::{RobotView, TeamView};
-use lasertag::sim::arena::Arena;
-use lasertag::sim::sensors::{self, Scan};
-use lasertag::sim::{Physics, Pose};
-use lasertag::tracker::{self, LaserModel, Sighting, Tracker};
+use lasertag_core::planner::coordinated::{Coordinated, Settings};
+use lasertag_core::planner::{RobotView, TeamView};
+use lasertag_core::sim::arena::Arena;
+use lasertag_core::sim::sensors::{self, Scan};
+use lasertag_core::sim::{Physics, Pose};
+use lasertag_core::tracker::{self, LaserModel, Sighting, Tracker};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
@@ -104,7 +104,7 @@ fn planner(c: &mut Criterion) {
     });
     c.bench_function("distance_field/office", |b| {
         b.iter(|| {
-            black_box(lasertag::nav::DistanceField::from_point(
+            black_box(lasertag_core::nav::DistanceField::from_point(
                 &arena.grid,
                 poses[0].pos,
             ))
@@ -112,7 +112,7 @@ fn planner(c: &mut Criterion) {
     });
     c.bench_function("view_table_build/office", |b| {
         b.iter(|| {
-            black_box(lasertag::sim::views::ViewTable::build(
+            black_box(lasertag_core::sim::views::ViewTable::build(
                 &arena,
                 Settings::default().view_spec(&arena, &physics),
             ))

@@ -10,10 +10,11 @@ use std::path::Path;
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use lasertag::maps::MapStore;
-use lasertag::planner::PlannerKind;
-use lasertag::sim::sensors;
-use lasertag::sim::world::{MatchConfig, Placement};
-use lasertag::sim::{AgentId, MatchStatus, Physics, World};
+use lasertag_core::planner::PlannerKind;
+use lasertag_core::sim::sensors;
+use lasertag_core::sim::{AgentId, Physics};
+use lasertag_core::world::{MatchConfig, Placement};
+use lasertag_core::world::{MatchStatus, World};
 use rand::SeedableRng;
 
 fn office_world(seed: u64, planner: PlannerKind, robots: usize, opponents: usize) -> World {

@@ -10,10 +10,10 @@ use std::path::Path;
 
 use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
 use lasertag::maps::MapStore;
-use lasertag::sim::arena::Arena;
-use lasertag::sim::sensors::{self, Scan};
-use lasertag::sim::{Physics, Pose};
-use lasertag::tracker::{LaserModel, Settings, Sighting, Tracker};
+use lasertag_core::sim::arena::Arena;
+use lasertag_core::sim::sensors::{self, Scan};
+use lasertag_core::sim::{Physics, Pose};
+use lasertag_core::tracker::{LaserModel, Settings, Sighting, Tracker};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 

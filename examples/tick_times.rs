@@ -10,10 +10,10 @@ use std::path::Path;
 use std::time::Instant;
 
 use lasertag::maps::MapStore;
-use lasertag::planner::PlannerKind;
-use lasertag::sim::bots::BotKind;
-use lasertag::sim::world::{MatchConfig, Placement};
-use lasertag::sim::{MatchStatus, World};
+use lasertag_core::bots::BotKind;
+use lasertag_core::planner::PlannerKind;
+use lasertag_core::world::{MatchConfig, Placement};
+use lasertag_core::world::{MatchStatus, World};
 
 fn main() -> Result<(), String> {
     let args: Vec<String> = std::env::args().skip(1).collect();
@@ -29,7 +29,7 @@ fn main() -> Result<(), String> {
     let loss: f32 = args.get(5).map_or(Ok(0.0), |s| {
         s.parse().map_err(|_| format!("not a number: {s}"))
     })?;
-    let radio = lasertag::radio::Settings {
+    let radio = lasertag_core::radio::Settings {
         latency_ticks,
         loss,
         ..Default::default()

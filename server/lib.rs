@@ -1,26 +1,21 @@
-//! lasertag: a team of autonomous robots plays laser tag against people.
+//! lasertag: the server around the deterministic match of `lasertag-core`.
 //!
-//! The crate is a functional core wrapped in an imperative shell:
-//! - core (deterministic, no tokio, no clocks, no I/O): [`sim`] (the world and its tick
-//!   pipeline), [`nav`] (shortest paths), [`tracker`] (role-factored particle filters), [`localise`] (each robot's own pose by MCL), [`planner`] (the robot team's decisions), [`radio`] (what
-//!   robots tell each other, delayed and dropped);
-//! - edge: [`maps`] (map files), [`protocol`] (every JSON shape of the API);
-//! - shell: [`game`] (one tokio task per match), [`http`] (the axum router), [`experiment`]
-//!   (the paper's experiments over all cores), `main.rs` (CLI).
+//! An imperative shell over a functional core (the core is its own crate, so the compiler
+//! keeps clocks, tasks, I/O and serialisation out of it):
+//! - edge: [`maps`] (map files), [`schema`] (hand-written OpenAPI pieces and lenient number
+//!   parsing), [`protocol`] (every JSON shape of the API, and the frames a match publishes);
+//! - shell: [`game`] (one tokio task per match), [`http`] (the axum router), [`config`]
+//!   (limits), [`metrics`] (Prometheus), `main.rs` (CLI; its `experiment` command runs
+//!   `lasertag-lab`).
 //!
 //! Invariants: a match is a pure function of (map, settings, seed, inputs by tick); robots'
-//! decisions read only what a robot could know; only a match's own task mutates it.
+//! decisions read only what a robot could know; only a match's own task mutates it; this
+//! library never imports `lasertag-lab`.
 
 pub mod config;
-pub mod experiment;
 pub mod game;
 pub mod http;
-pub mod localise;
 pub mod maps;
 pub mod metrics;
-pub mod nav;
-pub mod planner;
 pub mod protocol;
-pub mod radio;
-pub mod sim;
-pub mod tracker;
+pub mod schema;

@@ -11,8 +11,8 @@ use std::sync::Arc;
 use nalgebra::Point2;
 use serde::{Deserialize, Serialize};
 
-use crate::sim::AGENT_RADIUS;
-use crate::sim::arena::{Arena, MapDef, point_in_polygon};
+use lasertag_core::sim::AGENT_RADIUS;
+use lasertag_core::sim::arena::{Arena, MapDef, point_in_polygon};
 
 /// Largest map file or inline map accepted.
 pub const MAX_MAP_BYTES: usize = 1 << 20;
@@ -32,14 +32,14 @@ pub struct MapFile {
     /// Metres, in (0, 500].
     #[schema(exclusive_minimum = 0.0, maximum = 500.0)]
     pub height: f64,
-    #[schema(schema_with = crate::protocol::schema::obstacles)]
+    #[schema(schema_with = crate::schema::obstacles)]
     pub obstacles: Vec<Vec<[f64; 2]>>,
-    #[schema(schema_with = crate::protocol::schema::robot_spawns)]
+    #[schema(schema_with = crate::schema::robot_spawns)]
     pub robot_spawns: Vec<[f64; 3]>,
-    #[schema(schema_with = crate::protocol::schema::opponent_spawns)]
+    #[schema(schema_with = crate::schema::opponent_spawns)]
     pub opponent_spawns: Vec<[f64; 2]>,
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
-    #[schema(schema_with = crate::protocol::schema::landmarks)]
+    #[schema(schema_with = crate::schema::landmarks)]
     pub landmarks: Vec<[f64; 2]>,
 }
 

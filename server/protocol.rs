@@ -5,17 +5,20 @@
 //! Requests are parsed strictly: unknown fields are errors, and every error names the field
 //! ([`parse`] wraps serde with the JSON path of the failure).
 
-pub mod schema;
+pub mod frame;
 pub mod ws;
 
 use serde::de::DeserializeOwned;
+
+use crate::schema;
 use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
 
-use crate::planner::PlannerKind;
-use crate::sim::bots::BotKind;
-use crate::sim::world::{ControlKind, FinishReason, MatchConfig, Placement};
-use crate::sim::{AgentId, EventKind, MatchStatus, Side, TICK_HZ, World};
+use lasertag_core::bots::BotKind;
+use lasertag_core::planner::PlannerKind;
+use lasertag_core::sim::{AgentId, TICK_HZ};
+use lasertag_core::world::{ControlKind, FinishReason, MatchConfig, Placement};
+use lasertag_core::world::{EventKind, MatchStatus, Side, World};
 
 /// Parses a request body, naming the JSON path of whatever is wrong.
 pub fn parse<T: DeserializeOwned>(bytes: &[u8]) -> Result<T, String> {
@@ -193,8 +196,8 @@ pub struct CoordinationConfig {
     pub lookahead: f64,
 }
 
-impl From<&crate::planner::coordinated::Settings> for CoordinationConfig {
-    fn from(s: &crate::planner::coordinated::Settings) -> Self {
+impl From<&lasertag_core::planner::coordinated::Settings> for CoordinationConfig {
+    fn from(s: &lasertag_core::planner::coordinated::Settings) -> Self {
         CoordinationConfig {
             centring_weight: s.centring_weight as f64,
             travel_weight: s.travel_weight as f64,
@@ -215,8 +218,8 @@ impl From<&crate::planner::coordinated::Settings> for CoordinationConfig {
 }
 
 impl CoordinationSettings {
-    fn validate(self) -> Result<crate::planner::coordinated::Settings, String> {
-        let d = crate::planner::coordinated::Settings::default();
+    fn validate(self) -> Result<lasertag_core::planner::coordinated::Settings, String> {
+        let d = lasertag_core::planner::coordinated::Settings::default();
         let f = |name: &str, v: Option<f64>, default: f32, hi: f64| -> Result<f32, String> {
             match v {
                 None => Ok(default),
@@ -255,7 +258,7 @@ impl CoordinationSettings {
             // Every robot, even a perfectly localised one, would count as uncertain.
             return Err("coordination.uncertainty_spread: must be greater than 0".into());
         }
-        Ok(crate::planner::coordinated::Settings {
+        Ok(lasertag_core::planner::coordinated::Settings {
             centring_weight: f(
                 "centring_weight",
                 self.centring_weight,
@@ -301,14 +304,14 @@ impl CoordinationSettings {
                 "lookahead",
                 self.lookahead,
                 d.lookahead,
-                crate::planner::coordinated::MAX_LOOKAHEAD as f64,
+                lasertag_core::planner::coordinated::MAX_LOOKAHEAD as f64,
             )?,
             ..d
         })
     }
 }
 
-/// The team radio (issue 6). Perfect by default: with a latency or a loss each robot keeps
+/// The team radio. Perfect by default: with a latency or a loss each robot keeps
 /// its own tracker, fed by what it senses and what it receives.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
@@ -327,8 +330,8 @@ pub struct RadioConfig {
     pub loss: f64,
 }
 
-impl From<&crate::radio::Settings> for RadioConfig {
-    fn from(s: &crate::radio::Settings) -> Self {
+impl From<&lasertag_core::radio::Settings> for RadioConfig {
+    fn from(s: &lasertag_core::radio::Settings) -> Self {
         RadioConfig {
             latency_ticks: s.latency_ticks,
             loss: as_asked(s.loss, 6),
@@ -337,22 +340,22 @@ impl From<&crate::radio::Settings> for RadioConfig {
 }
 
 impl RadioSettings {
-    fn validate(self) -> Result<crate::radio::Settings, String> {
-        let d = crate::radio::Settings::default();
+    fn validate(self) -> Result<lasertag_core::radio::Settings, String> {
+        let d = lasertag_core::radio::Settings::default();
         let latency_ticks = match self.latency_ticks {
             None => d.latency_ticks,
             Some(v) => in_range(
                 "radio.latency_ticks",
                 v,
                 0,
-                crate::radio::MAX_LATENCY_TICKS as i64,
+                lasertag_core::radio::MAX_LATENCY_TICKS as i64,
             )? as u32,
         };
         let loss = match self.loss {
             None => d.loss,
             Some(v) => finite_in("radio.loss", v, 0.0, 1.0, false)? as f32,
         };
-        let settings = crate::radio::Settings {
+        let settings = lasertag_core::radio::Settings {
             latency_ticks,
             loss,
             ..d
@@ -387,8 +390,8 @@ pub struct OdometryConfig {
     pub turn: f64,
 }
 
-impl From<&crate::sim::Physics> for OdometryConfig {
-    fn from(p: &crate::sim::Physics) -> Self {
+impl From<&lasertag_core::sim::Physics> for OdometryConfig {
+    fn from(p: &lasertag_core::sim::Physics) -> Self {
         OdometryConfig {
             distance: as_asked(p.odometry_noise, 6),
             // Degrees → radians → degrees in f32 gives 30.000002 back for 30.
@@ -400,7 +403,10 @@ impl From<&crate::sim::Physics> for OdometryConfig {
 
 impl OdometrySettings {
     /// `physics` with this odometry noise.
-    fn validate(self, physics: crate::sim::Physics) -> Result<crate::sim::Physics, String> {
+    fn validate(
+        self,
+        physics: lasertag_core::sim::Physics,
+    ) -> Result<lasertag_core::sim::Physics, String> {
         let mut p = physics;
         if let Some(v) = self.distance {
             p.odometry_noise = finite_in("odometry.distance", v, 0.0, 1.0, false)? as f32;
@@ -494,8 +500,8 @@ pub struct TrackerConfig {
     pub grid_cell: f64,
 }
 
-impl From<&crate::tracker::Settings> for TrackerConfig {
-    fn from(s: &crate::tracker::Settings) -> Self {
+impl From<&lasertag_core::tracker::Settings> for TrackerConfig {
+    fn from(s: &lasertag_core::tracker::Settings) -> Self {
         TrackerConfig {
             particles_per_role: s.particles_per_role as i64,
             merge: s.merge,
@@ -508,7 +514,7 @@ impl From<&crate::tracker::Settings> for TrackerConfig {
 
 impl Default for TrackerConfig {
     fn default() -> Self {
-        TrackerConfig::from(&crate::tracker::Settings::default())
+        TrackerConfig::from(&lasertag_core::tracker::Settings::default())
     }
 }
 
@@ -641,13 +647,13 @@ impl CreateMatch {
             ..MatchConfig::default()
         };
         let config = MatchConfig {
-            tracker: crate::tracker::Settings {
+            tracker: lasertag_core::tracker::Settings {
                 particles_per_role: tracker.particles_per_role as usize,
                 merge: tracker.merge,
                 merge_interval: tracker.merge_interval as u64,
                 kl_cutoff: tracker.kl_cutoff as f32,
                 grid_cell: tracker.grid_cell as f32,
-                ..crate::tracker::Settings::default()
+                ..lasertag_core::tracker::Settings::default()
             },
             coordination: self.coordination.unwrap_or_default().validate()?,
             localisation: self.localisation.unwrap_or(true),
@@ -655,7 +661,7 @@ impl CreateMatch {
             ..config
         };
         let physics = self.odometry.unwrap_or_default().validate(config.physics)?;
-        let mut localiser = crate::localise::Settings::for_odometry(&physics);
+        let mut localiser = lasertag_core::localise::Settings::for_odometry(&physics);
         if let Some(beams) = self.localiser.unwrap_or_default().beams {
             localiser.beams = in_range("localiser.beams", beams, 0, 181)? as usize;
         }
@@ -872,7 +878,7 @@ pub struct PoseDto {
     pub theta: f64,
 }
 
-fn pose(p: crate::sim::Pose) -> PoseDto {
+fn pose(p: lasertag_core::sim::Pose) -> PoseDto {
     PoseDto {
         x: mm(p.pos.x),
         y: mm(p.pos.y),
@@ -981,9 +987,9 @@ pub fn state(world: &World, meta: &MatchMeta) -> MatchState {
                 theta: rad(o.pose.theta),
                 tagged: o.tagged,
                 control: match o.control {
-                    crate::sim::world::Control::Bot(_) => OpponentControl::Bot,
-                    crate::sim::world::Control::Api(_) => OpponentControl::Api,
-                    crate::sim::world::Control::Human(_) => OpponentControl::Human,
+                    lasertag_core::world::Control::Bot(_) => OpponentControl::Bot,
+                    lasertag_core::world::Control::Api(_) => OpponentControl::Api,
+                    lasertag_core::world::Control::Human(_) => OpponentControl::Human,
                 },
             })
             .collect(),
@@ -1011,12 +1017,12 @@ pub enum ConfidenceState {
     Invalid,
 }
 
-impl From<crate::tracker::Confidence> for ConfidenceState {
-    fn from(c: crate::tracker::Confidence) -> Self {
+impl From<lasertag_core::tracker::Confidence> for ConfidenceState {
+    fn from(c: lasertag_core::tracker::Confidence) -> Self {
         match c {
-            crate::tracker::Confidence::Valid => ConfidenceState::Valid,
-            crate::tracker::Confidence::Suspicious => ConfidenceState::Suspicious,
-            crate::tracker::Confidence::Invalid => ConfidenceState::Invalid,
+            lasertag_core::tracker::Confidence::Valid => ConfidenceState::Valid,
+            lasertag_core::tracker::Confidence::Suspicious => ConfidenceState::Suspicious,
+            lasertag_core::tracker::Confidence::Invalid => ConfidenceState::Invalid,
         }
     }
 }
@@ -1106,7 +1112,7 @@ pub struct EventDto {
     pub count: Option<u32>,
 }
 
-pub fn event(e: &crate::sim::Event) -> EventDto {
+pub fn event(e: &lasertag_core::world::Event) -> EventDto {
     let mut dto = EventDto {
         seq: e.seq,
         tick: e.tick,
@@ -1210,8 +1216,8 @@ pub struct OpponentCommand {
 }
 
 impl OpponentCommand {
-    pub fn order(self) -> Result<crate::sim::world::OpponentOrder, String> {
-        use crate::sim::world::OpponentOrder;
+    pub fn order(self) -> Result<lasertag_core::world::OpponentOrder, String> {
+        use lasertag_core::world::OpponentOrder;
         match (self.waypoints, self.stop, self.tag) {
             (Some(w), None, None) => {
                 if w.len() > 1_000 {

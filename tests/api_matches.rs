@@ -157,7 +157,7 @@ async fn coordination_weights_are_taken_and_echoed_with_defaults_filled_in() {
     assert_eq!(r.body["localisation"], true, "robots localise by default");
 }
 
-/// Issue 6 (world-model confidence): every role in `belief` carries its confidence and what
+/// World-model confidence: every role in `belief` carries its confidence and what
 /// it makes of it; a prior over the whole map is a guess.
 #[tokio::test]
 async fn belief_roles_carry_confidence_and_state() {
@@ -195,7 +195,7 @@ fn role_near(belief: &serde_json::Value, at: [f64; 2]) -> bool {
     })
 }
 
-/// Issue 6 (team radio): `radio` is echoed with defaults filled in; with a latency, each
+/// Team radio: `radio` is echoed with defaults filled in; with a latency, each
 /// robot keeps its own belief, `belief?robot=r1` shows it, and r1 learns of an opponent only
 /// r0 sees exactly `latency_ticks` later.
 #[tokio::test]

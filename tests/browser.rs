@@ -85,7 +85,7 @@ async fn play_and_spectate_in_headless_chromium() {
     assert_eq!(drawn["robots"], 2, "{drawn}");
     assert_eq!(drawn["opponents"], 3, "{drawn}");
     assert!(drawn["fans"].as_u64().unwrap() >= 1, "{drawn}");
-    // Each robot's localisation cloud is drawn (issue 6): a sample of its particles.
+    // Each robot's localisation cloud is drawn: a sample of its particles.
     assert!(drawn["localisation"].as_u64().unwrap() >= 20, "{drawn}");
     let px = b.eval(PIXELS).await;
     assert!(px["wall"].as_u64().unwrap() > 2000, "walls drawn: {px}");

@@ -3,10 +3,10 @@
 use std::path::Path;
 
 use lasertag::maps::MapStore;
-use lasertag::planner::PlannerKind;
-use lasertag::sim::World;
-use lasertag::sim::bots::BotKind;
-use lasertag::sim::world::{MatchConfig, Placement};
+use lasertag_core::bots::BotKind;
+use lasertag_core::planner::PlannerKind;
+use lasertag_core::world::World;
+use lasertag_core::world::{MatchConfig, Placement};
 
 fn digests(seed: u64) -> Vec<u64> {
     let store = MapStore::load_dir(&Path::new(env!("CARGO_MANIFEST_DIR")).join("maps")).unwrap();
@@ -45,9 +45,9 @@ fn the_same_seed_gives_the_same_digest_after_every_one_of_2000_ticks() {
 /// every tick, and the robots' trackers at the end.
 fn run_with_radio(
     planner: PlannerKind,
-    radio: lasertag::radio::Settings,
+    radio: lasertag_core::radio::Settings,
     ticks: usize,
-) -> (Vec<u64>, Vec<lasertag::tracker::Tracker>) {
+) -> (Vec<u64>, Vec<lasertag_core::tracker::Tracker>) {
     let store = MapStore::load_dir(&Path::new(env!("CARGO_MANIFEST_DIR")).join("maps")).unwrap();
     let arena = store.get("office").unwrap().arena.clone();
     let config = MatchConfig {
@@ -59,7 +59,7 @@ fn run_with_radio(
         time_limit_ticks: 1_000_000,
         seed: 5,
         radio,
-        tracker: lasertag::tracker::Settings {
+        tracker: lasertag_core::tracker::Settings {
             particles_per_role: 300,
             ..Default::default()
         },
@@ -75,7 +75,7 @@ fn run_with_radio(
     (digests, world.team.trackers.clone())
 }
 
-/// Issue 6 (team radio): a perfect radio must give exactly the centralised team. Forcing
+/// Team radio: a perfect radio must give exactly the centralised team. Forcing
 /// the per-robot machinery (one tracker per robot, every sighting sent through the channel,
 /// each robot planning from its own tracker) must replay the shared tracker's match tick for
 /// tick, with every robot's belief equal to the shared one.
@@ -83,8 +83,8 @@ fn run_with_radio(
 fn per_robot_trackers_over_a_perfect_radio_replay_the_centralised_team_exactly() {
     for planner in [PlannerKind::Coordinated, PlannerKind::Baseline] {
         let (shared, shared_trackers) =
-            run_with_radio(planner, lasertag::radio::Settings::default(), 1_500);
-        let forced = lasertag::radio::Settings {
+            run_with_radio(planner, lasertag_core::radio::Settings::default(), 1_500);
+        let forced = lasertag_core::radio::Settings {
             per_robot: true,
             ..Default::default()
         };
@@ -105,7 +105,7 @@ fn per_robot_trackers_over_a_perfect_radio_replay_the_centralised_team_exactly()
 /// The converse, so that the test above could fail: a radio with a latency changes the match.
 #[test]
 fn a_radio_with_latency_and_loss_plays_another_match_and_replays_itself() {
-    let lossy = lasertag::radio::Settings {
+    let lossy = lasertag_core::radio::Settings {
         latency_ticks: 5,
         loss: 0.2,
         ..Default::default()
@@ -115,7 +115,7 @@ fn a_radio_with_latency_and_loss_plays_another_match_and_replays_itself() {
     assert_eq!(a, b, "the same seed replays the same lossy radio");
     let (shared, _) = run_with_radio(
         PlannerKind::Coordinated,
-        lasertag::radio::Settings::default(),
+        lasertag_core::radio::Settings::default(),
         1_000,
     );
     assert_ne!(a.last(), shared.last(), "latency and loss change the match");

@@ -1,4 +1,4 @@
-//! Every limit of the server (issue 7, point 1), crossed over real HTTP and WebSocket with a
+//! Every limit of the server, crossed over real HTTP and WebSocket with a
 //! tiny setting: each refusal has the right status or close code and a reason, and the
 //! server is healthy afterwards (health answers, a real-time match keeps ticking, a client
 //! within the limits is still served).

@@ -5,10 +5,10 @@ use std::path::Path;
 use std::sync::Arc;
 
 use lasertag::maps::MapStore;
-use lasertag::sim::arena::Arena;
-use lasertag::sim::world::MatchConfig;
-use lasertag::sim::{MatchStatus, World};
-use lasertag::sim::{Pose, TICK_HZ};
+use lasertag_core::sim::arena::Arena;
+use lasertag_core::sim::{Pose, TICK_HZ};
+use lasertag_core::world::MatchConfig;
+use lasertag_core::world::{MatchStatus, World};
 
 fn arena(name: &str) -> Arc<Arena> {
     let store = MapStore::load_dir(&Path::new(env!("CARGO_MANIFEST_DIR")).join("maps"))

@@ -1,4 +1,4 @@
-//! `GET /metrics`: every family of issue 7 is there in the Prometheus text format, and the
+//! `GET /metrics`: every family is there in the Prometheus text format, and the
 //! numbers move with what the server does.
 
 mod common;

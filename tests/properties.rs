@@ -4,10 +4,11 @@ use std::path::Path;
 use std::sync::{Arc, OnceLock};
 
 use lasertag::maps::{self, MapFile, MapStore};
-use lasertag::planner::PlannerKind;
-use lasertag::sim::bots::BotKind;
-use lasertag::sim::world::{MatchConfig, Placement};
-use lasertag::sim::{AGENT_RADIUS, World};
+use lasertag_core::bots::BotKind;
+use lasertag_core::planner::PlannerKind;
+use lasertag_core::sim::AGENT_RADIUS;
+use lasertag_core::world::World;
+use lasertag_core::world::{MatchConfig, Placement};
 use proptest::prelude::*;
 
 fn maps() -> &'static MapStore {
@@ -72,7 +73,7 @@ fn random_map(
     h: f64,
     boxes: &[(f64, f64, f64, f64)],
     points: &[(f64, f64)],
-) -> Option<Arc<lasertag::sim::arena::Arena>> {
+) -> Option<Arc<lasertag_core::sim::arena::Arena>> {
     let obstacles: Vec<Vec<[f64; 2]>> = boxes
         .iter()
         .map(|&(x, y, bw, bh)| {
@@ -102,10 +103,10 @@ fn random_map(
         }
     }
     let def = maps::validate(&file).ok()?;
-    Some(Arc::new(lasertag::sim::arena::Arena::new(def)))
+    Some(Arc::new(lasertag_core::sim::arena::Arena::new(def)))
 }
 
-fn arena(k: usize) -> Arc<lasertag::sim::arena::Arena> {
+fn arena(k: usize) -> Arc<lasertag_core::sim::arena::Arena> {
     let all: Vec<_> = maps().iter().collect();
     all[k % all.len()].arena.clone()
 }
@@ -130,14 +131,14 @@ proptest! {
             planner: PlannerKind::Baseline,
             placement: Placement::Random,
             seed,
-            tracker: lasertag::tracker::Settings { particles_per_role: 200, ..Default::default() },
+            tracker: lasertag_core::tracker::Settings { particles_per_role: 200, ..Default::default() },
             ..MatchConfig::default()
         };
         let mut world = World::new(arena(map), config).unwrap();
         for _ in 0..600 {
             world.step();
             check(&world)?;
-            if world.status == lasertag::sim::MatchStatus::Finished {
+            if world.status == lasertag_core::world::MatchStatus::Finished {
                 break;
             }
         }
@@ -172,7 +173,7 @@ proptest! {
             placement: Placement::Random,
             localisation,
             seed,
-            tracker: lasertag::tracker::Settings {
+            tracker: lasertag_core::tracker::Settings {
                 particles_per_role: particles,
                 merge,
                 merge_interval,
@@ -188,7 +189,7 @@ proptest! {
         for _ in 0..300 {
             world.step();
             check(&world)?;
-            if world.status == lasertag::sim::MatchStatus::Finished {
+            if world.status == lasertag_core::world::MatchStatus::Finished {
                 break;
             }
         }

@@ -13,7 +13,7 @@ if ! command -v chromium >/dev/null 2>&1 && [ -z "${LASERTAG_CHROMIUM:-}" ]; the
   $SUDO apt-get update -qq
   DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq chromium >/dev/null
 fi
-cargo test --locked --all-targets
+cargo test --locked --workspace --all-targets
 
 # API conformance: schemathesis (from PyPI, pinned) against the real server's OpenAPI
 # document, every operation, every check (exceptions and reasons in tests/schemathesis.toml).

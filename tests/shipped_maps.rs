@@ -3,7 +3,7 @@
 use std::path::Path;
 
 use lasertag::maps::MapStore;
-use lasertag::nav::DistanceField;
+use lasertag_core::nav::DistanceField;
 use nalgebra::Point2;
 
 #[test]

@@ -1,4 +1,4 @@
-//! Graceful shutdown of the real binary (issue 7, point 6): on SIGTERM it stops accepting,
+//! Graceful shutdown of the real binary: on SIGTERM it stops accepting,
 //! tells every client of a running match `finished` with reason `server_shutdown`, closes
 //! every socket with a close frame, and exits within 5 s of the signal.
 
@@ -100,7 +100,7 @@ async fn until_close(ws: &mut Ws) -> (Option<Value>, Got) {
     }
 }
 
-// Regression test for issue 7's shutdown race: in 2 to 7 runs of 30, `serve` returned as soon
+// Regression test for a shutdown race: in 2 to 7 runs of 30, `serve` returned as soon
 // as axum's server future finished (it has no HTTP request to wait for) instead of waiting
 // for the WebSockets, and the runtime then dropped their tasks mid-close: a client read a bare
 // EOF (`ResetWithoutClosingHandshake`) instead of `finished` and its close frame.

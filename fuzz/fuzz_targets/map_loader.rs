@@ -7,7 +7,7 @@
 #![no_main]
 
 use lasertag::maps;
-use lasertag::sim::arena::Arena;
+use lasertag_core::sim::arena::Arena;
 use libfuzzer_sys::fuzz_target;
 
 fuzz_target!(|data: &[u8]| {

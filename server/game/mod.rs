@@ -6,7 +6,6 @@
 //! only when asked, in chunks between which it keeps answering other requests.
 
 pub mod showcase;
-pub mod snapshot;
 mod task;
 
 use std::collections::BTreeMap;
@@ -19,11 +18,11 @@ use tokio_util::sync::CancellationToken;
 use crate::config::Config;
 use crate::maps::MapStore;
 use crate::metrics::Metrics;
+use crate::protocol::frame::Frame;
 use crate::protocol::{self, Belief, Clock, Events, Joined, MatchState, MatchStats, MatchSummary};
-use crate::sim::World;
-use crate::sim::arena::Arena;
-use crate::sim::world::{FinishReason, HumanInput, OpponentOrder};
-use snapshot::Frame;
+use lasertag_core::sim::arena::Arena;
+use lasertag_core::world::World;
+use lasertag_core::world::{FinishReason, HumanInput, OpponentOrder};
 
 pub use task::{TaskSettings, spawn_match};
 
@@ -357,7 +356,7 @@ impl Registry {
     pub fn refresh_metrics(&self) {
         let (mut running, mut finished) = (0, 0);
         for h in self.all() {
-            if h.hub.frames.borrow().status == crate::sim::MatchStatus::Finished {
+            if h.hub.frames.borrow().status == lasertag_core::world::MatchStatus::Finished {
                 finished += 1;
             } else {
                 running += 1;

@@ -5,11 +5,11 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use crate::game::{Registry, random_id};
-use crate::planner::PlannerKind;
 use crate::protocol::{Clock, MatchMeta, Status};
-use crate::sim::World;
-use crate::sim::bots::BotKind;
-use crate::sim::world::{ControlKind, MatchConfig};
+use lasertag_core::bots::BotKind;
+use lasertag_core::planner::PlannerKind;
+use lasertag_core::world::World;
+use lasertag_core::world::{ControlKind, MatchConfig};
 
 /// Preferred map of the showcase, when the server has it; otherwise the first map.
 const SHOWCASE_MAP: &str = "office";

@@ -13,12 +13,13 @@ use tokio::sync::{mpsc, oneshot, watch};
 use tokio::time::MissedTickBehavior;
 use tracing::Instrument;
 
-use crate::game::snapshot::{BELIEF_EVERY, Frame};
 use crate::game::{Hub, MatchError, Request, Seat, random_id};
 use crate::metrics::{Metrics, Refusal, TickHistograms};
+use crate::protocol::frame::{BELIEF_EVERY, Frame};
 use crate::protocol::{self, Clock, Joined, MatchMeta, MatchState, MatchStats};
-use crate::sim::world::{Control, FinishReason, HumanInput, StepMark};
-use crate::sim::{MatchStatus, TICK_HZ, World};
+use lasertag_core::sim::TICK_HZ;
+use lasertag_core::world::{Control, FinishReason, HumanInput, StepMark};
+use lasertag_core::world::{MatchStatus, World};
 
 /// Ticks a manual step runs before it lets other requests in.
 const STEP_CHUNK: u64 = 250;
@@ -333,10 +334,10 @@ impl MatchTask {
                     })
                     .and_then(|i| {
                         world.order_opponent(i, order).map_err(|e| match e {
-                            crate::sim::world::OrderError::UnknownOpponent(_) => {
+                            lasertag_core::world::OrderError::UnknownOpponent(_) => {
                                 MatchError::NotFound(e.to_string())
                             }
-                            crate::sim::world::OrderError::OutsideArena { .. } => {
+                            lasertag_core::world::OrderError::OutsideArena { .. } => {
                                 MatchError::BadRequest(e.to_string())
                             }
                             _ => MatchError::Conflict(e.to_string()),

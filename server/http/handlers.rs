@@ -17,8 +17,8 @@ use crate::protocol::{
     Belief, CreateMatch, ErrorBody, Events, Health, JoinRequest, Joined, MapInfo, MatchMeta,
     MatchState, MatchStats, MatchSummary, OpponentCommand, StepRequest,
 };
-use crate::sim::World;
-use crate::sim::arena::{Arena, MapDef};
+use lasertag_core::sim::arena::{Arena, MapDef};
+use lasertag_core::world::World;
 
 /// Builds an arena off the async workers: the clearance grid of a big map takes a while.
 async fn build_arena(def: MapDef) -> Result<Arc<Arena>, ApiError> {

@@ -20,14 +20,14 @@ use tokio_util::sync::CancellationToken;
 use tracing::Instrument;
 
 use crate::config::Config;
-use crate::game::snapshot::{BELIEF_EVERY, Frame, visible_to};
 use crate::game::{ConnectionGuard, MatchHandle, Seat, SpectatorSeat};
 use crate::http::limits::{AddressConnection, Bucket, ClientIp};
 use crate::http::{ApiError, AppState};
 use crate::metrics::{ClientGuard, Metrics, Refusal};
+use crate::protocol::frame::{BELIEF_EVERY, Frame, visible_to};
 use crate::protocol::ws::{self as wire, ClientMessage, Limits, Welcome};
-use crate::sim::MatchStatus;
-use crate::sim::world::HumanInput;
+use lasertag_core::world::HumanInput;
+use lasertag_core::world::MatchStatus;
 
 /// Bad messages tolerated in a row before the connection is closed...
 pub const STRIKES: f64 = 10.0;
@@ -254,7 +254,7 @@ impl Connection {
             you: self.seat.as_ref().map(|s| s.opponent_id.clone()),
             name: self.seat.as_ref().map(|s| s.name.clone()),
             map: crate::maps::to_file(&self.handle.hub.arena.def),
-            tick_hz: crate::sim::TICK_HZ,
+            tick_hz: lasertag_core::sim::TICK_HZ,
             time_limit_s: frame.time_limit_s,
             belief_every: BELIEF_EVERY,
             belief: self.belief,

@@ -13,10 +13,10 @@ use std::sync::OnceLock;
 use axum::extract::ws::Utf8Bytes;
 use serde::{Deserialize, Serialize};
 
-use crate::game::snapshot::{BeliefView, Frame, SlotControl, Visible};
 use crate::maps::MapFile;
+use crate::protocol::frame::{BeliefView, Frame, SlotControl, Visible};
 use crate::protocol::{EventDto, OpponentControl, PoseDto, Status, Winner, status, winner};
-use crate::sim::Pose;
+use lasertag_core::sim::Pose;
 
 /// Serialised forms of one frame, built by the first connection that needs them and shared
 /// by all the others (so 500 spectators cost one serialisation per tick, not 500).
@@ -440,7 +440,7 @@ pub fn finished(frame: &Frame) -> Utf8Bytes {
 /// The `finished` a client gets when the server shuts down before its match has ended:
 /// nobody won, reason `server_shutdown` (the same as the match's own `finished` event then).
 pub fn finished_by_shutdown(frame: &Frame) -> Utf8Bytes {
-    if frame.status == crate::sim::MatchStatus::Finished {
+    if frame.status == lasertag_core::world::MatchStatus::Finished {
         return finished(frame);
     }
     Utf8Bytes::from(to_json(&Finished {

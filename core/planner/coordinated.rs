@@ -292,7 +292,7 @@ struct Choice {
 
 impl Coordinated {
     pub fn new(arena: &Arena, physics: &Physics, settings: Settings, robots: usize) -> Self {
-        let views = arena.view_table(settings.view_spec(arena, physics));
+        let views = ViewTable::of(arena, settings.view_spec(arena, physics));
         let (cells, poses) = (views.cell_count(), views.len());
         // Landmarks are recognised all round, so a position sees one whatever its heading.
         let sees_landmark =
@@ -949,11 +949,11 @@ impl Coordinated {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::bots::BotKind;
     use crate::planner::{Brain, PlannerKind};
-    use crate::sim::World;
     use crate::sim::arena::MapDef;
-    use crate::sim::bots::BotKind;
-    use crate::sim::world::{MatchConfig, Placement};
+    use crate::world::World;
+    use crate::world::{MatchConfig, Placement};
 
     /// Two 6 m × 6 m rooms joined by a corridor 4 m long and 0.9 m wide: too narrow for two
     /// robots to pass each other. The opponent is walled into a pocket in a corner, out of

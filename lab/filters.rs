@@ -15,12 +15,13 @@ use nalgebra::Point2;
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-use crate::experiment::plot::{self, Series};
-use crate::experiment::run_all;
-use crate::planner::PlannerKind;
-use crate::sim::arena::Arena;
-use crate::sim::world::{ControlKind, MatchConfig, OpponentOrder, Placement};
-use crate::sim::{TICK_HZ, World};
+use crate::plot::{self, Series};
+use crate::run_all;
+use lasertag_core::planner::PlannerKind;
+use lasertag_core::sim::TICK_HZ;
+use lasertag_core::sim::arena::Arena;
+use lasertag_core::world::World;
+use lasertag_core::world::{ControlKind, MatchConfig, OpponentOrder, Placement};
 
 #[derive(Debug, Clone)]
 pub struct FiltersConfig {
@@ -38,7 +39,7 @@ impl Default for FiltersConfig {
             opponents: 20,
             seed: 0,
             particles_per_role: 1000,
-            kl_cutoff: crate::tracker::Settings::default().kl_cutoff,
+            kl_cutoff: lasertag_core::tracker::Settings::default().kl_cutoff,
         }
     }
 }
@@ -107,11 +108,11 @@ pub fn one_run(
             robots: vec![[15.0, 5.9, std::f32::consts::FRAC_PI_2]],
             opponents: starts.iter().map(|p| [p.x, p.y]).collect(),
         },
-        tracker: crate::tracker::Settings {
+        tracker: lasertag_core::tracker::Settings {
             merge,
             particles_per_role: cfg.particles_per_role,
             kl_cutoff: cfg.kl_cutoff,
-            ..crate::tracker::Settings::default()
+            ..lasertag_core::tracker::Settings::default()
         },
         ..MatchConfig::default()
     };

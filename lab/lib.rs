@@ -1,15 +1,17 @@
-//! The paper's experiments as commands: many seeded headless matches spread over every core,
-//! with a progress bar, written out as CSV files and SVG plots.
+//! lasertag-lab: the paper's experiments over the core, as commands: many seeded headless
+//! matches spread over every core, with a progress bar, written out as CSV files and SVG
+//! plots. It knows no JSON and no server: the binary hands it the maps it loaded.
 //!
 //! - [`filters`]: Fig. 4 — the number of active filters with and without role merging.
 //! - [`capture`]: Fig. 5 — capture time of `coordinated` against `baseline`.
-//! - [`localisation`]: issue 6 — the robots' own pose error with and without landmarks.
-//! - [`reacquire`]: issue 6 — Coltin et al.'s Table I: time to see an opponent again with
+//! - [`localisation`]: the robots' own pose error with and without landmarks.
+//! - [`reacquire`]: Coltin et al.'s Table I: time to see an opponent again with
 //!   and without a teammate's hypotheses and the tracker's prediction.
-//! - [`uncertainty`]: issue 6 — uncertainty-aware motion on and off, for robots that
+//! - [`uncertainty`]: uncertainty-aware motion on and off, for robots that
 //!   localise from landmarks alone.
 
 pub mod capture;
+pub mod cli;
 pub mod filters;
 pub mod localisation;
 pub mod plot;

@@ -472,12 +472,6 @@ fn plan(
     }
 }
 
-/// The world point a detection refers to, seen from `pose`.
-pub fn detection_point(pose: Pose, d: &Detection) -> Point2<f32> {
-    let a = pose.theta + d.bearing;
-    pose.pos + nalgebra::Vector2::new(a.cos(), a.sin()) * d.range
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;

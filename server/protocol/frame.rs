@@ -14,12 +14,13 @@ use std::sync::Arc;
 
 use nalgebra::Point2;
 
-use crate::localise::Localiser;
 use crate::protocol::EventDto;
 use crate::protocol::ws::WireCache;
-use crate::sim::arena::Arena;
-use crate::sim::world::Control;
-use crate::sim::{MatchStatus, Pose, Side, World};
+use lasertag_core::localise::Localiser;
+use lasertag_core::sim::Pose;
+use lasertag_core::sim::arena::Arena;
+use lasertag_core::world::Control;
+use lasertag_core::world::{MatchStatus, Side, World};
 
 /// Ticks between two belief updates sent to viewers (5 Hz at 20 Hz ticks).
 pub const BELIEF_EVERY: u64 = 4;
@@ -153,7 +154,7 @@ impl Frame {
         Frame {
             tick: world.tick,
             time_s: world.time_s(),
-            time_limit_s: world.config.time_limit_ticks as f64 / crate::sim::TICK_HZ as f64,
+            time_limit_s: world.config.time_limit_ticks as f64 / lasertag_core::sim::TICK_HZ as f64,
             status: world.status,
             winner: world.winner,
             robots: world
@@ -206,7 +207,9 @@ impl Frame {
                         .events()
                         .iter()
                         .rev()
-                        .find(|e| matches!(e.kind, crate::sim::EventKind::Finished { .. }))
+                        .find(|e| {
+                            matches!(e.kind, lasertag_core::world::EventKind::Finished { .. })
+                        })
                         .map(crate::protocol::event)
                 })
                 .flatten(),

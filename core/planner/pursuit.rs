@@ -8,9 +8,10 @@
 use nalgebra::{Point2, Vector2};
 
 use crate::nav::{steer, turn_to};
-use crate::planner::{RobotView, detection_point};
+use crate::planner::RobotView;
 use crate::sim::arena::Arena;
 use crate::sim::motion::propose;
+use crate::sim::sensors::detection_point;
 use crate::sim::{AGENT_RADIUS, DT, Motion, Physics, Pose, wrap_angle};
 
 /// Range the pursuer closes to before it stops driving: well inside the 6 m tag range so a

@@ -1,4 +1,4 @@
-//! Issue 6: how well the robots localise themselves — mean position error over time on every
+//! How well the robots localise themselves — mean position error over time on every
 //! map in three variants: the full filter with the map's landmarks, the filter without
 //! landmarks (laser and odometry), and odometry alone (dead reckoning: the drift a robot that
 //! does not localise suffers).
@@ -9,11 +9,12 @@
 use std::path::Path;
 use std::sync::Arc;
 
-use crate::experiment::plot::{self, Series};
-use crate::experiment::run_all;
-use crate::sim::arena::{Arena, MapDef};
-use crate::sim::world::MatchConfig;
-use crate::sim::{TICK_HZ, World};
+use crate::plot::{self, Series};
+use crate::run_all;
+use lasertag_core::sim::TICK_HZ;
+use lasertag_core::sim::arena::{Arena, MapDef};
+use lasertag_core::world::MatchConfig;
+use lasertag_core::world::World;
 
 #[derive(Debug, Clone)]
 pub struct LocalisationConfig {

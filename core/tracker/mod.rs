@@ -31,9 +31,8 @@ use nalgebra::{Point2, Vector2};
 use rand::RngExt;
 use rand_chacha::ChaCha8Rng;
 
-use crate::planner::detection_point;
 use crate::sim::arena::Arena;
-use crate::sim::sensors::Detection;
+use crate::sim::sensors::{Detection, detection_point};
 use crate::sim::{AGENT_RADIUS, DT, Pose};
 
 /// Tracker settings (the match's `tracker` object).
@@ -840,7 +839,7 @@ mod tests {
         )
     }
 
-    /// Radio gap (session 3's note): a teammate's scan that arrives late says where nobody
+    /// Radio gap: a teammate's scan that arrives late says where nobody
     /// stood *then*; an opponent may since have walked in from the edge of what it saw. So
     /// it contradicts only hypotheses deep inside the seen area, and a fresh scan all of it.
     #[test]
@@ -944,7 +943,7 @@ mod tests {
         assert_eq!(t.roles.iter().filter(|r| r.tagged).count(), 1);
     }
 
-    /// Regression (issue 4, capture run office/evade/36): a cloud squeezed against a wall in
+    /// Regression (capture run office/evade/36): a cloud squeezed against a wall in
     /// full view of a robot was never down-weighted (a particle counted as seen only when the
     /// beam reached past its far edge), so the robots stared at an empty strip for 220 s.
     /// Now the strip is seen, and a role looked at in full for 10 ticks is re-seeded.
@@ -991,7 +990,7 @@ mod tests {
         );
     }
 
-    /// Issue 6 (world-model confidence): a sighting makes a role valid; unconfirmed, it turns
+    /// World-model confidence: a sighting makes a role valid; unconfirmed, it turns
     /// suspicious after about 20 s and invalid after about a minute; looking where it should
     /// be and seeing nothing wears it down within a second.
     #[test]

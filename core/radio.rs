@@ -1,5 +1,4 @@
-//! The team radio: what robots tell each other, and a seeded channel that delays and drops it
-//! (issue 6, team radio).
+//! The team radio: what robots tell each other, and a seeded channel that delays and drops it.
 //!
 //! Every tick each robot broadcasts one [`Message`]: its pose estimate, what it sensed (the
 //! owned form of a [`tracker::Sighting`](crate::tracker::Sighting)), how many opponents its

@@ -1,4 +1,4 @@
-//! Issue 6, point 2, measured where it matters: Fabiani & Latombe's uncertainty-aware motion
+//! Measured where it matters: Fabiani & Latombe's uncertainty-aware motion
 //! against the same planner without it, for robots whose localisation is weak.
 //!
 //! With the default localiser (30 laser beams against the map) a robot's spread stays at
@@ -21,14 +21,15 @@
 use std::path::Path;
 use std::sync::Arc;
 
-use crate::experiment::capture::{bot_name, mann_whitney_p, mean_ci, stats};
-use crate::experiment::plot::{self, Bar, Series};
-use crate::experiment::run_all;
-use crate::planner::PlannerKind;
-use crate::sim::arena::Arena;
-use crate::sim::bots::BotKind;
-use crate::sim::world::{MatchConfig, Placement};
-use crate::sim::{MatchStatus, Side, TICK_HZ, World};
+use crate::capture::{bot_name, mann_whitney_p, mean_ci, stats};
+use crate::plot::{self, Bar, Series};
+use crate::run_all;
+use lasertag_core::bots::BotKind;
+use lasertag_core::planner::PlannerKind;
+use lasertag_core::sim::TICK_HZ;
+use lasertag_core::sim::arena::Arena;
+use lasertag_core::world::{MatchConfig, Placement};
+use lasertag_core::world::{MatchStatus, Side, World};
 
 /// A robot whose estimate is further than this from the truth is lost (m).
 pub const LOST_M: f32 = 1.0;
@@ -74,15 +75,15 @@ impl Variant {
 fn config(cfg: &UncertaintyConfig, bot: BotKind, variant: Variant, seed: u64) -> MatchConfig {
     let d = MatchConfig::default();
     let k = cfg.odometry_scale;
-    let physics = crate::sim::Physics {
+    let physics = lasertag_core::sim::Physics {
         odometry_noise: d.physics.odometry_noise * k,
         odometry_turn_per_metre: d.physics.odometry_turn_per_metre * k,
         odometry_turn_noise: d.physics.odometry_turn_noise * k,
         ..d.physics.clone()
     };
-    let localiser = crate::localise::Settings {
+    let localiser = lasertag_core::localise::Settings {
         beams: cfg.beams,
-        ..crate::localise::Settings::for_odometry(&physics)
+        ..lasertag_core::localise::Settings::for_odometry(&physics)
     };
     let mut coordination = d.coordination.clone();
     if variant == Variant::Unaware {
@@ -144,7 +145,8 @@ pub fn hunt_run(
     config.physics.tag_range = 0.0;
     config.time_limit_ticks = cfg.hunt_s * TICK_HZ as u64;
     // Against the aware threshold in both variants, so that the shares compare.
-    let uncertain_above = crate::planner::coordinated::Settings::default().uncertainty_spread;
+    let uncertain_above =
+        lasertag_core::planner::coordinated::Settings::default().uncertainty_spread;
     let mut world = World::new(arena, config).map_err(|e| e.to_string())?;
     let mut error_per_second = Vec::with_capacity(cfg.hunt_s as usize);
     let (mut n, mut total, mut lost, mut uncertain) = (0usize, 0.0f64, 0usize, 0usize);
@@ -430,10 +432,10 @@ mod tests {
         assert!((aware.physics.odometry_noise - 0.2).abs() < 1e-6);
         assert_eq!(
             aware.coordination.uncertainty_spread,
-            crate::planner::coordinated::Settings::default().uncertainty_spread
+            lasertag_core::planner::coordinated::Settings::default().uncertainty_spread
         );
         assert_eq!(
-            crate::planner::coordinated::Settings {
+            lasertag_core::planner::coordinated::Settings {
                 uncertainty_spread: aware.coordination.uncertainty_spread,
                 ..unaware.coordination.clone()
             },

@@ -10,13 +10,14 @@
 use std::path::Path;
 use std::sync::Arc;
 
-use crate::experiment::plot::{self, Series};
-use crate::experiment::run_all;
-use crate::planner::PlannerKind;
-use crate::sim::arena::Arena;
-use crate::sim::bots::BotKind;
-use crate::sim::world::{MatchConfig, Placement};
-use crate::sim::{MatchStatus, Side, TICK_HZ, World};
+use crate::plot::{self, Series};
+use crate::run_all;
+use lasertag_core::bots::BotKind;
+use lasertag_core::planner::PlannerKind;
+use lasertag_core::sim::TICK_HZ;
+use lasertag_core::sim::arena::Arena;
+use lasertag_core::world::{MatchConfig, Placement};
+use lasertag_core::world::{MatchStatus, Side, World};
 
 #[derive(Debug, Clone)]
 pub struct CaptureConfig {
@@ -24,11 +25,11 @@ pub struct CaptureConfig {
     pub seed: u64,
     pub time_limit_s: u64,
     /// Weights of the coordinated planner (the defaults unless tuning).
-    pub coordination: crate::planner::coordinated::Settings,
+    pub coordination: lasertag_core::planner::coordinated::Settings,
     /// Robots localise themselves (the default); false leaves them their odometry.
     pub localisation: bool,
     /// The team radio (perfect unless asked: `--radio-latency`, `--radio-loss`).
-    pub radio: crate::radio::Settings,
+    pub radio: lasertag_core::radio::Settings,
 }
 
 /// One setting of the experiment.

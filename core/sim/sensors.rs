@@ -10,9 +10,16 @@
 use nalgebra::{Point2, Vector2};
 use rand::RngExt;
 
-use crate::localise::LandmarkSighting;
 use crate::sim::arena::Arena;
 use crate::sim::{AGENT_RADIUS, AgentId, Physics, Pose, gaussian, wrap_angle};
+
+/// A landmark seen by identity: its index in the map's `landmarks`, range and bearing.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LandmarkSighting {
+    pub id: usize,
+    pub range: f32,
+    pub bearing: f32,
+}
 
 /// An anonymous sighting of an opponent, relative to the sensing robot.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -227,6 +234,12 @@ impl OdometryStep {
             wrap_angle(a + self.rot2),
         )
     }
+}
+
+/// The world point a detection refers to, seen from `pose`.
+pub fn detection_point(pose: Pose, d: &Detection) -> Point2<f32> {
+    let a = pose.theta + d.bearing;
+    pose.pos + Vector2::new(a.cos(), a.sin()) * d.range
 }
 
 #[cfg(test)]

@@ -1,3 +1,6 @@
+//! Unit tests of the localiser: the likelihood field, the KLD sample bound, convergence with
+//! the laser and with landmarks, drift on odometry alone, and updates with nothing to weigh.
+
 use super::*;
 use crate::sim::arena::MapDef;
 use crate::sim::{Physics, sensors};

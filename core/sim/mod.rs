@@ -1,27 +1,19 @@
-//! The functional core: a laser-tag match as plain data and pure steps.
+//! The physical world of a match: bodies, geometry and sensors, below every decision.
 //!
-//! [`World`] owns everything about one match: the shared static [`arena::Arena`], the robots
-//! and opponents, the seeded random streams, the robots' team brain and the event log.
-//! [`World::step`] advances it by one fixed tick; nothing here reads a clock, does I/O or
-//! touches tokio, so a match is a pure function of (map, settings, seed, inputs by tick).
+//! Nothing here knows of the robots' beliefs or plans (the tracker, planner and localiser sit
+//! on higher floors); `crate::world::World` puts a match together.
 //!
 //! - `arena`: static geometry (ray casts, line of sight, clearance grid).
 //! - `motion`: kinematics and collision resolution of disc agents.
 //! - `sensors`: laser scans and anonymous opponent detections.
 //! - `rules`: tagging, freezing, elimination.
 //! - `views`: what each candidate destination's laser would see (the planner's footprints).
-//! - `bots`: the opponents' bot behaviours (part of the environment, so they may read truth).
-//! - `world`: the tick pipeline and the event log.
 
 pub mod arena;
-pub mod bots;
 pub mod motion;
 pub mod rules;
 pub mod sensors;
 pub mod views;
-pub mod world;
-
-pub use world::{Event, EventKind, MatchStatus, Side, World};
 
 use nalgebra::{Point2, Vector2};
 use rand::RngExt;

@@ -14,6 +14,8 @@
 
 use nalgebra::{Point2, Vector2};
 
+use std::sync::Arc;
+
 use crate::sim::arena::Arena;
 use crate::sim::wrap_angle;
 
@@ -75,6 +77,11 @@ pub fn candidate_points(arena: &Arena, spacing: f32) -> Vec<Point2<f32>> {
 }
 
 impl ViewTable {
+    /// The table for `spec` on `arena`, built on first use and shared afterwards.
+    pub fn of(arena: &Arena, spec: ViewSpec) -> Arc<ViewTable> {
+        arena.derived(spec, |arena| ViewTable::build(arena, spec))
+    }
+
     pub fn build(arena: &Arena, spec: ViewSpec) -> ViewTable {
         let cols = (arena.width() / spec.cell).ceil().max(1.0) as usize;
         let rows = (arena.height() / spec.cell).ceil().max(1.0) as usize;

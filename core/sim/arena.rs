@@ -8,11 +8,10 @@ use nalgebra::{Point2, Vector2};
 use parry2d::query::{PointQuery, Ray, RayCast};
 use parry2d::shape::Polyline;
 
+use std::any::Any;
 use std::sync::{Arc, Mutex};
 
-use crate::localise::{LikelihoodField, Settings};
 use crate::sim::AGENT_RADIUS;
-use crate::sim::views::{ViewSpec, ViewTable};
 
 /// A map after validation: plain data, no serialisation concerns (see `maps.rs` for the file format).
 #[derive(Debug, Clone, PartialEq)]
@@ -40,15 +39,15 @@ pub struct Arena {
     /// The same edges bucketed on a coarse grid, for the laser's many short ray casts.
     buckets: SegmentGrid,
     pub grid: ClearanceGrid,
-    /// Candidate-view tables built so far, one per laser setting (see `views.rs`).
-    views: Mutex<Vec<Arc<ViewTable>>>,
-    /// Localisation likelihood fields built so far, one per laser model (see `localise`).
-    fields: Mutex<Vec<(FieldKey, Arc<LikelihoodField>)>>,
+    /// Tables derived from the map and built once (the planner's candidate views, the
+    /// localiser's likelihood fields), shared by every match on it. The arena keeps them
+    /// without knowing their types, so the floors above it can cache here without the arena
+    /// importing them.
+    derived: Mutex<Vec<Derived>>,
 }
 
-/// What a likelihood field depends on besides the map: σ_hit, z_hit, z_rand and the laser's
-/// range, as bit patterns (exact equality is what a cache wants).
-type FieldKey = [u32; 4];
+/// One derived table and the key it was built for (both type-erased).
+type Derived = (Box<dyn Any + Send + Sync>, Arc<dyn Any + Send + Sync>);
 
 impl Arena {
     pub fn new(def: MapDef) -> Arena {
@@ -74,42 +73,32 @@ impl Arena {
             walls,
             buckets,
             grid,
-            views: Mutex::new(Vec::new()),
-            fields: Mutex::new(Vec::new()),
+            derived: Mutex::new(Vec::new()),
         }
     }
 
-    /// The localisation likelihood field for these filter settings and laser range, built on
-    /// first use (15 ms on `office`) and shared by every robot of every match on this map.
-    pub fn likelihood_field(&self, settings: &Settings, laser_range: f32) -> Arc<LikelihoodField> {
-        let key = [
-            settings.sigma_hit.to_bits(),
-            settings.z_hit.to_bits(),
-            settings.z_rand.to_bits(),
-            laser_range.to_bits(),
-        ];
-        // A poisoned lock only means another builder panicked; the list itself is intact.
-        let mut fields = self.fields.lock().unwrap_or_else(|e| e.into_inner());
-        if let Some((_, f)) = fields.iter().find(|(k, _)| *k == key) {
-            return f.clone();
-        }
-        let field = Arc::new(LikelihoodField::new(self, settings, laser_range));
-        fields.push((key, field.clone()));
-        field
-    }
-
-    /// The candidate-view table for `spec`, built on first use and shared afterwards.
+    /// The table of type `T` derived from this map for `key`, built by `build` on first use
+    /// and shared afterwards (the candidate-view tables, the likelihood fields).
     ///
-    /// Building takes tens to hundreds of milliseconds, so the server builds it off the
-    /// async runtime before a match starts rather than in the match's first tick.
-    pub fn view_table(&self, spec: ViewSpec) -> Arc<ViewTable> {
+    /// Building can take tens to hundreds of milliseconds, so the server builds what a match
+    /// needs off the async runtime before the match starts rather than in its first tick.
+    pub fn derived<K, T>(&self, key: K, build: impl FnOnce(&Arena) -> T) -> Arc<T>
+    where
+        K: PartialEq + Send + Sync + 'static,
+        T: Send + Sync + 'static,
+    {
         // A poisoned lock only means another builder panicked; the list itself is intact.
-        let mut tables = self.views.lock().unwrap_or_else(|e| e.into_inner());
-        if let Some(t) = tables.iter().find(|t| t.spec == spec) {
-            return t.clone();
+        let mut tables = self.derived.lock().unwrap_or_else(|e| e.into_inner());
+        let found = tables.iter().find_map(|(k, t)| {
+            (k.downcast_ref::<K>() == Some(&key))
+                .then(|| t.clone().downcast::<T>().ok())
+                .flatten()
+        });
+        if let Some(table) = found {
+            return table;
         }
-        let table = Arc::new(ViewTable::build(self, spec));
-        tables.push(table.clone());
+        let table = Arc::new(build(self));
+        tables.push((Box::new(key), table.clone()));
         table
     }
 

@@ -1,0 +1,405 @@
+//! The `experiment` commands: their flags (clap), checks and printed tables. The `lasertag`
+//! binary mounts [`Experiment`] as `lasertag experiment …` and hands over a map loader, so
+//! this crate never reads JSON.
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use clap::Subcommand;
+use lasertag_core::sim::arena::Arena;
+
+/// Reads every map of a directory into arenas (the binary's map loader).
+pub type LoadMaps = fn(&Path) -> Result<Vec<Arc<Arena>>, String>;
+
+#[derive(Debug, Subcommand)]
+pub enum Experiment {
+    /// Fig. 4: active filters with and without role merging on `hallway`.
+    Filters {
+        /// Runs per variant (with and without merging).
+        #[arg(long, default_value_t = 25)]
+        runs: usize,
+        /// Opponents passing the door in each run.
+        #[arg(long, default_value_t = 20)]
+        opponents: usize,
+        /// Particles per role.
+        #[arg(long, default_value_t = 1000)]
+        particles: usize,
+        /// Symmetric KL divergence under which two roles merge.
+        #[arg(long, default_value_t = 0.7)]
+        kl_cutoff: f32,
+        /// Seed of the first run (run i uses seed + i).
+        #[arg(long, default_value_t = 0)]
+        seed: u64,
+        /// Directory of map files.
+        #[arg(long, default_value = "maps")]
+        maps: PathBuf,
+        /// Where to write filters.csv and filters.svg.
+        #[arg(long, default_value = "out/filters")]
+        out: PathBuf,
+    },
+    /// Fig. 5: capture time of `coordinated` vs `baseline` on `office` and `warehouse`.
+    Capture {
+        /// Runs per map, opponent bot and planner.
+        #[arg(long, default_value_t = 100)]
+        runs: usize,
+        /// Seed of the first run (run i uses seed + i, the same for both planners).
+        #[arg(long, default_value_t = 0)]
+        seed: u64,
+        /// Time limit of each run in seconds (runs that reach it count as not captured).
+        #[arg(long, default_value_t = 300)]
+        time_limit: u64,
+        /// Maps to run on.
+        #[arg(long, value_delimiter = ',', default_value = "office,warehouse")]
+        on: Vec<String>,
+        /// Directory of map files.
+        #[arg(long, default_value = "maps")]
+        maps: PathBuf,
+        /// Where to write the CSV files and plots.
+        #[arg(long, default_value = "out/capture")]
+        out: PathBuf,
+        /// Override a weight of the coordinated planner, e.g. `--set travel_weight=0.02`
+        /// (repeatable; names as in the README's planner section).
+        #[arg(long = "set", value_name = "NAME=VALUE")]
+        set: Vec<String>,
+        /// Whether robots localise themselves (false: odometry alone, which drifts).
+        #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
+        localisation: bool,
+        /// Team radio latency in ticks (0..=100); with a latency or loss each robot keeps
+        /// its own tracker.
+        #[arg(long, default_value_t = 0)]
+        radio_latency: u32,
+        /// Probability that a robot misses one teammate message (0..=1).
+        #[arg(long, default_value_t = 0.0)]
+        radio_loss: f32,
+    },
+    /// Coltin et al.'s Table I: time for a robot to see an opponent again that a
+    /// teammate sees, with and without shared hypotheses and the tracker's prediction.
+    Reacquire {
+        /// Runs per condition (the same seeds and routes in every condition).
+        #[arg(long, default_value_t = 50)]
+        runs: usize,
+        /// Seed of the first run (run i uses seed + i).
+        #[arg(long, default_value_t = 0)]
+        seed: u64,
+        /// Longest search counted, seconds (runs that reach it count at it).
+        #[arg(long, default_value_t = 60)]
+        limit: u64,
+        /// Radio latency in ticks (no loss).
+        #[arg(long, default_value_t = 2)]
+        latency: u32,
+        /// Directory of map files (the experiment runs on `office`).
+        #[arg(long, default_value = "maps")]
+        maps: PathBuf,
+        /// Where to write the CSV files and the plot.
+        #[arg(long, default_value = "out/reacquire")]
+        out: PathBuf,
+    },
+    /// The robots' localisation error over time on every map: with landmarks,
+    /// without them, and odometry alone.
+    Localisation {
+        /// Runs per map and variant (with and without landmarks).
+        #[arg(long, default_value_t = 3)]
+        runs: usize,
+        /// Seed of the first run (run i uses seed + i).
+        #[arg(long, default_value_t = 0)]
+        seed: u64,
+        /// Length of each run in seconds.
+        #[arg(long, default_value_t = 600)]
+        seconds: u64,
+        #[arg(long, default_value_t = 2)]
+        robots: usize,
+        #[arg(long, default_value_t = 2)]
+        opponents: usize,
+        /// Directory of map files (every map in it is run).
+        #[arg(long, default_value = "maps")]
+        maps: PathBuf,
+        /// Where to write the CSV files and plots.
+        #[arg(long, default_value = "out/localisation")]
+        out: PathBuf,
+    },
+    /// Uncertainty-aware motion on and off, for robots that localise from
+    /// landmarks and odometry alone (Fabiani & Latombe's setting).
+    Uncertainty {
+        /// Runs per map, opponent bot and variant (the same seeds in both variants).
+        #[arg(long, default_value_t = 100)]
+        runs: usize,
+        /// Seed of the first run (run i uses seed + i).
+        #[arg(long, default_value_t = 0)]
+        seed: u64,
+        /// Time limit of each run in seconds (runs that reach it count as not captured).
+        #[arg(long, default_value_t = 300)]
+        time_limit: u64,
+        /// Laser beams the localiser uses (0: landmarks and odometry alone).
+        #[arg(long, default_value_t = 0)]
+        beams: usize,
+        /// Odometry noise as a multiple of the default (5% of distance, 2°/m, 2% of turns).
+        #[arg(long, default_value_t = 4.0)]
+        odometry_scale: f32,
+        /// Length of each hunt (tagging off) in seconds.
+        #[arg(long, default_value_t = 120)]
+        hunt_s: u64,
+        /// Maps to run on.
+        #[arg(long, value_delimiter = ',', default_value = "office,warehouse")]
+        on: Vec<String>,
+        /// Directory of map files.
+        #[arg(long, default_value = "maps")]
+        maps: PathBuf,
+        /// Where to write the CSV files and plots.
+        #[arg(long, default_value = "out/uncertainty")]
+        out: PathBuf,
+    },
+}
+
+/// The maps named in `on`, loaded from the directory `maps`.
+fn chosen_maps(
+    load: LoadMaps,
+    maps: &Path,
+    on: &[String],
+) -> Result<Vec<(String, Arc<Arena>)>, String> {
+    let store = load(maps)?;
+    on.iter()
+        .map(|name| {
+            store
+                .iter()
+                .find(|a| a.def.name == *name)
+                .map(|a| (name.clone(), a.clone()))
+                .ok_or_else(|| format!("no map {name:?} in {}", maps.display()))
+        })
+        .collect()
+}
+
+/// The one map `name` from the directory `maps`.
+fn one_map(load: LoadMaps, maps: &Path, name: &str) -> Result<Arc<Arena>, String> {
+    load(maps)?
+        .into_iter()
+        .find(|a| a.def.name == name)
+        .ok_or_else(|| format!("no {name} map in {}", maps.display()))
+}
+
+/// Runs one experiment command, printing its table; `load` reads a directory of maps.
+pub fn run(e: Experiment, load: LoadMaps) -> Result<(), String> {
+    match e {
+        Experiment::Capture {
+            runs,
+            seed,
+            time_limit,
+            on,
+            maps,
+            out,
+            set,
+            localisation,
+            radio_latency,
+            radio_loss,
+        } => {
+            if runs == 0 || time_limit == 0 {
+                return Err("--runs and --time-limit must be at least 1".into());
+            }
+            let chosen = chosen_maps(load, &maps, &on)?;
+            let mut coordination = lasertag_core::planner::coordinated::Settings::default();
+            for kv in &set {
+                let (k, v) = kv
+                    .split_once('=')
+                    .ok_or_else(|| format!("--set {kv}: expected NAME=VALUE"))?;
+                coordination
+                    .set(k, v)
+                    .map_err(|e| format!("--set {kv}: {e}"))?;
+            }
+            let radio = lasertag_core::radio::Settings {
+                latency_ticks: radio_latency,
+                loss: radio_loss,
+                ..Default::default()
+            };
+            radio.validate().map_err(|e| {
+                format!(
+                    "--{}",
+                    e.replacen("radio.", "radio-", 1).replacen("_ticks", "", 1)
+                )
+            })?;
+            let cfg = crate::capture::CaptureConfig {
+                runs,
+                seed,
+                time_limit_s: time_limit,
+                coordination,
+                localisation,
+                radio,
+            };
+            let table = crate::capture::run(&chosen, &cfg, &out)?;
+            print!("{table}");
+            println!(
+                "ratio: median capture time / baseline's; p: two-sided Mann–Whitney U against baseline\n\
+                 wrote {0}/capture.csv, {0}/capture_summary.csv and {0}/capture_<map>_<bot>.svg",
+                out.display()
+            );
+            Ok(())
+        }
+        Experiment::Reacquire {
+            runs,
+            seed,
+            limit,
+            latency,
+            maps,
+            out,
+        } => {
+            if runs == 0 || limit == 0 {
+                return Err("--runs and --limit must be at least 1".into());
+            }
+            if latency > lasertag_core::radio::MAX_LATENCY_TICKS {
+                return Err(format!(
+                    "--latency {latency} must be in 0..={}",
+                    lasertag_core::radio::MAX_LATENCY_TICKS
+                ));
+            }
+            let arena = one_map(load, &maps, "office")?;
+            let cfg = crate::reacquire::ReacquireConfig {
+                runs,
+                seed,
+                limit_s: limit,
+                latency_ticks: latency,
+            };
+            let summaries = crate::reacquire::run(arena, &cfg, &out)?;
+            println!(
+                "condition   shared  predicted  found    mean ± std (s)  median (s)  teammate saw"
+            );
+            for s in &summaries {
+                println!(
+                    "{:<11} {:<7} {:<10} {:>3}/{:<3} {:>7.2} ± {:<5.2} {:>10.2} {:>12.0}%",
+                    s.condition.name,
+                    s.condition.shared,
+                    s.condition.predicted,
+                    s.found,
+                    s.runs,
+                    s.mean_s,
+                    s.std_s,
+                    s.median_s,
+                    100.0 * s.teammate_saw
+                );
+            }
+            println!(
+                "wrote {0}/reacquire.csv, {0}/reacquire_summary.csv and {0}/reacquire.svg",
+                out.display()
+            );
+            Ok(())
+        }
+        Experiment::Localisation {
+            runs,
+            seed,
+            seconds,
+            robots,
+            opponents,
+            maps,
+            out,
+        } => {
+            if runs == 0 || seconds == 0 || robots == 0 {
+                return Err("--runs, --seconds and --robots must be at least 1".into());
+            }
+            let mut arenas = load(&maps)?;
+            arenas.sort_by(|a, b| a.def.name.cmp(&b.def.name));
+            let cfg = crate::localisation::LocalisationConfig {
+                runs,
+                seed,
+                seconds,
+                robots,
+                opponents,
+            };
+            let curves = crate::localisation::run(&arenas, &cfg, &out)?;
+            println!("map        variant        mean error (m)  worst (m)");
+            for c in &curves {
+                println!(
+                    "{:<10} {:<14} {:>14.4} {:>10.4}",
+                    c.map,
+                    c.variant.name(),
+                    c.mean,
+                    c.worst
+                );
+            }
+            println!(
+                "wrote {0}/localisation.csv, {0}/localisation_summary.csv and {0}/localisation_<map>.svg",
+                out.display()
+            );
+            Ok(())
+        }
+        Experiment::Uncertainty {
+            runs,
+            seed,
+            time_limit,
+            beams,
+            odometry_scale,
+            hunt_s,
+            on,
+            maps,
+            out,
+        } => {
+            if runs == 0 || time_limit == 0 || hunt_s == 0 {
+                return Err("--runs, --time-limit and --hunt-s must be at least 1".into());
+            }
+            if beams > 181 {
+                return Err(format!(
+                    "--beams {beams}: must be in 0..=181 (the laser has 181)"
+                ));
+            }
+            // The noise scaled past the API's ranges (heading 45°/m, fractions 1) is nonsense.
+            if !(0.0..=20.0).contains(&odometry_scale) {
+                return Err(format!(
+                    "--odometry-scale {odometry_scale}: must be in [0, 20]"
+                ));
+            }
+            let chosen = chosen_maps(load, &maps, &on)?;
+            let cfg = crate::uncertainty::UncertaintyConfig {
+                runs,
+                seed,
+                time_limit_s: time_limit,
+                beams,
+                odometry_scale,
+                hunt_s,
+            };
+            let table = crate::uncertainty::run(&chosen, &cfg, &out)?;
+            print!("{table}");
+            println!(
+                "wrote {0}/uncertainty_{{hunt,capture}}{{,_summary}}.csv, {0}/uncertainty_lost.svg and {0}/uncertainty_error_<map>.svg",
+                out.display()
+            );
+            Ok(())
+        }
+        Experiment::Filters {
+            runs,
+            opponents,
+            particles,
+            kl_cutoff,
+            seed,
+            maps,
+            out,
+        } => {
+            if runs == 0
+                || opponents == 0
+                || particles < 10
+                || !(kl_cutoff > 0.0 && kl_cutoff.is_finite())
+            {
+                return Err(
+                    "--runs and --opponents must be at least 1, --particles at least 10, --kl-cutoff positive".into(),
+                );
+            }
+            let arena = one_map(load, &maps, "hallway")?;
+            let cfg = crate::filters::FiltersConfig {
+                runs,
+                opponents,
+                seed,
+                particles_per_role: particles,
+                kl_cutoff,
+            };
+            let r = crate::filters::run(arena, &cfg, &out)?;
+            println!(
+                "with merging: mean active filters peaks at {:.2}, ends at {:.2}\n\
+                 without merging: peaks at {:.2}, ends at {:.2} ({} s of play)\n\
+                 wrote {}/filters.csv and {}/filters.svg",
+                r.with_merge_max_mean,
+                r.with_merge_final_mean,
+                r.without_merge_max_mean,
+                r.without_merge_final_mean,
+                r.seconds,
+                out.display(),
+                out.display()
+            );
+            Ok(())
+        }
+    }
+}
