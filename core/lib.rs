@@ -6,6 +6,7 @@
 //! `ChaCha8Rng` stream. The modules form floors, each importing only those listed before it
 //! (`tests/tidy.rs` checks the order):
 //!
+//! - [`settings`]: settings groups declared once (name, type, default, range, doc).
 //! - [`sim`]: the physical world: static [`sim::arena`], kinematics and collisions, laser and
 //!   landmark sensors, tagging rules, candidate views.
 //! - [`nav`]: travel-time fields and path following over the arena's clearance grid.
@@ -15,6 +16,8 @@
 //! - [`planner`]: the robot team's decisions (coordinated, baseline, idle).
 //! - [`bots`]: the opponents' bot behaviours (part of the environment: they may read truth).
 //! - [`world`]: one match, its tick pipeline and its event log.
+
+pub mod settings;
 
 pub mod sim;
 

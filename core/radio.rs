@@ -29,29 +29,24 @@ use crate::tracker::Sighting;
 /// Longest latency a match may ask for (5 s).
 pub const MAX_LATENCY_TICKS: u32 = 100;
 
-/// The radio a match runs with (`radio` in the API).
-#[derive(Debug, Clone, PartialEq)]
-pub struct Settings {
-    /// Ticks between sending and receiving (0..=[`MAX_LATENCY_TICKS`]).
-    pub latency_ticks: u32,
-    /// Probability that one receiver misses one message, in [0, 1].
-    pub loss: f32,
-    /// Messages carry the sender's sightings. Off, robots hear teammates' poses and plans
-    /// but not what they see (no shared hypotheses): for the reacquire experiment.
-    pub share_sightings: bool,
-    /// Run the per-robot machinery (one tracker per robot, the channel) even when the radio
-    /// is perfect. Its result must equal the shared path's; tests and experiments use this.
-    pub per_robot: bool,
-}
-
-impl Default for Settings {
-    fn default() -> Self {
-        Settings {
-            latency_ticks: 0,
-            loss: 0.0,
-            share_sightings: true,
-            per_robot: false,
-        }
+crate::settings! {
+    /// The team radio a match runs with (`radio` in the API). Perfect by default: with a
+    /// latency or a loss each robot keeps its own tracker, fed by what it senses and what it
+    /// receives.
+    #[derive(Debug, Clone, PartialEq)]
+    pub struct Settings as "radio" {
+        /// Ticks between a robot's broadcast and its teammates' receiving it.
+        pub latency_ticks: u32 = 0, range(0, MAX_LATENCY_TICKS);
+        /// Probability that one teammate misses one message, independently per receiver.
+        pub loss: f32 = 0.0, range(0.0, 1.0);
+    }
+    internal {
+        /// Messages carry the sender's sightings. Off, robots hear teammates' poses and plans
+        /// but not what they see (no shared hypotheses): for the reacquire experiment.
+        pub share_sightings: bool = true;
+        /// Run the per-robot machinery (one tracker per robot, the channel) even when the radio
+        /// is perfect. Its result must equal the shared path's; tests and experiments use this.
+        pub per_robot: bool = false;
     }
 }
 
@@ -64,23 +59,6 @@ impl Settings {
     /// Whether each robot keeps its own tracker.
     pub fn uses_channel(&self) -> bool {
         self.per_robot || !self.perfect()
-    }
-
-    /// Checks the ranges the API allows; the message names the field.
-    pub fn validate(&self) -> Result<(), String> {
-        if self.latency_ticks > MAX_LATENCY_TICKS {
-            return Err(format!(
-                "radio.latency_ticks: {} must be in 0..={MAX_LATENCY_TICKS}",
-                self.latency_ticks
-            ));
-        }
-        if !(self.loss.is_finite() && (0.0..=1.0).contains(&self.loss)) {
-            return Err(format!(
-                "radio.loss: {} must be finite and in [0, 1]",
-                self.loss
-            ));
-        }
-        Ok(())
     }
 }
 
@@ -279,27 +257,15 @@ mod tests {
 
     #[test]
     fn settings_are_validated_naming_the_field() {
-        let ok = Settings {
-            latency_ticks: 100,
-            loss: 1.0,
-            ..Settings::default()
-        };
-        assert!(ok.validate().is_ok());
-        let e = Settings {
-            latency_ticks: 101,
-            ..Settings::default()
-        }
-        .validate()
-        .unwrap_err();
-        assert!(e.starts_with("radio.latency_ticks"), "{e}");
-        for loss in [-0.1, 1.5, f32::NAN] {
-            let e = Settings {
-                loss,
-                ..Settings::default()
-            }
-            .validate()
-            .unwrap_err();
-            assert!(e.starts_with("radio.loss"), "{e}");
+        use crate::settings::{Group, Value};
+        let mut s = Settings::default();
+        s.set("latency_ticks", Value::Integer(100)).unwrap();
+        s.set("loss", Value::Number(1.0)).unwrap();
+        let e = s.set("latency_ticks", Value::Integer(101)).unwrap_err();
+        assert_eq!(e.field, "latency_ticks", "{e}");
+        for loss in [-0.1, 1.5, f64::NAN] {
+            let e = s.set("loss", Value::Number(loss)).unwrap_err();
+            assert_eq!(e.clone().within("radio").field, "radio.loss", "{e}");
         }
         assert!(Settings::default().perfect());
         assert!(!Settings::default().uses_channel());

@@ -22,6 +22,8 @@
 //! and its tick did not advance between them. At the end it prints a summary (memory at
 //! start and end, tick p99, late ticks, refused messages by reason, stalls) and exits with
 //! status 1 if any match stalled or the server stopped answering.
+//!
+//! Long file: a measurement program, one scenario read from top to bottom.
 
 use std::collections::HashMap;
 use std::net::SocketAddr;

@@ -12,6 +12,7 @@ use std::time::Instant;
 use lasertag::maps::MapStore;
 use lasertag_core::bots::BotKind;
 use lasertag_core::planner::PlannerKind;
+use lasertag_core::settings::Group;
 use lasertag_core::world::{MatchConfig, Placement};
 use lasertag_core::world::{MatchStatus, World};
 
@@ -25,16 +26,12 @@ fn main() -> Result<(), String> {
     let (robots, opponents) = (num(0, 2)?, num(1, 1)?);
     let map = args.get(2).map_or("office", String::as_str);
     let matches = num(3, 10)? as u64;
-    let latency_ticks = num(4, 0)? as u32;
-    let loss: f32 = args.get(5).map_or(Ok(0.0), |s| {
-        s.parse().map_err(|_| format!("not a number: {s}"))
-    })?;
-    let radio = lasertag_core::radio::Settings {
-        latency_ticks,
-        loss,
-        ..Default::default()
-    };
-    radio.validate()?;
+    let mut radio = lasertag_core::radio::Settings::default();
+    for (name, i) in [("latency_ticks", 4), ("loss", 5)] {
+        if let Some(text) = args.get(i) {
+            radio.set_text(name, text).map_err(|e| e.to_string())?;
+        }
+    }
     let store = MapStore::load_dir(Path::new("maps")).map_err(|e| e.to_string())?;
     let arena = store
         .get(map)

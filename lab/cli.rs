@@ -6,6 +6,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use clap::Subcommand;
+use lasertag_core::settings::{FieldType, Group, Value};
 use lasertag_core::sim::arena::Arena;
 
 /// Reads every map of a directory into arenas (the binary's map loader).
@@ -58,7 +59,8 @@ pub enum Experiment {
         #[arg(long, default_value = "out/capture")]
         out: PathBuf,
         /// Override a weight of the coordinated planner, e.g. `--set travel_weight=0.02`
-        /// (repeatable; names as in the README's planner section).
+        /// (repeatable; the names and ranges of the API's `coordination` object, listed in
+        /// docs/settings.md).
         #[arg(long = "set", value_name = "NAME=VALUE")]
         set: Vec<String>,
         /// Whether robots localise themselves (false: odometry alone, which drifts).
@@ -201,20 +203,16 @@ pub fn run(e: Experiment, load: LoadMaps) -> Result<(), String> {
                     .split_once('=')
                     .ok_or_else(|| format!("--set {kv}: expected NAME=VALUE"))?;
                 coordination
-                    .set(k, v)
-                    .map_err(|e| format!("--set {kv}: {e}"))?;
+                    .set_text(k, v)
+                    .map_err(|e| format!("--set {e}"))?;
             }
-            let radio = lasertag_core::radio::Settings {
-                latency_ticks: radio_latency,
-                loss: radio_loss,
-                ..Default::default()
-            };
-            radio.validate().map_err(|e| {
-                format!(
-                    "--{}",
-                    e.replacen("radio.", "radio-", 1).replacen("_ticks", "", 1)
-                )
-            })?;
+            let mut radio = lasertag_core::radio::Settings::default();
+            radio
+                .set("latency_ticks", Value::Integer(radio_latency.into()))
+                .map_err(|e| format!("--radio-latency: {}", e.message))?;
+            radio
+                .set("loss", radio_loss.to_value())
+                .map_err(|e| format!("--radio-loss: {}", e.message))?;
             let cfg = crate::capture::CaptureConfig {
                 runs,
                 seed,

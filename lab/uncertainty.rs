@@ -76,9 +76,11 @@ fn config(cfg: &UncertaintyConfig, bot: BotKind, variant: Variant, seed: u64) ->
     let d = MatchConfig::default();
     let k = cfg.odometry_scale;
     let physics = lasertag_core::sim::Physics {
-        odometry_noise: d.physics.odometry_noise * k,
-        odometry_turn_per_metre: d.physics.odometry_turn_per_metre * k,
-        odometry_turn_noise: d.physics.odometry_turn_noise * k,
+        odometry: lasertag_core::sim::Odometry {
+            distance: d.physics.odometry.distance * k,
+            heading_deg_per_m: d.physics.odometry.heading_deg_per_m * k,
+            turn: d.physics.odometry.turn * k,
+        },
         ..d.physics.clone()
     };
     let localiser = lasertag_core::localise::Settings {
@@ -429,7 +431,7 @@ mod tests {
         let unaware = config(&cfg, BotKind::Wander, Variant::Unaware, 3);
         assert_eq!(aware.localiser, unaware.localiser);
         assert_eq!(aware.localiser.beams, 0);
-        assert!((aware.physics.odometry_noise - 0.2).abs() < 1e-6);
+        assert!((aware.physics.odometry.distance - 0.2).abs() < 1e-6);
         assert_eq!(
             aware.coordination.uncertainty_spread,
             lasertag_core::planner::coordinated::Settings::default().uncertainty_spread

@@ -4,14 +4,23 @@
 //!
 //! Requests are parsed strictly: unknown fields are errors, and every error names the field
 //! ([`parse`] wraps serde with the JSON path of the failure).
+//!
+//! Long file: the match API's JSON shapes in one place, to read the wire format in one
+//! file; the state, belief and event shapes are the next seam to split out.
 
 pub mod frame;
+pub mod settings;
 pub mod ws;
 
 use serde::de::DeserializeOwned;
 
 use crate::schema;
+use lasertag_core::planner::coordinated;
+use lasertag_core::settings::FieldError;
+use lasertag_core::sim::Odometry;
+use lasertag_core::{localise, radio, tracker};
 use serde::{Deserialize, Serialize};
+use settings::{Echo, Overrides};
 use utoipa::ToSchema;
 
 use lasertag_core::bots::BotKind;
@@ -42,13 +51,6 @@ fn mm(v: f32) -> f64 {
 
 fn rad(v: f32) -> f64 {
     ((v as f64) * 10_000.0).round() / 10_000.0
-}
-
-/// A setting echoed as it was asked: f32 → f64 would print 0.2 as 0.20000000298, and a
-/// trip through another unit adds noise digits of its own.
-fn as_asked(v: f32, places: i32) -> f64 {
-    let k = 10f64.powi(places);
-    (v as f64 * k).round() / k
 }
 
 #[derive(Debug, Serialize, ToSchema)]
@@ -110,335 +112,6 @@ pub enum StartPlacement {
     Random,
 }
 
-/// Settings of the team's opponent tracker.
-#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize, ToSchema)]
-#[serde(deny_unknown_fields)]
-pub struct TrackerSettings {
-    /// Particles in each role's filter (10..=100000, default 1000).
-    #[serde(default, deserialize_with = "schema::opt_int")]
-    #[schema(minimum = 10, maximum = 100_000)]
-    pub particles_per_role: Option<i64>,
-    /// Merge roles whose clouds become indistinguishable (default true).
-    pub merge: Option<bool>,
-    /// Ticks between merge checks (1..=10000, default 20).
-    #[serde(default, deserialize_with = "schema::opt_int")]
-    #[schema(minimum = 1, maximum = 10_000)]
-    pub merge_interval: Option<i64>,
-    /// Symmetric KL divergence under which two roles merge ((0, 1e6], default 0.7).
-    #[schema(exclusive_minimum = 0.0, maximum = 1e6)]
-    pub kl_cutoff: Option<f64>,
-    /// Cell size in metres of the merge histogram (0.1..=10, default 1.0).
-    #[schema(minimum = 0.1, maximum = 10.0)]
-    pub grid_cell: Option<f64>,
-}
-
-/// Weights of the `coordinated` planner; see the README's planner section for what each does.
-#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize, ToSchema)]
-#[serde(deny_unknown_fields)]
-pub struct CoordinationSettings {
-    /// Extra worth of a hypothesis straight ahead over one at the edge of view (0..=10, default 0.5).
-    #[schema(minimum = 0.0, maximum = 10.0)]
-    pub centring_weight: Option<f64>,
-    /// Worth lost per second of travel, in shares of all hypotheses (0..=1, default 0.01).
-    #[schema(minimum = 0.0, maximum = 1.0)]
-    pub travel_weight: Option<f64>,
-    /// Worth lost for a destination on top of a teammate's (0..=10, default 0.05).
-    #[schema(minimum = 0.0, maximum = 10.0)]
-    pub crowding_weight: Option<f64>,
-    /// Metres over which the crowding penalty falls to 0 ((0, 50], default 3).
-    #[schema(exclusive_minimum = 0.0, maximum = 50.0)]
-    pub crowding_radius: Option<f64>,
-    /// Share of a hypothesis that still counts once a teammate will observe it (0..=1, default 0.2).
-    #[schema(minimum = 0.0, maximum = 1.0)]
-    pub claim_keep: Option<f64>,
-    /// Extra worth of the goal a robot already has (0..=1, default 0).
-    #[schema(minimum = 0.0, maximum = 1.0)]
-    pub keep_bonus: Option<f64>,
-    /// Weight of a suspicious role's hypotheses relative to others' ((0, 100], default 2).
-    #[schema(exclusive_minimum = 0.0, maximum = 100.0)]
-    pub suspicious_weight: Option<f64>,
-    /// Ticks between full negotiation rounds (1..=12000, default 60).
-    #[serde(default, deserialize_with = "schema::opt_int")]
-    #[schema(minimum = 1, maximum = 12_000)]
-    pub round_ticks: Option<i64>,
-    /// A goal is dropped when its view holds less than this share of its worth when chosen (0..=1, default 0.3).
-    #[schema(minimum = 0.0, maximum = 1.0)]
-    pub worthless_share: Option<f64>,
-    /// ... or less than this share of all hypotheses (0..=1, default 0.01).
-    #[schema(minimum = 0.0, maximum = 1.0)]
-    pub worthless_floor: Option<f64>,
-    /// Localisation spread (m) above which a robot counts as uncertain ((0, 10], default 0.15).
-    pub uncertainty_spread: Option<f64>,
-    /// Worth an uncertain robot adds to a destination that sees a landmark (0..=1, default 0.1).
-    pub landmark_weight: Option<f64>,
-    /// Worth an uncertain robot loses per metre of path through narrow passages (0..=1, default 0.02).
-    pub narrow_weight: Option<f64>,
-    /// Seconds a pursuer looks ahead to keep its target in view, 0 = off (0..=2, default 0.5).
-    pub lookahead: Option<f64>,
-}
-
-/// The coordinated planner's weights a match runs with, defaults filled in.
-#[derive(Debug, Clone, PartialEq, Serialize, ToSchema)]
-pub struct CoordinationConfig {
-    pub centring_weight: f64,
-    pub travel_weight: f64,
-    pub crowding_weight: f64,
-    pub crowding_radius: f64,
-    pub claim_keep: f64,
-    pub keep_bonus: f64,
-    pub suspicious_weight: f64,
-    pub round_ticks: u64,
-    pub worthless_share: f64,
-    pub worthless_floor: f64,
-    pub uncertainty_spread: f64,
-    pub landmark_weight: f64,
-    pub narrow_weight: f64,
-    pub lookahead: f64,
-}
-
-impl From<&lasertag_core::planner::coordinated::Settings> for CoordinationConfig {
-    fn from(s: &lasertag_core::planner::coordinated::Settings) -> Self {
-        CoordinationConfig {
-            centring_weight: s.centring_weight as f64,
-            travel_weight: s.travel_weight as f64,
-            crowding_weight: s.crowding_weight as f64,
-            crowding_radius: s.crowding_radius as f64,
-            claim_keep: s.claim_keep as f64,
-            keep_bonus: s.keep_bonus as f64,
-            suspicious_weight: s.suspicious_weight as f64,
-            round_ticks: s.round_ticks,
-            worthless_share: s.worthless_share as f64,
-            worthless_floor: s.worthless_floor as f64,
-            uncertainty_spread: s.uncertainty_spread as f64,
-            landmark_weight: s.landmark_weight as f64,
-            narrow_weight: s.narrow_weight as f64,
-            lookahead: s.lookahead as f64,
-        }
-    }
-}
-
-impl CoordinationSettings {
-    fn validate(self) -> Result<lasertag_core::planner::coordinated::Settings, String> {
-        let d = lasertag_core::planner::coordinated::Settings::default();
-        let f = |name: &str, v: Option<f64>, default: f32, hi: f64| -> Result<f32, String> {
-            match v {
-                None => Ok(default),
-                Some(v) => {
-                    finite_in(&format!("coordination.{name}"), v, 0.0, hi, false).map(|v| v as f32)
-                }
-            }
-        };
-        let crowding_radius = f(
-            "crowding_radius",
-            self.crowding_radius,
-            d.crowding_radius,
-            50.0,
-        )?;
-        if crowding_radius <= 0.0 {
-            return Err("coordination.crowding_radius: must be greater than 0".into());
-        }
-        let suspicious_weight = f(
-            "suspicious_weight",
-            self.suspicious_weight,
-            d.suspicious_weight,
-            100.0,
-        )?;
-        if suspicious_weight <= 0.0 {
-            // A weight of 0 would make a team whose roles are all suspicious see no
-            // hypotheses at all, and stand still.
-            return Err("coordination.suspicious_weight: must be greater than 0".into());
-        }
-        let uncertainty_spread = f(
-            "uncertainty_spread",
-            self.uncertainty_spread,
-            d.uncertainty_spread,
-            10.0,
-        )?;
-        if uncertainty_spread <= 0.0 {
-            // Every robot, even a perfectly localised one, would count as uncertain.
-            return Err("coordination.uncertainty_spread: must be greater than 0".into());
-        }
-        Ok(lasertag_core::planner::coordinated::Settings {
-            centring_weight: f(
-                "centring_weight",
-                self.centring_weight,
-                d.centring_weight,
-                10.0,
-            )?,
-            travel_weight: f("travel_weight", self.travel_weight, d.travel_weight, 1.0)?,
-            crowding_weight: f(
-                "crowding_weight",
-                self.crowding_weight,
-                d.crowding_weight,
-                10.0,
-            )?,
-            crowding_radius,
-            claim_keep: f("claim_keep", self.claim_keep, d.claim_keep, 1.0)?,
-            keep_bonus: f("keep_bonus", self.keep_bonus, d.keep_bonus, 1.0)?,
-            suspicious_weight,
-            round_ticks: match self.round_ticks {
-                None => d.round_ticks,
-                Some(v) => in_range("coordination.round_ticks", v, 1, 12_000)? as u64,
-            },
-            worthless_share: f(
-                "worthless_share",
-                self.worthless_share,
-                d.worthless_share,
-                1.0,
-            )?,
-            worthless_floor: f(
-                "worthless_floor",
-                self.worthless_floor,
-                d.worthless_floor,
-                1.0,
-            )?,
-            uncertainty_spread,
-            landmark_weight: f(
-                "landmark_weight",
-                self.landmark_weight,
-                d.landmark_weight,
-                1.0,
-            )?,
-            narrow_weight: f("narrow_weight", self.narrow_weight, d.narrow_weight, 1.0)?,
-            lookahead: f(
-                "lookahead",
-                self.lookahead,
-                d.lookahead,
-                lasertag_core::planner::coordinated::MAX_LOOKAHEAD as f64,
-            )?,
-            ..d
-        })
-    }
-}
-
-/// The team radio. Perfect by default: with a latency or a loss each robot keeps
-/// its own tracker, fed by what it senses and what it receives.
-#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize, ToSchema)]
-#[serde(deny_unknown_fields)]
-pub struct RadioSettings {
-    /// Ticks between a robot's broadcast and its teammates' receiving it (0..=100, default 0).
-    pub latency_ticks: Option<i64>,
-    /// Probability that one teammate misses one message, independently per receiver
-    /// ([0, 1], default 0).
-    pub loss: Option<f64>,
-}
-
-/// The radio a match runs with, defaults filled in.
-#[derive(Debug, Clone, PartialEq, Serialize, ToSchema)]
-pub struct RadioConfig {
-    pub latency_ticks: u32,
-    pub loss: f64,
-}
-
-impl From<&lasertag_core::radio::Settings> for RadioConfig {
-    fn from(s: &lasertag_core::radio::Settings) -> Self {
-        RadioConfig {
-            latency_ticks: s.latency_ticks,
-            loss: as_asked(s.loss, 6),
-        }
-    }
-}
-
-impl RadioSettings {
-    fn validate(self) -> Result<lasertag_core::radio::Settings, String> {
-        let d = lasertag_core::radio::Settings::default();
-        let latency_ticks = match self.latency_ticks {
-            None => d.latency_ticks,
-            Some(v) => in_range(
-                "radio.latency_ticks",
-                v,
-                0,
-                lasertag_core::radio::MAX_LATENCY_TICKS as i64,
-            )? as u32,
-        };
-        let loss = match self.loss {
-            None => d.loss,
-            Some(v) => finite_in("radio.loss", v, 0.0, 1.0, false)? as f32,
-        };
-        let settings = lasertag_core::radio::Settings {
-            latency_ticks,
-            loss,
-            ..d
-        };
-        settings.validate()?;
-        Ok(settings)
-    }
-}
-
-/// The robots' wheel odometry noise (game-rules.md: "about 5% of distance and 2° per metre,
-/// configurable"). Each is a standard deviation drawn every tick on the tick's motion. The
-/// robots' localisers model the same noise, inflated as filters should be.
-#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize, ToSchema)]
-#[serde(deny_unknown_fields)]
-pub struct OdometrySettings {
-    /// Error of the distance driven, as a fraction of it (0..=1, default 0.05).
-    #[schema(minimum = 0.0, maximum = 1.0)]
-    pub distance: Option<f64>,
-    /// Heading error per metre driven, degrees (0..=45, default 2).
-    #[schema(minimum = 0.0, maximum = 45.0)]
-    pub heading_deg_per_m: Option<f64>,
-    /// Error of a turn, as a fraction of it (0..=1, default 0.02).
-    #[schema(minimum = 0.0, maximum = 1.0)]
-    pub turn: Option<f64>,
-}
-
-/// The odometry noise a match runs with, defaults filled in.
-#[derive(Debug, Clone, PartialEq, Serialize, ToSchema)]
-pub struct OdometryConfig {
-    pub distance: f64,
-    pub heading_deg_per_m: f64,
-    pub turn: f64,
-}
-
-impl From<&lasertag_core::sim::Physics> for OdometryConfig {
-    fn from(p: &lasertag_core::sim::Physics) -> Self {
-        OdometryConfig {
-            distance: as_asked(p.odometry_noise, 6),
-            // Degrees → radians → degrees in f32 gives 30.000002 back for 30.
-            heading_deg_per_m: as_asked(p.odometry_turn_per_metre.to_degrees(), 4),
-            turn: as_asked(p.odometry_turn_noise, 6),
-        }
-    }
-}
-
-impl OdometrySettings {
-    /// `physics` with this odometry noise.
-    fn validate(
-        self,
-        physics: lasertag_core::sim::Physics,
-    ) -> Result<lasertag_core::sim::Physics, String> {
-        let mut p = physics;
-        if let Some(v) = self.distance {
-            p.odometry_noise = finite_in("odometry.distance", v, 0.0, 1.0, false)? as f32;
-        }
-        if let Some(v) = self.heading_deg_per_m {
-            p.odometry_turn_per_metre =
-                (finite_in("odometry.heading_deg_per_m", v, 0.0, 45.0, false)? as f32).to_radians();
-        }
-        if let Some(v) = self.turn {
-            p.odometry_turn_noise = finite_in("odometry.turn", v, 0.0, 1.0, false)? as f32;
-        }
-        Ok(p)
-    }
-}
-
-/// The robots' localisers (used when `localisation` is on).
-#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize, ToSchema)]
-#[serde(deny_unknown_fields)]
-pub struct LocaliserSettings {
-    /// Laser beams weighed per update, evenly spread over the scan (0..=181, default 30);
-    /// 0 localises from landmarks and odometry alone.
-    #[serde(default, deserialize_with = "schema::opt_int")]
-    #[schema(minimum = 0, maximum = 181)]
-    pub beams: Option<i64>,
-}
-
-/// The localiser settings a match runs with, defaults filled in.
-#[derive(Debug, Clone, PartialEq, Serialize, ToSchema)]
-pub struct LocaliserConfig {
-    pub beams: usize,
-}
-
 /// Body of `POST /api/matches`. Every field but `map` is optional.
 #[derive(Debug, Clone, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
@@ -457,9 +130,12 @@ pub struct CreateMatch {
     pub opponent_control: Option<OpponentControl>,
     pub opponent_bot: Option<OpponentBot>,
     pub planner: Option<Planner>,
-    pub tracker: Option<TrackerSettings>,
+    /// The team's opponent tracker (docs/settings.md).
+    #[schema(schema_with = settings::tracker_request)]
+    pub tracker: Option<Overrides<tracker::Settings>>,
     /// Weights of the `coordinated` planner (ignored by the others).
-    pub coordination: Option<CoordinationSettings>,
+    #[schema(schema_with = settings::coordination_request)]
+    pub coordination: Option<Overrides<coordinated::Settings>>,
     pub clock: Option<Clock>,
     /// 0..=18446744073709551615 (default 0).
     #[serde(default, deserialize_with = "schema::opt_seed")]
@@ -482,40 +158,15 @@ pub struct CreateMatch {
     /// false leaves each robot its odometry alone, which drifts).
     pub localisation: Option<bool>,
     /// The team radio (default perfect: `{"latency_ticks": 0, "loss": 0.0}`).
-    pub radio: Option<RadioSettings>,
+    #[schema(schema_with = settings::radio_request)]
+    pub radio: Option<Overrides<radio::Settings>>,
     /// The robots' wheel odometry noise (default
     /// `{"distance": 0.05, "heading_deg_per_m": 2, "turn": 0.02}`).
-    pub odometry: Option<OdometrySettings>,
+    #[schema(schema_with = settings::odometry_request)]
+    pub odometry: Option<Overrides<Odometry>>,
     /// The robots' localisers (default `{"beams": 30}`).
-    pub localiser: Option<LocaliserSettings>,
-}
-
-/// The tracker settings a match runs with, defaults filled in.
-#[derive(Debug, Clone, PartialEq, Serialize, ToSchema)]
-pub struct TrackerConfig {
-    pub particles_per_role: i64,
-    pub merge: bool,
-    pub merge_interval: i64,
-    pub kl_cutoff: f64,
-    pub grid_cell: f64,
-}
-
-impl From<&lasertag_core::tracker::Settings> for TrackerConfig {
-    fn from(s: &lasertag_core::tracker::Settings) -> Self {
-        TrackerConfig {
-            particles_per_role: s.particles_per_role as i64,
-            merge: s.merge,
-            merge_interval: s.merge_interval as i64,
-            kl_cutoff: s.kl_cutoff as f64,
-            grid_cell: s.grid_cell as f64,
-        }
-    }
-}
-
-impl Default for TrackerConfig {
-    fn default() -> Self {
-        TrackerConfig::from(&lasertag_core::tracker::Settings::default())
-    }
+    #[schema(schema_with = settings::localiser_request)]
+    pub localiser: Option<Overrides<localise::Settings>>,
 }
 
 /// A validated `CreateMatch`: the core's config plus what only the shell cares about.
@@ -527,29 +178,37 @@ pub struct MatchRequest {
     pub bots_joinable: bool,
 }
 
-fn in_range(field: &str, v: i64, lo: i64, hi: i64) -> Result<i64, String> {
-    if (lo..=hi).contains(&v) {
-        Ok(v)
-    } else {
-        Err(format!("{field}: {v} must be in {lo}..={hi}"))
+fn refused(field: &str, message: String) -> FieldError {
+    FieldError {
+        field: field.to_string(),
+        message,
     }
 }
 
-fn finite_in(field: &str, v: f64, lo: f64, hi: f64, lo_open: bool) -> Result<f64, String> {
+fn in_range(field: &str, v: i64, lo: i64, hi: i64) -> Result<i64, FieldError> {
+    if (lo..=hi).contains(&v) {
+        Ok(v)
+    } else {
+        Err(refused(field, format!("{v} must be in {lo}..={hi}")))
+    }
+}
+
+fn finite_in(field: &str, v: f64, lo: f64, hi: f64, lo_open: bool) -> Result<f64, FieldError> {
     let ok = v.is_finite() && (if lo_open { v > lo } else { v >= lo }) && v <= hi;
     if ok {
         Ok(v)
     } else {
         let open = if lo_open { "(" } else { "[" };
-        Err(format!(
-            "{field}: {v} must be finite and in {open}{lo}, {hi}]"
+        Err(refused(
+            field,
+            format!("{v} must be finite and in {open}{lo}, {hi}]"),
         ))
     }
 }
 
 impl CreateMatch {
-    /// Checks ranges and fills in defaults.
-    pub fn validate(self) -> Result<MatchRequest, String> {
+    /// Checks ranges and fills in defaults; an error names the field.
+    pub fn validate(self) -> Result<MatchRequest, FieldError> {
         let robots = in_range("robots", self.robots.unwrap_or(2), 1, 8)? as usize;
         let opponents = in_range("opponents", self.opponents.unwrap_or(1), 1, 32)? as usize;
         let time_limit_s = finite_in(
@@ -559,44 +218,16 @@ impl CreateMatch {
             86_400.0,
             true,
         )?;
-        let t = self.tracker.unwrap_or_default();
-        let d = TrackerConfig::default();
-        let tracker = TrackerConfig {
-            particles_per_role: in_range(
-                "tracker.particles_per_role",
-                t.particles_per_role.unwrap_or(d.particles_per_role),
-                10,
-                100_000,
-            )?,
-            merge: t.merge.unwrap_or(d.merge),
-            merge_interval: in_range(
-                "tracker.merge_interval",
-                t.merge_interval.unwrap_or(d.merge_interval),
-                1,
-                10_000,
-            )?,
-            kl_cutoff: finite_in(
-                "tracker.kl_cutoff",
-                t.kl_cutoff.unwrap_or(d.kl_cutoff),
-                0.0,
-                1e6,
-                true,
-            )?,
-            grid_cell: finite_in(
-                "tracker.grid_cell",
-                t.grid_cell.unwrap_or(d.grid_cell),
-                0.1,
-                10.0,
-                false,
-            )?,
-        };
-        let check_points = |field: &str, pts: &[&[f64]]| -> Result<(), String> {
+        let check_points = |field: &str, pts: &[&[f64]]| -> Result<(), FieldError> {
             for (i, p) in pts.iter().enumerate() {
                 if let Some(v) = p
                     .iter()
                     .find(|v| !v.is_finite() || v.abs() > schema::MAX_COORDINATE)
                 {
-                    return Err(format!("{field}[{i}]: {v} is not a finite coordinate"));
+                    return Err(refused(
+                        &format!("{field}[{i}]"),
+                        format!("{v} is not a finite coordinate"),
+                    ));
                 }
             }
             Ok(())
@@ -646,26 +277,25 @@ impl CreateMatch {
             placement,
             ..MatchConfig::default()
         };
-        let config = MatchConfig {
-            tracker: lasertag_core::tracker::Settings {
-                particles_per_role: tracker.particles_per_role as usize,
-                merge: tracker.merge,
-                merge_interval: tracker.merge_interval as u64,
-                kl_cutoff: tracker.kl_cutoff as f32,
-                grid_cell: tracker.grid_cell as f32,
-                ..lasertag_core::tracker::Settings::default()
-            },
-            coordination: self.coordination.unwrap_or_default().validate()?,
-            localisation: self.localisation.unwrap_or(true),
-            radio: self.radio.unwrap_or_default().validate()?,
-            ..config
+        let physics = lasertag_core::sim::Physics {
+            odometry: self
+                .odometry
+                .unwrap_or_default()
+                .apply(Odometry::default())?,
+            ..config.physics
         };
-        let physics = self.odometry.unwrap_or_default().validate(config.physics)?;
-        let mut localiser = lasertag_core::localise::Settings::for_odometry(&physics);
-        if let Some(beams) = self.localiser.unwrap_or_default().beams {
-            localiser.beams = in_range("localiser.beams", beams, 0, 181)? as usize;
-        }
+        let localiser = self
+            .localiser
+            .unwrap_or_default()
+            .apply(localise::Settings::for_odometry(&physics))?;
         let config = MatchConfig {
+            tracker: self.tracker.unwrap_or_default().apply(config.tracker)?,
+            coordination: self
+                .coordination
+                .unwrap_or_default()
+                .apply(config.coordination)?,
+            localisation: self.localisation.unwrap_or(true),
+            radio: self.radio.unwrap_or_default().apply(config.radio)?,
             localiser,
             physics,
             ..config
@@ -766,18 +396,25 @@ pub struct MatchSummary {
     pub opponent_bot: OpponentBot,
     /// The planner asked for.
     pub planner: Planner,
-    /// The planner that runs (differs while a planner falls back to another).
+    /// Deprecated: always equal to `planner` (no planner falls back to another); kept so
+    /// that clients reading it do not break.
+    #[schema(deprecated)]
     pub planner_active: Planner,
-    pub tracker: TrackerConfig,
-    pub coordination: CoordinationConfig,
+    #[schema(schema_with = settings::tracker_echo)]
+    pub tracker: Echo<tracker::Settings>,
+    #[schema(schema_with = settings::coordination_echo)]
+    pub coordination: Echo<coordinated::Settings>,
     /// Whether robots localise themselves (else their estimate is their odometry alone).
     pub localisation: bool,
     /// The team radio; with a latency or loss each robot keeps its own belief.
-    pub radio: RadioConfig,
+    #[schema(schema_with = settings::radio_echo)]
+    pub radio: Echo<radio::Settings>,
     /// The robots' wheel odometry noise.
-    pub odometry: OdometryConfig,
+    #[schema(schema_with = settings::odometry_echo)]
+    pub odometry: Echo<Odometry>,
     /// The robots' localisers (what they weigh when `localisation` is on).
-    pub localiser: LocaliserConfig,
+    #[schema(schema_with = settings::localiser_echo)]
+    pub localiser: Echo<localise::Settings>,
     pub seed: u64,
     pub players: usize,
     /// WebSocket spectators connected now.
@@ -833,14 +470,12 @@ pub fn summary(world: &World, meta: &MatchMeta) -> MatchSummary {
         },
         planner: planner_dto(world.team.kind()),
         planner_active: planner_dto(world.team.kind()),
-        tracker: TrackerConfig::from(&c.tracker),
-        coordination: CoordinationConfig::from(&c.coordination),
+        tracker: Echo(c.tracker.clone()),
+        coordination: Echo(c.coordination.clone()),
         localisation: c.localisation,
-        radio: RadioConfig::from(&c.radio),
-        odometry: OdometryConfig::from(&c.physics),
-        localiser: LocaliserConfig {
-            beams: c.localiser.beams,
-        },
+        radio: Echo(c.radio.clone()),
+        odometry: Echo(c.physics.odometry),
+        localiser: Echo(c.localiser.clone()),
         seed: c.seed,
         players: meta.players,
         spectators: meta.spectators,
@@ -1271,40 +906,4 @@ pub struct Joined {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn create_match_defaults_and_ranges() {
-        let m: CreateMatch = parse(br#"{"map": "office"}"#).unwrap();
-        let r = m.validate().unwrap();
-        assert_eq!(r.config.robots, 2);
-        assert_eq!(r.config.time_limit_ticks, 6000);
-        assert_eq!(r.config.tracker.particles_per_role, 1000);
-        let m: CreateMatch = parse(br#"{"map": "office", "robots": 9}"#).unwrap();
-        assert_eq!(m.validate().unwrap_err(), "robots: 9 must be in 1..=8");
-        let e = parse::<CreateMatch>(br#"{"map": "office", "robots": "two"}"#).unwrap_err();
-        assert!(e.starts_with("robots: invalid type"), "{e}");
-        let e = parse::<CreateMatch>(br#"{"map": "office", "tracker": {"merge": 1}}"#).unwrap_err();
-        assert!(e.starts_with("tracker.merge: invalid type"), "{e}");
-        let e = parse::<CreateMatch>(br#"{"map": "office", "colour": 1}"#).unwrap_err();
-        assert!(e.contains("unknown field `colour`"), "{e}");
-        let e = parse::<CreateMatch>(br#"{"map": "office", "time_limit_s": 1e999}"#).unwrap_err();
-        assert!(e.starts_with("time_limit_s:"), "{e}");
-        let e = parse::<CreateMatch>(br#"{"robots": 2}"#).unwrap_err();
-        assert!(e.contains("missing field `map`"), "{e}");
-        assert!(r.config.localisation, "robots localise unless told not to");
-        let m: CreateMatch = parse(br#"{"map": "office", "localisation": false}"#).unwrap();
-        assert!(!m.validate().unwrap().config.localisation);
-    }
-
-    #[test]
-    fn opponent_commands_take_exactly_one_field() {
-        let c: OpponentCommand = parse(br#"{"stop": true}"#).unwrap();
-        assert!(c.order().is_ok());
-        let c: OpponentCommand = parse(br#"{"stop": true, "tag": true}"#).unwrap();
-        assert!(c.order().is_err());
-        let c: OpponentCommand = parse(br#"{}"#).unwrap();
-        assert!(c.order().is_err());
-    }
-}
+mod tests;

@@ -136,7 +136,7 @@ async fn play_and_spectate_in_headless_chromium() {
         .await;
     b.navigate(&format!("{base}/#/play/{id}")).await;
     // Wait for *this* match: until the page has fetched its token, `__lasertag` still
-    // describes the showcase game it was playing (a race seen in CI, stop 9).
+    // describes the showcase game it was playing (a race seen in CI).
     b.wait_for(
         &format!("__lasertag.matchId === '{id}' && __lasertag.role === 'player' && __lasertag.snapshots > 5 && __lasertag.drawn"),
         20,

@@ -18,7 +18,7 @@ fn maps() -> &'static MapStore {
     })
 }
 
-/// Checks the invariants of the README's Invariants section on `world` after a tick.
+/// Checks the core's invariants (ARCHITECTURE.md, Invariants) on `world` after a tick.
 fn check(world: &World) -> Result<(), TestCaseError> {
     let untagged = world.opponents.iter().filter(|o| !o.tagged).count() as u32;
     prop_assert_eq!(

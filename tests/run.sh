@@ -13,6 +13,9 @@ if ! command -v chromium >/dev/null 2>&1 && [ -z "${LASERTAG_CHROMIUM:-}" ]; the
   $SUDO apt-get update -qq
   DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq chromium >/dev/null
 fi
+# Lints first (tests/tidy.rs checks formatting and the floors; clippy would wait on the build
+# directory that `cargo test` holds if the tidy test ran it).
+cargo clippy --locked --workspace --all-targets -- -D warnings
 cargo test --locked --workspace --all-targets
 
 # API conformance: schemathesis (from PyPI, pinned) against the real server's OpenAPI

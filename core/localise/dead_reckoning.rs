@@ -122,9 +122,11 @@ mod tests {
         for physics in [
             Physics::default(),
             Physics {
-                odometry_noise: 0.2,
-                odometry_turn_per_metre: 8f32.to_radians(),
-                odometry_turn_noise: 0.1,
+                odometry: crate::sim::Odometry {
+                    distance: 0.2,
+                    heading_deg_per_m: 8.0,
+                    turn: 0.1,
+                },
                 ..Physics::default()
             },
         ] {

@@ -13,6 +13,8 @@
 //!   half uniformly over free space and half from the poses a landmark sighting allows.
 //!
 //! Pure core: no clock, no I/O; all randomness comes from the caller's RNG.
+//!
+//! Long file: the filter and its likelihood field; the field is the next seam to split out.
 
 pub mod dead_reckoning;
 
@@ -26,49 +28,59 @@ use crate::sim::arena::Arena;
 use crate::sim::sensors::{Detection, LandmarkSighting, OdometryStep, beam_bearing};
 use crate::sim::{AGENT_RADIUS, Pose, gaussian, wrap_angle};
 
-/// Tuning of the filter (defaults as in AMCL where they apply).
-#[derive(Debug, Clone, PartialEq)]
-pub struct Settings {
-    pub min_particles: usize,
-    pub max_particles: usize,
-    /// Laser beams used per update (evenly spread over the scan).
-    pub beams: usize,
-    /// σ of the likelihood field's Gaussian (m): laser noise plus map-grid quantisation.
-    pub sigma_hit: f32,
-    pub z_hit: f32,
-    pub z_rand: f32,
-    /// Odometry motion noise: rotation from rotation, rotation from translation (rad per m),
-    /// translation from translation, translation from rotation (m per rad). Std-dev form.
-    pub alpha: [f32; 4],
-    /// σ of a landmark's range (m) and bearing (rad) as the filter models them.
-    pub landmark_range_sigma: f32,
-    pub landmark_bearing_sigma: f32,
-    /// KLD-sampling: error bound ε, upper quantile z of the normal, bin size (m, rad).
-    pub kld_err: f64,
-    pub kld_z: f64,
-    pub bin_xy: f32,
-    pub bin_theta: f32,
-    /// Augmented MCL smoothing rates of the short- and long-term average likelihood.
-    pub alpha_slow: f64,
-    pub alpha_fast: f64,
-    /// Inject only when the short-term likelihood has fallen below this fraction of the
-    /// long-term one (1 = plain augmented MCL, injecting at any dip). Plain MCL lets one
-    /// injected particle outscore the true cloud in the hallway when an opponent up close
-    /// blocks most beams (a 1.2 m jump in one update); but 0.5 made the hallway without
-    /// landmarks far worse (mean 0.8 m against 0.02 m), so it stays at 1 until tuned.
-    pub inject_below: f64,
-    /// Measurement updates happen once the robot has moved this far (m) or turned this much
-    /// (rad) since the last one, or every `update_every` calls regardless.
-    pub update_min_d: f32,
-    pub update_min_a: f32,
-    pub update_every: u32,
-    /// Spread of the initial cloud around the known start pose (m, rad).
-    pub init_sigma_xy: f32,
-    pub init_sigma_theta: f32,
-    /// Jitter added to resampled particles (m, rad) ("roughening"): without it a robot that
-    /// stands still collapses onto copies of a few particles and can never move its belief.
-    pub roughen_xy: f32,
-    pub roughen_theta: f32,
+crate::settings! {
+    /// Tuning of the filter (defaults as in AMCL where they apply); only `beams` is a
+    /// match setting (the match's `localiser` object).
+    #[derive(Debug, Clone, PartialEq)]
+    pub struct Settings as "localiser" {
+        /// Laser beams weighed per update, evenly spread over the scan; 0 localises from
+        /// landmarks and odometry alone.
+        pub beams: usize = 30, range(0, 181);
+    }
+    internal {
+        pub min_particles: usize = 500;
+        pub max_particles: usize = 2000;
+        /// σ of the likelihood field's Gaussian (m): laser noise plus map-grid quantisation.
+        pub sigma_hit: f32 = 0.1;
+        pub z_hit: f32 = 0.9;
+        pub z_rand: f32 = 0.1;
+        /// Odometry motion noise: rotation from rotation, rotation from translation (rad per
+        /// m), translation from translation, translation from rotation (m per rad). Std-dev
+        /// form.
+        pub alpha: [f32; 4] = Settings::alpha_for(&crate::sim::Physics::default());
+        /// σ of a landmark's range (m) and bearing (rad) as the filter models them.
+        pub landmark_range_sigma: f32 = 0.1;
+        pub landmark_bearing_sigma: f32 = 4f32.to_radians();
+        /// KLD-sampling: error bound ε, upper quantile z of the normal, bin size (m, rad).
+        pub kld_err: f64 = 0.05;
+        pub kld_z: f64 = 2.33;
+        pub bin_xy: f32 = 0.2;
+        pub bin_theta: f32 = 10f32.to_radians();
+        /// Augmented MCL smoothing rates of the short- and long-term average likelihood.
+        pub alpha_slow: f64 = 0.001;
+        pub alpha_fast: f64 = 0.1;
+        /// Inject only when the short-term likelihood has fallen below this fraction of the
+        /// long-term one (1 = plain augmented MCL, injecting at any dip). Plain MCL lets one
+        /// injected particle outscore the true cloud in the hallway when an opponent up close
+        /// blocks most beams (a 1.2 m jump in one update); but 0.5 made the hallway without
+        /// landmarks far worse (mean 0.8 m against 0.02 m), so it stays at 1 until tuned.
+        pub inject_below: f64 = 1.0;
+        /// Measurement updates happen once the robot has moved this far (m) or turned this
+        /// much (rad) since the last one, or every `update_every` calls regardless. AMCL's
+        /// defaults (0.2 m, π/6): the odometry between updates drifts by about a centimetre,
+        /// and updating on every tick made the filter 70 % of a tick's cost.
+        pub update_min_d: f32 = 0.2;
+        pub update_min_a: f32 = std::f32::consts::FRAC_PI_6;
+        pub update_every: u32 = 10;
+        /// Spread of the initial cloud around the known start pose (m, rad).
+        pub init_sigma_xy: f32 = 0.05;
+        pub init_sigma_theta: f32 = 2f32.to_radians();
+        /// Jitter added to resampled particles (m, rad) ("roughening"): without it a robot
+        /// that stands still collapses onto copies of a few particles and can never move its
+        /// belief.
+        pub roughen_xy: f32 = 0.01;
+        pub roughen_theta: f32 = 0.5f32.to_radians();
+    }
 }
 
 impl Settings {
@@ -91,47 +103,15 @@ impl Settings {
         // Ratios, so that the default noise gives the tuned values to the last bit.
         let scaled = |tuned: f32, v: f32, default: f32| tuned * (v / default);
         [
-            scaled(TUNED[0], p.odometry_turn_noise, d.odometry_turn_noise),
+            scaled(TUNED[0], p.odometry.turn, d.odometry.turn),
             scaled(
                 TUNED[1],
-                p.odometry_turn_per_metre,
-                d.odometry_turn_per_metre,
+                p.odometry.heading_per_metre(),
+                d.odometry.heading_per_metre(),
             ),
-            scaled(TUNED[2], p.odometry_noise, d.odometry_noise),
+            scaled(TUNED[2], p.odometry.distance, d.odometry.distance),
             TUNED[3],
         ]
-    }
-}
-
-impl Default for Settings {
-    fn default() -> Self {
-        Settings {
-            min_particles: 500,
-            max_particles: 2000,
-            beams: 30,
-            sigma_hit: 0.1,
-            z_hit: 0.9,
-            z_rand: 0.1,
-            alpha: Settings::alpha_for(&crate::sim::Physics::default()),
-            landmark_range_sigma: 0.1,
-            landmark_bearing_sigma: 4f32.to_radians(),
-            kld_err: 0.05,
-            kld_z: 2.33,
-            bin_xy: 0.2,
-            bin_theta: 10f32.to_radians(),
-            alpha_slow: 0.001,
-            alpha_fast: 0.1,
-            inject_below: 1.0,
-            // AMCL's defaults (0.2 m, π/6): the odometry between updates drifts by about a
-            // centimetre, and updating on every tick made the filter 70 % of a tick's cost.
-            update_min_d: 0.2,
-            update_min_a: std::f32::consts::FRAC_PI_6,
-            update_every: 10,
-            init_sigma_xy: 0.05,
-            init_sigma_theta: 2f32.to_radians(),
-            roughen_xy: 0.01,
-            roughen_theta: 0.5f32.to_radians(),
-        }
     }
 }
 

@@ -168,7 +168,10 @@ fn the_default_motion_model_is_the_tuned_one() {
         [0.05, 3f32.to_radians(), 0.08, 0.01]
     );
     let noisy = Physics {
-        odometry_noise: 0.2,
+        odometry: crate::sim::Odometry {
+            distance: 0.2,
+            ..Default::default()
+        },
         ..Physics::default()
     };
     assert!(

@@ -29,6 +29,9 @@
 //! last heard otherwise ([`Mate`]). With an imperfect radio a robot also scores with its own
 //! tracker, and nobody moves a teammate: a robot stuck behind one with a higher index asks
 //! it over the radio to step aside, and that robot does so itself when it hears.
+//!
+//! Long file: negotiation, scoring and goal keeping share one private robot state, and
+//! its unit tests reach into it; scoring and passages are the next seams to split out.
 
 use std::sync::Arc;
 
@@ -43,73 +46,59 @@ use crate::sim::views::{ViewSpec, ViewTable};
 use crate::sim::{AGENT_RADIUS, Motion, Physics, Pose, wrap_angle};
 use crate::tracker::{Confidence, Tracker};
 
-/// The planner's weights and rhythms. Defaults are tuned with `lasertag experiment capture`
-/// (see the README).
-#[derive(Debug, Clone, PartialEq)]
-pub struct Settings {
-    /// Spacing of candidate positions (metres) and headings per position.
-    pub candidate_spacing: f32,
-    pub headings: usize,
-    /// Side of the scoring grid's cells (metres).
-    pub score_cell: f32,
-    /// Extra worth of a hypothesis straight ahead over one at the edge of the view.
-    pub centring_weight: f32,
-    /// Worth lost per second of travel, in fractions of all hypotheses.
-    pub travel_weight: f32,
-    /// Worth lost for a destination on top of a teammate's, falling to 0 at `crowding_radius`.
-    pub crowding_weight: f32,
-    pub crowding_radius: f32,
-    /// Share of a hypothesis that still counts once a teammate is going to observe it.
-    pub claim_keep: f32,
-    /// How much more a hypothesis of a suspicious role (see `tracker::Confidence`) counts
-    /// than one of a valid or invalid role: robots go and check what the team is unsure of.
-    pub suspicious_weight: f32,
-    /// Extra worth of the goal a robot already has, so that it does not switch for a
-    /// marginal gain (each switch wastes the trip so far).
-    pub keep_bonus: f32,
-    /// Ticks between full negotiation rounds.
-    pub round_ticks: u64,
-    /// A goal whose view now holds less than this share of what it held when chosen (or less
-    /// than `worthless_floor` of all hypotheses) is dropped for a new one.
-    pub worthless_share: f32,
-    pub worthless_floor: f32,
-    /// Uncertainty-aware motion (Fabiani & Latombe): a robot whose localisation spread is
-    /// above `uncertainty_spread` (m) counts as uncertain, fully so at twice that. Below it
-    /// the two terms here vanish and the choice is the plain one.
-    pub uncertainty_spread: f32,
-    /// Worth added, times the uncertainty, to a destination that sees a landmark (within
-    /// the landmark range, in line of sight): there the robot localises itself again.
-    pub landmark_weight: f32,
-    /// Worth lost, times the uncertainty, per metre of the path through narrow passages
-    /// (see [`NARROW_HALF_WIDTH`]), where a robot unsure of its pose scrapes walls.
-    pub narrow_weight: f32,
-    /// Pursuit look-ahead (seconds, 0 = off): while it sees an opponent, an uncertain robot
-    /// weighs a few motions held this long by the chance of still seeing it (see
-    /// [`crate::planner::pursuit::engage_looking_ahead`]).
-    pub lookahead: f32,
-}
-
-impl Default for Settings {
-    fn default() -> Self {
-        Settings {
-            candidate_spacing: 1.0,
-            headings: 8,
-            score_cell: 0.5,
-            centring_weight: 0.5,
-            travel_weight: 0.01,
-            crowding_weight: 0.05,
-            crowding_radius: 3.0,
-            claim_keep: 0.2,
-            keep_bonus: 0.0,
-            suspicious_weight: 2.0,
-            round_ticks: 60,
-            worthless_share: 0.3,
-            worthless_floor: 0.01,
-            uncertainty_spread: 0.15,
-            landmark_weight: 0.1,
-            narrow_weight: 0.02,
-            lookahead: 0.5,
-        }
+crate::settings! {
+    /// Weights and rhythms of the `coordinated` planner (the match's `coordination` object;
+    /// docs/planner.md says what each does). The defaults are tuned with `lasertag
+    /// experiment capture`.
+    #[derive(Debug, Clone, PartialEq)]
+    pub struct Settings as "coordination" {
+        /// Extra worth of a hypothesis straight ahead over one at the edge of the view.
+        pub centring_weight: f32 = 0.5, range(0.0, 10.0);
+        /// Worth lost per second of travel, in shares of all hypotheses.
+        pub travel_weight: f32 = 0.01, range(0.0, 1.0);
+        /// Worth lost for a destination on top of a teammate's, falling to 0 at
+        /// `crowding_radius`.
+        pub crowding_weight: f32 = 0.05, range(0.0, 10.0);
+        /// Metres over which the crowding penalty falls to 0.
+        pub crowding_radius: f32 = 3.0, above(0.0, 50.0);
+        /// Share of a hypothesis that still counts once a teammate is going to observe it.
+        pub claim_keep: f32 = 0.2, range(0.0, 1.0);
+        /// Extra worth of the goal a robot already has, so that it does not switch for a
+        /// marginal gain (each switch wastes the trip so far).
+        pub keep_bonus: f32 = 0.0, range(0.0, 1.0);
+        /// How much more a hypothesis of a suspicious role (see `tracker::Confidence`) counts
+        /// than one of a valid or invalid role: robots go and check what the team is unsure
+        /// of. Above 0: at 0 a team whose roles are all suspicious would see nothing.
+        pub suspicious_weight: f32 = 2.0, above(0.0, 100.0);
+        /// Ticks between full negotiation rounds.
+        pub round_ticks: u64 = 60, range(1, 12_000);
+        /// A goal whose view now holds less than this share of what it held when chosen is
+        /// dropped for a new one.
+        pub worthless_share: f32 = 0.3, range(0.0, 1.0);
+        /// ... or less than this share of all hypotheses.
+        pub worthless_floor: f32 = 0.01, range(0.0, 1.0);
+        /// Uncertainty-aware motion (Fabiani & Latombe): a robot whose localisation spread
+        /// is above this (m) counts as uncertain, fully so at twice that. Below it the two
+        /// terms below vanish and the choice is the plain one. Above 0: at 0 every robot,
+        /// even a perfectly localised one, would count as uncertain.
+        pub uncertainty_spread: f32 = 0.15, above(0.0, 10.0);
+        /// Worth added, times the uncertainty, to a destination that sees a landmark (within
+        /// the landmark range, in line of sight): there the robot localises itself again.
+        pub landmark_weight: f32 = 0.1, range(0.0, 1.0);
+        /// Worth lost, times the uncertainty, per metre of the path through narrow passages
+        /// (under twice `NARROW_HALF_WIDTH` wide), where a robot unsure of its pose scrapes
+        /// walls.
+        pub narrow_weight: f32 = 0.02, range(0.0, 1.0);
+        /// Pursuit look-ahead (seconds, 0 = off): while it sees an opponent, an uncertain
+        /// robot weighs a few motions held this long by the chance of still seeing it.
+        pub lookahead: f32 = 0.5, range(0.0, MAX_LOOKAHEAD);
+    }
+    internal {
+        /// Spacing of candidate positions (metres) and headings per position.
+        pub candidate_spacing: f32 = 1.0;
+        pub headings: usize = 8;
+        /// Side of the scoring grid's cells (metres).
+        pub score_cell: f32 = 0.5;
     }
 }
 
@@ -128,59 +117,6 @@ const NARROW_REACH: f32 = 0.2;
 const MAX_POSITIONS: f32 = 1500.0;
 
 impl Settings {
-    /// Sets one field by name (for tuning from the command line).
-    pub fn set(&mut self, name: &str, value: &str) -> Result<(), String> {
-        fn num<T: std::str::FromStr>(v: &str) -> Result<T, String> {
-            v.parse()
-                .map_err(|_| format!("{v:?} is not a valid number"))
-        }
-        let positive = |x: f32| {
-            if x.is_finite() && x >= 0.0 {
-                Ok(x)
-            } else {
-                Err(format!("must be a finite number ≥ 0, got {x}"))
-            }
-        };
-        match name {
-            "centring_weight" => self.centring_weight = positive(num(value)?)?,
-            "travel_weight" => self.travel_weight = positive(num(value)?)?,
-            "crowding_weight" => self.crowding_weight = positive(num(value)?)?,
-            "crowding_radius" => self.crowding_radius = positive(num(value)?)?.max(0.01),
-            "claim_keep" => self.claim_keep = positive(num(value)?)?.min(1.0),
-            "keep_bonus" => self.keep_bonus = positive(num(value)?)?,
-            "suspicious_weight" => {
-                let w = positive(num(value)?)?;
-                if w == 0.0 {
-                    return Err("must be greater than 0".into());
-                }
-                self.suspicious_weight = w;
-            }
-            "round_ticks" => self.round_ticks = num::<u64>(value)?.max(1),
-            "worthless_share" => self.worthless_share = positive(num(value)?)?,
-            "worthless_floor" => self.worthless_floor = positive(num(value)?)?,
-            "uncertainty_spread" => {
-                let w = positive(num(value)?)?;
-                if w == 0.0 {
-                    // Every robot, even a perfectly localised one, would count as uncertain.
-                    return Err("must be greater than 0".into());
-                }
-                self.uncertainty_spread = w;
-            }
-            "landmark_weight" => self.landmark_weight = positive(num(value)?)?,
-            "narrow_weight" => self.narrow_weight = positive(num(value)?)?,
-            "lookahead" => self.lookahead = positive(num(value)?)?.min(MAX_LOOKAHEAD),
-            _ => {
-                return Err(format!(
-                    "unknown setting {name:?} (known: centring_weight, travel_weight, \
-                     crowding_weight, crowding_radius, claim_keep, keep_bonus, \
-                     suspicious_weight, round_ticks, worthless_share, worthless_floor, \
-                     uncertainty_spread, landmark_weight, narrow_weight, lookahead)"
-                ));
-            }
-        }
-        Ok(())
-    }
-
     /// The view table this planner needs on `arena`, coarsened for big maps.
     pub fn view_spec(&self, arena: &Arena, physics: &Physics) -> ViewSpec {
         let spacing = self
@@ -432,7 +368,7 @@ impl Coordinated {
                 state.progress = None; // turning to a target in place is not being stuck
                 // Only an uncertain robot looks ahead: always on, the look-ahead's detours
                 // to keep a target in view cost more tags than they saved (capture medians
-                // against `evade` rose by half; see the README).
+                // against `evade` rose by half; see docs/planner.md).
                 let horizon = if self.uncertainty(robot.spread) > 0.0 {
                     self.settings.lookahead
                 } else {

@@ -25,6 +25,29 @@ pub const DT: f32 = 1.0 / TICK_HZ as f32;
 /// Every agent is a disc of this radius (metres).
 pub const AGENT_RADIUS: f32 = 0.25;
 
+crate::settings! {
+    /// The robots' wheel odometry noise (the match's `odometry` object; game-rules.md: "about
+    /// 5% of distance and 2° per metre, configurable"). Each is a standard deviation drawn
+    /// every tick on the tick's motion; the robots' localisers model the same noise,
+    /// inflated as filters should be.
+    #[derive(Debug, Clone, Copy, PartialEq)]
+    pub struct Odometry as "odometry" {
+        /// Error of the distance driven, as a fraction of it.
+        pub distance: f32 = 0.05, range(0.0, 1.0);
+        /// Heading error per metre driven, degrees.
+        pub heading_deg_per_m: f32 = 2.0, range(0.0, 45.0);
+        /// Error of a turn, as a fraction of it.
+        pub turn: f32 = 0.02, range(0.0, 1.0);
+    }
+}
+
+impl Odometry {
+    /// The heading error per metre driven in radians, as the noise model uses it.
+    pub fn heading_per_metre(&self) -> f32 {
+        self.heading_deg_per_m.to_radians()
+    }
+}
+
 /// The physical parameters of a match (game-rules.md defaults).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Physics {
@@ -42,11 +65,8 @@ pub struct Physics {
     pub tag_range: f32,
     pub tag_cooldown_ticks: u64,
     pub freeze_ticks: u64,
-    /// Wheel odometry noise per step (std-dev): fraction of the distance travelled, heading
-    /// error per metre travelled (rad/m) and fraction of the turn made.
-    pub odometry_noise: f32,
-    pub odometry_turn_per_metre: f32,
-    pub odometry_turn_noise: f32,
+    /// Wheel odometry noise per step.
+    pub odometry: Odometry,
     /// Landmarks are recognised by identity within this range in line of sight, all round.
     pub landmark_range: f32,
     pub landmark_range_noise: f32,
@@ -70,10 +90,7 @@ impl Default for Physics {
             tag_range: 6.0,
             tag_cooldown_ticks: TICK_HZ as u64,
             freeze_ticks: 10 * TICK_HZ as u64,
-            // game-rules.md: "about 5% of distance and 2° per metre".
-            odometry_noise: 0.05,
-            odometry_turn_per_metre: 2f32.to_radians(),
-            odometry_turn_noise: 0.02,
+            odometry: Odometry::default(),
             // game-rules.md gives the 4 m; the noise is ours: like the opponent detector's.
             landmark_range: 4.0,
             landmark_range_noise: 0.05,

@@ -215,12 +215,12 @@ impl OdometryStep {
     /// (rot1, trans, rot2): what the sim's odometry draws, and what dead reckoning predicts.
     pub fn wheel_noise(&self, physics: &Physics) -> [f32; 3] {
         let turn = |rot: f32| {
-            physics.odometry_turn_noise * rot.abs()
-                + physics.odometry_turn_per_metre * self.trans.abs()
+            physics.odometry.turn * rot.abs()
+                + physics.odometry.heading_per_metre() * self.trans.abs()
         };
         [
             turn(self.rot1),
-            physics.odometry_noise * self.trans.abs(),
+            physics.odometry.distance * self.trans.abs(),
             turn(self.rot2),
         ]
     }

@@ -10,7 +10,7 @@
 //!
 //! Building one costs a ray cast per (position, cell in range) — tens to hundreds of
 //! milliseconds on the shipped maps — so an [`Arena`] keeps the tables it has built
-//! ([`Arena::view_table`]) and every match on that map shares them.
+//! ([`ViewTable::of`], cached by `Arena::derived`) and every match on that map shares them.
 
 use nalgebra::{Point2, Vector2};
 

@@ -4,6 +4,9 @@
 //! (and after anything else that changes what viewers see) on a `watch` channel, and keeps
 //! the people who play: their tokens, which connection is theirs, and how long a dropped
 //! player has to come back (a freed slot a person took from a bot goes back to the bot).
+//!
+//! Long file: one match task's loop, its messages and its clean-up rules share the
+//! task's state.
 
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Arc, OnceLock};
@@ -193,7 +196,7 @@ impl MatchTask {
                 req = rx.recv() => {
                     let Some(req) = req else { break };
                     if let Request::Stop(reason) = req {
-                        self.world.stop_because(reason);
+                        self.world.end(reason);
                         self.publish();
                         break;
                     }
@@ -576,7 +579,7 @@ impl MatchTask {
                 "ending the match: abandoned (no client for {:?})",
                 now - self.last_activity
             );
-            self.world.stop_because(FinishReason::Abandoned);
+            self.world.end(FinishReason::Abandoned);
             self.publish();
             return Some("abandoned");
         }

@@ -158,7 +158,9 @@ pub async fn create_match(
     State(state): State<AppState>,
     JsonBody(body): JsonBody<CreateMatch>,
 ) -> Result<impl IntoResponse, ApiError> {
-    let req = body.validate().map_err(ApiError::bad_request)?;
+    let req = body
+        .validate()
+        .map_err(|e| ApiError::bad_request(e.to_string()))?;
     let cfg = &state.registry.config;
     let metrics = &state.registry.metrics;
     let agents = req.config.robots + req.config.opponents;

@@ -12,7 +12,7 @@ use crate::protocol::*;
 #[openapi(
     info(
         title = "lasertag",
-        description = "Robots play laser tag against people: the HTTP API. Play and spectate over the WebSocket `GET /ws/matches/{id}` (`?token=` to play); its messages are described in the project's README. Every endpoint may answer 429 (too many requests from one address, with Retry-After); the server's limits are its command-line settings (README, Configuration)."
+        description = "Robots play laser tag against people: the HTTP API. Play and spectate over the WebSocket `GET /ws/matches/{id}` (`?token=` to play); its messages are described in the project's docs/api.md. Every endpoint may answer 429 (too many requests from one address, with Retry-After); the server's limits are its command-line settings (docs/operations.md)."
     ),
     paths(
         handlers::health,
@@ -37,14 +37,6 @@ use crate::protocol::*;
         MapInfo,
         MapFile,
         CreateMatch,
-        TrackerSettings,
-        TrackerConfig,
-        RadioSettings,
-        RadioConfig,
-        OdometrySettings,
-        OdometryConfig,
-        LocaliserSettings,
-        LocaliserConfig,
         MatchSummary,
         MatchState,
         RobotState,

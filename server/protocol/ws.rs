@@ -1,5 +1,5 @@
 //! The WebSocket messages of `GET /ws/matches/{id}` (`../shared/spec/http-api.md`), as
-//! implemented and documented in the README.
+//! implemented and documented in docs/api.md.
 //!
 //! Server to client, JSON text with a `type`: `welcome` (once, first), `snapshot` (every
 //! tick), `event` (as in the events endpoint), `finished` (once, at the end), `pong`, `error`.

@@ -1,0 +1,281 @@
+//! Unit tests of the tracker: negative and positive information, splits, merges, tags,
+//! late sightings from teammates and world-model confidence, on small arenas built in code.
+
+use super::*;
+use rand::SeedableRng;
+
+fn open_room() -> Arena {
+    crate::sim::arena::open_room([6.0, 3.0, 0.0])
+}
+
+fn laser() -> LaserModel {
+    LaserModel {
+        fov: std::f32::consts::PI,
+        range: 8.0,
+    }
+}
+
+fn tracker(arena: &Arena, opponents: u32) -> Tracker {
+    Tracker::new(
+        arena,
+        Settings::default(),
+        opponents,
+        ChaCha8Rng::seed_from_u64(4),
+    )
+}
+
+/// Radio gap: a teammate's scan that arrives late says where nobody
+/// stood *then*; an opponent may since have walked in from the edge of what it saw. So
+/// it contradicts only hypotheses deep inside the seen area, and a fresh scan all of it.
+#[test]
+fn a_late_scan_contradicts_only_what_nobody_could_have_entered_since() {
+    let robot = Pose::new(1.0, 3.0, 0.0);
+    let scan = vec![5.0; 181];
+    let fresh = Sighting {
+        pose: robot,
+        scan: &scan,
+        detections: &[],
+        tagged: false,
+        age_ticks: 0,
+    };
+    // 10 ticks late: an opponent at top speed (1 m/s) may have moved 0.5 m.
+    let late = Sighting {
+        age_ticks: 10,
+        ..fresh
+    };
+    let (cos, sin) = (robot.theta.cos(), robot.theta.sin());
+    let speed = Settings::default().opponent_speed;
+    let seen =
+        |p: Point2<f32>, s: &Sighting| would_be_seen(p, s, laser(), cos, sin, s.reach(speed));
+    let deep = Point2::new(3.0, 3.0); // 2 m ahead, far from every edge of the scan
+    let near_end = Point2::new(5.8, 3.0); // 0.2 m short of where the beams ended
+    let near_side = Point2::new(1.3, 4.5); // just inside the field of view's edge
+    for p in [deep, near_end, near_side] {
+        assert!(seen(p, &fresh), "a fresh scan sees {p}");
+    }
+    assert!(seen(deep, &late), "deep inside is still contradicted");
+    assert!(
+        !seen(near_end, &late),
+        "someone may have come in past the beams' ends"
+    );
+    assert!(
+        !seen(near_side, &late),
+        "someone may have come in from the side"
+    );
+    // And a late detection places the opponent less sharply.
+    let mut sharp = tracker(&open_room(), 1);
+    let mut blurred = sharp.clone();
+    let det = [Detection {
+        range: 3.0,
+        bearing: 0.0,
+    }];
+    let a = open_room();
+    sharp.update(
+        &a,
+        laser(),
+        &[Sighting {
+            detections: &det,
+            ..fresh
+        }],
+    );
+    blurred.update(
+        &a,
+        laser(),
+        &[Sighting {
+            detections: &det,
+            ..late
+        }],
+    );
+    let spread = |t: &Tracker| {
+        let r = &t.roles[0];
+        let total: f32 = r.weights.iter().sum();
+        let mean = r
+            .particles
+            .iter()
+            .zip(&r.weights)
+            .fold(Vector2::zeros(), |m, (p, w)| m + p.coords * (w / total));
+        r.particles
+            .iter()
+            .zip(&r.weights)
+            .map(|(p, w)| (p.coords - mean).norm_squared() * w / total)
+            .sum::<f32>()
+            .sqrt()
+    };
+    assert!(
+        spread(&blurred) > 1.5 * spread(&sharp),
+        "late {} vs fresh {}",
+        spread(&blurred),
+        spread(&sharp)
+    );
+}
+
+/// Regression (review of the tracker): a hit whose target the laser did not detect (a
+/// teammate blocked the beams but not the shot) must still take one opponent off.
+#[test]
+fn a_hit_without_a_matching_detection_still_takes_one_count_off() {
+    let a = open_room();
+    let mut t = tracker(&a, 2);
+    let scan = vec![8.0; 181];
+    let s = Sighting {
+        pose: Pose::new(1.0, 3.0, 0.0),
+        scan: &scan,
+        detections: &[],
+        tagged: true,
+        age_ticks: 0,
+    };
+    t.update(&a, laser(), &[s]);
+    assert_eq!(t.untagged_count(), 1);
+    assert_eq!(t.roles.iter().filter(|r| r.tagged).count(), 1);
+}
+
+/// Regression (capture run office/evade/36): a cloud squeezed against a wall in
+/// full view of a robot was never down-weighted (a particle counted as seen only when the
+/// beam reached past its far edge), so the robots stared at an empty strip for 220 s.
+/// Now the strip is seen, and a role looked at in full for 10 ticks is re-seeded.
+#[test]
+fn a_cloud_against_a_wall_in_full_view_is_contradicted_and_re_seeded() {
+    let a = open_room();
+    let mut t = tracker(&a, 1);
+    // Hypotheses in a strip 0.27 m from the east wall, in front of a robot facing it.
+    let strip: Vec<Point2<f32>> = (0..1000)
+        .map(|i| Point2::new(11.73, 1.5 + 3.0 * i as f32 / 1000.0))
+        .collect();
+    t.roles[0].reset(strip);
+    // What the robot's laser measures: the wall, 3 m ahead, along every beam.
+    let robot = Pose::new(8.5, 3.0, 0.0);
+    let scan: Vec<f32> = (0..181)
+        .map(|i| {
+            let b = (i as f32 - 90.0).to_radians();
+            a.cast_ray(robot.pos, Vector2::new(b.cos(), b.sin()), 8.0)
+        })
+        .collect();
+    let s = Sighting {
+        pose: robot,
+        scan: &scan,
+        detections: &[],
+        tagged: false,
+        age_ticks: 0,
+    };
+    for _ in 0..CONTRADICTED_TICKS {
+        t.update(&a, laser(), &[s]);
+    }
+    let near_wall: f32 = t.roles[0]
+        .particles
+        .iter()
+        .zip(&t.roles[0].weights)
+        .filter(|(p, _)| p.x > 11.0)
+        .map(|(_, w)| w)
+        .sum();
+    assert!(near_wall < 0.05, "weight still by the wall: {near_wall}");
+    assert_eq!(t.untagged_count(), 1);
+    assert_eq!(
+        t.roles[0].confidence_state(),
+        Confidence::Invalid,
+        "a guess now"
+    );
+}
+
+/// World-model confidence: a sighting makes a role valid; unconfirmed, it turns
+/// suspicious after about 20 s and invalid after about a minute; looking where it should
+/// be and seeing nothing wears it down within a second.
+#[test]
+fn confidence_is_set_by_sightings_and_worn_down_by_time_and_fruitless_looks() {
+    let a = open_room();
+    let mut t = tracker(&a, 1);
+    assert_eq!(
+        t.roles[0].confidence_state(),
+        Confidence::Invalid,
+        "a prior"
+    );
+    let scan = vec![8.0; 181];
+    let seen = [Detection {
+        range: 5.0,
+        bearing: 0.0,
+    }];
+    let watching = Sighting {
+        pose: Pose::new(1.0, 3.0, 0.0),
+        scan: &scan,
+        detections: &seen,
+        tagged: false,
+        age_ticks: 0,
+    };
+    t.update(&a, laser(), &[watching]);
+    assert_eq!(t.roles[0].confidence, 1.0);
+    assert_eq!(t.roles[0].confidence_state(), Confidence::Valid);
+    // Nobody senses for 30 s: the cloud spreads, unconfirmed.
+    for _ in 0..600 {
+        t.update(&a, laser(), &[]);
+    }
+    assert_eq!(t.roles[0].confidence_state(), Confidence::Suspicious);
+    for _ in 0..600 {
+        t.update(&a, laser(), &[]);
+    }
+    assert_eq!(t.roles[0].confidence_state(), Confidence::Invalid);
+    // Confirmed again, then looked for where it was and not found.
+    t.update(&a, laser(), &[watching]);
+    assert_eq!(t.roles[0].confidence_state(), Confidence::Valid);
+    let looking = Sighting {
+        detections: &[],
+        ..watching
+    };
+    for _ in 0..8 {
+        t.update(&a, laser(), &[looking]);
+    }
+    assert_eq!(t.roles[0].confidence_state(), Confidence::Suspicious);
+}
+
+/// Regression (reacquire experiment): a tight cloud 2 m from a detection kept its place
+/// (the Bayes update only renormalised it) although the detection confirmed the role
+/// every tick; without motion to carry it there, it never followed a teammate's
+/// sightings. A detection 4σ from every particle now re-draws the cloud around it.
+#[test]
+fn a_detection_far_from_a_tight_cloud_redraws_the_cloud_there() {
+    let a = open_room();
+    let mut t = Tracker::new(
+        &a,
+        Settings {
+            predict: false,
+            ..Settings::default()
+        },
+        1,
+        ChaCha8Rng::seed_from_u64(4),
+    );
+    let tight: Vec<Point2<f32>> = (0..1000)
+        .map(|i| Point2::new(4.0 + (i % 10) as f32 * 0.01, 3.0 + (i / 100) as f32 * 0.01))
+        .collect();
+    t.roles[0].reset(tight);
+    let seen = [Detection {
+        range: 5.0,
+        bearing: 0.0,
+    }];
+    let s = Sighting {
+        pose: Pose::new(1.0, 3.0, 0.0),
+        scan: &[],
+        detections: &seen,
+        tagged: false,
+        age_ticks: 0,
+    };
+    t.update(&a, laser(), &[s]);
+    let r = &t.roles[0];
+    let mean = r
+        .particles
+        .iter()
+        .zip(&r.weights)
+        .fold(Vector2::zeros(), |m, (p, w)| m + p.coords * *w);
+    assert!(
+        (mean - Vector2::new(6.0, 3.0)).norm() < 0.2,
+        "the cloud moved to the detection: {mean:?}"
+    );
+}
+
+#[test]
+fn fast_atan2_matches_atan2() {
+    for k in 0..3600 {
+        let a = k as f32 / 3600.0 * std::f32::consts::TAU - std::f32::consts::PI;
+        let (y, x) = (a.sin() * 3.0, a.cos() * 3.0);
+        assert!(
+            (fast_atan2(y, x) - y.atan2(x)).abs() < 1e-3
+                || (a.abs() - std::f32::consts::PI).abs() < 1e-3
+        );
+    }
+}

@@ -1,0 +1,78 @@
+//! The agents of a match as the world holds them: robots (truth, estimate, sensors, the
+//! command decided last tick) and opponents (truth and who controls them), and the orders
+//! an API-driven opponent takes.
+
+use super::*;
+
+#[derive(Debug, Clone)]
+pub struct Robot {
+    pub pose: Pose,
+    /// The robot's own belief about its pose: its localiser's point estimate, or its
+    /// odometry when localisation is off. Everything the team decides starts from this.
+    pub estimate: Pose,
+    /// Standard deviation of the robot's position belief (m): its localiser's, or with
+    /// localisation off the dead-reckoning uncertainty, which only grows.
+    pub spread: f32,
+    /// Dead-reckoned pose from the wheel odometry (starts at the true start pose).
+    pub odometry: Pose,
+    /// The uncertainty of `odometry` (used for `spread` when there is no localiser).
+    pub dead_reckoning: DeadReckoning,
+    /// Landmarks recognised this tick.
+    pub landmarks: Vec<LandmarkSighting>,
+    pub localiser: Option<Box<Localiser>>,
+    pub frozen_until: u64,
+    pub cooldown_until: u64,
+    pub scan: Scan,
+    pub command: RobotCommand,
+}
+
+/// A route given to an API-driven opponent.
+#[derive(Debug, Clone, Default)]
+pub struct ApiRoute {
+    pub waypoints: VecDeque<Point2<f32>>,
+    pub fire: bool,
+}
+
+/// A person's latest keys.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct HumanInput {
+    pub forward: f32,
+    pub turn: f32,
+    pub tag: bool,
+}
+
+#[derive(Debug, Clone)]
+pub enum Control {
+    Bot(Bot),
+    Api(ApiRoute),
+    Human(HumanInput),
+}
+
+#[derive(Debug, Clone)]
+pub struct Opponent {
+    pub pose: Pose,
+    pub tagged: bool,
+    pub cooldown_until: u64,
+    pub control: Control,
+}
+
+/// An external order for an API-driven opponent.
+#[derive(Debug, Clone, PartialEq)]
+pub enum OpponentOrder {
+    Waypoints(Vec<Point2<f32>>),
+    Stop,
+    Tag,
+}
+
+/// Why an order or input was refused.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum OrderError {
+    #[error("no opponent {0} in this match")]
+    UnknownOpponent(String),
+    #[error("opponent {0} is not API-controlled")]
+    NotApiControlled(String),
+    #[error("opponent {0} has been tagged")]
+    Tagged(String),
+    #[error("{field}: [{x}, {y}] lies outside the arena")]
+    OutsideArena { field: String, x: f32, y: f32 },
+}

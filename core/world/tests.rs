@@ -1,0 +1,234 @@
+//! Unit tests of the tick pipeline on small arenas built in code: spawns, tagging,
+//! freezing, the time limit, orders, placement and the bots.
+
+use super::*;
+use crate::sim::arena::MapDef;
+
+/// A 12 m × 6 m room with one pillar.
+fn duel() -> Arc<Arena> {
+    Arc::new(Arena::new(MapDef {
+        name: "duel".into(),
+        width: 12.0,
+        height: 6.0,
+        obstacles: vec![vec![
+            Point2::new(5.5, 4.5),
+            Point2::new(6.5, 4.5),
+            Point2::new(6.5, 5.5),
+            Point2::new(5.5, 5.5),
+        ]],
+        robot_spawns: vec![[1.0, 3.0, 0.0], [1.0, 1.0, 0.0]],
+        opponent_spawns: vec![Point2::new(11.0, 5.0), Point2::new(11.0, 1.0)],
+        landmarks: vec![],
+    }))
+}
+
+fn config(planner: PlannerKind, control: ControlKind) -> MatchConfig {
+    MatchConfig {
+        robots: 1,
+        opponents: 1,
+        opponent_control: control,
+        planner,
+        ..MatchConfig::default()
+    }
+}
+
+#[test]
+fn agents_start_at_spawns_in_order_wrapping_and_never_overlap() {
+    let cfg = MatchConfig {
+        robots: 3,
+        opponents: 3,
+        ..config(PlannerKind::Idle, ControlKind::Api)
+    };
+    let w = World::new(duel(), cfg).unwrap();
+    assert_eq!(w.robots[0].pose.pos, Point2::new(1.0, 3.0));
+    assert_eq!(w.robots[1].pose.pos, Point2::new(1.0, 1.0));
+    assert_eq!(w.opponents[1].pose.pos, Point2::new(11.0, 1.0));
+    let all: Vec<_> = w.present();
+    for (i, a) in all.iter().enumerate() {
+        for b in &all[i + 1..] {
+            assert!((a.1 - b.1).norm() >= 2.0 * AGENT_RADIUS, "{a:?} {b:?}");
+        }
+    }
+}
+
+#[test]
+fn a_robot_tags_an_opponent_that_walks_into_view() {
+    let mut w = World::new(duel(), config(PlannerKind::Baseline, ControlKind::Api)).unwrap();
+    w.order_opponent(0, OpponentOrder::Waypoints(vec![Point2::new(4.0, 3.0)]))
+        .unwrap();
+    for _ in 0..2_000 {
+        w.step();
+        if w.status == MatchStatus::Finished {
+            break;
+        }
+    }
+    assert_eq!(w.winner, Some(Side::Robots));
+    assert!(w.events().iter().any(|e| matches!(
+        e.kind,
+        EventKind::Tag {
+            target: AgentId::Opponent(0),
+            ..
+        }
+    )));
+}
+
+#[test]
+fn an_opponent_freezes_a_robot_in_front_of_it() {
+    let mut w = World::new(duel(), config(PlannerKind::Idle, ControlKind::Api)).unwrap();
+    w.opponents[0].pose = Pose::new(4.0, 3.0, std::f32::consts::PI);
+    w.order_opponent(0, OpponentOrder::Tag).unwrap();
+    w.step();
+    assert!(w.robot_frozen(0));
+    assert!(
+        w.events()
+            .iter()
+            .any(|e| matches!(e.kind, EventKind::RobotTagged { .. }))
+    );
+    // Cool-down: a second order within 1 s does not fire.
+    w.order_opponent(0, OpponentOrder::Tag).unwrap();
+    w.step();
+    assert!(
+        w.robots[0].scan.ranges.is_empty(),
+        "from the tick after the hit, a frozen robot does not sense"
+    );
+    let shots = w
+        .events()
+        .iter()
+        .filter(|e| matches!(e.kind, EventKind::Shot { .. }))
+        .count();
+    assert_eq!(shots, 1);
+    for _ in 0..200 {
+        w.step();
+    }
+    assert!(!w.robot_frozen(0), "frozen for 10 s only");
+}
+
+#[test]
+fn the_time_limit_ends_the_match_for_the_opponents() {
+    let cfg = MatchConfig {
+        time_limit_ticks: 40,
+        ..config(PlannerKind::Idle, ControlKind::Bot)
+    };
+    let mut w = World::new(duel(), cfg).unwrap();
+    for _ in 0..100 {
+        w.step();
+    }
+    assert_eq!(w.tick, 40);
+    assert_eq!(w.winner, Some(Side::Opponents));
+}
+
+#[test]
+fn orders_are_checked() {
+    let mut w = World::new(duel(), config(PlannerKind::Idle, ControlKind::Api)).unwrap();
+    assert!(matches!(
+        w.order_opponent(0, OpponentOrder::Waypoints(vec![Point2::new(13.0, 1.0)])),
+        Err(OrderError::OutsideArena { .. })
+    ));
+    assert!(matches!(
+        w.order_opponent(3, OpponentOrder::Stop),
+        Err(OrderError::UnknownOpponent(_))
+    ));
+    let mut b = World::new(duel(), config(PlannerKind::Idle, ControlKind::Bot)).unwrap();
+    assert!(matches!(
+        b.order_opponent(0, OpponentOrder::Stop),
+        Err(OrderError::NotApiControlled(_))
+    ));
+}
+
+#[test]
+fn random_placement_is_seeded_and_free() {
+    let cfg = |seed| MatchConfig {
+        placement: Placement::Random,
+        seed,
+        robots: 2,
+        opponents: 2,
+        ..config(PlannerKind::Idle, ControlKind::Bot)
+    };
+    let a = World::new(duel(), cfg(5)).unwrap();
+    let b = World::new(duel(), cfg(5)).unwrap();
+    let c = World::new(duel(), cfg(6)).unwrap();
+    assert_eq!(a.digest(), b.digest());
+    assert_ne!(a.digest(), c.digest());
+    for r in &a.robots {
+        assert!(a.arena.disc_is_free(r.pose.pos, AGENT_RADIUS));
+    }
+}
+
+#[test]
+fn an_evading_bot_runs_from_a_robot_it_sees() {
+    let cfg = MatchConfig {
+        opponent_bot: BotKind::Evade,
+        opponent_control: ControlKind::Bot,
+        placement: Placement::Given {
+            robots: vec![[3.0, 2.0, 0.0]],
+            opponents: vec![[5.0, 2.0]],
+        },
+        ..config(PlannerKind::Idle, ControlKind::Bot)
+    };
+    let mut w = World::new(duel(), cfg).unwrap();
+    for _ in 0..200 {
+        w.step();
+    }
+    let robot = w.robots[0].pose.pos;
+    let bot = w.opponents[0].pose.pos;
+    let hidden = !w.arena.line_of_sight(robot, bot);
+    assert!(
+        (bot - robot).norm() > 5.0 || hidden,
+        "the bot fled: {bot:?}"
+    );
+}
+
+#[test]
+fn a_wandering_bot_keeps_moving_and_stays_in_free_space() {
+    let cfg = MatchConfig {
+        time_limit_ticks: 100_000,
+        ..config(PlannerKind::Idle, ControlKind::Bot)
+    };
+    let mut w = World::new(duel(), cfg).unwrap();
+    let mut visited = Vec::new();
+    for t in 0..2_000 {
+        w.step();
+        let p = w.opponents[0].pose.pos;
+        assert!(
+            w.arena.disc_is_free(p, AGENT_RADIUS - 1e-3),
+            "tick {t}: {p:?}"
+        );
+        if t % 200 == 0 {
+            visited.push(p);
+        }
+    }
+    let spread = visited
+        .iter()
+        .map(|p| (p - visited[0]).norm())
+        .fold(0.0, f32::max);
+    assert!(spread > 3.0, "wandered about: {visited:?}");
+}
+
+/// Regression (review of the tracker): a robot that tags an opponent in the same tick as
+/// it is itself frozen still reports the hit, so the role counts keep adding up.
+#[test]
+fn a_hit_by_a_robot_frozen_in_the_same_tick_still_counts() {
+    let cfg = MatchConfig {
+        opponents: 2,
+        placement: Placement::Given {
+            robots: vec![[3.0, 3.0, 0.0]],
+            opponents: vec![[6.0, 3.0], [1.0, 3.0]],
+        },
+        ..config(PlannerKind::Baseline, ControlKind::Api)
+    };
+    let mut w = World::new(duel(), cfg).unwrap();
+    // o1 stands behind the robot; turn it to face the robot.
+    w.opponents[1].pose.theta = 0.0;
+    assert!(
+        w.robots[0].command.tag,
+        "the robot sees o0 dead ahead and fires"
+    );
+    w.order_opponent(1, OpponentOrder::Tag).unwrap();
+    w.step();
+    assert!(w.opponents[0].tagged, "o0 was hit");
+    assert!(
+        w.robot_frozen(0),
+        "and the robot was frozen in the same tick"
+    );
+    assert_eq!(w.team.trackers[0].untagged_count(), 1);
+}
