@@ -7,6 +7,7 @@
 //! the difference, and one SVG per setting: the fraction of runs that have tagged the
 //! opponent by each time.
 
+use crate::error::LabError;
 use std::path::Path;
 use std::sync::Arc;
 
@@ -62,7 +63,7 @@ fn one_run(
     s: Setting,
     seed: u64,
     cfg: &CaptureConfig,
-) -> Result<Option<f64>, String> {
+) -> Result<Option<f64>, LabError> {
     let limit_s = cfg.time_limit_s;
     let config = MatchConfig {
         robots: 2,
@@ -77,7 +78,7 @@ fn one_run(
         radio: cfg.radio.clone(),
         ..MatchConfig::default()
     };
-    let mut world = World::new(arena, config).map_err(|e| e.to_string())?;
+    let mut world = World::new(arena, config)?;
     while world.status == MatchStatus::Running {
         world.step();
     }
@@ -169,8 +170,8 @@ pub fn run(
     maps: &[(String, Arc<Arena>)],
     cfg: &CaptureConfig,
     out: &Path,
-) -> Result<String, String> {
-    std::fs::create_dir_all(out).map_err(|e| format!("creating {}: {e}", out.display()))?;
+) -> Result<String, LabError> {
+    crate::error::create_dir_all(out)?;
     let bots = [BotKind::Wander, BotKind::Evade];
     let planners = [PlannerKind::Coordinated, PlannerKind::Baseline];
     let mut settings = Vec::new();
@@ -289,7 +290,7 @@ pub fn run(
     }
     let write = |name: &str, text: &str| {
         let p = out.join(name);
-        std::fs::write(&p, text).map_err(|e| format!("writing {}: {e}", p.display()))
+        crate::error::write(&p, text)
     };
     write("capture.csv", &csv)?;
     write("capture_summary.csv", &summary)?;

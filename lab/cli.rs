@@ -2,6 +2,7 @@
 //! binary mounts [`Experiment`] as `lasertag experiment …` and hands over a map loader, so
 //! this crate never reads JSON.
 
+use crate::error::LabError;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
@@ -10,7 +11,7 @@ use lasertag_core::settings::{FieldType, Group, Value};
 use lasertag_core::sim::arena::Arena;
 
 /// Reads every map of a directory into arenas (the binary's map loader).
-pub type LoadMaps = fn(&Path) -> Result<Vec<Arc<Arena>>, String>;
+pub type LoadMaps = fn(&Path) -> Result<Vec<Arc<Arena>>, LabError>;
 
 #[derive(Debug, Subcommand)]
 pub enum Experiment {
@@ -157,7 +158,7 @@ fn chosen_maps(
     load: LoadMaps,
     maps: &Path,
     on: &[String],
-) -> Result<Vec<(String, Arc<Arena>)>, String> {
+) -> Result<Vec<(String, Arc<Arena>)>, LabError> {
     let store = load(maps)?;
     on.iter()
         .map(|name| {
@@ -165,21 +166,27 @@ fn chosen_maps(
                 .iter()
                 .find(|a| a.def.name == *name)
                 .map(|a| (name.clone(), a.clone()))
-                .ok_or_else(|| format!("no map {name:?} in {}", maps.display()))
+                .ok_or_else(|| LabError::NoMap {
+                    name: name.clone(),
+                    dir: maps.to_owned(),
+                })
         })
         .collect()
 }
 
 /// The one map `name` from the directory `maps`.
-fn one_map(load: LoadMaps, maps: &Path, name: &str) -> Result<Arc<Arena>, String> {
+fn one_map(load: LoadMaps, maps: &Path, name: &str) -> Result<Arc<Arena>, LabError> {
     load(maps)?
         .into_iter()
         .find(|a| a.def.name == name)
-        .ok_or_else(|| format!("no {name} map in {}", maps.display()))
+        .ok_or_else(|| LabError::NoMap {
+            name: name.to_owned(),
+            dir: maps.to_owned(),
+        })
 }
 
 /// Runs one experiment command, printing its table; `load` reads a directory of maps.
-pub fn run(e: Experiment, load: LoadMaps) -> Result<(), String> {
+pub fn run(e: Experiment, load: LoadMaps) -> Result<(), LabError> {
     match e {
         Experiment::Capture {
             runs,
@@ -194,25 +201,30 @@ pub fn run(e: Experiment, load: LoadMaps) -> Result<(), String> {
             radio_loss,
         } => {
             if runs == 0 || time_limit == 0 {
-                return Err("--runs and --time-limit must be at least 1".into());
+                return Err(LabError::Arguments(
+                    "--runs and --time-limit must be at least 1".into(),
+                ));
             }
             let chosen = chosen_maps(load, &maps, &on)?;
             let mut coordination = lasertag_core::planner::coordinated::Settings::default();
             for kv in &set {
-                let (k, v) = kv
-                    .split_once('=')
-                    .ok_or_else(|| format!("--set {kv}: expected NAME=VALUE"))?;
+                let (k, v) = kv.split_once('=').ok_or_else(|| {
+                    LabError::Arguments(format!("--set {kv}: expected NAME=VALUE"))
+                })?;
                 coordination
                     .set_text(k, v)
-                    .map_err(|e| format!("--set {e}"))?;
+                    .map_err(|error| LabError::Setting {
+                        flag: "--set",
+                        error,
+                    })?;
             }
             let mut radio = lasertag_core::radio::Settings::default();
             radio
                 .set("latency_ticks", Value::Integer(radio_latency.into()))
-                .map_err(|e| format!("--radio-latency: {}", e.message))?;
+                .map_err(|e| LabError::Arguments(format!("--radio-latency: {}", e.message)))?;
             radio
                 .set("loss", radio_loss.to_value())
-                .map_err(|e| format!("--radio-loss: {}", e.message))?;
+                .map_err(|e| LabError::Arguments(format!("--radio-loss: {}", e.message)))?;
             let cfg = crate::capture::CaptureConfig {
                 runs,
                 seed,
@@ -239,13 +251,15 @@ pub fn run(e: Experiment, load: LoadMaps) -> Result<(), String> {
             out,
         } => {
             if runs == 0 || limit == 0 {
-                return Err("--runs and --limit must be at least 1".into());
+                return Err(LabError::Arguments(
+                    "--runs and --limit must be at least 1".into(),
+                ));
             }
             if latency > lasertag_core::radio::MAX_LATENCY_TICKS {
-                return Err(format!(
+                return Err(LabError::Arguments(format!(
                     "--latency {latency} must be in 0..={}",
                     lasertag_core::radio::MAX_LATENCY_TICKS
-                ));
+                )));
             }
             let arena = one_map(load, &maps, "office")?;
             let cfg = crate::reacquire::ReacquireConfig {
@@ -288,7 +302,9 @@ pub fn run(e: Experiment, load: LoadMaps) -> Result<(), String> {
             out,
         } => {
             if runs == 0 || seconds == 0 || robots == 0 {
-                return Err("--runs, --seconds and --robots must be at least 1".into());
+                return Err(LabError::Arguments(
+                    "--runs, --seconds and --robots must be at least 1".into(),
+                ));
             }
             let mut arenas = load(&maps)?;
             arenas.sort_by(|a, b| a.def.name.cmp(&b.def.name));
@@ -328,18 +344,20 @@ pub fn run(e: Experiment, load: LoadMaps) -> Result<(), String> {
             out,
         } => {
             if runs == 0 || time_limit == 0 || hunt_s == 0 {
-                return Err("--runs, --time-limit and --hunt-s must be at least 1".into());
+                return Err(LabError::Arguments(
+                    "--runs, --time-limit and --hunt-s must be at least 1".into(),
+                ));
             }
             if beams > 181 {
-                return Err(format!(
+                return Err(LabError::Arguments(format!(
                     "--beams {beams}: must be in 0..=181 (the laser has 181)"
-                ));
+                )));
             }
             // The noise scaled past the API's ranges (heading 45°/m, fractions 1) is nonsense.
             if !(0.0..=20.0).contains(&odometry_scale) {
-                return Err(format!(
+                return Err(LabError::Arguments(format!(
                     "--odometry-scale {odometry_scale}: must be in [0, 20]"
-                ));
+                )));
             }
             let chosen = chosen_maps(load, &maps, &on)?;
             let cfg = crate::uncertainty::UncertaintyConfig {
@@ -372,9 +390,7 @@ pub fn run(e: Experiment, load: LoadMaps) -> Result<(), String> {
                 || particles < 10
                 || !(kl_cutoff > 0.0 && kl_cutoff.is_finite())
             {
-                return Err(
-                    "--runs and --opponents must be at least 1, --particles at least 10, --kl-cutoff positive".into(),
-                );
+                return Err(LabError::Arguments("--runs and --opponents must be at least 1, --particles at least 10, --kl-cutoff positive".into()));
             }
             let arena = one_map(load, &maps, "hallway")?;
             let cfg = crate::filters::FiltersConfig {

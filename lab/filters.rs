@@ -8,6 +8,7 @@
 //! the storage area on the right. Departure and parking orders are chosen so nobody walks
 //! through someone else's spot.
 
+use crate::error::LabError;
 use std::path::Path;
 use std::sync::Arc;
 
@@ -80,7 +81,7 @@ pub fn one_run(
     cfg: &FiltersConfig,
     merge: bool,
     run: usize,
-) -> Result<Vec<u32>, String> {
+) -> Result<Vec<u32>, LabError> {
     let n = cfg.opponents;
     // Starts: top rows leave first (nobody walks up through a waiting spot).
     let mut starts = spots(&arena, 0.6, 8.2);
@@ -89,12 +90,12 @@ pub fn one_run(
     let mut parks = spots(&arena, 21.8, 29.4);
     parks.sort_by(|a, b| a.x.total_cmp(&b.x).then(a.y.total_cmp(&b.y)));
     if starts.len() < n || parks.len() < n {
-        return Err(format!(
+        return Err(LabError::Scenario(format!(
             "map {:?} has room for {} waiting and {} parked opponents, {n} needed: this experiment needs the shipped hallway map",
             arena.def.name,
             starts.len(),
             parks.len()
-        ));
+        )));
     }
     starts.truncate(n);
     let config = MatchConfig {
@@ -116,7 +117,7 @@ pub fn one_run(
         },
         ..MatchConfig::default()
     };
-    let mut world = World::new(arena, config).map_err(|e| e.to_string())?;
+    let mut world = World::new(arena, config)?;
     let mut rng = ChaCha8Rng::seed_from_u64(cfg.seed.wrapping_mul(1_000_003) + run as u64);
     let mut next = 0usize; // next walker to send
     let mut depart_at = 20u64; // tick
@@ -135,14 +136,10 @@ pub fn one_run(
                 (p.x, LANE_Y),
                 (p.x, p.y),
             ];
-            world
-                .order_opponent(
-                    next,
-                    OpponentOrder::Waypoints(
-                        route.iter().map(|&(x, y)| Point2::new(x, y)).collect(),
-                    ),
-                )
-                .map_err(|e| e.to_string())?;
+            world.order_opponent(
+                next,
+                OpponentOrder::Waypoints(route.iter().map(|&(x, y)| Point2::new(x, y)).collect()),
+            )?;
             walking = Some(next);
             next += 1;
         }
@@ -200,8 +197,8 @@ pub struct FiltersResult {
 }
 
 /// Runs the experiment and writes `filters.csv` and `filters.svg` into `out`.
-pub fn run(arena: Arc<Arena>, cfg: &FiltersConfig, out: &Path) -> Result<FiltersResult, String> {
-    std::fs::create_dir_all(out).map_err(|e| format!("creating {}: {e}", out.display()))?;
+pub fn run(arena: Arc<Arena>, cfg: &FiltersConfig, out: &Path) -> Result<FiltersResult, LabError> {
+    crate::error::create_dir_all(out)?;
     let jobs = 2 * cfg.runs;
     let results = run_all("filters (merge, no merge)", jobs, |i| {
         one_run(arena.clone(), cfg, i < cfg.runs, i % cfg.runs)
@@ -217,7 +214,7 @@ pub fn run(arena: Arc<Arena>, cfg: &FiltersConfig, out: &Path) -> Result<Filters
         csv.push_str(&format!("{t},{:.3},{:.3}\n", at(&with, t), at(&without, t)));
     }
     let csv_path = out.join("filters.csv");
-    std::fs::write(&csv_path, csv).map_err(|e| format!("writing {}: {e}", csv_path.display()))?;
+    crate::error::write(&csv_path, csv)?;
     let curve = |c: &[f64]| (0..len).map(|t| (t as f64, at(c, t))).collect::<Vec<_>>();
     plot::lines(
         &out.join("filters.svg"),

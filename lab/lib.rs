@@ -12,6 +12,7 @@
 
 pub mod capture;
 pub mod cli;
+pub mod error;
 pub mod filters;
 pub mod localisation;
 pub mod plot;

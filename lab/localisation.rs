@@ -6,6 +6,7 @@
 //! Each run is a full match with localisation on. Tagging is disabled (`tag_range` 0) so that
 //! every run lasts the whole duration: the robots still hunt, which is what moves them.
 
+use crate::error::LabError;
 use std::path::Path;
 use std::sync::Arc;
 
@@ -78,7 +79,7 @@ pub fn one_run(
     cfg: &LocalisationConfig,
     localisation: bool,
     seed: u64,
-) -> Result<(Vec<f64>, f64), String> {
+) -> Result<(Vec<f64>, f64), LabError> {
     let mut config = MatchConfig {
         robots: cfg.robots,
         opponents: cfg.opponents,
@@ -88,7 +89,7 @@ pub fn one_run(
         ..MatchConfig::default()
     };
     config.physics.tag_range = 0.0;
-    let mut world = World::new(arena, config).map_err(|e| e.to_string())?;
+    let mut world = World::new(arena, config)?;
     let mut per_second = Vec::with_capacity(cfg.seconds as usize);
     let (mut sum, mut n, mut worst) = (0.0f64, 0usize, 0.0f64);
     for t in 1..=cfg.seconds * TICK_HZ as u64 {
@@ -113,8 +114,8 @@ pub fn run(
     arenas: &[Arc<Arena>],
     cfg: &LocalisationConfig,
     out: &Path,
-) -> Result<Vec<Curve>, String> {
-    std::fs::create_dir_all(out).map_err(|e| format!("creating {}: {e}", out.display()))?;
+) -> Result<Vec<Curve>, LabError> {
+    crate::error::create_dir_all(out)?;
     let variants: Vec<(Arc<Arena>, Variant)> = arenas
         .iter()
         .flat_map(|a| {
@@ -187,7 +188,7 @@ pub fn run(
         ("localisation_summary.csv", &summary),
     ] {
         let path = out.join(name);
-        std::fs::write(&path, text).map_err(|e| format!("writing {}: {e}", path.display()))?;
+        crate::error::write(&path, text)?;
     }
     for per_map in curves.chunks(Variant::ALL.len()) {
         let series: Vec<Series> = per_map

@@ -1,5 +1,6 @@
 //! Line plots as SVG files (plotters), for the experiments.
 
+use crate::error::LabError;
 use std::path::Path;
 
 use plotters::prelude::*;
@@ -27,7 +28,7 @@ pub fn lines(
     x_label: &str,
     y_label: &str,
     series: &[Series],
-) -> Result<(), String> {
+) -> Result<(), LabError> {
     lines_scaled(path, title, x_label, y_label, series, YScale::Linear)
 }
 
@@ -39,7 +40,7 @@ pub fn lines_scaled(
     y_label: &str,
     series: &[Series],
     scale: YScale,
-) -> Result<(), String> {
+) -> Result<(), LabError> {
     let x_max = series
         .iter()
         .flat_map(|s| s.points.iter().map(|p| p.0))
@@ -50,7 +51,10 @@ pub fn lines_scaled(
         .fold(1.0f64, f64::max)
         * 1.1;
     let root = SVGBackend::new(path, (800, 500)).into_drawing_area();
-    let err = |e: &dyn std::fmt::Display| format!("plotting {}: {e}", path.display());
+    let err = |e: &dyn std::fmt::Display| LabError::Plot {
+        path: path.to_owned(),
+        message: e.to_string(),
+    };
     root.fill(&WHITE).map_err(|e| err(&e))?;
     let mut builder = ChartBuilder::on(&root);
     builder
@@ -93,17 +97,15 @@ fn draw_lines<'a, Y>(
     x_label: &str,
     y_label: &str,
     series: &[Series],
-) -> Result<(), String>
+) -> Result<(), DrawingAreaErrorKind<std::io::Error>>
 where
     Y: Ranged<ValueType = f64> + plotters::coord::ranged1d::ValueFormatter<f64>,
 {
-    let err = |e: &dyn std::fmt::Display| e.to_string();
     chart
         .configure_mesh()
         .x_desc(x_label)
         .y_desc(y_label)
-        .draw()
-        .map_err(|e| err(&e))?;
+        .draw()?;
     let colours = [
         RGBColor(31, 119, 180),
         RGBColor(214, 39, 40),
@@ -116,8 +118,7 @@ where
             .draw_series(LineSeries::new(
                 s.points.iter().copied(),
                 colour.stroke_width(2),
-            ))
-            .map_err(|e| err(&e))?
+            ))?
             .label(s.name)
             .legend(move |(x, y)| {
                 PathElement::new(vec![(x, y), (x + 20, y)], colour.stroke_width(2))
@@ -128,8 +129,7 @@ where
         .background_style(WHITE.mix(0.8))
         .border_style(BLACK)
         .position(SeriesLabelPosition::UpperLeft)
-        .draw()
-        .map_err(|e| err(&e))?;
+        .draw()?;
     Ok(())
 }
 
@@ -141,7 +141,7 @@ pub struct Bar<'a> {
 }
 
 /// Draws `bars` side by side with error bars and writes the chart to `path`.
-pub fn bars(path: &Path, title: &str, y_label: &str, bars: &[Bar]) -> Result<(), String> {
+pub fn bars(path: &Path, title: &str, y_label: &str, bars: &[Bar]) -> Result<(), LabError> {
     let y_max = bars
         .iter()
         .map(|b| b.value + b.error)
@@ -149,7 +149,10 @@ pub fn bars(path: &Path, title: &str, y_label: &str, bars: &[Bar]) -> Result<(),
         * 1.15;
     let n = bars.len().max(1);
     let root = SVGBackend::new(path, (800, 500)).into_drawing_area();
-    let err = |e: &dyn std::fmt::Display| format!("plotting {}: {e}", path.display());
+    let err = |e: &dyn std::fmt::Display| LabError::Plot {
+        path: path.to_owned(),
+        message: e.to_string(),
+    };
     root.fill(&WHITE).map_err(|e| err(&e))?;
     let mut chart = ChartBuilder::on(&root)
         .caption(title, ("sans-serif", 22))

@@ -36,6 +36,7 @@
 //! Writes `reacquire.csv` (every run), `reacquire_summary.csv` (mean ± std per condition)
 //! and `reacquire.svg` (bars with ± std error bars).
 
+use crate::error::LabError;
 use std::path::Path;
 use std::sync::Arc;
 
@@ -146,7 +147,7 @@ pub fn one_run(
     c: Condition,
     seed: u64,
     cfg: &ReacquireConfig,
-) -> Result<Outcome, String> {
+) -> Result<Outcome, LabError> {
     let physics = Physics {
         tag_range: 0.0, // nobody ends the search by tagging
         ..Physics::default()
@@ -180,17 +181,15 @@ pub fn one_run(
         ..MatchConfig::default()
     };
     let end = end_point(&arena, &physics, seed);
-    let mut world = World::new(arena, config).map_err(|e| e.to_string())?;
-    world
-        .order_opponent(
-            0,
-            OpponentOrder::Waypoints(vec![
-                Point2::new(DOOR_X, OPPONENT_START[1]),
-                Point2::new(DOOR_X, 5.6),
-                end,
-            ]),
-        )
-        .map_err(|e| e.to_string())?;
+    let mut world = World::new(arena, config)?;
+    world.order_opponent(
+        0,
+        OpponentOrder::Waypoints(vec![
+            Point2::new(DOOR_X, OPPONENT_START[1]),
+            Point2::new(DOOR_X, 5.6),
+            end,
+        ]),
+    )?;
     let sees = |w: &World, i: usize| !w.robots[i].scan.detections.is_empty();
     let limit = cfg.limit_s * TICK_HZ as u64;
     let mut lost_at: Option<u64> = None;
@@ -204,7 +203,9 @@ pub fn one_run(
         }
     }
     let Some(lost) = lost_at else {
-        return Err(format!("seed {seed}: the opponent never left B's sight"));
+        return Err(LabError::Scenario(format!(
+            "seed {seed}: the opponent never left B's sight"
+        )));
     };
     while world.tick < lost + limit {
         if sees(&world, 0) {
@@ -247,8 +248,8 @@ pub struct Summary {
 }
 
 /// Runs every condition on `arena` (office) and writes the files into `out`.
-pub fn run(arena: Arc<Arena>, cfg: &ReacquireConfig, out: &Path) -> Result<Vec<Summary>, String> {
-    std::fs::create_dir_all(out).map_err(|e| format!("creating {}: {e}", out.display()))?;
+pub fn run(arena: Arc<Arena>, cfg: &ReacquireConfig, out: &Path) -> Result<Vec<Summary>, LabError> {
+    crate::error::create_dir_all(out)?;
     let jobs = CONDITIONS.len() * cfg.runs;
     let results = run_all("reacquire runs", jobs, |j| {
         one_run(
@@ -307,7 +308,7 @@ pub fn run(arena: Arc<Arena>, cfg: &ReacquireConfig, out: &Path) -> Result<Vec<S
     }
     let write = |name: &str, text: &str| {
         let p = out.join(name);
-        std::fs::write(&p, text).map_err(|e| format!("writing {}: {e}", p.display()))
+        crate::error::write(&p, text)
     };
     write("reacquire.csv", &csv)?;
     write("reacquire_summary.csv", &summary_csv)?;

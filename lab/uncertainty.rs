@@ -18,6 +18,7 @@
 //!   trade buys;
 //! - captures against the `wander` and `evade` bots: the capture time, what it costs.
 
+use crate::error::LabError;
 use std::path::Path;
 use std::sync::Arc;
 
@@ -127,9 +128,9 @@ pub fn capture_run(
     bot: BotKind,
     variant: Variant,
     seed: u64,
-) -> Result<Option<f64>, String> {
+) -> Result<Option<f64>, LabError> {
     let config = config(cfg, bot, variant, seed);
-    let mut world = World::new(arena, config).map_err(|e| e.to_string())?;
+    let mut world = World::new(arena, config)?;
     while world.status == MatchStatus::Running {
         world.step();
     }
@@ -142,14 +143,14 @@ pub fn hunt_run(
     cfg: &UncertaintyConfig,
     variant: Variant,
     seed: u64,
-) -> Result<Hunt, String> {
+) -> Result<Hunt, LabError> {
     let mut config = config(cfg, BotKind::Wander, variant, seed);
     config.physics.tag_range = 0.0;
     config.time_limit_ticks = cfg.hunt_s * TICK_HZ as u64;
     // Against the aware threshold in both variants, so that the shares compare.
     let uncertain_above =
         lasertag_core::planner::coordinated::Settings::default().uncertainty_spread;
-    let mut world = World::new(arena, config).map_err(|e| e.to_string())?;
+    let mut world = World::new(arena, config)?;
     let mut error_per_second = Vec::with_capacity(cfg.hunt_s as usize);
     let (mut n, mut total, mut lost, mut uncertain) = (0usize, 0.0f64, 0usize, 0usize);
     let (mut second_sum, mut second_n) = (0.0f64, 0usize);
@@ -195,8 +196,8 @@ pub fn run(
     maps: &[(String, Arc<Arena>)],
     cfg: &UncertaintyConfig,
     out: &Path,
-) -> Result<String, String> {
-    std::fs::create_dir_all(out).map_err(|e| format!("creating {}: {e}", out.display()))?;
+) -> Result<String, LabError> {
+    crate::error::create_dir_all(out)?;
     let bots = [BotKind::Wander, BotKind::Evade];
     let mut captures = Vec::new();
     let mut hunts = Vec::new();
@@ -406,7 +407,7 @@ pub fn run(
         ("uncertainty_capture_summary.csv", &capture_summary),
     ] {
         let path = out.join(name);
-        std::fs::write(&path, text).map_err(|e| format!("writing {}: {e}", path.display()))?;
+        crate::error::write(&path, text)?;
     }
     Ok(table)
 }

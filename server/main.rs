@@ -61,8 +61,11 @@ struct ServeArgs {
 }
 
 /// Every map of `dir`, for the experiments (which know no map files).
-fn load_maps(dir: &std::path::Path) -> Result<Vec<Arc<lasertag_core::sim::arena::Arena>>, String> {
-    let store = MapStore::load_dir(dir).map_err(|e| format!("loading maps: {e}"))?;
+fn load_maps(
+    dir: &std::path::Path,
+) -> Result<Vec<Arc<lasertag_core::sim::arena::Arena>>, lasertag_lab::error::LabError> {
+    let store =
+        MapStore::load_dir(dir).map_err(|e| lasertag_lab::error::LabError::Maps(e.into()))?;
     Ok(store.iter().map(|m| m.arena.clone()).collect())
 }
 

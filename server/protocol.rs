@@ -29,19 +29,34 @@ use lasertag_core::sim::{AgentId, TICK_HZ};
 use lasertag_core::world::{ControlKind, FinishReason, MatchConfig, Placement};
 use lasertag_core::world::{EventKind, MatchStatus, Side, World};
 
-/// Parses a request body, naming the JSON path of whatever is wrong.
-pub fn parse<T: DeserializeOwned>(bytes: &[u8]) -> Result<T, String> {
-    let de = &mut serde_json::Deserializer::from_slice(bytes);
-    let value: T = serde_path_to_error::deserialize(de).map_err(|e| {
+/// A request part that was refused: the JSON path of what is wrong, and why.
+pub use lasertag_core::settings::FieldError as Invalid;
+
+/// `Invalid` at `field`.
+pub fn invalid(field: impl Into<String>, message: impl Into<String>) -> Invalid {
+    Invalid {
+        field: field.into(),
+        message: message.into(),
+    }
+}
+
+/// Deserialises with serde, naming the JSON path of whatever is wrong (`root` when it is
+/// the whole document).
+pub fn deserialize_at<'de, T, D>(de: D, root: &str) -> Result<T, Invalid>
+where
+    T: Deserialize<'de>,
+    D: serde::Deserializer<'de>,
+{
+    serde_path_to_error::deserialize(de).map_err(|e| {
         let path = e.path().to_string();
-        let inner = e.into_inner();
-        if path == "." {
-            format!("body: {inner}")
-        } else {
-            format!("{path}: {inner}")
-        }
-    })?;
-    Ok(value)
+        let message = e.into_inner().to_string();
+        invalid(if path == "." { root.to_owned() } else { path }, message)
+    })
+}
+
+/// Parses a request body, naming the JSON path of whatever is wrong.
+pub fn parse<T: DeserializeOwned>(bytes: &[u8]) -> Result<T, Invalid> {
+    deserialize_at(&mut serde_json::Deserializer::from_slice(bytes), "body")
 }
 
 /// Rounds metres to a millimetre: f32 noise digits help nobody and bloat the JSON.
@@ -78,6 +93,27 @@ pub enum OpponentControl {
     Bot,
     Api,
     Human,
+}
+
+/// The wire names of the core's controller kinds (the core stays free of serde).
+impl From<ControlKind> for OpponentControl {
+    fn from(kind: ControlKind) -> Self {
+        match kind {
+            ControlKind::Bot => OpponentControl::Bot,
+            ControlKind::Api => OpponentControl::Api,
+            ControlKind::Human => OpponentControl::Human,
+        }
+    }
+}
+
+impl From<OpponentControl> for ControlKind {
+    fn from(control: OpponentControl) -> Self {
+        match control {
+            OpponentControl::Bot => ControlKind::Bot,
+            OpponentControl::Api => ControlKind::Api,
+            OpponentControl::Human => ControlKind::Human,
+        }
+    }
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, ToSchema)]
@@ -261,11 +297,7 @@ impl CreateMatch {
         let config = MatchConfig {
             robots,
             opponents,
-            opponent_control: match self.opponent_control.unwrap_or(OpponentControl::Bot) {
-                OpponentControl::Bot => ControlKind::Bot,
-                OpponentControl::Api => ControlKind::Api,
-                OpponentControl::Human => ControlKind::Human,
-            },
+            opponent_control: self.opponent_control.unwrap_or(OpponentControl::Bot).into(),
             opponent_bot: match self.opponent_bot.unwrap_or(OpponentBot::Wander) {
                 OpponentBot::Wander => BotKind::Wander,
                 OpponentBot::Evade => BotKind::Evade,
@@ -458,11 +490,7 @@ pub fn summary(world: &World, meta: &MatchMeta) -> MatchSummary {
         robots: world.robots.len(),
         opponents: world.opponents.len(),
         opponents_left: world.opponents.iter().filter(|o| !o.tagged).count(),
-        opponent_control: match c.opponent_control {
-            ControlKind::Bot => OpponentControl::Bot,
-            ControlKind::Api => OpponentControl::Api,
-            ControlKind::Human => OpponentControl::Human,
-        },
+        opponent_control: c.opponent_control.into(),
         opponent_bot: match c.opponent_bot {
             BotKind::Wander => OpponentBot::Wander,
             BotKind::Evade => OpponentBot::Evade,
@@ -621,11 +649,7 @@ pub fn state(world: &World, meta: &MatchMeta) -> MatchState {
                 y: mm(o.pose.pos.y),
                 theta: rad(o.pose.theta),
                 tagged: o.tagged,
-                control: match o.control {
-                    lasertag_core::world::Control::Bot(_) => OpponentControl::Bot,
-                    lasertag_core::world::Control::Api(_) => OpponentControl::Api,
-                    lasertag_core::world::Control::Human(_) => OpponentControl::Human,
-                },
+                control: o.control.kind().into(),
             })
             .collect(),
     }
@@ -673,15 +697,6 @@ pub struct Belief {
     pub roles: Vec<Role>,
 }
 
-/// Parses a robot id (`r0`, `r1`, …) into its index.
-pub fn robot_index(id: &str) -> Option<usize> {
-    let digits = id.strip_prefix('r')?;
-    if digits.is_empty() || !digits.bytes().all(|b| b.is_ascii_digit()) || digits.len() > 6 {
-        return None;
-    }
-    digits.parse().ok()
-}
-
 /// Robot `robot`'s belief, or the team's merged one (with a perfect radio both are the
 /// shared tracker's; see `Team::merged_belief`). `None` for a robot the match does not have.
 pub fn belief(world: &World, robot: Option<usize>) -> Option<Belief> {
@@ -702,8 +717,8 @@ pub fn belief(world: &World, robot: Option<usize>) -> Option<Belief> {
                 tagged: r.tagged,
                 confidence: (r.confidence as f64 * 1000.0).round() / 1000.0,
                 state: r.confidence_state().into(),
-                particles: r.particles.iter().map(|p| [mm(p.x), mm(p.y)]).collect(),
-                weights: r.weights.iter().map(|w| *w as f64).collect(),
+                particles: r.particles().iter().map(|p| [mm(p.x), mm(p.y)]).collect(),
+                weights: r.weights().iter().map(|w| *w as f64).collect(),
             })
             .collect(),
     })
@@ -851,21 +866,24 @@ pub struct OpponentCommand {
 }
 
 impl OpponentCommand {
-    pub fn order(self) -> Result<lasertag_core::world::OpponentOrder, String> {
+    pub fn order(self) -> Result<lasertag_core::world::OpponentOrder, Invalid> {
         use lasertag_core::world::OpponentOrder;
         match (self.waypoints, self.stop, self.tag) {
             (Some(w), None, None) => {
                 if w.len() > 1_000 {
-                    return Err(format!("waypoints: {} points, the limit is 1000", w.len()));
+                    return Err(invalid(
+                        "waypoints",
+                        format!("{} points, the limit is 1000", w.len()),
+                    ));
                 }
                 for (i, p) in w.iter().enumerate() {
                     if !(p[0].is_finite() && p[1].is_finite())
                         || p[0].abs() > schema::MAX_COORDINATE
                         || p[1].abs() > schema::MAX_COORDINATE
                     {
-                        return Err(format!(
-                            "waypoints[{i}]: [{}, {}] is not a finite point",
-                            p[0], p[1]
+                        return Err(invalid(
+                            format!("waypoints[{i}]"),
+                            format!("[{}, {}] is not a finite point", p[0], p[1]),
                         ));
                     }
                 }
@@ -877,9 +895,9 @@ impl OpponentCommand {
             }
             (None, Some(true), None) => Ok(OpponentOrder::Stop),
             (None, None, Some(true)) => Ok(OpponentOrder::Tag),
-            (None, Some(false), None) => Err("stop: must be true".into()),
-            (None, None, Some(false)) => Err("tag: must be true".into()),
-            _ => Err("body: give exactly one of waypoints, stop, tag".into()),
+            (None, Some(false), None) => Err(invalid("stop", "must be true")),
+            (None, None, Some(false)) => Err(invalid("tag", "must be true")),
+            _ => Err(invalid("body", "give exactly one of waypoints, stop, tag")),
         }
     }
 }

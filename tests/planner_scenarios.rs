@@ -87,9 +87,7 @@ fn robots_split_across_the_two_branches_of_the_office_corridor() {
     assert!(north.iter().all(|p| in_north_branch(*p)));
     assert!(east.iter().all(|p| in_east_branch(*p)));
     let role = &mut world.team.trackers[0].roles[0];
-    role.particles = north.iter().chain(&east).copied().collect();
-    role.weights = vec![1.0 / 1000.0; 1000];
-    role.steps = vec![nalgebra::Vector2::zeros(); 1000];
+    role.reset(north.iter().chain(&east).copied().collect());
     world.team.renegotiate();
     // A round lets one robot choose per tick.
     world.step();

@@ -35,10 +35,10 @@ fn check(world: &World) -> Result<(), TestCaseError> {
         .flat_map(|t| t.roles.iter())
         .filter(|r| !r.tagged)
     {
-        let sum: f32 = role.weights.iter().sum();
-        prop_assert!(role.weights.iter().all(|w| w.is_finite() && *w >= 0.0));
+        let sum: f32 = role.weights().iter().sum();
+        prop_assert!(role.weights().iter().all(|w| w.is_finite() && *w >= 0.0));
         prop_assert!((sum - 1.0).abs() < 1e-3, "weights sum to {}", sum);
-        prop_assert_eq!(role.weights.len(), role.particles.len());
+        prop_assert_eq!(role.weights().len(), role.particles().len());
     }
     let discs: Vec<_> = world
         .robots

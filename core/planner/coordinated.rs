@@ -512,7 +512,7 @@ impl Coordinated {
                 _ => 1.0,
             };
             let count = role.count as f32 * boost;
-            for (p, w) in role.particles.iter().zip(&role.weights) {
+            for (p, w) in role.particles().iter().zip(role.weights()) {
                 if let Some(c) = self.views.cell_of(*p) {
                     self.mass[c] += w * count;
                 }

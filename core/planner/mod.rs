@@ -288,19 +288,7 @@ impl Team {
                     .iter()
                     .filter_map(|t| t.roles.iter().find(|r| r.id == role.id && !r.tagged))
                     .collect();
-                let share = 1.0 / parts.len() as f32;
-                let mut mixed = Role {
-                    particles: Vec::new(),
-                    weights: Vec::new(),
-                    steps: Vec::new(),
-                    ..role.clone()
-                };
-                for p in parts {
-                    mixed.particles.extend_from_slice(&p.particles);
-                    mixed.weights.extend(p.weights.iter().map(|w| w * share));
-                    mixed.steps.extend_from_slice(&p.steps);
-                }
-                mixed
+                Role::pooled(role, &parts)
             })
             .collect();
         Cow::Owned(roles)

@@ -154,6 +154,44 @@ pub enum AgentId {
     Opponent(usize),
 }
 
+/// A string that is not an agent id. Ids are written one way only: `r` or `o`, then the
+/// index in decimal without leading zeros (`r0`, `o12`; never `r01`, `R1` or `r+1`).
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("{0:?} is not an agent id (r0, r1, … for robots; o0, o1, … for opponents)")]
+pub struct BadAgentId(pub String);
+
+impl AgentId {
+    /// The index among its kind.
+    pub fn index(self) -> usize {
+        match self {
+            AgentId::Robot(i) | AgentId::Opponent(i) => i,
+        }
+    }
+}
+
+impl std::str::FromStr for AgentId {
+    type Err = BadAgentId;
+
+    fn from_str(s: &str) -> Result<Self, BadAgentId> {
+        let bad = || BadAgentId(s.to_owned());
+        let (kind, digits): (fn(usize) -> AgentId, &str) = match s.as_bytes().first() {
+            Some(b'r') => (AgentId::Robot, &s[1..]),
+            Some(b'o') => (AgentId::Opponent, &s[1..]),
+            _ => return Err(bad()),
+        };
+        // One spelling per id: digits only, no leading zero, and short enough that no
+        // match could have that many agents (which also keeps the parse from overflowing).
+        let canonical = !digits.is_empty()
+            && digits.len() <= 6
+            && digits.bytes().all(|b| b.is_ascii_digit())
+            && (digits == "0" || !digits.starts_with('0'));
+        if !canonical {
+            return Err(bad());
+        }
+        digits.parse().map(kind).map_err(|_| bad())
+    }
+}
+
 impl std::fmt::Display for AgentId {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
@@ -179,6 +217,23 @@ pub enum Motion {
 mod tests {
     use super::*;
     use rand::SeedableRng;
+
+    #[test]
+    fn agent_ids_have_one_spelling() {
+        for (text, id) in [
+            ("r0", AgentId::Robot(0)),
+            ("r7", AgentId::Robot(7)),
+            ("o12", AgentId::Opponent(12)),
+        ] {
+            assert_eq!(text.parse::<AgentId>(), Ok(id));
+            assert_eq!(id.to_string(), text);
+        }
+        for bad in [
+            "", "r", "o", "r01", "o007", "r007", "R1", "x1", "r+1", "r-1", "r1 ", "r1234567", "rr1",
+        ] {
+            assert!(bad.parse::<AgentId>().is_err(), "{bad:?} parsed");
+        }
+    }
 
     #[test]
     fn wrap_angle_stays_in_range() {

@@ -74,11 +74,12 @@ pub struct Role {
     pub count: u32,
     /// A role holding tagged opponents: kept where they were tagged, never updated or hunted.
     pub tagged: bool,
-    pub particles: Vec<Point2<f32>>,
-    /// Same length as `particles`, summing to 1.
-    pub weights: Vec<f32>,
-    /// Each particle's current step per tick (metres), same length as `particles`.
-    pub steps: Vec<Vector2<f32>>,
+    // The cloud: private so that it only changes through the tracker, which keeps the three
+    // the same length and the weights summing to 1.
+    particles: Vec<Point2<f32>>,
+    weights: Vec<f32>,
+    /// Each particle's current step per tick (metres).
+    steps: Vec<Vector2<f32>>,
     /// Consecutive ticks in which robots looked at (nearly) all of this role's weight and
     /// saw nothing of it: see [`CONTRADICTED_TICKS`].
     pub unseen_run: u32,
@@ -122,8 +123,42 @@ impl Role {
 }
 
 impl Role {
+    /// Where this role's opponents may be.
+    pub fn particles(&self) -> &[Point2<f32>] {
+        &self.particles
+    }
+
+    /// One weight per particle, summing to 1.
+    pub fn weights(&self) -> &[f32] {
+        &self.weights
+    }
+
+    /// Each particle's current step per tick (metres).
+    pub fn steps(&self) -> &[Vector2<f32>] {
+        &self.steps
+    }
+
+    /// This role's clouds in several trackers pooled into one, each tracker's weight
+    /// scaled by `1 / parts.len()` so the sum stays 1 (the team's merged view of a role).
+    /// Everything but the cloud comes from `template`.
+    pub fn pooled(template: &Role, parts: &[&Role]) -> Role {
+        let share = 1.0 / parts.len() as f32;
+        let mut pooled = Role {
+            particles: Vec::new(),
+            weights: Vec::new(),
+            steps: Vec::new(),
+            ..template.clone()
+        };
+        for p in parts {
+            pooled.particles.extend_from_slice(&p.particles);
+            pooled.weights.extend(p.weights.iter().map(|w| w * share));
+            pooled.steps.extend_from_slice(&p.steps);
+        }
+        pooled
+    }
+
     /// Replaces the cloud by `particles` with equal weights, standing still.
-    fn reset(&mut self, particles: Vec<Point2<f32>>) {
+    pub fn reset(&mut self, particles: Vec<Point2<f32>>) {
         let n = particles.len();
         self.particles = particles;
         self.weights = vec![1.0 / n as f32; n];

@@ -48,6 +48,17 @@ pub enum Control {
     Human(HumanInput),
 }
 
+impl Control {
+    /// Which kind of controller this is.
+    pub fn kind(&self) -> ControlKind {
+        match self {
+            Control::Bot(_) => ControlKind::Bot,
+            Control::Api(_) => ControlKind::Api,
+            Control::Human(_) => ControlKind::Human,
+        }
+    }
+}
+
 #[derive(Debug, Clone)]
 pub struct Opponent {
     pub pose: Pose,

@@ -560,7 +560,7 @@ impl World {
     /// Replaces an API-driven opponent's route, stops it, or fires its device on the next tick.
     pub fn order_opponent(&mut self, index: usize, order: OpponentOrder) -> Result<(), OrderError> {
         let (w, h) = (self.arena.width(), self.arena.height());
-        let name = format!("o{index}");
+        let name = AgentId::Opponent(index).to_string();
         let o = self
             .opponents
             .get_mut(index)

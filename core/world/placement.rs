@@ -32,7 +32,7 @@ pub(super) fn place_agents(
         Err(SetupError::NoRoom(id))
     };
     for i in 0..config.robots {
-        let id = format!("r{i}");
+        let id = AgentId::Robot(i).to_string();
         let (pos, theta) = match &config.placement {
             Placement::Random => {
                 let p = pick_random(&taken, id)?;
@@ -64,7 +64,7 @@ pub(super) fn place_agents(
         robots.push(Pose { pos, theta });
     }
     for i in 0..config.opponents {
-        let id = format!("o{i}");
+        let id = AgentId::Opponent(i).to_string();
         let pos = match &config.placement {
             Placement::Random => pick_random(&taken, id)?,
             Placement::Given {

@@ -60,7 +60,7 @@ pub enum Request {
         reply: oneshot::Sender<Result<MatchState, MatchError>>,
     },
     Order {
-        opponent: String,
+        opponent: usize,
         order: OpponentOrder,
         reply: oneshot::Sender<Result<(), MatchError>>,
     },
@@ -173,7 +173,7 @@ impl MatchHandle {
         self.ask(|reply| Request::Step { ticks, reply }).await?
     }
 
-    pub async fn order(&self, opponent: String, order: OpponentOrder) -> Result<(), MatchError> {
+    pub async fn order(&self, opponent: usize, order: OpponentOrder) -> Result<(), MatchError> {
         self.ask(|reply| Request::Order {
             opponent,
             order,

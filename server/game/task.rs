@@ -20,7 +20,7 @@ use crate::game::{Hub, MatchError, Request, Seat, random_id};
 use crate::metrics::{Metrics, Refusal, TickHistograms};
 use crate::protocol::frame::{BELIEF_EVERY, Frame};
 use crate::protocol::{self, Clock, Joined, MatchMeta, MatchState, MatchStats};
-use lasertag_core::sim::TICK_HZ;
+use lasertag_core::sim::{AgentId, TICK_HZ};
 use lasertag_core::world::{Control, FinishReason, HumanInput, StepMark};
 use lasertag_core::world::{MatchStatus, World};
 
@@ -330,21 +330,14 @@ impl MatchTask {
                 order,
                 reply,
             } => {
-                let world = &mut self.world;
-                let result = opponent_index(&opponent, world.opponents.len())
-                    .ok_or_else(|| {
-                        MatchError::NotFound(format!("no opponent {opponent} in match {id}"))
-                    })
-                    .and_then(|i| {
-                        world.order_opponent(i, order).map_err(|e| match e {
-                            lasertag_core::world::OrderError::UnknownOpponent(_) => {
-                                MatchError::NotFound(e.to_string())
-                            }
-                            lasertag_core::world::OrderError::OutsideArena { .. } => {
-                                MatchError::BadRequest(e.to_string())
-                            }
-                            _ => MatchError::Conflict(e.to_string()),
-                        })
+                use lasertag_core::world::OrderError;
+                let result = self
+                    .world
+                    .order_opponent(opponent, order)
+                    .map_err(|e| match e {
+                        OrderError::UnknownOpponent(_) => MatchError::NotFound(e.to_string()),
+                        OrderError::OutsideArena { .. } => MatchError::BadRequest(e.to_string()),
+                        _ => MatchError::Conflict(e.to_string()),
                     });
                 let _ = reply.send(result);
             }
@@ -397,19 +390,6 @@ impl MatchTask {
             self.robot_tags,
             with_belief,
         );
-        let new_tags = frame
-            .events
-            .iter()
-            .filter(|e| e.kind == "robot_tagged")
-            .count() as u32;
-        let frame = if new_tags > 0 {
-            Frame {
-                robot_tags: self.robot_tags + new_tags,
-                ..frame
-            }
-        } else {
-            frame
-        };
         self.robot_tags = frame.robot_tags;
         self.published_seq = frame.last_seq;
         self.frames_published += 1;
@@ -526,7 +506,7 @@ impl MatchTask {
         tracing::info!(player = %player.name, slot, "player joined");
         let joined = Joined {
             player_id: player.id.clone(),
-            opponent_id: format!("o{slot}"),
+            opponent_id: AgentId::Opponent(slot).to_string(),
             token: player.token.clone(),
         };
         self.players[slot] = Some(player);
@@ -557,7 +537,7 @@ impl MatchTask {
         tracing::info!(player = %p.name, slot, generation = p.generation, "player connected");
         Ok(Seat {
             slot,
-            opponent_id: format!("o{slot}"),
+            opponent_id: AgentId::Opponent(slot).to_string(),
             name: p.name.to_string(),
             generation: p.generation,
             kicked,
@@ -642,10 +622,4 @@ fn same_secret(a: &str, b: &str) -> bool {
             .zip(b.bytes())
             .fold(0u8, |acc, (x, y)| acc | (x ^ y))
             == 0
-}
-
-/// `o3` → 3, when that opponent exists.
-fn opponent_index(id: &str, count: usize) -> Option<usize> {
-    let n: usize = id.strip_prefix('o')?.parse().ok()?;
-    (n < count && id == format!("o{n}")).then_some(n)
 }

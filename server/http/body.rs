@@ -29,8 +29,6 @@ where
                     format!("body: larger than the limit of {max} bytes"),
                 )
             })?;
-        protocol::parse(&bytes)
-            .map(JsonBody)
-            .map_err(ApiError::bad_request)
+        Ok(JsonBody(protocol::parse(&bytes)?))
     }
 }

@@ -60,3 +60,10 @@ impl IntoResponse for ApiError {
             .into_response()
     }
 }
+
+/// A refused field of a request: always the client's to fix.
+impl From<crate::protocol::Invalid> for ApiError {
+    fn from(e: crate::protocol::Invalid) -> ApiError {
+        ApiError::bad_request(e.to_string())
+    }
+}

@@ -17,6 +17,7 @@ use crate::protocol::{
     Belief, CreateMatch, ErrorBody, Events, Health, JoinRequest, Joined, MapInfo, MatchMeta,
     MatchState, MatchStats, MatchSummary, OpponentCommand, StepRequest,
 };
+use lasertag_core::sim::AgentId;
 use lasertag_core::sim::arena::{Arena, MapDef};
 use lasertag_core::world::World;
 
@@ -296,9 +297,14 @@ pub async fn belief(
         // Anything that is not one of the match's robots is a robot it does not have: 404,
         // like `r9` in a two-robot match. (A 400 for a malformed id made schema-valid strings
         // fail schemathesis, and a `pattern` on the parameter crashed its generator.)
-        Some(r) => Some(crate::protocol::robot_index(r).ok_or_else(|| {
-            ApiError::not_found(format!("robot: no robot {r:?} in this match (r0, r1, …)"))
-        })?),
+        Some(r) => match r.parse() {
+            Ok(AgentId::Robot(i)) => Some(i),
+            _ => {
+                return Err(ApiError::not_found(format!(
+                    "robot: no robot {r:?} in this match (r0, r1, …)"
+                )));
+            }
+        },
     };
     Ok(Json(handle.belief(robot).await?))
 }
@@ -339,8 +345,14 @@ pub async fn command(
     JsonBody(body): JsonBody<OpponentCommand>,
 ) -> Result<StatusCode, ApiError> {
     let handle = find(&state, &id)?;
-    let order = body.order().map_err(ApiError::bad_request)?;
-    handle.order(oid, order).await?;
+    let order = body.order()?;
+    // Like an unknown robot, anything that is not an opponent id names no opponent here.
+    let Ok(AgentId::Opponent(opponent)) = oid.parse() else {
+        return Err(ApiError::not_found(format!(
+            "no opponent {oid:?} in match {id} (o0, o1, …)"
+        )));
+    };
+    handle.order(opponent, order).await?;
     Ok(StatusCode::NO_CONTENT)
 }
 

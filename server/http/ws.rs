@@ -411,7 +411,7 @@ impl Connection {
         }
         let msg = match ClientMessage::parse(text) {
             Ok(m) => m,
-            Err(e) => return self.strike(Refusal::MessageInvalid, &e).await,
+            Err(e) => return self.strike(Refusal::MessageInvalid, &e.to_string()).await,
         };
         match msg {
             ClientMessage::Ping { t } => self.send(wire::pong(t)).await,

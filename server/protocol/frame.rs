@@ -19,7 +19,7 @@ use crate::protocol::ws::WireCache;
 use lasertag_core::localise::Localiser;
 use lasertag_core::sim::Pose;
 use lasertag_core::sim::arena::Arena;
-use lasertag_core::world::Control;
+use lasertag_core::world::{ControlKind, EventKind};
 use lasertag_core::world::{MatchStatus, Side, World};
 
 /// Ticks between two belief updates sent to viewers (5 Hz at 20 Hz ticks).
@@ -69,18 +69,11 @@ fn thin_cloud(localiser: &Localiser) -> Vec<[i32; 2]> {
         .collect()
 }
 
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum SlotControl {
-    Bot,
-    Api,
-    Human,
-}
-
 #[derive(Debug, Clone)]
 pub struct OpponentFrame {
     pub pose: Pose,
     pub tagged: bool,
-    pub control: SlotControl,
+    pub control: ControlKind,
     /// The person playing it, if any.
     pub player: Option<Arc<str>>,
     /// Whether that person is connected right now.
@@ -128,7 +121,8 @@ pub struct Frame {
     pub since_seq: u64,
     /// The `seq` of the newest event so far.
     pub last_seq: u64,
-    /// Tags of robots by opponents so far (the opponents' score).
+    /// Tags of robots by opponents so far (the opponents' score), counted from the
+    /// events of every frame so far.
     pub robot_tags: u32,
     /// The `finished` event, once the match has ended.
     pub finished: Option<EventDto>,
@@ -145,11 +139,13 @@ impl Frame {
         robot_tags: u32,
         with_belief: bool,
     ) -> Frame {
-        let events: Vec<EventDto> = world
-            .events_since(since_seq)
-            .iter()
-            .map(crate::protocol::event)
-            .collect();
+        let new_events = world.events_since(since_seq);
+        let robot_tags = robot_tags
+            + new_events
+                .iter()
+                .filter(|e| matches!(e.kind, EventKind::RobotTagged { .. }))
+                .count() as u32;
+        let events: Vec<EventDto> = new_events.iter().map(crate::protocol::event).collect();
         let last_seq = events.last().map_or(since_seq, |e| e.seq);
         Frame {
             tick: world.tick,
@@ -186,11 +182,7 @@ impl Frame {
                     OpponentFrame {
                         pose: o.pose,
                         tagged: o.tagged,
-                        control: match o.control {
-                            Control::Bot(_) => SlotControl::Bot,
-                            Control::Api(_) => SlotControl::Api,
-                            Control::Human(_) => SlotControl::Human,
-                        },
+                        control: o.control.kind(),
                         player,
                         connected,
                     }
@@ -207,9 +199,7 @@ impl Frame {
                         .events()
                         .iter()
                         .rev()
-                        .find(|e| {
-                            matches!(e.kind, lasertag_core::world::EventKind::Finished { .. })
-                        })
+                        .find(|e| matches!(e.kind, EventKind::Finished { .. }))
                         .map(crate::protocol::event)
                 })
                 .flatten(),
@@ -262,9 +252,9 @@ pub fn belief_view(world: &World) -> BeliefView {
                     tagged: r.tagged,
                     confidence: r.confidence,
                     state: r.confidence_state().into(),
-                    particles: r.particles.len(),
-                    mean: weighted_mean(&r.particles, &r.weights),
-                    points: thin(&r.particles, &r.weights, k),
+                    particles: r.particles().len(),
+                    mean: weighted_mean(r.particles(), r.weights()),
+                    points: thin(r.particles(), r.weights(), k),
                 }
             })
             .collect(),

@@ -14,9 +14,10 @@ use axum::extract::ws::Utf8Bytes;
 use serde::{Deserialize, Serialize};
 
 use crate::maps::MapFile;
-use crate::protocol::frame::{BeliefView, Frame, SlotControl, Visible};
+use crate::protocol::frame::{BeliefView, Frame, Visible};
 use crate::protocol::{EventDto, OpponentControl, PoseDto, Status, Winner, status, winner};
-use lasertag_core::sim::Pose;
+use crate::protocol::{Invalid, deserialize_at, invalid};
+use lasertag_core::sim::{AgentId, Pose};
 
 /// Serialised forms of one frame, built by the first connection that needs them and shared
 /// by all the others (so 500 spectators cost one serialisation per tick, not 500).
@@ -60,30 +61,22 @@ struct PingMsg {
 }
 
 /// Deserialises `v`, naming the field of the failure.
-fn fields<T: serde::de::DeserializeOwned>(v: serde_json::Value) -> Result<T, String> {
-    serde_path_to_error::deserialize(v).map_err(|e| {
-        let path = e.path().to_string();
-        let inner = e.into_inner();
-        if path == "." {
-            format!("message: {inner}")
-        } else {
-            format!("{path}: {inner}")
-        }
-    })
+fn fields<T: serde::de::DeserializeOwned>(v: serde_json::Value) -> Result<T, Invalid> {
+    deserialize_at(v, "message")
 }
 
 impl ClientMessage {
     /// Parses and range-checks a client's text message, naming what is wrong.
-    pub fn parse(text: &str) -> Result<ClientMessage, String> {
+    pub fn parse(text: &str) -> Result<ClientMessage, Invalid> {
         let mut v: serde_json::Value =
-            serde_json::from_str(text).map_err(|e| format!("message: not JSON: {e}"))?;
+            serde_json::from_str(text).map_err(|e| invalid("message", format!("not JSON: {e}")))?;
         let Some(obj) = v.as_object_mut() else {
-            return Err("message: must be a JSON object with a \"type\"".into());
+            return Err(invalid("message", "must be a JSON object with a \"type\""));
         };
         let kind = match obj.remove("type") {
             Some(serde_json::Value::String(s)) => s,
-            Some(_) => return Err("type: must be a string".into()),
-            None => return Err("type: missing (input, belief or ping)".into()),
+            Some(_) => return Err(invalid("type", "must be a string")),
+            None => return Err(invalid("type", "missing (input, belief or ping)")),
         };
         let msg = match kind.as_str() {
             "input" => {
@@ -101,8 +94,9 @@ impl ClientMessage {
                 t: fields::<PingMsg>(v)?.t,
             },
             other => {
-                return Err(format!(
-                    "type: unknown message type {other:?} (input, belief or ping)"
+                return Err(invalid(
+                    "type",
+                    format!("unknown message type {other:?} (input, belief or ping)"),
                 ));
             }
         };
@@ -110,12 +104,12 @@ impl ClientMessage {
             ClientMessage::Input { forward, turn, .. } => {
                 for (field, v) in [("forward", forward), ("turn", turn)] {
                     if !(v.is_finite() && (-1.0..=1.0).contains(v)) {
-                        return Err(format!("{field}: {v} must be in -1..=1"));
+                        return Err(invalid(field, format!("{v} must be in -1..=1")));
                     }
                 }
             }
             ClientMessage::Ping { t } if !t.is_finite() => {
-                return Err(format!("t: {t} must be a finite number"));
+                return Err(invalid("t", format!("{t} must be a finite number")));
             }
             _ => {}
         }
@@ -310,7 +304,7 @@ fn snapshot_json(frame: &Frame, you: Option<&str>, visible: Option<&Visible>) ->
             .enumerate()
             .filter(|(i, _)| visible.is_none_or(|v| v.robots[*i]))
             .map(|(i, r)| RobotWire {
-                id: format!("r{i}"),
+                id: AgentId::Robot(i).to_string(),
                 x: mm(r.pose.pos.x),
                 y: mm(r.pose.pos.y),
                 theta: rad(r.pose.theta),
@@ -333,16 +327,12 @@ fn snapshot_json(frame: &Frame, you: Option<&str>, visible: Option<&Visible>) ->
             .enumerate()
             .filter(|(i, _)| visible.is_none_or(|v| v.opponents[*i]))
             .map(|(i, o)| OpponentWire {
-                id: format!("o{i}"),
+                id: AgentId::Opponent(i).to_string(),
                 x: mm(o.pose.pos.x),
                 y: mm(o.pose.pos.y),
                 theta: rad(o.pose.theta),
                 tagged: o.tagged,
-                control: match o.control {
-                    SlotControl::Bot => OpponentControl::Bot,
-                    SlotControl::Api => OpponentControl::Api,
-                    SlotControl::Human => OpponentControl::Human,
-                },
+                control: o.control.into(),
                 name: o.player.as_deref().map(str::to_string),
             })
             .collect(),
@@ -485,13 +475,21 @@ mod tests {
             ClientMessage::parse(r#"{"type":"belief","on":true}"#),
             Ok(ClientMessage::Belief { on: true })
         );
-        let e = ClientMessage::parse(r#"{"type":"input","forward":2,"turn":0}"#).unwrap_err();
+        let e = ClientMessage::parse(r#"{"type":"input","forward":2,"turn":0}"#)
+            .unwrap_err()
+            .to_string();
         assert_eq!(e, "forward: 2 must be in -1..=1");
-        let e = ClientMessage::parse(r#"{"type":"input","forward":0,"turn":0,"x":1}"#).unwrap_err();
+        let e = ClientMessage::parse(r#"{"type":"input","forward":0,"turn":0,"x":1}"#)
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("unknown field `x`"), "{e}");
-        let e = ClientMessage::parse(r#"{"type":"dance"}"#).unwrap_err();
+        let e = ClientMessage::parse(r#"{"type":"dance"}"#)
+            .unwrap_err()
+            .to_string();
         assert!(e.starts_with("type: unknown message type"), "{e}");
-        let e = ClientMessage::parse(r#"{"type":"input","forward":"fast","turn":0}"#).unwrap_err();
+        let e = ClientMessage::parse(r#"{"type":"input","forward":"fast","turn":0}"#)
+            .unwrap_err()
+            .to_string();
         assert!(e.starts_with("forward"), "{e}");
         assert!(ClientMessage::parse("not json").is_err());
         assert!(ClientMessage::parse(r#"{"forward":0}"#).is_err());
