@@ -2,22 +2,17 @@
 //! files each promises (CSV headers and row counts, the plots), plus a clear refusal of a
 //! bad argument.
 
+mod common;
+
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 use std::sync::Arc;
 
-use lasertag::maps::MapStore;
 use lasertag_core::sim::arena::Arena;
 use lasertag_lab::reacquire;
 
 fn office() -> Arc<Arena> {
-    let store = MapStore::load_dir(&Path::new(env!("CARGO_MANIFEST_DIR")).join("maps"))
-        .expect("shipped maps load");
-    store
-        .get("office")
-        .expect("office is shipped")
-        .arena
-        .clone()
+    common::shipped_arena("office")
 }
 
 /// A fresh output directory under the system's temporary directory.

@@ -1,23 +1,17 @@
 //! Robots localising themselves in real matches on shipped maps: the error stays small, and a
 //! kidnapped robot finds itself again.
 
-use std::path::Path;
+mod common;
+
 use std::sync::Arc;
 
-use lasertag::maps::MapStore;
 use lasertag_core::sim::arena::Arena;
 use lasertag_core::sim::{Pose, TICK_HZ};
 use lasertag_core::world::MatchConfig;
 use lasertag_core::world::{MatchStatus, World};
 
 fn arena(name: &str) -> Arc<Arena> {
-    let store = MapStore::load_dir(&Path::new(env!("CARGO_MANIFEST_DIR")).join("maps"))
-        .expect("shipped maps load");
-    store
-        .get(name)
-        .unwrap_or_else(|| panic!("{name} is shipped"))
-        .arena
-        .clone()
+    common::shipped_arena(name)
 }
 
 fn config(seed: u64, seconds: u64) -> MatchConfig {

@@ -3,10 +3,8 @@
 
 mod common;
 
-use std::path::Path;
 use std::sync::Arc;
 
-use lasertag::maps::MapStore;
 use lasertag_core::bots::BotKind;
 use lasertag_core::planner::PlannerKind;
 use lasertag_core::sim::arena::Arena;
@@ -17,13 +15,7 @@ use nalgebra::Point2;
 use serde_json::{Value, json};
 
 fn office() -> Arc<Arena> {
-    let store = MapStore::load_dir(Path::new(env!("CARGO_MANIFEST_DIR")).join("maps").as_path())
-        .expect("shipped maps load");
-    store
-        .get("office")
-        .expect("office is shipped")
-        .arena
-        .clone()
+    common::shipped_arena("office")
 }
 
 /// The office's two branches beyond the junction at x ≈ 14 of its main corridor: north

@@ -12,6 +12,17 @@ use lasertag::game::Registry;
 use lasertag::maps::MapStore;
 use serde_json::{Value, json};
 
+/// The shipped map `name`, loaded and validated as the server does at start-up.
+pub fn shipped_arena(name: &str) -> std::sync::Arc<lasertag_core::sim::arena::Arena> {
+    let store = MapStore::load_dir(&Path::new(env!("CARGO_MANIFEST_DIR")).join("maps"))
+        .expect("shipped maps load");
+    store
+        .get(name)
+        .unwrap_or_else(|| panic!("{name} is shipped"))
+        .arena
+        .clone()
+}
+
 pub struct TestServer {
     pub addr: SocketAddr,
     pub client: reqwest::Client,

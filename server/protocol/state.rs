@@ -1,0 +1,453 @@
+//! A match as the API shows it: its summary in listings, the ground-truth state, the
+//! robot team's belief and the event log, converted from the core's types with coordinates rounded to the
+//! millimetre.
+
+use super::*;
+
+/// What the shell knows about a match besides its world.
+#[derive(Debug, Clone)]
+pub struct MatchMeta {
+    pub id: String,
+    pub map: String,
+    pub clock: Clock,
+    pub players: usize,
+    /// WebSocket spectators connected now.
+    pub spectators: usize,
+    /// Opponent slots a person can take now.
+    pub free_slots: usize,
+    /// Whether people may take over bot opponents (the showcase).
+    pub bots_joinable: bool,
+}
+
+/// A match in listings and the reply to `POST /api/matches`.
+#[derive(Debug, Clone, Serialize, ToSchema)]
+pub struct MatchSummary {
+    pub id: String,
+    pub map: String,
+    pub clock: Clock,
+    pub tick: u64,
+    pub tick_hz: u32,
+    pub time_s: f64,
+    pub time_limit_s: f64,
+    pub status: Status,
+    pub winner: Option<Winner>,
+    pub robots: usize,
+    pub opponents: usize,
+    pub opponents_left: usize,
+    pub opponent_control: OpponentControl,
+    pub opponent_bot: OpponentBot,
+    /// The planner asked for.
+    pub planner: Planner,
+    /// Deprecated: always equal to `planner` (no planner falls back to another); kept so
+    /// that clients reading it do not break.
+    #[schema(deprecated)]
+    pub planner_active: Planner,
+    #[schema(schema_with = settings::tracker_echo)]
+    pub tracker: Echo<tracker::Settings>,
+    #[schema(schema_with = settings::coordination_echo)]
+    pub coordination: Echo<coordinated::Settings>,
+    /// Whether robots localise themselves (else their estimate is their odometry alone).
+    pub localisation: bool,
+    /// The team radio; with a latency or loss each robot keeps its own belief.
+    #[schema(schema_with = settings::radio_echo)]
+    pub radio: Echo<radio::Settings>,
+    /// The robots' wheel odometry noise.
+    #[schema(schema_with = settings::odometry_echo)]
+    pub odometry: Echo<Odometry>,
+    /// The robots' localisers (what they weigh when `localisation` is on).
+    #[schema(schema_with = settings::localiser_echo)]
+    pub localiser: Echo<localise::Settings>,
+    pub seed: u64,
+    pub players: usize,
+    /// WebSocket spectators connected now.
+    pub spectators: usize,
+    /// Opponent slots a person can take now (`POST /api/matches/{id}/players`).
+    pub free_slots: usize,
+    pub bots_joinable: bool,
+    /// Caveats a user should know, e.g. a fallback in effect.
+    pub notes: Vec<String>,
+}
+
+/// Caveats about a match: settings that were accepted but do nothing as asked.
+pub fn notes(world: &World) -> Vec<String> {
+    let c = &world.config;
+    let mut notes = Vec::new();
+    if !c.localisation
+        && c.planner == PlannerKind::Coordinated
+        && c.coordination.landmark_weight > 0.0
+    {
+        notes.push(
+            "coordination.landmark_weight has no effect without localisation: a landmark in \
+             view corrects nothing when robots dead-reckon"
+                .to_string(),
+        );
+    }
+    notes
+}
+
+pub fn summary(world: &World, meta: &MatchMeta) -> MatchSummary {
+    let c = &world.config;
+    MatchSummary {
+        id: meta.id.clone(),
+        map: meta.map.clone(),
+        clock: meta.clock,
+        tick: world.tick,
+        tick_hz: TICK_HZ,
+        time_s: world.time_s(),
+        time_limit_s: c.time_limit_ticks as f64 / TICK_HZ as f64,
+        status: status(world.status),
+        winner: winner(world.winner),
+        robots: world.robots.len(),
+        opponents: world.opponents.len(),
+        opponents_left: world.opponents.iter().filter(|o| !o.tagged).count(),
+        opponent_control: c.opponent_control.into(),
+        opponent_bot: match c.opponent_bot {
+            BotKind::Wander => OpponentBot::Wander,
+            BotKind::Evade => OpponentBot::Evade,
+            BotKind::Idle => OpponentBot::Idle,
+        },
+        planner: planner_dto(world.team.kind()),
+        planner_active: planner_dto(world.team.kind()),
+        tracker: Echo(c.tracker.clone()),
+        coordination: Echo(c.coordination.clone()),
+        localisation: c.localisation,
+        radio: Echo(c.radio.clone()),
+        odometry: Echo(c.physics.odometry),
+        localiser: Echo(c.localiser.clone()),
+        seed: c.seed,
+        players: meta.players,
+        spectators: meta.spectators,
+        free_slots: meta.free_slots,
+        bots_joinable: meta.bots_joinable,
+        notes: notes(world),
+    }
+}
+
+/// `GET /api/matches/{id}/stats`: how the match's task keeps up (wall-clock measurements of
+/// the shell, not part of the deterministic match).
+#[derive(Debug, Clone, Serialize, ToSchema)]
+pub struct MatchStats {
+    pub id: String,
+    pub tick: u64,
+    /// Ticks in the window the percentiles cover (the most recent ones, up to 4096).
+    pub ticks_measured: usize,
+    /// Compute time of one tick (the step plus building the published frame), microseconds.
+    pub tick_us_p50: f64,
+    pub tick_us_p99: f64,
+    pub tick_us_max: f64,
+    pub tick_us_mean: f64,
+    /// Real-time ticks that were late by more than a whole tick period (skipped, not burst).
+    pub late_ticks: u64,
+    /// Frames published to viewers so far.
+    pub frames_published: u64,
+    pub spectators: usize,
+    pub players_connected: usize,
+}
+
+#[derive(Debug, Clone, Serialize, ToSchema)]
+pub struct PoseDto {
+    pub x: f64,
+    pub y: f64,
+    pub theta: f64,
+}
+
+fn pose(p: lasertag_core::sim::Pose) -> PoseDto {
+    PoseDto {
+        x: mm(p.pos.x),
+        y: mm(p.pos.y),
+        theta: rad(p.theta),
+    }
+}
+
+#[derive(Debug, Clone, Serialize, ToSchema)]
+pub struct DetectionDto {
+    pub range: f64,
+    pub bearing: f64,
+}
+
+#[derive(Debug, Clone, Serialize, ToSchema)]
+pub struct RobotState {
+    pub id: String,
+    pub x: f64,
+    pub y: f64,
+    pub theta: f64,
+    /// The robot's own belief of its pose (its localiser's point estimate; the true pose
+    /// when the match runs without localisation).
+    pub estimate: PoseDto,
+    /// Standard deviation of the localiser's position belief, metres (0 without localisation).
+    pub spread: f64,
+    pub frozen: bool,
+    /// Where its planner sends it, or null.
+    pub goal: Option<PoseDto>,
+    /// This tick's ranges, beam i at bearing (i - 90)°; empty while frozen.
+    pub scan: Vec<f64>,
+    /// This tick's anonymous sightings.
+    pub detections: Vec<DetectionDto>,
+}
+
+#[derive(Debug, Clone, Serialize, ToSchema)]
+pub struct OpponentState {
+    pub id: String,
+    pub x: f64,
+    pub y: f64,
+    pub theta: f64,
+    pub tagged: bool,
+    pub control: OpponentControl,
+}
+
+/// Full ground-truth state of a match.
+#[derive(Debug, Clone, Serialize, ToSchema)]
+pub struct MatchState {
+    pub id: String,
+    pub map: String,
+    pub tick: u64,
+    pub time_s: f64,
+    pub tick_hz: u32,
+    pub status: Status,
+    pub winner: Option<Winner>,
+    pub planner: Planner,
+    pub planner_active: Planner,
+    pub notes: Vec<String>,
+    pub robots: Vec<RobotState>,
+    pub opponents: Vec<OpponentState>,
+}
+
+pub fn state(world: &World, meta: &MatchMeta) -> MatchState {
+    MatchState {
+        id: meta.id.clone(),
+        map: meta.map.clone(),
+        tick: world.tick,
+        time_s: world.time_s(),
+        tick_hz: TICK_HZ,
+        status: status(world.status),
+        winner: winner(world.winner),
+        planner: planner_dto(world.team.kind()),
+        planner_active: planner_dto(world.team.kind()),
+        notes: notes(world),
+        robots: world
+            .robots
+            .iter()
+            .enumerate()
+            .map(|(i, r)| RobotState {
+                id: AgentId::Robot(i).to_string(),
+                x: mm(r.pose.pos.x),
+                y: mm(r.pose.pos.y),
+                theta: rad(r.pose.theta),
+                estimate: pose(r.estimate),
+                spread: mm(r.spread),
+                frozen: world.robot_frozen(i),
+                goal: r.command.goal.map(pose),
+                scan: r.scan.ranges.iter().map(|v| mm(*v)).collect(),
+                detections: r
+                    .scan
+                    .detections
+                    .iter()
+                    .map(|d| DetectionDto {
+                        range: mm(d.range),
+                        bearing: rad(d.bearing),
+                    })
+                    .collect(),
+            })
+            .collect(),
+        opponents: world
+            .opponents
+            .iter()
+            .enumerate()
+            .map(|(i, o)| OpponentState {
+                id: AgentId::Opponent(i).to_string(),
+                x: mm(o.pose.pos.x),
+                y: mm(o.pose.pos.y),
+                theta: rad(o.pose.theta),
+                tagged: o.tagged,
+                control: o.control.kind().into(),
+            })
+            .collect(),
+    }
+}
+
+#[derive(Debug, Clone, Serialize, ToSchema)]
+pub struct Role {
+    pub id: u64,
+    pub count: u32,
+    pub tagged: bool,
+    /// The team's trust in this cloud, 0..=1: 1 when just confirmed by a sighting.
+    pub confidence: f64,
+    /// `valid` (≥ 0.5), `suspicious` (≥ 0.15: worth a look) or `invalid` (a guess).
+    pub state: ConfidenceState,
+    pub particles: Vec<[f64; 2]>,
+    pub weights: Vec<f64>,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, ToSchema)]
+#[serde(rename_all = "lowercase")]
+pub enum ConfidenceState {
+    Valid,
+    Suspicious,
+    Invalid,
+}
+
+impl From<lasertag_core::tracker::Confidence> for ConfidenceState {
+    fn from(c: lasertag_core::tracker::Confidence) -> Self {
+        match c {
+            lasertag_core::tracker::Confidence::Valid => ConfidenceState::Valid,
+            lasertag_core::tracker::Confidence::Suspicious => ConfidenceState::Suspicious,
+            lasertag_core::tracker::Confidence::Invalid => ConfidenceState::Invalid,
+        }
+    }
+}
+
+/// The robot team's belief about the opponents: one robot's own (`?robot=r1`), or the
+/// team's merged view.
+#[derive(Debug, Clone, Serialize, ToSchema)]
+pub struct Belief {
+    pub tick: u64,
+    /// The robot whose belief this is; absent for the team's merged view.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub robot: Option<String>,
+    pub roles: Vec<Role>,
+}
+
+/// Robot `robot`'s belief, or the team's merged one (with a perfect radio both are the
+/// shared tracker's; see `Team::merged_belief`). `None` for a robot the match does not have.
+pub fn belief(world: &World, robot: Option<usize>) -> Option<Belief> {
+    let roles = match robot {
+        Some(i) => {
+            std::borrow::Cow::Borrowed(&world.team.belief_of(i, world.robots.len())?.roles[..])
+        }
+        None => world.team.merged_belief(),
+    };
+    Some(Belief {
+        tick: world.tick,
+        robot: robot.map(|i| AgentId::Robot(i).to_string()),
+        roles: roles
+            .iter()
+            .map(|r| Role {
+                id: r.id,
+                count: r.count,
+                tagged: r.tagged,
+                confidence: (r.confidence as f64 * 1000.0).round() / 1000.0,
+                state: r.confidence_state().into(),
+                particles: r.particles().iter().map(|p| [mm(p.x), mm(p.y)]).collect(),
+                weights: r.weights().iter().map(|w| *w as f64).collect(),
+            })
+            .collect(),
+    })
+}
+
+/// One entry of the event log. Fields beyond `seq`, `tick` and `kind` depend on the kind.
+#[derive(Debug, Clone, Serialize, ToSchema)]
+pub struct EventDto {
+    pub seq: u64,
+    pub tick: u64,
+    /// `shot`, `tag`, `robot_tagged`, `role_split`, `role_merge`, `player_joined`,
+    /// `player_left`, `finished`.
+    pub kind: &'static str,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub by: Option<String>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub target: Option<String>,
+    /// For `shot`: the agent hit, or null for a miss.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub hit: Option<Option<String>>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub opponent: Option<String>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub name: Option<String>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub winner: Option<Winner>,
+    /// For `finished`: `all_tagged`, `time_limit`, `stopped`, `server_shutdown` or
+    /// `abandoned`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub reason: Option<&'static str>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub time_s: Option<f64>,
+    /// For `role_split` and `role_merge`: the role that results.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub role: Option<u64>,
+    /// For `role_split` and `role_merge`: the role it came from / the role merged away.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub from: Option<u64>,
+    /// For `role_merge`: the opponents the merged role stands for.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub count: Option<u32>,
+}
+
+pub fn event(e: &lasertag_core::world::Event) -> EventDto {
+    let mut dto = EventDto {
+        seq: e.seq,
+        tick: e.tick,
+        kind: "",
+        by: None,
+        target: None,
+        hit: None,
+        opponent: None,
+        name: None,
+        winner: None,
+        reason: None,
+        time_s: None,
+        role: None,
+        from: None,
+        count: None,
+    };
+    match &e.kind {
+        EventKind::Shot { by, hit } => {
+            dto.kind = "shot";
+            dto.by = Some(by.to_string());
+            dto.hit = Some(hit.map(|h| h.to_string()));
+        }
+        EventKind::Tag { by, target } => {
+            dto.kind = "tag";
+            dto.by = Some(by.to_string());
+            dto.target = Some(target.to_string());
+        }
+        EventKind::RobotTagged { by, target } => {
+            dto.kind = "robot_tagged";
+            dto.by = Some(by.to_string());
+            dto.target = Some(target.to_string());
+        }
+        EventKind::RoleSplit { role, from } => {
+            dto.kind = "role_split";
+            dto.role = Some(*role);
+            dto.from = Some(*from);
+        }
+        EventKind::RoleMerge { role, from, count } => {
+            dto.kind = "role_merge";
+            dto.role = Some(*role);
+            dto.from = Some(*from);
+            dto.count = Some(*count);
+        }
+        EventKind::PlayerJoined { opponent, name } => {
+            dto.kind = "player_joined";
+            dto.opponent = Some(opponent.to_string());
+            dto.name = Some(name.clone());
+        }
+        EventKind::PlayerLeft { opponent, name } => {
+            dto.kind = "player_left";
+            dto.opponent = Some(opponent.to_string());
+            dto.name = Some(name.clone());
+        }
+        EventKind::Finished { winner: w, reason } => {
+            dto.kind = "finished";
+            dto.winner = winner(*w);
+            dto.reason = Some(finish_reason(*reason));
+            dto.time_s = Some(e.tick as f64 / TICK_HZ as f64);
+        }
+    }
+    dto
+}
+
+/// The wire name of why a match ended.
+pub fn finish_reason(reason: FinishReason) -> &'static str {
+    match reason {
+        FinishReason::AllTagged => "all_tagged",
+        FinishReason::TimeLimit => "time_limit",
+        FinishReason::Stopped => "stopped",
+        FinishReason::ServerShutdown => "server_shutdown",
+        FinishReason::Abandoned => "abandoned",
+    }
+}
+
+#[derive(Debug, Clone, Serialize, ToSchema)]
+pub struct Events {
+    pub events: Vec<EventDto>,
+}
