@@ -1,6 +1,7 @@
 //! Unit tests of the tracker: negative and positive information, splits, merges, tags,
 //! late sightings from teammates and world-model confidence, on small arenas built in code.
 
+use super::observe::fast_atan2;
 use super::*;
 use rand::SeedableRng;
 

@@ -30,21 +30,24 @@
 //! tracker, and nobody moves a teammate: a robot stuck behind one with a higher index asks
 //! it over the radio to step aside, and that robot does so itself when it hears.
 //!
-//! Long file: negotiation, scoring and goal keeping share one private robot state, and
-//! its unit tests reach into it; scoring and passages are the next seams to split out.
+//! The scoring stages live in `scoring`; robots getting past each other in doorways and
+//! narrow corridors in `passages`.
+
+mod passages;
+mod scoring;
 
 use std::sync::Arc;
 
 use nalgebra::Point2;
 
-use crate::nav::{self, DistanceField, PathFollower, steer, turn_to};
+use crate::nav::{self, PathFollower, steer, turn_to};
 use crate::planner::pursuit::{engage_looking_ahead, nearest_sighting, pursuit_goal};
 use crate::planner::{Knowledge, RobotCommand, RobotView, TeamView};
 use crate::radio::Status;
 use crate::sim::arena::Arena;
 use crate::sim::views::{ViewSpec, ViewTable};
-use crate::sim::{AGENT_RADIUS, Motion, Physics, Pose, wrap_angle};
-use crate::tracker::{Confidence, Tracker};
+use crate::sim::{Motion, Physics, Pose};
+use crate::tracker::Tracker;
 
 crate::settings! {
     /// Weights and rhythms of the `coordinated` planner (the match's `coordination` object;
@@ -143,20 +146,6 @@ const STUCK_DISTANCE: f32 = 0.2;
 const STUCK_TICKS: u64 = 40;
 /// Shortest time between two choices of one robot outside full rounds.
 const MIN_CHOICE_TICKS: u64 = 10;
-/// Longest a robot waits off a teammate's path before it goes on with its own plans.
-const MAKE_WAY_TICKS: u64 = 160;
-
-/// Distance from `p` to the segment `a`–`b`.
-fn segment_distance(p: Point2<f32>, a: Point2<f32>, b: Point2<f32>) -> f32 {
-    let ab = b - a;
-    let len2 = ab.norm_squared();
-    let t = if len2 > 0.0 {
-        ((p - a).dot(&ab) / len2).clamp(0.0, 1.0)
-    } else {
-        0.0
-    };
-    (p - (a + ab * t)).norm()
-}
 
 #[derive(Debug, Clone, Copy, PartialEq)]
 struct Goal {
@@ -216,14 +205,6 @@ pub struct Coordinated {
     sees_landmark: Vec<bool>,
     /// Per clearance-grid cell: whether it lies in a narrow passage.
     narrow: Vec<bool>,
-}
-
-/// One robot's best choice in a round.
-#[derive(Debug, Clone, Copy)]
-struct Choice {
-    pose: usize,
-    value: f32,
-    worth: f32,
 }
 
 impl Coordinated {
@@ -500,362 +481,6 @@ impl Coordinated {
             .collect()
     }
 
-    /// Stage 1: expected opponents per scoring cell. Returns their total.
-    fn bin_mass(&mut self, tracker: &Tracker) -> f32 {
-        self.mass.iter_mut().for_each(|m| *m = 0.0);
-        let mut total = 0.0;
-        for role in tracker.roles.iter().filter(|r| !r.tagged && r.count > 0) {
-            // Active feedback (Coltin et al.): a role the team is no longer sure of is worth
-            // checking on, so its hypotheses weigh more than a confirmed role's or a guess's.
-            let boost = match role.confidence_state() {
-                Confidence::Suspicious => self.settings.suspicious_weight,
-                _ => 1.0,
-            };
-            let count = role.count as f32 * boost;
-            for (p, w) in role.particles().iter().zip(role.weights()) {
-                if let Some(c) = self.views.cell_of(*p) {
-                    self.mass[c] += w * count;
-                }
-            }
-            total += count;
-        }
-        total
-    }
-
-    /// Share of all hypotheses (weighted towards the centre of view) that pose `k` sees.
-    fn worth_of(&self, k: usize, total: f32) -> f32 {
-        let (cells, centring) = self.views.view(k);
-        let cw = self.settings.centring_weight;
-        let sum: f32 = cells
-            .iter()
-            .zip(centring)
-            .map(|(&c, &f)| self.mass[c as usize] * (1.0 + cw * f))
-            .sum();
-        sum / ((1.0 + cw) * total)
-    }
-
-    fn drop_worthless(&mut self, searching: &[usize], total: f32) {
-        for &i in searching {
-            if let Some(g) = self.robots[i].goal {
-                let now = self.worth_of(g.pose, total);
-                if now < self.settings.worthless_floor
-                    || now < self.settings.worthless_share * g.worth
-                {
-                    self.robots[i].replan = true;
-                }
-            }
-        }
-    }
-
-    /// Discounts the mass a pose will observe: a teammate is taking care of it.
-    fn claim(&mut self, k: usize) {
-        let keep = self.settings.claim_keep;
-        let views = self.views.clone();
-        for &c in views.view(k).0 {
-            self.mass[c as usize] *= keep;
-        }
-    }
-
-    /// The candidate pose nearest to what `pose` sees now.
-    fn nearest_pose(&self, pose: Pose) -> Option<usize> {
-        let h = self.settings.headings;
-        let i = self
-            .views
-            .positions
-            .iter()
-            .enumerate()
-            .min_by(|a, b| {
-                (a.1 - pose.pos)
-                    .norm_squared()
-                    .total_cmp(&(b.1 - pose.pos).norm_squared())
-            })?
-            .0;
-        let step = std::f32::consts::TAU / h as f32;
-        let heading =
-            (wrap_angle(pose.theta).rem_euclid(std::f32::consts::TAU) / step).round() as usize % h;
-        Some(i * h + heading)
-    }
-
-    /// Stages 2 and 3 for robot `i`: claim what its teammates will see, then choose.
-    fn choose(
-        &mut self,
-        arena: &Arena,
-        physics: &Physics,
-        view: &TeamView,
-        know: &Knowledge,
-        i: usize,
-        total: f32,
-    ) {
-        // Claims of robots that keep what they do: pursuers look where they look; searchers
-        // that are not choosing keep their goals.
-        let mates = self.mates(know, view, i);
-        for m in mates.iter().filter(|m| !m.frozen) {
-            let j = m.index;
-            let k = if know.shared_memory() {
-                if self.robots[j].seeing {
-                    self.nearest_pose(view.robots[j].pose)
-                } else {
-                    self.robots[j].goal.map(|g| g.pose)
-                }
-            } else {
-                know.heard(i, j).and_then(|h| h.status.claim)
-            };
-            if let Some(k) = k.filter(|&k| k < self.views.len()) {
-                self.claim(k);
-            }
-        }
-        let taken: Vec<Point2<f32>> = mates
-            .iter()
-            .filter(|m| !m.frozen)
-            .filter_map(|m| m.goal)
-            .collect();
-        self.score_poses(total);
-        let field = self.field_for(arena, view, know, i);
-        let uncertainty = self.uncertainty(view.robots[i].spread);
-        let best = field.as_ref().and_then(|f| {
-            self.best_for(arena, physics, i, f, &taken, uncertainty)
-                .map(|c| (c, f))
-        });
-        let from = view.robots[i].pose.pos;
-        let state = &mut self.robots[i];
-        state.replan = false;
-        state.due = false;
-        state.avoid_team = false;
-        state.chosen_at = view.tick;
-        let Some((c, field)) = best else {
-            // Nothing reachable (walled in by teammates? the next try plans without them).
-            state.goal = None;
-            state.path = PathFollower::default();
-            return;
-        };
-        let (pos, _) = self.views.pose(c.pose);
-        let path = arena
-            .grid
-            .cell_of(pos)
-            .and_then(|cell| field.path_to(&arena.grid, from, cell))
-            .unwrap_or_else(|| vec![from]);
-        state.goal = Some(Goal {
-            pose: c.pose,
-            worth: c.worth,
-        });
-        state.path = PathFollower::new(path);
-        state.progress = None;
-    }
-
-    fn field_for(
-        &self,
-        arena: &Arena,
-        view: &TeamView,
-        know: &Knowledge,
-        i: usize,
-    ) -> Option<DistanceField> {
-        let from = view.robots[i].pose.pos;
-        if self.robots[i].avoid_team {
-            let others: Vec<(Point2<f32>, f32)> = self
-                .mates(know, view, i)
-                .iter()
-                // A teammate pressed against this robot must not wall in its start cell:
-                // the disc stops short of it.
-                .map(|m| {
-                    let gap = (m.pos - from).norm() - 1.5 * arena.grid.cell;
-                    (m.pos, (3.0 * AGENT_RADIUS).min(gap.max(0.0)))
-                })
-                .collect();
-            if let Some(f) = DistanceField::from_point_avoiding(&arena.grid, from, &others) {
-                return Some(f);
-            }
-        }
-        DistanceField::from_point(&arena.grid, from)
-    }
-
-    /// Per-pose worth under the current (claimed) mass.
-    fn score_poses(&mut self, total: f32) {
-        for k in 0..self.views.len() {
-            self.seen[k] = self.worth_of(k, total);
-        }
-    }
-
-    /// How uncertain a robot with localisation `spread` counts as: 0 up to
-    /// `uncertainty_spread`, rising to 1 at twice that.
-    fn uncertainty(&self, spread: f32) -> f32 {
-        let t = self.settings.uncertainty_spread;
-        if spread > t {
-            ((spread - t) / t).min(1.0)
-        } else {
-            0.0
-        }
-    }
-
-    /// Robot `i`'s best pose given the scored worths. An `uncertainty` above 0 adds
-    /// Fabiani & Latombe's trade: destinations that see a landmark gain, paths through
-    /// narrow passages lose.
-    fn best_for(
-        &self,
-        arena: &Arena,
-        physics: &Physics,
-        i: usize,
-        field: &DistanceField,
-        chosen: &[Point2<f32>],
-        uncertainty: f32,
-    ) -> Option<Choice> {
-        let s = &self.settings;
-        let h = s.headings;
-        let current = self.robots[i].goal.map(|g| g.pose);
-        // Only for an uncertain robot: a certain one skips the pass (and the terms vanish
-        // exactly, so its choices are the plain planner's).
-        let narrow =
-            (uncertainty > 0.0 && s.narrow_weight > 0.0).then(|| field.narrow_metres(&self.narrow));
-        let mut best: Option<Choice> = None;
-        for (p_idx, p) in self.views.positions.iter().enumerate() {
-            let Some(cell) = arena.grid.cell_of(*p) else {
-                continue;
-            };
-            if !field.reachable(cell) {
-                continue;
-            }
-            let travel_s = field.dist[cell] / physics.robot_speed;
-            let crowding: f32 = chosen
-                .iter()
-                .map(|q| (1.0 - (q - p).norm() / s.crowding_radius).max(0.0))
-                .sum();
-            let mut cost = s.travel_weight * travel_s + s.crowding_weight * crowding;
-            if uncertainty > 0.0 {
-                let landmark = if self.sees_landmark[p_idx] {
-                    s.landmark_weight
-                } else {
-                    0.0
-                };
-                let narrow_m = narrow.as_ref().map_or(0.0, |n| n[cell]);
-                cost += uncertainty * (s.narrow_weight * narrow_m - landmark);
-            }
-            for k in p_idx * h..(p_idx + 1) * h {
-                let keep = if current == Some(k) {
-                    s.keep_bonus
-                } else {
-                    0.0
-                };
-                let value = self.seen[k] - cost + keep;
-                if best.is_none_or(|b| value > b.value) {
-                    best = Some(Choice {
-                        pose: k,
-                        value,
-                        worth: self.seen[k],
-                    });
-                }
-            }
-        }
-        best
-    }
-
-    /// Robot `i` has not moved for a while although its path goes on. Blocked by a moving
-    /// teammate (two robots meeting in a doorway or a narrow corridor), the one with the
-    /// higher index steps off the other's path and waits for it to pass: a fixed order, so
-    /// the two never both give way or both insist. Blocked by anything else (a frozen or
-    /// parked teammate, a tight corner), it re-plans around its teammates.
-    ///
-    /// Over an imperfect radio a robot moves only itself: with the higher index it steps
-    /// aside; with the lower it asks the blocker to (in its next message) and waits, and
-    /// re-plans around the team if it is still stuck at the next check after asking.
-    fn unstick(&mut self, arena: &Arena, view: &TeamView, know: &Knowledge, i: usize, tick: u64) {
-        let pos = view.robots[i].pose.pos;
-        let blocker = self
-            .mates(know, view, i)
-            .into_iter()
-            .filter(|m| (m.pos - pos).norm() < 1.2)
-            .filter(|m| !m.frozen && m.moving)
-            .filter(|m| !m.pursuing) // a pursuer follows its target, not its path
-            .filter(|m| !m.making_way)
-            .min_by(|a, b| (a.pos - pos).norm().total_cmp(&(b.pos - pos).norm()))
-            .map(|m| m.index);
-        if let Some(j) = blocker {
-            if know.shared_memory() || i > j {
-                let (yielder, keeper) = (i.max(j), i.min(j));
-                if self.make_way(arena, view, know, yielder, keeper, tick) {
-                    return;
-                }
-            } else {
-                let asked_already = self.robots[i]
-                    .asked
-                    .is_some_and(|(k, at)| k == j && tick < at + 2 * STUCK_TICKS);
-                if !asked_already {
-                    let state = &mut self.robots[i];
-                    state.yield_request = Some(j);
-                    state.asked = Some((j, tick));
-                    state.progress = None;
-                    return;
-                }
-            }
-        }
-        self.robots[i].replan = true;
-        self.robots[i].avoid_team = true;
-    }
-
-    /// Sends `yielder` to the nearest point off `keeper`'s remaining path. False when there
-    /// is none within reach.
-    fn make_way(
-        &mut self,
-        arena: &Arena,
-        view: &TeamView,
-        know: &Knowledge,
-        yielder: usize,
-        keeper: usize,
-        tick: u64,
-    ) -> bool {
-        const CLEAR: f32 = 0.9; // centre distance at which two discs pass with room to spare
-        const REACH: f32 = 8.0;
-        let grid = &arena.grid;
-        let from = view.robots[yielder].pose.pos;
-        // The keeper's position and remaining route, as the yielder knows them.
-        let (keeper_pos, route) = if know.shared_memory() {
-            let keeper_pos = view.robots[keeper].pose.pos;
-            let k = &self.robots[keeper].path;
-            let mut route = vec![keeper_pos];
-            route.extend(k.waypoints.iter().skip(k.next).copied());
-            (keeper_pos, route)
-        } else {
-            let Some(m) = know.heard(yielder, keeper) else {
-                return false;
-            };
-            let route = if m.status.route.is_empty() {
-                vec![m.pose.pos]
-            } else {
-                m.status.route.clone()
-            };
-            (m.pose.pos, route)
-        };
-        // The keeper's body is a wall for the way out, but no wider than the gap between the
-        // two: pressed together (pushed sideways in a corridor, centres 0.5 m apart) a full
-        // two-radius disc also closed the cells beside the yielder and boxed it in.
-        let gap = (from - keeper_pos).norm() - grid.cell;
-        let keeper_disc = (keeper_pos, gap.clamp(grid.cell, 2.0 * AGENT_RADIUS));
-        let Some(field) = DistanceField::from_point_avoiding(grid, from, &[keeper_disc]) else {
-            return false;
-        };
-        let off_route = |p: Point2<f32>| {
-            route
-                .windows(2)
-                .all(|w| segment_distance(p, w[0], w[1]) >= CLEAR)
-                && (p - keeper_pos).norm() >= CLEAR
-        };
-        let spot = (0..grid.len())
-            .filter(|&c| field.dist[c] <= REACH)
-            .filter(|&c| off_route(grid.centre(c)))
-            .min_by(|&a, &b| field.dist[a].total_cmp(&field.dist[b]));
-        let Some(path) = spot.and_then(|c| field.path_to(grid, from, c)) else {
-            return false;
-        };
-        let state = &mut self.robots[yielder];
-        state.path = PathFollower::new(path);
-        state.making_way = Some((keeper, tick + MAKE_WAY_TICKS));
-        state.replan = false;
-        state.progress = None;
-        if know.shared_memory() {
-            // Over a radio the keeper reset its own when it asked.
-            self.robots[keeper].progress = None;
-        }
-        true
-    }
-
     /// Follow the path to the goal, then turn to its heading.
     fn drive(&mut self, physics: &Physics, i: usize, robot: &RobotView) -> RobotCommand {
         let goal = self.goal_pose(i);
@@ -883,18 +508,19 @@ impl Coordinated {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::bots::BotKind;
-    use crate::planner::{Brain, PlannerKind};
-    use crate::sim::arena::MapDef;
-    use crate::world::World;
-    use crate::world::{MatchConfig, Placement};
+mod test_maps {
+    //! Maps the unit tests of scoring and passages share.
+
+    use std::sync::Arc;
+
+    use nalgebra::Point2;
+
+    use crate::sim::arena::{Arena, MapDef};
 
     /// Two 6 m × 6 m rooms joined by a corridor 4 m long and 0.9 m wide: too narrow for two
     /// robots to pass each other. The opponent is walled into a pocket in a corner, out of
     /// sight, so that nothing distracts the robots.
-    fn corridor() -> Arc<Arena> {
+    pub(super) fn corridor() -> Arc<Arena> {
         Arc::new(Arena::new(MapDef {
             name: "corridor".into(),
             width: 16.0,
@@ -929,179 +555,5 @@ mod tests {
             opponent_spawns: vec![Point2::new(0.9, 5.3)],
             landmarks: vec![],
         }))
-    }
-
-    fn coordinated(world: &mut World) -> &mut Coordinated {
-        match &mut world.team.brain {
-            Brain::Coordinated(c) => c,
-            _ => panic!("a coordinated team"),
-        }
-    }
-
-    /// Sends robot `i` to the candidate pose nearest `to`, as a negotiation would.
-    fn send(world: &mut World, i: usize, to: Point2<f32>) {
-        let arena = world.arena.clone();
-        let from = world.robots[i].pose.pos;
-        let c = coordinated(world);
-        let k = c
-            .nearest_pose(Pose {
-                pos: to,
-                theta: 0.0,
-            })
-            .unwrap();
-        let (pos, _) = c.views.pose(k);
-        let field = DistanceField::from_point(&arena.grid, from).unwrap();
-        let path = field
-            .path_to(&arena.grid, from, arena.grid.cell_of(pos).unwrap())
-            .unwrap();
-        let state = &mut c.robots[i];
-        state.goal = Some(Goal {
-            pose: k,
-            worth: 1.0,
-        });
-        state.path = PathFollower::new(path);
-        state.replan = false;
-    }
-
-    #[test]
-    fn two_robots_meeting_head_on_in_a_narrow_corridor_both_get_through() {
-        let config = MatchConfig {
-            robots: 2,
-            opponents: 1,
-            opponent_bot: BotKind::Idle,
-            planner: PlannerKind::Coordinated,
-            placement: Placement::Given {
-                robots: vec![[2.0, 3.0, 0.0], [14.0, 3.0, std::f32::consts::PI]],
-                opponents: vec![[0.9, 5.3]],
-            },
-            // Goals stay as the test sets them: no rounds, never worthless.
-            coordination: Settings {
-                round_ticks: u64::MAX / 2,
-                worthless_floor: 0.0,
-                worthless_share: 0.0,
-                ..Settings::default()
-            },
-            ..MatchConfig::default()
-        };
-        let mut world = World::new(corridor(), config).unwrap();
-        coordinated(&mut world).next_round = u64::MAX / 2;
-        send(&mut world, 0, Point2::new(14.5, 3.5));
-        send(&mut world, 1, Point2::new(1.5, 2.5));
-        let (mut a_through, mut b_through) = (None, None);
-        for _ in 0..(60 * 20) {
-            world.step();
-            if a_through.is_none() && world.robots[0].pose.pos.x > 10.3 {
-                a_through = Some(world.tick);
-            }
-            if b_through.is_none() && world.robots[1].pose.pos.x < 5.7 {
-                b_through = Some(world.tick);
-            }
-        }
-        assert!(
-            a_through.is_some() && b_through.is_some(),
-            "robot 0 through at {a_through:?}, robot 1 at {b_through:?}; poses {:?}",
-            world.robots.iter().map(|r| r.pose).collect::<Vec<_>>()
-        );
-    }
-
-    /// Robot 0's choice from `from` with `spread`, the mass set by hand.
-    fn choice(
-        arena: &Arena,
-        settings: Settings,
-        from: Point2<f32>,
-        mass: &[(Point2<f32>, f32)],
-        spread: f32,
-    ) -> (Point2<f32>, Choice) {
-        let physics = Physics::default();
-        let mut c = Coordinated::new(arena, &physics, settings, 1);
-        let mut total = 0.0;
-        for &(p, m) in mass {
-            let cell = c.views.cell_of(p).unwrap();
-            c.mass[cell] += m;
-            total += m;
-        }
-        c.score_poses(total);
-        let field = DistanceField::from_point(&arena.grid, from).unwrap();
-        let u = c.uncertainty(spread);
-        let best = c.best_for(arena, &physics, 0, &field, &[], u).unwrap();
-        (c.views.pose(best.pose).0, best)
-    }
-
-    /// An open 10 m × 6 m room with one landmark by its west wall.
-    fn room_with_landmark() -> Arena {
-        Arena::new(MapDef {
-            name: "room".into(),
-            width: 10.0,
-            height: 6.0,
-            obstacles: vec![],
-            robot_spawns: vec![[5.0, 3.0, 0.0]],
-            opponent_spawns: vec![Point2::new(9.0, 3.0)],
-            landmarks: vec![Point2::new(0.5, 3.0)],
-        })
-    }
-
-    #[test]
-    fn an_uncertain_robot_prefers_a_destination_that_sees_a_landmark() {
-        let arena = room_with_landmark();
-        let from = Point2::new(5.0, 3.0);
-        // Hypotheses at either end, too far apart (8.8 m) for one view; a little more of
-        // them east, away from the landmark.
-        let mass = [(Point2::new(0.6, 3.0), 0.48), (Point2::new(9.4, 3.0), 0.52)];
-        let landmark = Point2::new(0.5, 3.0);
-        let range = Physics::default().landmark_range;
-        let plain = Settings {
-            landmark_weight: 0.0,
-            narrow_weight: 0.0,
-            ..Settings::default()
-        };
-        let (old, old_choice) = choice(&arena, plain, from, &mass, 0.0);
-        assert!(
-            old.x > 5.0,
-            "without the landmark term it goes east: {old:?}"
-        );
-        // Localised (spread under the threshold): exactly the old choice, value and all.
-        for spread in [0.0, 0.05, 0.15] {
-            let (_, c) = choice(&arena, Settings::default(), from, &mass, spread);
-            assert_eq!(
-                (c.pose, c.value, c.worth),
-                (old_choice.pose, old_choice.value, old_choice.worth)
-            );
-        }
-        // Lost (spread twice the threshold): it goes where it can see the landmark.
-        let (new, _) = choice(&arena, Settings::default(), from, &mass, 0.3);
-        assert!(
-            (new - landmark).norm() <= range,
-            "goes within sight of the landmark: {new:?}"
-        );
-    }
-
-    #[test]
-    fn an_uncertain_robot_avoids_a_narrow_corridor() {
-        let arena = corridor();
-        let from = Point2::new(3.0, 3.0);
-        // Slightly more hypotheses in the far room's corner (out of sight of the corridor)
-        // than in this room's; travel is free, so only the corridor can tell them apart.
-        let mass = [
-            (Point2::new(15.5, 0.5), 0.53),
-            (Point2::new(3.0, 0.5), 0.47),
-        ];
-        let settings = Settings {
-            travel_weight: 0.0,
-            ..Settings::default()
-        };
-        let (sure, sure_choice) = choice(&arena, settings.clone(), from, &mass, 0.1);
-        assert!(sure.x > 10.0, "a localised robot goes through: {sure:?}");
-        let plain = Settings {
-            narrow_weight: 0.0,
-            landmark_weight: 0.0,
-            ..settings.clone()
-        };
-        let (_, old) = choice(&arena, plain, from, &mass, 0.1);
-        assert_eq!((sure_choice.pose, sure_choice.value), (old.pose, old.value));
-        let (unsure, _) = choice(&arena, settings, from, &mass, 0.3);
-        assert!(
-            unsure.x < 6.0,
-            "an uncertain one stays out of the corridor: {unsure:?}"
-        );
     }
 }

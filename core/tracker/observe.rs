@@ -1,0 +1,347 @@
+//! The measurement update, stages 2–4 of [`Tracker::update`]: tags take opponents out,
+//! negative information down-weights what the robots' scans would have seen, and positive
+//! information gives each detection to the role it most likely belongs to (splitting off a
+//! role for one opponent when needed) and updates that role by Bayes' rule.
+
+use nalgebra::{Point2, Vector2};
+
+use crate::sim::arena::Arena;
+use crate::sim::sensors::detection_point;
+use crate::sim::{AGENT_RADIUS, DT, Pose};
+use crate::tracker::{
+    CONFIDENCE_LOOK_DECAY, CONFIDENCE_TIME_CONSTANT_S, CONTRADICTED_KEEP, LaserModel, Role,
+    Sighting, Tracker, TrackerEvent,
+};
+
+/// Lateral spread (m) of a detection's position: sensor noise plus the pose estimate's error.
+fn detection_sigma(range: f32) -> f32 {
+    0.1 + 0.03 * range
+}
+
+/// Likelihood of a detection 4σ from every particle: a prior with less weight near a
+/// detection than that has nothing to say about it, and is re-drawn around it.
+const FAR_LIKELIHOOD: f32 = 3.354_626_3e-4; // exp(-4² / 2)
+
+/// Spread used to decide which role a detection belongs to: generous, because a tracked
+/// opponent's cloud lags a running opponent by a little.
+const ASSOCIATION_SIGMA: f32 = 0.75;
+
+/// Particles that a robot's scan would have seen: negative information.
+/// `reach`: how far an opponent may have moved since the scan (0 for a fresh one). A
+/// hypothesis at `p` is contradicted only if every point within `reach` of it was seen, so
+/// that an opponent there now could not have stood outside the seen area then.
+pub(super) fn would_be_seen(
+    p: Point2<f32>,
+    s: &Sighting,
+    laser: LaserModel,
+    cos: f32,
+    sin: f32,
+    reach: f32,
+) -> bool {
+    if s.scan.is_empty() {
+        return false; // a robot frozen while sensing saw nothing
+    }
+    let dx = p.x - s.pose.pos.x;
+    let dy = p.y - s.pose.pos.y;
+    let d2 = dx * dx + dy * dy;
+    let far = laser.range - reach;
+    if far <= 0.0 || d2 > far * far {
+        return false;
+    }
+    let forward = dx * cos + dy * sin;
+    let lateral = -dx * sin + dy * cos;
+    let bearing = fast_atan2(lateral, forward);
+    let d = d2.sqrt();
+    // The bearings the disc of radius `reach` around `p` spans (all of them when it holds
+    // the robot).
+    let spread = if reach <= 0.0 {
+        0.0
+    } else if reach >= d {
+        return false;
+    } else {
+        (reach / d).asin()
+    };
+    let half = laser.fov / 2.0;
+    if bearing.abs() + spread > half {
+        return false;
+    }
+    let n = s.scan.len();
+    let beam_at = |b: f32| -> f32 {
+        let i = (((b + half) / laser.fov) * (n - 1) as f32).round() as usize;
+        s.scan[i.min(n - 1)]
+    };
+    let mut beam = beam_at(bearing);
+    if spread > 0.0 {
+        // Every beam across the disc must have reached past its far side.
+        let beams = ((2.0 * spread / laser.fov) * (n - 1) as f32).ceil() as usize + 1;
+        for k in 0..=beams {
+            let b = bearing - spread + 2.0 * spread * k as f32 / beams as f32;
+            beam = beam.min(beam_at(b));
+        }
+    }
+    // An opponent centred at `p` would have stopped this beam at its near edge, d − R, and
+    // been detected. So the beam reaching past d − R (with a margin for the laser's noise and
+    // the beam not passing exactly through p) means nobody stands at `p`. Requiring the beam
+    // to reach d + R instead would hide every hypothesis hugging a wall from negative
+    // information for ever: robots would stare at an empty strip along a wall.
+    d + reach < beam + AGENT_RADIUS - SEEN_MARGIN
+}
+
+/// Laser noise (3σ = 0.06 m), the bit a beam that passes a little off a particle's centre
+/// meets the disc later (about 0.01 m), and some slack.
+const SEEN_MARGIN: f32 = 0.1;
+
+/// atan2 to within about 0.0015 rad (a beam is 0.017 rad wide), several times faster than libm.
+pub(super) fn fast_atan2(y: f32, x: f32) -> f32 {
+    use std::f32::consts::{FRAC_PI_2, PI};
+    if x == 0.0 && y == 0.0 {
+        return 0.0;
+    }
+    let (ax, ay) = (x.abs(), y.abs());
+    let a = ax.min(ay) / ax.max(ay);
+    let s = a * a;
+    let mut r = ((-0.046_496_473 * s + 0.159_314_22) * s - 0.327_622_77) * s * a + a;
+    if ay > ax {
+        r = FRAC_PI_2 - r;
+    }
+    if x < 0.0 {
+        r = PI - r;
+    }
+    if y < 0.0 { -r } else { r }
+}
+
+impl Tracker {
+    /// Log-likelihood-ish score of `z` under role `r`, for association.
+    fn association(&self, r: &Role, z: Point2<f32>) -> f32 {
+        let inv = 1.0 / (2.0 * ASSOCIATION_SIGMA * ASSOCIATION_SIGMA);
+        let mut sum = 0.0f32;
+        let mut nearest = f32::INFINITY;
+        for (p, w) in r.particles.iter().zip(&r.weights) {
+            let d2 = (p - z).norm_squared();
+            nearest = nearest.min(d2);
+            if d2 < 16.0 * ASSOCIATION_SIGMA * ASSOCIATION_SIGMA {
+                sum += w * (-d2 * inv).exp();
+            }
+        }
+        if sum > 1e-30 {
+            sum.ln()
+        } else {
+            // No particle near: rank by the nearest particle (always below any real likelihood).
+            -1e6 - nearest
+        }
+    }
+
+    /// The untagged role a detection at `z` most likely belongs to.
+    fn associate(&self, z: Point2<f32>) -> Option<usize> {
+        self.roles
+            .iter()
+            .enumerate()
+            .filter(|(_, r)| !r.tagged && r.count > 0)
+            .map(|(i, r)| (self.association(r, z), i))
+            .max_by(|a, b| a.0.total_cmp(&b.0).then(b.1.cmp(&a.1)))
+            .map(|(_, i)| i)
+    }
+
+    /// Splits one opponent off role `i` (a copy standing for one) when it stands for more;
+    /// returns the index of the role that now stands for exactly that opponent.
+    fn split_one(&mut self, i: usize, events: &mut Vec<TrackerEvent>) -> usize {
+        if self.roles[i].count <= 1 {
+            return i;
+        }
+        self.roles[i].count -= 1;
+        let mut copy = self.roles[i].clone();
+        copy.id = self.next_id;
+        self.next_id += 1;
+        copy.count = 1;
+        events.push(TrackerEvent::Split {
+            role: copy.id,
+            from: self.roles[i].id,
+        });
+        self.roles.push(copy);
+        self.roles.len() - 1
+    }
+
+    /// Stage 2: each robot whose shot hit took out one opponent: the one its device hit, the
+    /// nearest detection inside the tag cone. When no detection fits (a teammate blocked the
+    /// laser but not the shot), the role with the most weight inside the cone loses it: a
+    /// hit must always take one count off, or the counts would stop adding up.
+    pub(super) fn tags(
+        &mut self,
+        sightings: &[Sighting],
+        used: &mut [Vec<bool>],
+        events: &mut Vec<TrackerEvent>,
+    ) {
+        // Detections are noisy (1° in bearing): allow a little outside the device's cone.
+        let half = self.settings.tag_half_angle + 2f32.to_radians();
+        let range = self.settings.tag_range + 0.3;
+        for (k, s) in sightings.iter().enumerate() {
+            if !s.tagged {
+                continue;
+            }
+            let hit = s
+                .detections
+                .iter()
+                .enumerate()
+                .filter(|(_, d)| d.bearing.abs() <= half && d.range <= range)
+                .min_by(|a, b| a.1.range.total_cmp(&b.1.range));
+            let found = match hit {
+                Some((j, d)) => {
+                    used[k][j] = true;
+                    let z = detection_point(s.pose, d);
+                    self.associate(z).map(|i| (i, z))
+                }
+                None => self.most_weight_in_cone(s.pose, half, range),
+            };
+            let Some((i, z)) = found else { continue };
+            let i = self.split_one(i, events);
+            let role = &mut self.roles[i];
+            role.tagged = true;
+            role.confidence = 1.0; // the device reported the hit: a fact
+            role.reset(vec![z]);
+        }
+    }
+
+    /// The untagged role with the most weight inside a tag cone from `pose`, and the weighted
+    /// mean of that weight (or a point straight ahead when no role has any there).
+    fn most_weight_in_cone(
+        &self,
+        pose: Pose,
+        half: f32,
+        range: f32,
+    ) -> Option<(usize, Point2<f32>)> {
+        let ahead = pose.pos + pose.heading() * (range / 2.0);
+        self.roles
+            .iter()
+            .enumerate()
+            .filter(|(_, r)| !r.tagged && r.count > 0)
+            .map(|(i, r)| {
+                let (mut w, mut sum) = (0.0f32, Vector2::zeros());
+                for (p, pw) in r.particles.iter().zip(&r.weights) {
+                    if (p - pose.pos).norm() <= range && pose.bearing_to(*p).abs() <= half {
+                        w += pw;
+                        sum += p.coords * *pw;
+                    }
+                }
+                let z = if w > 0.0 {
+                    Point2::from(sum / w)
+                } else {
+                    ahead
+                };
+                (w, i, z)
+            })
+            .max_by(|a, b| a.0.total_cmp(&b.0).then(b.1.cmp(&a.1)))
+            .map(|(_, i, z)| (i, z))
+    }
+
+    /// Stage 3: down-weight every particle some robot would have seen, and count how long
+    /// each role has been looked at in full without being seen.
+    pub(super) fn negative(&mut self, sightings: &[Sighting], laser: LaserModel) {
+        let p_miss = self.settings.p_miss;
+        let before: Vec<f32> = self.roles.iter().map(|r| r.weights.iter().sum()).collect();
+        for s in sightings.iter().filter(|s| !s.scan.is_empty()) {
+            let (cos, sin) = (s.pose.theta.cos(), s.pose.theta.sin());
+            let reach = s.reach(self.settings.opponent_speed);
+            for role in self.roles.iter_mut().filter(|r| !r.tagged) {
+                for (p, w) in role.particles.iter().zip(role.weights.iter_mut()) {
+                    if would_be_seen(*p, s, laser, cos, sin, reach) {
+                        *w *= p_miss;
+                    }
+                }
+            }
+        }
+        let time_decay = (-DT / CONFIDENCE_TIME_CONSTANT_S).exp();
+        for (role, before) in self.roles.iter_mut().zip(before) {
+            if role.tagged {
+                continue;
+            }
+            let after: f32 = role.weights.iter().sum();
+            // Weight kept = unseen share + p_miss × seen share.
+            if after <= (p_miss + CONTRADICTED_KEEP) * before {
+                role.unseen_run += 1;
+            } else {
+                role.unseen_run = 0;
+            }
+            let seen_share = if before > 0.0 {
+                ((before - after) / (before * (1.0 - p_miss))).clamp(0.0, 1.0)
+            } else {
+                0.0
+            };
+            role.confidence *= time_decay * (1.0 - CONFIDENCE_LOOK_DECAY * seen_share);
+        }
+    }
+
+    /// Stage 4: each (unused) detection updates the role it most likely belongs to.
+    pub(super) fn positive(
+        &mut self,
+        arena: &Arena,
+        sightings: &[Sighting],
+        used: &[Vec<bool>],
+        events: &mut Vec<TrackerEvent>,
+    ) {
+        for (k, s) in sightings.iter().enumerate() {
+            for (j, d) in s.detections.iter().enumerate() {
+                if used[k][j] {
+                    continue;
+                }
+                let z = detection_point(s.pose, d);
+                let Some(i) = self.associate(z) else { continue };
+                let i = self.split_one(i, events);
+                let sigma = detection_sigma(d.range).hypot(s.reach(self.settings.opponent_speed));
+                self.observe(arena, i, z, sigma);
+            }
+        }
+    }
+
+    /// Bayes update of role `i` with a detection at `z`. When the prior has (almost) no
+    /// particles where the detection is, the cloud is re-drawn around it instead (sensor
+    /// resetting): the detection is far sharper than any prior it could disagree with.
+    fn observe(&mut self, arena: &Arena, i: usize, z: Point2<f32>, sigma: f32) {
+        let inv = 1.0 / (2.0 * sigma * sigma);
+        let role = &mut self.roles[i];
+        role.unseen_run = 0; // seen after all
+        role.confidence = 1.0;
+        let mut total = 0.0f32;
+        for (p, w) in role.particles.iter().zip(role.weights.iter_mut()) {
+            *w *= (-(p - z).norm_squared() * inv).exp();
+            total += *w;
+        }
+        let n = role.particles.len() as f32;
+        let ess = if total > 0.0 {
+            let sq: f32 = role.weights.iter().map(|w| (w / total) * (w / total)).sum();
+            1.0 / sq
+        } else {
+            0.0
+        };
+        // Keep the Bayes update only if it left a usable cloud: weights that underflowed would
+        // otherwise be mistaken for an impossible role and scattered over the map. And only
+        // if the prior had any weight near the detection: `total` is the detection's
+        // likelihood under the prior, and below that of a cloud lying wholly 4σ away the
+        // Bayes update would just renormalise the cloud where it is — a tight cloud metres
+        // from a confirmed detection (found by the reacquire experiment, whose
+        // no-prediction tracker has no motion to carry its cloud to a teammate's detections).
+        if total > FAR_LIKELIHOOD && ess >= 0.05 * n {
+            return;
+        }
+        let count = role.particles.len();
+        let mut fresh = Vec::with_capacity(count);
+        let mut tries = 0;
+        while fresh.len() < count && tries < count * 20 {
+            tries += 1;
+            let q = z + Vector2::new(
+                crate::sim::gaussian(&mut self.rng, sigma),
+                crate::sim::gaussian(&mut self.rng, sigma),
+            );
+            if arena
+                .grid
+                .cell_of(q)
+                .is_some_and(|c| arena.grid.clearance[c] >= AGENT_RADIUS)
+            {
+                fresh.push(q);
+            }
+        }
+        while fresh.len() < count {
+            fresh.push(z); // pressed against a wall: the detection itself is the best guess
+        }
+        self.roles[i].reset(fresh);
+    }
+}
