@@ -161,6 +161,7 @@ async fn run(args: Args) -> Result<(), String> {
             let config = lasertag::config::Config {
                 max_connections_per_address: usize::MAX,
                 max_spectators_per_match: usize::MAX,
+                max_matches_per_address: usize::MAX,
                 requests_per_s: 1e6,
                 request_burst: 1e6,
                 ..lasertag::config::Config::default()
@@ -179,6 +180,7 @@ async fn run(args: Args) -> Result<(), String> {
     let http = reqwest::Client::new();
     let base = format!("http://{addr}");
     let mut ids = Vec::new();
+    let mut owner_tokens = Vec::new();
     for i in 0..args.matches {
         let body = json!({"map": args.map, "robots": 2, "opponents": args.opponents,
             "opponent_bot": "evade", "planner": args.planner,
@@ -198,6 +200,7 @@ async fn run(args: Args) -> Result<(), String> {
         }
         let v: Value = r.json().await.map_err(|e| e.to_string())?;
         ids.push(v["id"].as_str().unwrap_or_default().to_string());
+        owner_tokens.push(v["owner_token"].as_str().unwrap_or_default().to_string());
     }
     println!(
         "{} real-time matches on {} (2 {} robots, {} evade bots), {} spectators, {} s, server {addr}",
@@ -362,8 +365,12 @@ async fn run(args: Args) -> Result<(), String> {
         "  throughput       {:.1} MB/s to all spectators",
         (bb + bp) as f64 / secs / 1e6
     );
-    for id in &ids {
-        let _ = http.delete(format!("{base}/api/matches/{id}")).send().await;
+    for (id, token) in ids.iter().zip(&owner_tokens) {
+        let _ = http
+            .delete(format!("{base}/api/matches/{id}"))
+            .bearer_auth(token)
+            .send()
+            .await;
     }
     Ok(())
 }

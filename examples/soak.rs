@@ -108,7 +108,7 @@ async fn create_match(
     base: &str,
     k: u64,
     humans: bool,
-) -> Result<String, String> {
+) -> Result<(String, String), String> {
     let map = MAPS[(k as usize) % MAPS.len()];
     // Bots: 2 robots hunt 3 evading bots that people may take over. Humans: 4 human slots
     // (an empty slot stands still), so the robots have something to do even when nobody
@@ -129,8 +129,8 @@ async fn create_match(
         .map_err(|e| e.to_string())?;
     let status = r.status();
     let v: Value = r.json().await.map_err(|e| e.to_string())?;
-    match v["id"].as_str() {
-        Some(id) if status == 201 => Ok(id.to_string()),
+    match (v["id"].as_str(), v["owner_token"].as_str()) {
+        (Some(id), Some(token)) if status == 201 => Ok((id.to_string(), token.to_string())),
         _ => Err(format!("creating a match: {status} {v}")),
     }
 }
@@ -420,6 +420,7 @@ async fn run(args: Args) -> Result<bool, String> {
     // test of one machine. The rest (message rate, sizes, graces) are the defaults.
     let config = lasertag::config::Config {
         max_connections_per_address: usize::MAX,
+        max_matches_per_address: usize::MAX,
         requests_per_s: 1e6,
         request_burst: 1e6,
         ..lasertag::config::Config::default()
@@ -439,12 +440,13 @@ async fn run(args: Args) -> Result<bool, String> {
     let live: Live = Arc::default();
     let mut next_seed = args.seed.wrapping_mul(1000);
     // Which matches have human slots (the rest have bots), so replacements keep the mix.
-    let mut kinds: HashMap<String, bool> = HashMap::new();
+    // And each match's owner token, to delete it.
+    let mut kinds: HashMap<String, (bool, String)> = HashMap::new();
     for i in 0..args.matches {
         let humans = i % 2 == 1;
-        let id = create_match(&http, &base, next_seed, humans).await?;
+        let (id, token) = create_match(&http, &base, next_seed, humans).await?;
         next_seed += 1;
-        kinds.insert(id.clone(), humans);
+        kinds.insert(id.clone(), (humans, token));
         live.lock().unwrap_or_else(|e| e.into_inner()).push(id);
     }
     let started = Instant::now();
@@ -516,11 +518,15 @@ async fn run(args: Args) -> Result<bool, String> {
             .cloned()
             .collect();
         for id in &gone {
-            let humans = kinds.remove(id).unwrap_or(false);
-            let _ = http.delete(format!("{base}/api/matches/{id}")).send().await;
+            let (humans, token) = kinds.remove(id).unwrap_or_default();
+            let _ = http
+                .delete(format!("{base}/api/matches/{id}"))
+                .bearer_auth(token)
+                .send()
+                .await;
             match create_match(&http, &base, next_seed, humans).await {
-                Ok(new) => {
-                    kinds.insert(new.clone(), humans);
+                Ok((new, token)) => {
+                    kinds.insert(new.clone(), (humans, token));
                     ids.push(new);
                     replaced += 1;
                 }
@@ -552,7 +558,12 @@ async fn run(args: Args) -> Result<bool, String> {
     let last = sample(&http, &base).await.ok();
     let rss_end = resident_kib();
     for id in live_ids(&live) {
-        let _ = http.delete(format!("{base}/api/matches/{id}")).send().await;
+        let token = kinds.get(&id).map(|k| k.1.clone()).unwrap_or_default();
+        let _ = http
+            .delete(format!("{base}/api/matches/{id}"))
+            .bearer_auth(token)
+            .send()
+            .await;
     }
     tokio::time::sleep(Duration::from_secs(2)).await;
     let rss_after_cleanup = resident_kib();

@@ -27,6 +27,37 @@ pub mod defaults {
     pub const FINISHED_GRACE: &str = "300";
     pub const ABANDONED_AFTER: &str = "120";
     pub const RECONNECT_GRACE: &str = "30";
+    pub const MAX_MATCHES_PER_ADDRESS: usize = 8;
+    pub const MAX_MAPS: usize = 200;
+    pub const MAX_MAPS_PER_ADDRESS: usize = 10;
+    pub const IDLE_MANUAL_AFTER: &str = "600";
+    pub const MAX_CONNECTIONS: usize = 4096;
+    pub const HEADER_READ_TIMEOUT: &str = "10";
+}
+
+/// A secret setting: shown as `"<redacted>"` by `Debug`, so logs of the config never carry it.
+#[derive(Clone, PartialEq, Eq)]
+pub struct Secret(pub String);
+
+impl std::fmt::Debug for Secret {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("\"<redacted>\"")
+    }
+}
+
+impl std::str::FromStr for Secret {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Secret, String> {
+        // Short tokens can be guessed; the owner tokens the server makes are 32 hex digits.
+        if s.len() < 16 {
+            return Err("must be at least 16 characters".into());
+        }
+        if !s.bytes().all(|b| b.is_ascii_graphic()) {
+            return Err("must be printable ASCII without spaces".into());
+        }
+        Ok(Secret(s.to_owned()))
+    }
 }
 
 /// Every setting of the server (flags of `lasertag serve`).
@@ -102,6 +133,39 @@ pub struct Config {
     #[arg(long = "reconnect-grace-s", value_name = "SECONDS", env = "LASERTAG_RECONNECT_GRACE_S",
           default_value = defaults::RECONNECT_GRACE, value_parser = seconds)]
     pub reconnect_grace: Duration,
+    /// The operator's token: `Authorization: Bearer <it>` may change or delete any match or
+    /// uploaded map (at least 16 printable characters). Without it only owners can.
+    #[arg(long, env = "LASERTAG_ADMIN_TOKEN", value_parser = clap::value_parser!(Secret))]
+    pub admin_token: Option<Secret>,
+    /// Matches one client (an IPv4 address, or an IPv6 /64) may hold at once, finished ones
+    /// included until they are removed; more are refused with 429.
+    #[arg(long, env = "LASERTAG_MAX_MATCHES_PER_ADDRESS", default_value_t = defaults::MAX_MATCHES_PER_ADDRESS,
+          value_parser = clap::value_parser!(u64).range(1..).map(|v| v as usize))]
+    pub max_matches_per_address: usize,
+    /// Maps the server holds, shipped ones included; uploads past it are refused with 503.
+    #[arg(long, env = "LASERTAG_MAX_MAPS", default_value_t = defaults::MAX_MAPS,
+          value_parser = clap::value_parser!(u64).range(1..).map(|v| v as usize))]
+    pub max_maps: usize,
+    /// Uploaded maps one client (an IPv4 address, or an IPv6 /64) may keep; more are refused
+    /// with 429 until it deletes one.
+    #[arg(long, env = "LASERTAG_MAX_MAPS_PER_ADDRESS", default_value_t = defaults::MAX_MAPS_PER_ADDRESS,
+          value_parser = clap::value_parser!(u64).range(1..).map(|v| v as usize))]
+    pub max_maps_per_address: usize,
+    /// Seconds a manual-clock match may go without a request that changes it (step, command)
+    /// before it is ended and removed: manual matches never end on their own.
+    #[arg(long = "idle-manual-after-s", value_name = "SECONDS", env = "LASERTAG_IDLE_MANUAL_AFTER_S",
+          default_value = defaults::IDLE_MANUAL_AFTER, value_parser = seconds)]
+    pub idle_manual_after: Duration,
+    /// TCP connections open at once, WebSockets included; past it the server stops
+    /// accepting until one closes (new clients wait in the kernel's backlog).
+    #[arg(long, env = "LASERTAG_MAX_CONNECTIONS", default_value_t = defaults::MAX_CONNECTIONS,
+          value_parser = clap::value_parser!(u64).range(1..).map(|v| v as usize))]
+    pub max_connections: usize,
+    /// Seconds a client has to send a request's header, and the most a connection may sit
+    /// idle between requests; then it is closed.
+    #[arg(long = "header-read-timeout-s", value_name = "SECONDS", env = "LASERTAG_HEADER_READ_TIMEOUT_S",
+          default_value = defaults::HEADER_READ_TIMEOUT, value_parser = seconds)]
+    pub header_read_timeout: Duration,
 }
 
 impl Default for Config {
@@ -123,6 +187,13 @@ impl Default for Config {
             finished_grace: secs(defaults::FINISHED_GRACE),
             abandoned_after: secs(defaults::ABANDONED_AFTER),
             reconnect_grace: secs(defaults::RECONNECT_GRACE),
+            admin_token: None,
+            max_matches_per_address: defaults::MAX_MATCHES_PER_ADDRESS,
+            max_maps: defaults::MAX_MAPS,
+            max_maps_per_address: defaults::MAX_MAPS_PER_ADDRESS,
+            idle_manual_after: secs(defaults::IDLE_MANUAL_AFTER),
+            max_connections: defaults::MAX_CONNECTIONS,
+            header_read_timeout: secs(defaults::HEADER_READ_TIMEOUT),
         }
     }
 }

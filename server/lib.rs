@@ -5,13 +5,14 @@
 //! - edge: [`maps`] (map files), [`schema`] (hand-written OpenAPI pieces and lenient number
 //!   parsing), [`protocol`] (every JSON shape of the API, and the frames a match publishes);
 //! - shell: [`game`] (one tokio task per match), [`http`] (the axum router), [`config`]
-//!   (limits), [`metrics`] (Prometheus), `main.rs` (CLI; its `experiment` command runs
+//!   (limits), [`access`] (owners, their tokens, per-client keys), [`metrics`] (Prometheus), `main.rs` (CLI; its `experiment` command runs
 //!   `lasertag-lab`).
 //!
 //! Invariants: a match is a pure function of (map, settings, seed, inputs by tick); robots'
 //! decisions read only what a robot could know; only a match's own task mutates it; this
 //! library never imports `lasertag-lab`.
 
+pub mod access;
 pub mod config;
 pub mod game;
 pub mod http;

@@ -183,12 +183,11 @@ async fn serve(args: ServeArgs) -> Result<(), String> {
     let local = listener.local_addr().map_err(|e| e.to_string())?;
     tracing::info!("serving http://{local}");
     let app = lasertag::http::app(registry.clone(), args.web);
-    let server = axum::serve(
-        listener,
-        app.into_make_service_with_connect_info::<SocketAddr>(),
-    )
-    .with_graceful_shutdown(shutdown_signal(registry.clone()))
-    .into_future();
+    let limits = lasertag::http::ConnectionLimits {
+        max_connections: registry.config.max_connections,
+        header_read_timeout: registry.config.header_read_timeout,
+    };
+    let server = lasertag::http::serve(listener, app, limits, shutdown_signal(registry.clone()));
     tokio::pin!(server);
     // Before a signal only an accept loop that failed ends the server. After one, the server
     // future may well be the branch that finishes first (it has no HTTP request left to wait

@@ -1,4 +1,4 @@
-//! Map files (`../shared/spec/map-format.md`): parse, validate, and convert to a [`MapDef`].
+//! Map files (`docs/map-format.md`): parse, validate, and convert to a [`MapDef`].
 //!
 //! [`MapFile`] is the JSON shape (the only serde type here); [`validate`] enforces every rule
 //! of the spec and reports the first violation as a [`MapError`] naming field and index.
@@ -11,6 +11,7 @@ use std::sync::Arc;
 use nalgebra::Point2;
 use serde::{Deserialize, Serialize};
 
+use crate::access::{ClientKey, Owner};
 use lasertag_core::sim::AGENT_RADIUS;
 use lasertag_core::sim::arena::{Arena, MapDef, point_in_polygon};
 
@@ -316,6 +317,8 @@ fn distance_to_polygon_edges(p: Point2<f32>, poly: &[Point2<f32>]) -> f32 {
 #[derive(Debug, Clone)]
 pub struct StoredMap {
     pub arena: Arc<Arena>,
+    /// Who uploaded it; the default (no token) for shipped maps, which nobody removes.
+    pub owner: Owner,
 }
 
 /// Every map the server knows, by name (sorted, so listings are stable).
@@ -381,12 +384,31 @@ impl MapStore {
 
     /// Adds an already-built arena. Returns false (and changes nothing) when the name is taken.
     pub fn insert_arena(&mut self, arena: Arc<Arena>) -> bool {
+        self.insert_owned(arena, Owner::default())
+    }
+
+    /// Adds an uploaded map with its owner. Returns false (and changes nothing) when the name
+    /// is taken.
+    pub fn insert_owned(&mut self, arena: Arc<Arena>, owner: Owner) -> bool {
         if self.maps.contains_key(&arena.def.name) {
             return false;
         }
         self.maps
-            .insert(arena.def.name.clone(), StoredMap { arena });
+            .insert(arena.def.name.clone(), StoredMap { arena, owner });
         true
+    }
+
+    /// Forgets a map (matches playing on it keep their arena).
+    pub fn remove(&mut self, name: &str) -> Option<StoredMap> {
+        self.maps.remove(name)
+    }
+
+    /// Maps uploaded by `client` held now.
+    pub fn uploaded_by(&self, client: ClientKey) -> usize {
+        self.maps
+            .values()
+            .filter(|m| m.owner.client == Some(client))
+            .count()
     }
 
     pub fn contains(&self, name: &str) -> bool {

@@ -35,10 +35,18 @@ pub enum Refusal {
     MessageTooLarge,
     /// A WebSocket message that is not valid (not JSON, unknown type, out of range...).
     MessageInvalid,
+    /// A new match or map from a client that holds its most (429).
+    ClientQuota,
+    /// A map upload while the server holds its most maps (503).
+    MapsFull,
+    /// A change without an owner or admin token (401).
+    Unauthorized,
+    /// A change with a token that is not the owner's (403).
+    Forbidden,
 }
 
 impl Refusal {
-    pub const ALL: [Refusal; 11] = [
+    pub const ALL: [Refusal; 15] = [
         Refusal::RateLimited,
         Refusal::ConnectionsPerAddress,
         Refusal::MatchesFull,
@@ -50,6 +58,10 @@ impl Refusal {
         Refusal::MessageRate,
         Refusal::MessageTooLarge,
         Refusal::MessageInvalid,
+        Refusal::ClientQuota,
+        Refusal::MapsFull,
+        Refusal::Unauthorized,
+        Refusal::Forbidden,
     ];
 
     pub fn label(self) -> &'static str {
@@ -65,6 +77,10 @@ impl Refusal {
             Refusal::MessageRate => "message_rate",
             Refusal::MessageTooLarge => "message_too_large",
             Refusal::MessageInvalid => "message_invalid",
+            Refusal::ClientQuota => "client_quota",
+            Refusal::MapsFull => "maps_full",
+            Refusal::Unauthorized => "unauthorized",
+            Refusal::Forbidden => "forbidden",
         }
     }
 }
@@ -75,7 +91,7 @@ pub struct Metrics {
     registry: Registry,
     /// Matches held, by `state` (`running`, `finished`); set at each scrape.
     pub matches: IntGaugeVec,
-    /// Matches removed, by `reason` (`deleted`, `finished`, `abandoned`).
+    /// Matches removed, by `reason` (`deleted`, `finished`, `abandoned`, `idle`).
     pub matches_removed: IntCounterVec,
     /// WebSocket clients connected now, by `role` (`player`, `spectator`).
     pub clients: IntGaugeVec,
@@ -197,7 +213,7 @@ impl Metrics {
         for r in Refusal::ALL {
             refused.with_label_values(&[r.label()]).inc_by(0);
         }
-        for reason in ["deleted", "finished", "abandoned"] {
+        for reason in ["deleted", "finished", "abandoned", "idle"] {
             matches_removed.with_label_values(&[reason]).inc_by(0);
         }
         Metrics {

@@ -1,4 +1,4 @@
-//! Every JSON shape of the HTTP and WebSocket interface (`../shared/spec/http-api.md`), and the
+//! Every JSON shape of the HTTP and WebSocket interface (`docs/api.md`), and the
 //! conversions between them and the core's plain types. Nothing else in the crate derives serde
 //! (map files aside, in `maps.rs`), so the wire format is decided here and only here.
 //!
@@ -92,6 +92,25 @@ pub struct MapInfo {
     pub name: String,
     pub width: f64,
     pub height: f64,
+}
+
+/// The reply to `POST /api/maps`: the map and the secret that deletes it (shown only here).
+#[derive(Debug, Serialize, ToSchema)]
+pub struct MapCreated {
+    #[serde(flatten)]
+    pub map: MapInfo,
+    /// `Authorization: Bearer <owner_token>` deletes the map.
+    pub owner_token: String,
+}
+
+/// The reply to `POST /api/matches`: the summary and the secret that changes the match
+/// (shown only here).
+#[derive(Debug, Serialize, ToSchema)]
+pub struct MatchCreated {
+    #[serde(flatten)]
+    pub summary: MatchSummary,
+    /// `Authorization: Bearer <owner_token>` steps, commands and deletes the match.
+    pub owner_token: String,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, ToSchema)]

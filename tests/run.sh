@@ -40,11 +40,15 @@ fi
 # The server `cargo test` built, on a free loopback port, without the showcase. Every request
 # comes from 127.0.0.1, so the per-address request rate is lifted, and so is the number of
 # matches (schemathesis creates many; a full server would rightly answer 503, which is not
-# what this run is about); finished matches are removed after 5 s.
+# what this run is about), as are the per-client quotas; finished matches are removed after
+# 5 s. Schemathesis changes matches as the operator (a fresh admin token for this run).
 PORT=$(python3 -c 'import socket; s = socket.socket(); s.bind(("127.0.0.1", 0)); print(s.getsockname()[1])')
-LASERTAG_ADDR="127.0.0.1:$PORT" LASERTAG_NO_SHOWCASE=true \
+ADMIN_TOKEN=$(python3 -c 'import secrets; print(secrets.token_hex(16))')
+LASERTAG_ADDR="127.0.0.1:$PORT" LASERTAG_NO_SHOWCASE=true LASERTAG_ADMIN_TOKEN="$ADMIN_TOKEN" \
   LASERTAG_REQUESTS_PER_S=1000000 LASERTAG_REQUEST_BURST=1000000 \
-  LASERTAG_MAX_MATCHES=100000 LASERTAG_FINISHED_GRACE_S=5 RUST_LOG=warn \
+  LASERTAG_MAX_MATCHES=100000 LASERTAG_MAX_MATCHES_PER_ADDRESS=100000 \
+  LASERTAG_MAX_MAPS=100000 LASERTAG_MAX_MAPS_PER_ADDRESS=100000 \
+  LASERTAG_FINISHED_GRACE_S=5 RUST_LOG=warn \
   target/debug/lasertag serve > target/schemathesis/server.log 2>&1 &
 SERVER_PID=$!
 trap 'kill "$SERVER_PID" 2>/dev/null || true' EXIT
@@ -54,8 +58,31 @@ trap 'kill "$SERVER_PID" 2>/dev/null || true' EXIT
 ST_SEED="${LASERTAG_SCHEMATHESIS_SEED:-260417942957883433998280874087315974579}"
 ST_SEED_ARGS=()
 if [ "$ST_SEED" != random ]; then ST_SEED_ARGS=(--seed "$ST_SEED"); fi
+# Matches for the operations on one match to act on (generated ids would only ever find
+# nothing): a manual one with API-driven opponents (step, command) and one with human slots
+# (players); the hooks send most generated requests there (tests/schemathesis_hooks.py).
+fixture() {
+  python3 - "$PORT" "$1" <<'PY'
+import json, sys, time, urllib.request
+port, body = sys.argv[1], sys.argv[2]
+for _ in range(600):
+    try:
+        req = urllib.request.Request(f"http://127.0.0.1:{port}/api/matches", body.encode(),
+                                     {"content-type": "application/json"})
+        print(json.load(urllib.request.urlopen(req, timeout=5))["id"])
+        break
+    except OSError:
+        time.sleep(0.1)
+else:
+    sys.exit("tests/run.sh: the server never answered")
+PY
+}
+LASERTAG_ST_MANUAL=$(fixture '{"map": "office", "clock": "manual", "opponent_control": "api", "opponents": 2}')
+LASERTAG_ST_HUMAN=$(fixture '{"map": "office", "opponent_control": "human", "opponents": 32, "robots": 1, "planner": "idle"}')
+export LASERTAG_ST_MANUAL LASERTAG_ST_HUMAN
 (cd tests && SCHEMATHESIS_HOOKS=schemathesis_hooks "../$ST" --config-file schemathesis.toml \
   run "http://127.0.0.1:$PORT/api/openapi.json" --wait-for-schema 60 "${ST_SEED_ARGS[@]}" \
+  -H "Authorization: Bearer $ADMIN_TOKEN" \
   --checks all --max-examples 40 --request-timeout 60 --workers 2 --no-color)
 kill "$SERVER_PID" 2>/dev/null || true
 wait "$SERVER_PID" 2>/dev/null || true

@@ -129,18 +129,17 @@ async fn sigterm_tells_every_client_closes_cleanly_and_exits_within_5_s() {
     )
     .await;
     let token = joined["token"].as_str().unwrap();
-    let done = post(
+    let created = post(
         &client,
         addr,
         "/api/matches",
         json!({"map": "office", "clock": "manual", "time_limit_s": 1}),
     )
-    .await["id"]
-        .as_str()
-        .unwrap()
-        .to_string();
+    .await;
+    let done = created["id"].as_str().unwrap().to_string();
     let r = client
         .post(format!("http://{addr}/api/matches/{done}/step"))
+        .bearer_auth(created["owner_token"].as_str().unwrap())
         .json(&json!({"ticks": 100}))
         .send()
         .await

@@ -19,7 +19,7 @@ const SIM_FLOORS: &[&str] = &["mod", "arena", "motion", "sensors", "views", "rul
 
 /// The server library's modules from the ground floor up.
 const SERVER_FLOORS: &[&str] = &[
-    "config", "metrics", "schema", "maps", "protocol", "game", "http",
+    "config", "access", "metrics", "schema", "maps", "protocol", "game", "http",
 ];
 
 /// The only crates the core may depend on: geometry, seeded randomness and typed errors.

@@ -15,6 +15,7 @@ use std::sync::{Arc, RwLock, Weak};
 use tokio::sync::{mpsc, oneshot, watch};
 use tokio_util::sync::CancellationToken;
 
+use crate::access::{ClientKey, Owner};
 use crate::config::Config;
 use crate::maps::MapStore;
 use crate::metrics::Metrics;
@@ -24,6 +25,7 @@ use lasertag_core::sim::arena::Arena;
 use lasertag_core::world::World;
 use lasertag_core::world::{FinishReason, HumanInput, OpponentOrder};
 
+pub use crate::access::random_id;
 pub use task::{TaskSettings, spawn_match};
 
 /// A request refused by a match, mapped to an HTTP status at the edge.
@@ -101,6 +103,8 @@ pub struct Seat {
 #[derive(Debug, Clone)]
 pub struct Hub {
     pub frames: watch::Receiver<Arc<Frame>>,
+    /// The match's summary as of its latest frame (what listings show).
+    pub summary: watch::Receiver<Arc<MatchSummary>>,
     pub arena: Arc<Arena>,
     pub spectators: Arc<AtomicUsize>,
 }
@@ -132,6 +136,8 @@ impl Drop for SpectatorSeat {
 #[derive(Debug, Clone)]
 pub struct MatchHandle {
     pub id: String,
+    /// Who may change it (step, commands, delete).
+    pub owner: Arc<Owner>,
     /// Creation order, for stable listings.
     pub order: u64,
     pub clock: Clock,
@@ -253,31 +259,55 @@ impl Registry {
     }
 
     /// Starts a task for `world` and registers it, whatever the number of matches (the
-    /// showcase's way in; requests go through [`Registry::try_start`]).
+    /// showcase's way in; requests go through [`Registry::try_start`]). Only the operator
+    /// may change it.
     pub fn start(&self, world: World, meta: protocol::MatchMeta) -> MatchHandle {
         let mut matches = self.matches.write().unwrap_or_else(|e| e.into_inner());
-        self.start_locked(&mut matches, world, meta)
+        self.start_locked(&mut matches, world, meta, Owner::default())
     }
 
-    /// Starts a match unless the server holds `config.max_matches` already.
+    /// Starts a match for `owner` unless the server holds `config.max_matches` already or
+    /// the owner's client holds `config.max_matches_per_address`.
     pub fn try_start(
         &self,
         world: World,
         meta: protocol::MatchMeta,
-    ) -> Result<MatchHandle, MatchesFull> {
+        owner: Owner,
+    ) -> Result<MatchHandle, NoRoom> {
         let mut matches = self.matches.write().unwrap_or_else(|e| e.into_inner());
-        if matches.len() >= self.config.max_matches {
-            self.metrics.refuse(crate::metrics::Refusal::MatchesFull);
-            return Err(MatchesFull(self.config.max_matches));
-        }
-        Ok(self.start_locked(&mut matches, world, meta))
+        self.room_in(&matches, owner.client)?;
+        Ok(self.start_locked(&mut matches, world, meta, owner))
     }
 
-    /// Whether a new match would be let in now (a cheap check before building one).
-    pub fn has_room(&self) -> Result<(), MatchesFull> {
-        if self.len() >= self.config.max_matches {
-            self.metrics.refuse(crate::metrics::Refusal::MatchesFull);
-            return Err(MatchesFull(self.config.max_matches));
+    /// Whether a new match from `client` would be let in now (a cheap check before
+    /// building one; [`Registry::try_start`] checks again).
+    pub fn has_room(&self, client: Option<ClientKey>) -> Result<(), NoRoom> {
+        let matches = self.matches.read().unwrap_or_else(|e| e.into_inner());
+        self.room_in(&matches, client)
+    }
+
+    fn room_in(
+        &self,
+        matches: &BTreeMap<String, MatchHandle>,
+        client: Option<ClientKey>,
+    ) -> Result<(), NoRoom> {
+        use crate::metrics::Refusal;
+        if matches.len() >= self.config.max_matches {
+            self.metrics.refuse(Refusal::MatchesFull);
+            return Err(NoRoom::Server(self.config.max_matches));
+        }
+        if let Some(client) = client {
+            let held = matches
+                .values()
+                .filter(|h| h.owner.client == Some(client))
+                .count();
+            if held >= self.config.max_matches_per_address {
+                self.metrics.refuse(Refusal::ClientQuota);
+                return Err(NoRoom::Client {
+                    client,
+                    max: self.config.max_matches_per_address,
+                });
+            }
         }
         Ok(())
     }
@@ -287,6 +317,7 @@ impl Registry {
         matches: &mut BTreeMap<String, MatchHandle>,
         world: World,
         meta: protocol::MatchMeta,
+        owner: Owner,
     ) -> MatchHandle {
         let id = meta.id.clone();
         let clock = meta.clock;
@@ -306,6 +337,7 @@ impl Registry {
                 reconnect_grace: self.config.reconnect_grace,
                 finished_grace: self.config.finished_grace,
                 abandoned_after: self.config.abandoned_after,
+                idle_manual_after: self.config.idle_manual_after,
                 max_players: self.config.max_players_per_match,
                 metrics: self.metrics.clone(),
                 on_exit: Box::new(on_exit),
@@ -313,6 +345,7 @@ impl Registry {
         );
         let handle = MatchHandle {
             id: id.clone(),
+            owner: Arc::new(owner),
             order: self.next_order.fetch_add(1, Ordering::Relaxed),
             clock,
             hub,
@@ -409,16 +442,11 @@ impl Registry {
     }
 }
 
-/// The server holds its most matches (the number).
+/// Why a new match was not let in.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct MatchesFull(pub usize);
-
-/// A fresh random identifier of `bytes` random bytes, hex-encoded (ids and secret tokens).
-pub fn random_id(bytes: usize) -> String {
-    let mut buf = vec![0u8; bytes];
-    if getrandom::fill(&mut buf).is_err() {
-        // The OS RNG failing is not something to limp on with predictable tokens.
-        panic!("the operating system's random number generator failed");
-    }
-    buf.iter().map(|b| format!("{b:02x}")).collect()
+pub enum NoRoom {
+    /// The server holds its most matches (the number).
+    Server(usize),
+    /// This client holds its most matches.
+    Client { client: ClientKey, max: usize },
 }

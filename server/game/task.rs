@@ -16,10 +16,11 @@ use tokio::sync::{mpsc, oneshot, watch};
 use tokio::time::MissedTickBehavior;
 use tracing::Instrument;
 
+use crate::access::same_secret;
 use crate::game::{Hub, MatchError, Request, Seat, random_id};
 use crate::metrics::{Metrics, Refusal, TickHistograms};
 use crate::protocol::frame::{BELIEF_EVERY, Frame};
-use crate::protocol::{self, Clock, Joined, MatchMeta, MatchState, MatchStats};
+use crate::protocol::{self, Clock, Joined, MatchMeta, MatchState, MatchStats, MatchSummary};
 use lasertag_core::sim::{AgentId, TICK_HZ};
 use lasertag_core::world::{Control, FinishReason, HumanInput, StepMark};
 use lasertag_core::world::{MatchStatus, World};
@@ -67,6 +68,9 @@ pub struct TaskSettings {
     pub finished_grace: Duration,
     /// How long a match with human slots may go without any client before it is ended.
     pub abandoned_after: Duration,
+    /// How long a manual-clock match may go unchanged (no step, no command) before it is
+    /// ended: nothing else ever ends one.
+    pub idle_manual_after: Duration,
     /// People who may hold a slot at once.
     pub max_players: usize,
     pub metrics: Metrics,
@@ -80,6 +84,7 @@ impl std::fmt::Debug for TaskSettings {
             .field("reconnect_grace", &self.reconnect_grace)
             .field("finished_grace", &self.finished_grace)
             .field("abandoned_after", &self.abandoned_after)
+            .field("idle_manual_after", &self.idle_manual_after)
             .field("max_players", &self.max_players)
             .finish_non_exhaustive()
     }
@@ -95,8 +100,10 @@ pub fn spawn_match(
     let (tx, rx) = mpsc::channel(256);
     let first = Arc::new(Frame::build(&world, &[], 0, 0, true));
     let (frames_tx, frames) = watch::channel(first);
+    let (summaries_tx, summary) = watch::channel(Arc::new(protocol::summary(&world, &meta)));
     let hub = Hub {
         frames,
+        summary,
         arena: world.arena.clone(),
         spectators: Arc::new(AtomicUsize::new(0)),
     };
@@ -115,11 +122,13 @@ pub fn spawn_match(
         players: (0..world.opponents.len()).map(|_| None).collect(),
         finished_at: None,
         last_activity: now,
+        last_change: now,
         histograms,
         world,
         meta,
         settings,
         frames: frames_tx,
+        summaries: summaries_tx,
         spectators: hub.spectators.clone(),
         published_seq: 0,
         robot_tags: 0,
@@ -160,11 +169,16 @@ struct MatchTask {
     finished_at: Option<Instant>,
     /// The last time a request came or a client was connected (for abandonment).
     last_activity: Instant,
+    /// The last step or command (what keeps a manual match alive).
+    last_change: Instant,
     histograms: TickHistograms,
     meta: MatchMeta,
     settings: TaskSettings,
     players: Vec<Option<Player>>,
     frames: watch::Sender<Arc<Frame>>,
+    /// The match as listings show it, published with each frame so that the lobby never
+    /// waits on this task.
+    summaries: watch::Sender<Arc<MatchSummary>>,
     spectators: Arc<AtomicUsize>,
     published_seq: u64,
     robot_tags: u32,
@@ -310,6 +324,7 @@ impl MatchTask {
                 let _ = reply.send(self.stats());
             }
             Request::Step { ticks, reply } => {
+                self.last_change = Instant::now();
                 if realtime {
                     let _ = reply.send(Err(MatchError::Conflict(format!(
                         "match {id} runs in real time; step works only on manual-clock matches"
@@ -330,6 +345,7 @@ impl MatchTask {
                 order,
                 reply,
             } => {
+                self.last_change = Instant::now();
                 use lasertag_core::world::OrderError;
                 let result = self
                     .world
@@ -395,6 +411,9 @@ impl MatchTask {
         self.frames_published += 1;
         // `send_replace` never fails nor waits, whoever (if anyone) is watching.
         self.frames.send_replace(Arc::new(frame));
+        self.refresh_meta();
+        self.summaries
+            .send_replace(Arc::new(protocol::summary(&self.world, &self.meta)));
     }
 
     fn record(&mut self, took: Duration) {
@@ -554,6 +573,16 @@ impl MatchTask {
                 tracing::info!("removing the match: finished {:?} ago", now - at);
                 return Some("finished");
             }
+        } else if self.meta.clock == Clock::Manual
+            && now - self.last_change >= self.settings.idle_manual_after
+        {
+            tracing::info!(
+                "ending the match: a manual match unchanged for {:?}",
+                now - self.last_change
+            );
+            self.world.end(FinishReason::Abandoned);
+            self.publish();
+            return Some("idle");
         } else if self.abandoned(now) {
             tracing::info!(
                 "ending the match: abandoned (no client for {:?})",
@@ -613,13 +642,4 @@ impl MatchTask {
         }
         now - self.last_activity >= self.settings.abandoned_after
     }
-}
-
-/// Compares secrets in time independent of where they differ.
-fn same_secret(a: &str, b: &str) -> bool {
-    a.len() == b.len()
-        && a.bytes()
-            .zip(b.bytes())
-            .fold(0u8, |acc, (x, y)| acc | (x ^ y))
-            == 0
 }

@@ -1,4 +1,4 @@
-//! One function per endpoint of `../shared/spec/http-api.md`.
+//! One function per endpoint of `docs/api.md`.
 
 use std::collections::HashMap;
 use std::sync::Arc;
@@ -8,14 +8,17 @@ use axum::extract::{Path, Query, State};
 use axum::http::StatusCode;
 use axum::response::IntoResponse;
 
-use crate::game::{MatchHandle, MatchesFull, random_id};
+use crate::access::{ClientKey, Owner};
+use crate::game::{MatchHandle, NoRoom, random_id};
+use crate::http::auth::Bearer;
 use crate::http::body::JsonBody;
+use crate::http::limits::ClientIp;
 use crate::http::{ApiError, AppState};
 use crate::maps::{self, MapFile};
 use crate::metrics::Refusal;
 use crate::protocol::{
-    Belief, CreateMatch, ErrorBody, Events, Health, JoinRequest, Joined, MapInfo, MatchMeta,
-    MatchState, MatchStats, MatchSummary, OpponentCommand, StepRequest,
+    Belief, CreateMatch, ErrorBody, Events, Health, JoinRequest, Joined, MapCreated, MapInfo,
+    MatchCreated, MatchMeta, MatchState, MatchStats, MatchSummary, OpponentCommand, StepRequest,
 };
 use lasertag_core::sim::AgentId;
 use lasertag_core::sim::arena::{Arena, MapDef};
@@ -33,14 +36,21 @@ async fn build_arena(def: MapDef) -> Result<Arc<Arena>, ApiError> {
         })
 }
 
-fn matches_full(full: MatchesFull) -> ApiError {
-    ApiError::new(
-        StatusCode::SERVICE_UNAVAILABLE,
-        format!(
-            "the server holds {} matches, its most; try again when one has finished (finished matches are removed after a grace period)",
-            full.0
+fn no_room(why: NoRoom) -> ApiError {
+    match why {
+        NoRoom::Server(max) => ApiError::new(
+            StatusCode::SERVICE_UNAVAILABLE,
+            format!(
+                "the server holds {max} matches, its most; try again when one has finished (finished matches are removed after a grace period)"
+            ),
         ),
-    )
+        NoRoom::Client { client, max } => ApiError::new(
+            StatusCode::TOO_MANY_REQUESTS,
+            format!(
+                "{client} holds {max} matches, the most one client may; delete one (DELETE /api/matches/{{id}} with its owner_token) or wait for one to end"
+            ),
+        ),
+    }
 }
 
 fn find(state: &AppState, id: &str) -> Result<MatchHandle, ApiError> {
@@ -93,27 +103,19 @@ pub async fn get_map(
 }
 
 #[utoipa::path(post, path = "/api/maps", request_body = MapFile,
-    responses((status = 201, body = MapInfo, links(
-                  ("GetMap" = (operation_id = "get_map", parameters(("name" = "$response.body#/name")))))),
+    responses((status = 201, body = MapCreated, links(
+                  ("GetMap" = (operation_id = "get_map", parameters(("name" = "$response.body#/name")))),
+                  ("DeleteMap" = (operation_id = "delete_map", parameters(("name" = "$response.body#/name")))))),
               (status = 400, body = ErrorBody), (status = 409, body = ErrorBody),
-              (status = 413, body = ErrorBody)))]
+              (status = 413, body = ErrorBody), (status = 429, body = ErrorBody), (status = 503, body = ErrorBody)))]
 pub async fn add_map(
     State(state): State<AppState>,
+    ClientIp(ip): ClientIp,
     JsonBody(value): JsonBody<serde_json::Value>,
 ) -> Result<impl IntoResponse, ApiError> {
     let def = maps::from_value(value).map_err(|e| ApiError::bad_request(e.to_string()))?;
-    if state
-        .registry
-        .maps
-        .read()
-        .unwrap_or_else(|e| e.into_inner())
-        .contains(&def.name)
-    {
-        return Err(ApiError::conflict(format!(
-            "a map named {:?} exists",
-            def.name
-        )));
-    }
+    let client = ClientKey::of(ip);
+    map_room(&state, &def.name, client)?;
     let name = def.name.clone();
     let info = MapInfo {
         name: def.name.clone(),
@@ -121,30 +123,126 @@ pub async fn add_map(
         height: def.height as f64,
     };
     let arena = build_arena(def).await?;
+    // Checked again under the write lock: others may have uploaded while this one was built.
+    map_room(&state, &name, client)?;
+    let owner = Owner::new(client);
+    let owner_token = owner.token.clone().unwrap_or_default();
     let mut store = state
         .registry
         .maps
         .write()
         .unwrap_or_else(|e| e.into_inner());
-    if !store.insert_arena(arena) {
+    if !store.insert_owned(arena, owner) {
         return Err(ApiError::conflict(format!("a map named {name:?} exists")));
     }
-    Ok((StatusCode::CREATED, Json(info)))
+    Ok((
+        StatusCode::CREATED,
+        Json(MapCreated {
+            map: info,
+            owner_token,
+        }),
+    ))
+}
+
+/// Refuses a map upload whose name is taken, past the server's most maps, or past the
+/// client's quota.
+fn map_room(state: &AppState, name: &str, client: ClientKey) -> Result<(), ApiError> {
+    let cfg = &state.registry.config;
+    let store = state
+        .registry
+        .maps
+        .read()
+        .unwrap_or_else(|e| e.into_inner());
+    if store.contains(name) {
+        return Err(ApiError::conflict(format!("a map named {name:?} exists")));
+    }
+    if store.len() >= cfg.max_maps {
+        state.registry.metrics.refuse(Refusal::MapsFull);
+        return Err(ApiError::new(
+            StatusCode::SERVICE_UNAVAILABLE,
+            format!(
+                "the server holds {} maps, its most; uploaded maps can be deleted by their owners",
+                cfg.max_maps
+            ),
+        ));
+    }
+    if store.uploaded_by(client) >= cfg.max_maps_per_address {
+        state.registry.metrics.refuse(Refusal::ClientQuota);
+        return Err(ApiError::new(
+            StatusCode::TOO_MANY_REQUESTS,
+            format!(
+                "{client} has uploaded {} maps, the most one client may keep; delete one (DELETE /api/maps/{{name}} with its owner_token)",
+                cfg.max_maps_per_address
+            ),
+        ));
+    }
+    Ok(())
+}
+
+#[utoipa::path(delete, path = "/api/maps/{name}", params(("name" = String, Path)),
+    security(("owner_token" = [])),
+    responses((status = 204), (status = 401, body = ErrorBody), (status = 403, body = ErrorBody),
+              (status = 404, body = ErrorBody), (status = 409, body = ErrorBody)))]
+pub async fn delete_map(
+    State(state): State<AppState>,
+    bearer: Bearer,
+    Path(name): Path<String>,
+) -> Result<StatusCode, ApiError> {
+    let stored = {
+        let maps = state
+            .registry
+            .maps
+            .read()
+            .unwrap_or_else(|e| e.into_inner());
+        maps.get(&name)
+            .cloned()
+            .ok_or_else(|| ApiError::not_found(format!("no map {name:?}")))?
+    };
+    if stored.owner.token.is_none() {
+        return Err(ApiError::new(
+            StatusCode::FORBIDDEN,
+            format!("map {name:?} is shipped with the server and cannot be removed"),
+        ));
+    }
+    bearer.may_change(&state, &stored.owner, &format!("map {name:?}"))?;
+    let in_use = state.registry.all().into_iter().any(|h| {
+        Arc::ptr_eq(&h.hub.arena, &stored.arena)
+            && h.hub.frames.borrow().status == lasertag_core::world::MatchStatus::Running
+    });
+    if in_use {
+        return Err(ApiError::conflict(format!(
+            "map {name:?} is in use by a running match; delete it when the match has ended"
+        )));
+    }
+    let mut maps = state
+        .registry
+        .maps
+        .write()
+        .unwrap_or_else(|e| e.into_inner());
+    // Only the map that was checked: a new one under the same name is not this request's.
+    if maps
+        .get(&name)
+        .is_some_and(|m| Arc::ptr_eq(&m.arena, &stored.arena))
+    {
+        maps.remove(&name);
+    }
+    Ok(StatusCode::NO_CONTENT)
 }
 
 #[utoipa::path(get, path = "/api/matches", responses((status = 200, body = [MatchSummary])))]
 pub async fn list_matches(State(state): State<AppState>) -> Json<Vec<MatchSummary>> {
-    let mut out = Vec::new();
-    for h in state.registry.all() {
-        if let Ok(s) = h.summary().await {
-            out.push(s);
-        }
-    }
-    Json(out)
+    // Published summaries, not a question to each task: a match busy stepping thousands of
+    // ticks must not hold up the lobby.
+    let all = state.registry.all();
+    Json(
+        all.iter()
+            .map(|h| MatchSummary::clone(&h.hub.summary.borrow()))
+            .collect(),
+    )
 }
 
 #[utoipa::path(post, path = "/api/matches", request_body = CreateMatch,
-    responses((status = 201, body = MatchSummary, links(
+    responses((status = 201, body = MatchCreated, links(
                   ("GetMatch" = (operation_id = "get_match", parameters(("id" = "$response.body#/id")))),
                   ("DeleteMatch" = (operation_id = "delete_match", parameters(("id" = "$response.body#/id")))),
                   ("Step" = (operation_id = "step", parameters(("id" = "$response.body#/id")))),
@@ -157,8 +255,10 @@ pub async fn list_matches(State(state): State<AppState>) -> Json<Vec<MatchSummar
               (status = 413, body = ErrorBody), (status = 429, body = ErrorBody), (status = 503, body = ErrorBody)))]
 pub async fn create_match(
     State(state): State<AppState>,
+    ClientIp(ip): ClientIp,
     JsonBody(body): JsonBody<CreateMatch>,
 ) -> Result<impl IntoResponse, ApiError> {
+    let client = ClientKey::of(ip);
     let req = body
         .validate()
         .map_err(|e| ApiError::bad_request(e.to_string()))?;
@@ -184,7 +284,7 @@ pub async fn create_match(
         )));
     }
     // Refused before the world is built; `try_start` checks again under the lock.
-    state.registry.has_room().map_err(matches_full)?;
+    state.registry.has_room(Some(client)).map_err(no_room)?;
     let arena: Arc<Arena> = match req.map {
         serde_json::Value::String(name) => {
             let maps = state
@@ -234,13 +334,21 @@ pub async fn create_match(
         free_slots: 0,
         bots_joinable: req.bots_joinable,
     };
+    let owner = Owner::new(client);
+    let owner_token = owner.token.clone().unwrap_or_default();
     let handle = state
         .registry
-        .try_start(world, meta)
-        .map_err(matches_full)?;
+        .try_start(world, meta, owner)
+        .map_err(no_room)?;
     // Asked of the task so that fields it owns (free slots) are filled in.
     let summary = handle.summary().await?;
-    Ok((StatusCode::CREATED, Json(summary)))
+    Ok((
+        StatusCode::CREATED,
+        Json(MatchCreated {
+            summary,
+            owner_token,
+        }),
+    ))
 }
 
 #[utoipa::path(get, path = "/api/matches/{id}", params(("id" = String, Path)),
@@ -253,11 +361,16 @@ pub async fn get_match(
 }
 
 #[utoipa::path(delete, path = "/api/matches/{id}", params(("id" = String, Path)),
-    responses((status = 204), (status = 404, body = ErrorBody)))]
+    security(("owner_token" = [])),
+    responses((status = 204), (status = 401, body = ErrorBody), (status = 403, body = ErrorBody),
+              (status = 404, body = ErrorBody)))]
 pub async fn delete_match(
     State(state): State<AppState>,
+    bearer: Bearer,
     Path(id): Path<String>,
 ) -> Result<StatusCode, ApiError> {
+    let handle = find(&state, &id)?;
+    bearer.may_change(&state, &handle.owner, &format!("match {id}"))?;
     if state.registry.remove(&id).await {
         Ok(StatusCode::NO_CONTENT)
     } else {
@@ -266,14 +379,18 @@ pub async fn delete_match(
 }
 
 #[utoipa::path(post, path = "/api/matches/{id}/step", params(("id" = String, Path)), request_body = StepRequest,
-    responses((status = 200, body = MatchState), (status = 400, body = ErrorBody), (status = 404, body = ErrorBody),
+    security(("owner_token" = [])),
+    responses((status = 200, body = MatchState), (status = 400, body = ErrorBody), (status = 401, body = ErrorBody),
+              (status = 403, body = ErrorBody), (status = 404, body = ErrorBody),
               (status = 409, body = ErrorBody)))]
 pub async fn step(
     State(state): State<AppState>,
+    bearer: Bearer,
     Path(id): Path<String>,
     JsonBody(body): JsonBody<StepRequest>,
 ) -> Result<Json<MatchState>, ApiError> {
     let handle = find(&state, &id)?;
+    bearer.may_change(&state, &handle.owner, &format!("match {id}"))?;
     if !(1..=100_000).contains(&body.ticks) {
         return Err(ApiError::bad_request(format!(
             "ticks: {} must be in 1..=100000",
@@ -337,14 +454,18 @@ pub async fn events(
 
 #[utoipa::path(post, path = "/api/matches/{id}/opponents/{oid}/command",
     params(("id" = String, Path), ("oid" = String, Path)), request_body = OpponentCommand,
-    responses((status = 204), (status = 400, body = ErrorBody), (status = 404, body = ErrorBody),
+    security(("owner_token" = [])),
+    responses((status = 204), (status = 400, body = ErrorBody), (status = 401, body = ErrorBody),
+              (status = 403, body = ErrorBody), (status = 404, body = ErrorBody),
               (status = 409, body = ErrorBody)))]
 pub async fn command(
     State(state): State<AppState>,
+    bearer: Bearer,
     Path((id, oid)): Path<(String, String)>,
     JsonBody(body): JsonBody<OpponentCommand>,
 ) -> Result<StatusCode, ApiError> {
     let handle = find(&state, &id)?;
+    bearer.may_change(&state, &handle.owner, &format!("match {id}"))?;
     let order = body.order()?;
     // Like an unknown robot, anything that is not an opponent id names no opponent here.
     let Ok(AgentId::Opponent(opponent)) = oid.parse() else {

@@ -2,11 +2,13 @@
 //! call directly. Handlers parse and validate at the edge ([`body::JsonBody`]), then talk to
 //! the [`Registry`] and to match tasks; they never hold a world.
 
+mod auth;
 mod body;
 mod error;
 mod handlers;
 pub mod limits;
 mod openapi;
+mod serve;
 pub mod ws;
 
 use std::path::PathBuf;
@@ -24,6 +26,7 @@ use tower_http::trace::TraceLayer;
 
 use crate::game::Registry;
 pub use error::ApiError;
+pub use serve::{ConnectionLimits, serve};
 
 /// What every handler shares.
 #[derive(Debug, Clone)]
@@ -46,7 +49,10 @@ pub fn app(registry: Arc<Registry>, web_dir: PathBuf) -> Router {
         .route("/health", get(handlers::health))
         .route("/openapi.json", get(openapi::document))
         .route("/maps", get(handlers::list_maps).post(handlers::add_map))
-        .route("/maps/{name}", get(handlers::get_map))
+        .route(
+            "/maps/{name}",
+            get(handlers::get_map).delete(handlers::delete_map),
+        )
         .route(
             "/matches",
             get(handlers::list_matches).post(handlers::create_match),

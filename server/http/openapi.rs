@@ -19,6 +19,7 @@ use crate::protocol::*;
         handlers::list_maps,
         handlers::get_map,
         handlers::add_map,
+        handlers::delete_map,
         handlers::list_matches,
         handlers::create_match,
         handlers::get_match,
@@ -35,9 +36,11 @@ use crate::protocol::*;
         ErrorBody,
         Health,
         MapInfo,
+        MapCreated,
         MapFile,
         CreateMatch,
         MatchSummary,
+        MatchCreated,
         MatchState,
         RobotState,
         OpponentState,
@@ -52,9 +55,31 @@ use crate::protocol::*;
         JoinRequest,
         Joined,
         MatchStats
-    ))
+    )),
+    modifiers(&OwnerToken)
 )]
 pub struct ApiDoc;
+
+/// The bearer scheme of `owner_token` (and the operator's admin token).
+struct OwnerToken;
+
+impl utoipa::Modify for OwnerToken {
+    fn modify(&self, doc: &mut utoipa::openapi::OpenApi) {
+        use utoipa::openapi::security::{HttpAuthScheme, HttpBuilder, SecurityScheme};
+        let components = doc.components.get_or_insert_with(Default::default);
+        components.add_security_scheme(
+            "owner_token",
+            SecurityScheme::Http(
+                HttpBuilder::new()
+                    .scheme(HttpAuthScheme::Bearer)
+                    .description(Some(
+                        "The owner_token of POST /api/matches or POST /api/maps, or the server's admin token",
+                    ))
+                    .build(),
+            ),
+        );
+    }
+}
 
 pub async fn document() -> Json<serde_json::Value> {
     static DOC: std::sync::OnceLock<serde_json::Value> = std::sync::OnceLock::new();

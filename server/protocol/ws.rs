@@ -1,4 +1,4 @@
-//! The WebSocket messages of `GET /ws/matches/{id}` (`../shared/spec/http-api.md`), as
+//! The WebSocket messages of `GET /ws/matches/{id}` (`docs/api.md`), as
 //! implemented and documented in docs/api.md.
 //!
 //! Server to client, JSON text with a `type`: `welcome` (once, first), `snapshot` (every

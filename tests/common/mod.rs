@@ -23,19 +23,32 @@ pub fn shipped_arena(name: &str) -> std::sync::Arc<lasertag_core::sim::arena::Ar
         .clone()
 }
 
+/// How many maps the server ships with.
+pub fn shipped_map_count() -> usize {
+    MapStore::load_dir(&Path::new(env!("CARGO_MANIFEST_DIR")).join("maps"))
+        .expect("shipped maps load")
+        .len()
+}
+
 pub struct TestServer {
     pub addr: SocketAddr,
     pub client: reqwest::Client,
     pub registry: std::sync::Arc<Registry>,
+    /// The owner token of each match this server's helpers created: `post` and `delete`
+    /// present it for paths under that match, as its owner would.
+    owner_tokens: std::sync::Mutex<std::collections::HashMap<String, String>>,
 }
 
-/// The default settings, except the per-address request rate: tests step manual matches
-/// tick by tick and read the state after each, thousands of requests a second from one
-/// address. The rate limit itself is crossed in `tests/limits.rs`.
+/// The default settings, except the per-address request rate and quotas: tests step manual
+/// matches tick by tick and read the state after each, thousands of requests a second from
+/// one address. The rate limit itself is crossed in `tests/limits.rs`.
 pub fn test_config() -> Config {
     Config {
         requests_per_s: 1e6,
         request_burst: 1e6,
+        // Every test client is 127.0.0.1; the per-client quotas are crossed in tests/access.rs.
+        max_matches_per_address: 1000,
+        max_maps_per_address: 1000,
         ..Config::default()
     }
 }
@@ -60,13 +73,22 @@ impl TestServer {
         let app = lasertag::http::app(registry.clone(), root.join("web"));
         let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
         let addr = listener.local_addr().unwrap();
-        // As the binary serves it: the per-address limits need the peer's address.
-        let service = app.into_make_service_with_connect_info::<SocketAddr>();
-        tokio::spawn(async move { axum::serve(listener, service).await });
+        // As the binary serves it: its accept loop, with the peer's address on each request.
+        let limits = lasertag::http::ConnectionLimits {
+            max_connections: registry.config.max_connections,
+            header_read_timeout: registry.config.header_read_timeout,
+        };
+        tokio::spawn(lasertag::http::serve(
+            listener,
+            app,
+            limits,
+            std::future::pending(),
+        ));
         TestServer {
             addr,
             client: reqwest::Client::new(),
             registry,
+            owner_tokens: Default::default(),
         }
     }
 
@@ -114,24 +136,72 @@ impl TestServer {
         Self::reply(self.client.get(self.url(path)).send().await.unwrap()).await
     }
 
-    pub async fn delete(&self, path: &str) -> Reply {
-        Self::reply(self.client.delete(self.url(path)).send().await.unwrap()).await
+    /// The owner token of the match `path` is under, if a helper created it.
+    pub fn owner_token(&self, path: &str) -> Option<String> {
+        let id = path
+            .strip_prefix("/api/matches/")?
+            .split(['/', '?'])
+            .next()?;
+        self.owner_tokens.lock().unwrap().get(id).cloned()
     }
 
+    /// DELETE as the owner of the match it names (see [`TestServer::owner_token`]).
+    pub async fn delete(&self, path: &str) -> Reply {
+        self.delete_as(path, self.owner_token(path).as_deref())
+            .await
+    }
+
+    /// DELETE with `Authorization: Bearer <token>`, or without one.
+    pub async fn delete_as(&self, path: &str, token: Option<&str>) -> Reply {
+        let mut r = self.client.delete(self.url(path));
+        if let Some(t) = token {
+            r = r.bearer_auth(t);
+        }
+        Self::reply(r.send().await.unwrap()).await
+    }
+
+    /// POST as the owner of the match it names (see [`TestServer::owner_token`]).
     pub async fn post(&self, path: &str, body: &Value) -> Reply {
         self.post_raw(path, serde_json::to_vec(body).unwrap()).await
     }
 
-    pub async fn post_raw(&self, path: &str, body: impl Into<reqwest::Body>) -> Reply {
-        let r = self
+    /// POST with `Authorization: Bearer <token>`, or without one.
+    pub async fn post_as(&self, path: &str, body: &Value, token: Option<&str>) -> Reply {
+        let mut r = self
             .client
             .post(self.url(path))
             .header("content-type", "application/json")
-            .body(body)
-            .send()
-            .await
-            .unwrap();
-        Self::reply(r).await
+            .body(serde_json::to_vec(body).unwrap());
+        if let Some(t) = token {
+            r = r.bearer_auth(t);
+        }
+        Self::reply(r.send().await.unwrap()).await
+    }
+
+    pub async fn post_raw(&self, path: &str, body: impl Into<reqwest::Body>) -> Reply {
+        let mut r = self
+            .client
+            .post(self.url(path))
+            .header("content-type", "application/json")
+            .body(body);
+        if let Some(t) = self.owner_token(path) {
+            r = r.bearer_auth(t);
+        }
+        let reply = Self::reply(r.send().await.unwrap()).await;
+        // Remember the owner of what this server's helpers create.
+        if path == "/api/matches"
+            && reply.status == 201
+            && let (Some(id), Some(token)) = (
+                reply.body["id"].as_str(),
+                reply.body["owner_token"].as_str(),
+            )
+        {
+            self.owner_tokens
+                .lock()
+                .unwrap()
+                .insert(id.to_owned(), token.to_owned());
+        }
+        reply
     }
 
     /// Creates a match and returns its id (panics unless 201).

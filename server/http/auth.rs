@@ -1,0 +1,72 @@
+//! Who may change what: the owner token handed out when a match or map was made, or the
+//! operator's admin token, presented as `Authorization: Bearer <token>`. Reading is open.
+
+use axum::http::StatusCode;
+use axum::http::header::AUTHORIZATION;
+use axum::http::request::Parts;
+
+use crate::access::{Owner, same_secret};
+use crate::http::{ApiError, AppState};
+use crate::metrics::Refusal;
+
+/// The bearer token of a request, if it sent one.
+#[derive(Debug, Clone, Default)]
+pub struct Bearer(Option<String>);
+
+impl<S: Send + Sync> axum::extract::FromRequestParts<S> for Bearer {
+    type Rejection = ApiError;
+
+    async fn from_request_parts(parts: &mut Parts, _state: &S) -> Result<Bearer, ApiError> {
+        let Some(value) = parts.headers.get(AUTHORIZATION) else {
+            return Ok(Bearer(None));
+        };
+        // A header that is there but not a bearer token is a client bug worth naming,
+        // rather than a silent "no token".
+        let token = value
+            .to_str()
+            .ok()
+            .and_then(|v| {
+                let (scheme, token) = v.split_once(' ')?;
+                scheme.eq_ignore_ascii_case("bearer").then(|| token.trim())
+            })
+            .filter(|t| !t.is_empty())
+            .ok_or_else(|| {
+                ApiError::new(
+                    StatusCode::UNAUTHORIZED,
+                    "authorization: expected `Bearer <token>`",
+                )
+            })?;
+        Ok(Bearer(Some(token.to_owned())))
+    }
+}
+
+impl Bearer {
+    /// Lets the request change `what` (e.g. "match 3f2a…") when it carries its owner's token
+    /// or the admin token: 401 without a token, 403 with another one.
+    pub fn may_change(&self, state: &AppState, owner: &Owner, what: &str) -> Result<(), ApiError> {
+        let metrics = &state.registry.metrics;
+        let Some(token) = &self.0 else {
+            metrics.refuse(Refusal::Unauthorized);
+            return Err(ApiError::new(
+                StatusCode::UNAUTHORIZED,
+                format!(
+                    "authorization: changing {what} takes its owner_token as `Authorization: Bearer <owner_token>`"
+                ),
+            ));
+        };
+        let admin = state.registry.config.admin_token.as_ref();
+        if owner.is(token) || admin.is_some_and(|a| same_secret(&a.0, token)) {
+            return Ok(());
+        }
+        metrics.refuse(Refusal::Forbidden);
+        let whose = if owner.token.is_some() {
+            "that is not the owner_token of"
+        } else {
+            "only the operator may change"
+        };
+        Err(ApiError::new(
+            StatusCode::FORBIDDEN,
+            format!("authorization: {whose} {what}"),
+        ))
+    }
+}

@@ -1,0 +1,166 @@
+//! A hostile visitor's battery: requests and connections chosen to be expensive or to take
+//! what is not theirs. Each test asserts the refusal, that a match running beside it kept
+//! ticking, and that the server's resident memory stayed under a bound.
+
+mod common;
+
+use std::time::Duration;
+
+use common::{TestServer, assert_error, test_config};
+use lasertag::config::Config;
+use serde_json::json;
+use tokio::io::{AsyncReadExt, AsyncWriteExt};
+use tokio::net::TcpStream;
+
+/// Resident memory of this process (the server runs in it), in MiB.
+fn resident_mib() -> u64 {
+    let status = std::fs::read_to_string("/proc/self/status").unwrap_or_default();
+    status
+        .lines()
+        .find_map(|l| l.strip_prefix("VmRSS:"))
+        .and_then(|v| v.trim().trim_end_matches("kB").trim().parse::<u64>().ok())
+        .map_or(0, |kib| kib / 1024)
+}
+
+/// The most this test process may hold: the server, its matches and the test's clients.
+const RESIDENT_BOUND_MIB: u64 = 1024;
+
+/// A real-time match with idle robots (it runs to its time limit) to watch for starvation.
+async fn bystander(s: &TestServer) -> String {
+    s.create_match(json!({"map": "office", "planner": "idle"}))
+        .await
+}
+
+async fn tick_of(s: &TestServer, id: &str) -> u64 {
+    let r = s.get(&format!("/api/matches/{id}")).await;
+    assert_eq!(r.status, 200, "{}", r.body);
+    r.body["tick"].as_u64().unwrap()
+}
+
+/// The bystander has moved past `since`, the server answers, and memory is bounded.
+async fn unharmed(s: &TestServer, id: &str, since: u64) {
+    let mut tick = since;
+    for _ in 0..200 {
+        tick = tick_of(s, id).await;
+        if tick > since {
+            break;
+        }
+        tokio::time::sleep(Duration::from_millis(25)).await;
+    }
+    assert!(tick > since, "the bystander match is stuck at tick {tick}");
+    assert_eq!(s.get("/api/health").await.status, 200);
+    let rss = resident_mib();
+    assert!(rss < RESIDENT_BOUND_MIB, "resident memory {rss} MiB");
+}
+
+/// Reads until the server closes the connection; false if it is still open after `wait`.
+async fn closed_within(stream: &mut TcpStream, wait: Duration) -> bool {
+    let mut buf = [0u8; 1024];
+    let deadline = tokio::time::Instant::now() + wait;
+    loop {
+        match tokio::time::timeout_at(deadline, stream.read(&mut buf)).await {
+            Err(_) => return false,
+            Ok(Ok(0)) | Ok(Err(_)) => return true,
+            Ok(Ok(_)) => {} // a 408 or similar before the close
+        }
+    }
+}
+
+#[tokio::test]
+async fn a_slow_client_is_cut_off_and_the_connection_cap_holds() {
+    let s = TestServer::start_with(Config {
+        header_read_timeout: Duration::from_millis(300),
+        max_connections: 8,
+        ..test_config()
+    })
+    .await;
+    let live = bystander(&s).await;
+    let t0 = tick_of(&s, &live).await;
+    // Half a header, then nothing: closed once the header read timeout has passed (the
+    // wait is generous; the point is that it closes at all).
+    let mut slow = TcpStream::connect(s.addr).await.unwrap();
+    slow.write_all(b"GET /api/health HTTP/1.1\r\nHost: x\r\n")
+        .await
+        .unwrap();
+    assert!(
+        closed_within(&mut slow, Duration::from_secs(10)).await,
+        "a half-sent header held its connection"
+    );
+    // An idle keep-alive connection goes the same way.
+    let mut idle = TcpStream::connect(s.addr).await.unwrap();
+    idle.write_all(b"GET /api/health HTTP/1.1\r\nHost: x\r\n\r\n")
+        .await
+        .unwrap();
+    assert!(closed_within(&mut idle, Duration::from_secs(10)).await);
+
+    // Far more half-open connections than the cap (the rest wait in the backlog): the
+    // server serves again once the header timeout has cut them off.
+    let mut hogs = Vec::new();
+    for _ in 0..40 {
+        if let Ok(mut c) = TcpStream::connect(s.addr).await {
+            let _ = c.write_all(b"GET / HTTP/1.1\r\n").await;
+            hogs.push(c);
+        }
+    }
+    unharmed(&s, &live, t0).await;
+    drop(hogs);
+}
+
+#[tokio::test]
+async fn the_lobby_answers_while_a_match_steps_a_long_way() {
+    let s = TestServer::start().await;
+    let live = bystander(&s).await;
+    let t0 = tick_of(&s, &live).await;
+    let busy = s
+        .create_match(json!({"map": "warehouse", "clock": "manual", "robots": 8, "opponents": 8, "time_limit_s": 3600}))
+        .await;
+    let token = s.owner_token(&format!("/api/matches/{busy}")).unwrap();
+    let stepper = {
+        let client = s.client.clone();
+        let url = s.url(&format!("/api/matches/{busy}/step"));
+        tokio::spawn(async move {
+            client
+                .post(url)
+                .bearer_auth(token)
+                .json(&json!({"ticks": 20000}))
+                .send()
+                .await
+                .map(|r| r.status().as_u16())
+        })
+    };
+    // The listing reads published summaries: it answers while the task is stepping (the
+    // step request itself is still running when the listing comes back).
+    tokio::time::sleep(Duration::from_millis(200)).await;
+    let listing = s.get("/api/matches").await;
+    assert_eq!(listing.status, 200);
+    let ids: Vec<&str> = listing
+        .body
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter_map(|m| m["id"].as_str())
+        .collect();
+    assert!(ids.contains(&busy.as_str()) && ids.contains(&live.as_str()));
+    assert!(
+        !stepper.is_finished(),
+        "the step was too short to show anything"
+    );
+    unharmed(&s, &live, t0).await;
+    stepper.abort();
+}
+
+#[tokio::test]
+async fn a_stranger_cannot_end_someone_elses_match() {
+    let s = TestServer::start().await;
+    let live = bystander(&s).await;
+    let t0 = tick_of(&s, &live).await;
+    let path = format!("/api/matches/{live}");
+    assert_error(&s.delete_as(&path, None).await, 401, "owner_token");
+    assert_error(
+        &s.delete_as(&path, Some("0123456789abcdef0123456789abcdef"))
+            .await,
+        403,
+        "owner_token",
+    );
+    unharmed(&s, &live, t0).await;
+}
