@@ -13,9 +13,11 @@ const CORE_FLOORS: &[&str] = &[
     "settings", "sim", "nav", "localise", "tracker", "radio", "planner", "bots", "world",
 ];
 
-/// Inside the core's `sim`: `mod.rs` (poses, physics, constants) is the floor, then the arena,
-/// and the rest stand on the arena.
-const SIM_FLOORS: &[&str] = &["mod", "arena", "motion", "sensors", "views", "rules"];
+/// Inside the core's `sim`: `mod.rs` (poses, physics, constants) is the floor, then the
+/// segment index, the arena, and the rest stand on the arena.
+const SIM_FLOORS: &[&str] = &[
+    "mod", "segments", "arena", "motion", "sensors", "views", "rules",
+];
 
 /// The server library's modules from the ground floor up.
 const SERVER_FLOORS: &[&str] = &[

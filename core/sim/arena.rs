@@ -12,6 +12,7 @@ use std::any::Any;
 use std::sync::{Arc, Mutex};
 
 use crate::sim::AGENT_RADIUS;
+use crate::sim::segments::SegmentGrid;
 
 /// A map after validation: plain data, no serialisation concerns (see `maps.rs` for the file format).
 #[derive(Debug, Clone, PartialEq)]
@@ -67,7 +68,7 @@ impl Arena {
         }
         let walls = Polyline::new(vertices, Some(indices));
         let grid = ClearanceGrid::build(&def, &walls);
-        let buckets = SegmentGrid::build(&def, &walls);
+        let buckets = SegmentGrid::build(def.width, def.height, &walls);
         Arena {
             def,
             walls,
@@ -163,119 +164,20 @@ impl Arena {
         }
     }
 
+    /// Bytes the arena holds on the heap for its walls, segment index and clearance grid
+    /// (the tables derived later, such as view tables, are not counted).
+    pub fn heap_bytes(&self) -> usize {
+        let vertices: usize = self.def.obstacles.iter().map(Vec::len).sum::<usize>() + 4;
+        // The polyline keeps vertices and index pairs, and a BVH of about two nodes per
+        // segment; the definition keeps its own copy of the vertices.
+        vertices * (2 * 8 + 8 + 2 * 64)
+            + self.buckets.heap_bytes()
+            + self.grid.clearance.len() * std::mem::size_of::<f32>()
+    }
+
     /// True when a disc of `radius` at `p` overlaps no wall or obstacle.
     pub fn disc_is_free(&self, p: Point2<f32>, radius: f32) -> bool {
         self.clearance(p) >= radius
-    }
-}
-
-/// Wall segments bucketed on a uniform grid: each cell lists the segments that touch it.
-#[derive(Debug)]
-struct SegmentGrid {
-    cell: f32,
-    cols: usize,
-    rows: usize,
-    /// `starts[c]..starts[c + 1]` indexes `items` for cell `c`.
-    starts: Vec<u32>,
-    items: Vec<[Point2<f32>; 2]>,
-}
-
-impl SegmentGrid {
-    const CELL: f32 = 0.5;
-
-    fn build(def: &MapDef, walls: &Polyline) -> SegmentGrid {
-        // Keep the grid small on huge maps: at most ~250k cells.
-        let cell = Self::CELL.max((def.width * def.height / 250_000.0).sqrt());
-        let cols = (def.width / cell).ceil().max(1.0) as usize;
-        let rows = (def.height / cell).ceil().max(1.0) as usize;
-        let mut per_cell: Vec<Vec<[Point2<f32>; 2]>> = vec![Vec::new(); cols * rows];
-        for seg in walls.segments() {
-            // Conservative: every cell the segment's slightly grown bounding box touches.
-            let pad = 1e-3;
-            let c0 = (((seg.a.x.min(seg.b.x) - pad) / cell).floor().max(0.0)) as usize;
-            let c1 = (((seg.a.x.max(seg.b.x) + pad) / cell).floor() as usize).min(cols - 1);
-            let r0 = (((seg.a.y.min(seg.b.y) - pad) / cell).floor().max(0.0)) as usize;
-            let r1 = (((seg.a.y.max(seg.b.y) + pad) / cell).floor() as usize).min(rows - 1);
-            for r in r0..=r1 {
-                for c in c0..=c1 {
-                    per_cell[r * cols + c].push([seg.a, seg.b]);
-                }
-            }
-        }
-        let mut starts = Vec::with_capacity(cols * rows + 1);
-        let mut items = Vec::new();
-        for segs in per_cell {
-            starts.push(items.len() as u32);
-            items.extend(segs);
-        }
-        starts.push(items.len() as u32);
-        SegmentGrid {
-            cell,
-            cols,
-            rows,
-            starts,
-            items,
-        }
-    }
-
-    fn cast(&self, o: Point2<f32>, d: Vector2<f32>, max: f32) -> f32 {
-        let cross = |a: Vector2<f32>, b: Vector2<f32>| a.x * b.y - a.y * b.x;
-        let mut cx = (o.x / self.cell).floor() as isize;
-        let mut cy = (o.y / self.cell).floor() as isize;
-        let step_x: isize = if d.x >= 0.0 { 1 } else { -1 };
-        let step_y: isize = if d.y >= 0.0 { 1 } else { -1 };
-        let next_boundary = |c: isize, step: isize| (c + (step > 0) as isize) as f32 * self.cell;
-        let mut t_max_x = if d.x.abs() < 1e-12 {
-            f32::INFINITY
-        } else {
-            (next_boundary(cx, step_x) - o.x) / d.x
-        };
-        let mut t_max_y = if d.y.abs() < 1e-12 {
-            f32::INFINITY
-        } else {
-            (next_boundary(cy, step_y) - o.y) / d.y
-        };
-        let t_delta_x = if d.x.abs() < 1e-12 {
-            f32::INFINITY
-        } else {
-            self.cell / d.x.abs()
-        };
-        let t_delta_y = if d.y.abs() < 1e-12 {
-            f32::INFINITY
-        } else {
-            self.cell / d.y.abs()
-        };
-        let mut best = max;
-        loop {
-            if cx >= 0 && cy >= 0 && (cx as usize) < self.cols && (cy as usize) < self.rows {
-                let c = cy as usize * self.cols + cx as usize;
-                for [a, b] in &self.items[self.starts[c] as usize..self.starts[c + 1] as usize] {
-                    let e = b - a;
-                    let denom = cross(d, e);
-                    if denom.abs() < 1e-12 {
-                        continue;
-                    }
-                    let ao = a - o;
-                    let t = cross(ao, e) / denom;
-                    let u = cross(ao, d) / denom;
-                    if t >= 0.0 && t < best && (-1e-6..=1.0 + 1e-6).contains(&u) {
-                        best = t;
-                    }
-                }
-            }
-            // A hit inside this cell cannot be beaten by any later cell.
-            let t_exit = t_max_x.min(t_max_y);
-            if best <= t_exit || t_exit >= max {
-                return best;
-            }
-            if t_max_x < t_max_y {
-                cx += step_x;
-                t_max_x += t_delta_x;
-            } else {
-                cy += step_y;
-                t_max_y += t_delta_y;
-            }
-        }
     }
 }
 
@@ -470,6 +372,51 @@ mod tests {
         ] {
             let o = Point2::new(2.0, 3.0);
             assert!((a.cast_ray(o, dir, 8.0) - a.cast_ray_bvh(o, dir, 8.0)).abs() < 1e-4);
+        }
+    }
+
+    #[test]
+    fn long_diagonal_walls_cost_cells_along_them_and_rays_still_find_them() {
+        use rand::{RngExt, SeedableRng};
+        // Thin parallel slivers across a 500 m map: their bounding boxes span the whole grid.
+        let sliver = |x0: f32, y0: f32, x1: f32, y1: f32| {
+            vec![
+                Point2::new(x0, y0),
+                Point2::new(x1, y1),
+                Point2::new(x1 + 0.5, y1),
+                Point2::new(x0 + 0.5, y0),
+            ]
+        };
+        let a = Arena::new(MapDef {
+            name: "diagonals".into(),
+            width: 500.0,
+            height: 500.0,
+            obstacles: vec![
+                sliver(10.0, 10.0, 480.0, 490.0),
+                sliver(60.0, 10.0, 490.0, 440.0),
+                sliver(10.0, 60.0, 430.0, 490.0),
+            ],
+            robot_spawns: vec![[5.0, 250.0, 0.0]],
+            opponent_spawns: vec![Point2::new(495.0, 250.0)],
+            landmarks: vec![],
+        });
+        // Twelve edges of up to 700 m on 1 m cells: a few thousand entries, where whole
+        // bounding boxes took about a million.
+        let entries = a.buckets.len();
+        assert!(entries < 20_000, "{entries} segment index entries");
+        // The same answers, bit for bit, as an index of whole bounding boxes.
+        let boxes = SegmentGrid::by_bounding_boxes(a.def.width, a.def.height, &a.walls);
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
+        for _ in 0..20_000 {
+            let o = Point2::new(rng.random_range(1.0..499.0), rng.random_range(1.0..499.0));
+            let ang: f32 = rng.random_range(0.0..std::f32::consts::TAU);
+            let dir = Vector2::new(ang.cos(), ang.sin());
+            let (along, boxed) = (a.buckets.cast(o, dir, 300.0), boxes.cast(o, dir, 300.0));
+            assert_eq!(
+                along.to_bits(),
+                boxed.to_bits(),
+                "{o:?} {ang}: {along} vs {boxed}"
+            );
         }
     }
 

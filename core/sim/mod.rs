@@ -12,6 +12,7 @@
 pub mod arena;
 pub mod motion;
 pub mod rules;
+pub(crate) mod segments;
 pub mod sensors;
 pub mod views;
 

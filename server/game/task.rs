@@ -118,7 +118,7 @@ pub fn spawn_match(
     };
     let histograms = settings.metrics.tick_histograms(kind, clock);
     let now = Instant::now();
-    let task = MatchTask {
+    let mut task = MatchTask {
         players: (0..world.opponents.len()).map(|_| None).collect(),
         finished_at: None,
         last_activity: now,
@@ -138,6 +138,7 @@ pub fn spawn_match(
         tick_next: 0,
         late_ticks: 0,
     };
+    task.publish_summary();
     handle.spawn(task.run(rx).instrument(span));
     (tx, hub)
 }
@@ -217,7 +218,12 @@ impl MatchTask {
                     if !matches!(req, Request::Input { .. }) {
                         self.last_activity = Instant::now();
                     }
+                    let changes_seats = !matches!(req, Request::Input { .. } | Request::Summary(_) | Request::State(_) | Request::Belief { .. } | Request::Events { .. } | Request::Stats(_));
                     self.answer(req, realtime, &mut pending);
+                    // Joins, seats and commands change what the lobby shows.
+                    if changes_seats {
+                        self.publish_summary();
+                    }
                 }
                 _ = interval.tick(), if realtime && running => {
                     let now = Instant::now();
@@ -255,7 +261,9 @@ impl MatchTask {
                     }
                 }
                 _ = housekeeping.tick() => {
-                    if let Some(why) = self.housekeeping() {
+                    let why = self.housekeeping();
+                    self.publish_summary();
+                    if let Some(why) = why {
                         self.settings.metrics.matches_removed.with_label_values(&[why]).inc();
                         let on_exit = std::mem::replace(&mut self.settings.on_exit, Box::new(|| {}));
                         on_exit();
@@ -411,6 +419,11 @@ impl MatchTask {
         self.frames_published += 1;
         // `send_replace` never fails nor waits, whoever (if anyone) is watching.
         self.frames.send_replace(Arc::new(frame));
+        self.publish_summary();
+    }
+
+    /// Publishes the match as listings show it (players and spectators counted now).
+    fn publish_summary(&mut self) {
         self.refresh_meta();
         self.summaries
             .send_replace(Arc::new(protocol::summary(&self.world, &self.meta)));
