@@ -19,6 +19,14 @@ use lasertag_core::sim::arena::{Arena, MapDef, point_in_polygon};
 pub const MAX_MAP_BYTES: usize = 1 << 20;
 /// Most obstacle vertices a map may have, over all polygons.
 pub const MAX_VERTICES: usize = 10_000;
+/// Most vertices of one polygon: checking that it does not cross itself compares every
+/// pair of its edges.
+pub const MAX_POLYGON_VERTICES: usize = 1_000;
+/// Most robot spawns, and most opponent spawns (matches have at most 8 robots and 32
+/// opponents; spawns wrap): each is checked against every wall.
+pub const MAX_SPAWNS: usize = 64;
+/// Most landmarks: a localising robot looks for every one of them each tick.
+pub const MAX_LANDMARKS: usize = 256;
 
 /// The JSON object of a map, as in files and API bodies.
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq, utoipa::ToSchema)]
@@ -114,7 +122,25 @@ pub fn validate(m: &MapFile) -> Result<MapDef, MapError> {
             format!("{total} vertices in all, the limit is {MAX_VERTICES}"),
         ));
     }
+    for (field, n, max) in [
+        ("robot_spawns", m.robot_spawns.len(), MAX_SPAWNS),
+        ("opponent_spawns", m.opponent_spawns.len(), MAX_SPAWNS),
+        ("landmarks", m.landmarks.len(), MAX_LANDMARKS),
+    ] {
+        if n > max {
+            return Err(err(field, format!("{n} points, the limit is {max}")));
+        }
+    }
     for (i, poly) in m.obstacles.iter().enumerate() {
+        if poly.len() > MAX_POLYGON_VERTICES {
+            return Err(err(
+                format!("obstacles[{i}]"),
+                format!(
+                    "polygon has {} vertices, the limit is {MAX_POLYGON_VERTICES}",
+                    poly.len()
+                ),
+            ));
+        }
         if poly.len() < 3 {
             return Err(err(
                 format!("obstacles[{i}]"),

@@ -105,17 +105,18 @@ pub fn obstacles() -> RefOr<Schema> {
         .items(
             ArrayBuilder::new()
                 .items(tuple(2, 0.0, 500.0))
-                .min_items(Some(3)),
+                .min_items(Some(3))
+                .max_items(Some(crate::maps::MAX_POLYGON_VERTICES)),
         )
         .description(Some(
-            "Polygons, each at least 3 vertices `[x, y]` inside the arena, not intersecting itself; 10000 vertices in all at most.",
+            "Polygons, each of 3 to 1000 vertices `[x, y]` inside the arena, not intersecting itself; 10000 vertices in all at most.",
         ))
         .into()
 }
 
 /// Spawns and landmarks `[x, y]` (`[x, y, heading]` for robots with `n` 3); `at_least` 1 for
 /// spawns, 0 for landmarks.
-fn map_points(n: usize, at_least: usize, description: &str) -> RefOr<Schema> {
+fn map_points(n: usize, at_least: usize, at_most: usize, description: &str) -> RefOr<Schema> {
     let item = if n == 3 {
         // The heading may be any number, so the three share the loosest bound (`prefixItems`
         // could bound x and y apart, but tools that convert 3.1 schemas to older drafts
@@ -130,6 +131,7 @@ fn map_points(n: usize, at_least: usize, description: &str) -> RefOr<Schema> {
     ArrayBuilder::new()
         .items(item)
         .min_items(Some(at_least))
+        .max_items(Some(at_most))
         .description(Some(description))
         .into()
 }
@@ -138,7 +140,8 @@ pub fn robot_spawns() -> RefOr<Schema> {
     map_points(
         3,
         1,
-        "Robot spawns `[x, y, heading]`, at least one, each inside the arena and at least 0.25 m from walls.",
+        crate::maps::MAX_SPAWNS,
+        "Robot spawns `[x, y, heading]`, 1 to 64, each inside the arena and at least 0.25 m from walls.",
     )
 }
 
@@ -146,12 +149,18 @@ pub fn opponent_spawns() -> RefOr<Schema> {
     map_points(
         2,
         1,
-        "Opponent spawns `[x, y]`, at least one, each inside the arena and at least 0.25 m from walls.",
+        crate::maps::MAX_SPAWNS,
+        "Opponent spawns `[x, y]`, 1 to 64, each inside the arena and at least 0.25 m from walls.",
     )
 }
 
 pub fn landmarks() -> RefOr<Schema> {
-    map_points(2, 0, "Landmarks `[x, y]` inside the arena (optional).")
+    map_points(
+        2,
+        0,
+        crate::maps::MAX_LANDMARKS,
+        "Landmarks `[x, y]` inside the arena, at most 256 (optional).",
+    )
 }
 
 /// An integer JSON number, also when written with a fraction of zero (`5.0`): JSON Schema's

@@ -160,8 +160,10 @@ async fn an_uploaded_map_is_deleted_by_its_owner_once_no_match_runs_on_it() {
     assert_error(&r, 403, "owner_token");
     let r = s.delete_as("/api/maps/office", Some(ADMIN)).await;
     assert_error(&r, 403, "shipped");
+    let r = s.delete_as("/api/maps/nope", Some(&owner)).await;
+    assert_error(&r, 403, "nope");
     assert_error(
-        &s.delete_as("/api/maps/nope", Some(&owner)).await,
+        &s.delete_as("/api/maps/nope", Some(ADMIN)).await,
         404,
         "nope",
     );
@@ -175,6 +177,14 @@ async fn an_uploaded_map_is_deleted_by_its_owner_once_no_match_runs_on_it() {
 
     let path = format!("/api/matches/{game}");
     assert_eq!(s.delete_as(&path, Some(&game_owner)).await.status, 204);
+    // Once it has gone, its owner's token opens nothing there; the operator learns it
+    // does not exist.
+    assert_error(
+        &s.delete_as(&path, Some(&game_owner)).await,
+        403,
+        "owner_token",
+    );
+    assert_error(&s.delete_as(&path, Some(ADMIN)).await, 404, "no match");
     assert_eq!(
         s.delete_as("/api/maps/duel", Some(&owner)).await.status,
         204

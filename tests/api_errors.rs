@@ -312,14 +312,15 @@ async fn every_error_class_is_answered_and_nothing_running_is_disturbed() {
 
     // Unknown ids and routes.
     assert_error(&server.get("/api/matches/nope").await, 404, "nope");
-    assert_error(&server.delete("/api/matches/nope").await, 404, "nope");
+    // A change is refused for want of a token before the match is looked up.
+    assert_error(&server.delete("/api/matches/nope").await, 401, "nope");
     assert_error(&server.get("/api/matches/nope/belief").await, 404, "nope");
     assert_error(&server.get("/api/matches/nope/events").await, 404, "nope");
     assert_error(
         &server
             .post("/api/matches/nope/step", &json!({"ticks": 1}))
             .await,
-        404,
+        401,
         "nope",
     );
     assert_error(&server.get("/api/maps/nope").await, 404, "nope");

@@ -215,13 +215,43 @@ impl ClearanceGrid {
         let cell = (0.1f32).max((def.width * def.height / MAX_GRID_CELLS).sqrt());
         let cols = (def.width / cell).ceil().max(1.0) as usize;
         let rows = (def.height / cell).ceil().max(1.0) as usize;
+        let centre =
+            |c: usize, r: usize| Point2::new((c as f32 + 0.5) * cell, (r as f32 + 0.5) * cell);
+        // Each obstacle tests only the cells of its bounding box (grown by a millimetre
+        // against rounding): no point outside the box is inside it, and testing every cell
+        // against every polygon cost cells × vertices (seconds for a big map of many small
+        // obstacles).
+        let mut inside = vec![false; cols * rows];
+        for poly in &def.obstacles {
+            let (lo, hi) = poly.iter().fold(
+                (
+                    Point2::new(f32::MAX, f32::MAX),
+                    Point2::new(f32::MIN, f32::MIN),
+                ),
+                |(lo, hi), v| (lo.inf(v), hi.sup(v)),
+            );
+            let first = |v: f32| ((v - 1e-3) / cell - 0.5).ceil().max(0.0) as usize;
+            let last = |v: f32, n: usize| {
+                let k = ((v + 1e-3) / cell - 0.5).floor();
+                (k >= 0.0).then(|| (k as usize).min(n - 1))
+            };
+            let (Some(c1), Some(r1)) = (last(hi.x, cols), last(hi.y, rows)) else {
+                continue;
+            };
+            for r in first(lo.y)..=r1 {
+                for c in first(lo.x)..=c1 {
+                    let k = r * cols + c;
+                    if !inside[k] && point_in_polygon(centre(c, r), poly) {
+                        inside[k] = true;
+                    }
+                }
+            }
+        }
         let mut clearance = vec![0.0; cols * rows];
         for r in 0..rows {
             for c in 0..cols {
-                let p = Point2::new((c as f32 + 0.5) * cell, (r as f32 + 0.5) * cell);
-                let inside = p.x >= def.width
-                    || p.y >= def.height
-                    || def.obstacles.iter().any(|poly| point_in_polygon(p, poly));
+                let p = centre(c, r);
+                let inside = p.x >= def.width || p.y >= def.height || inside[r * cols + c];
                 clearance[r * cols + c] = if inside {
                     0.0
                 } else {
@@ -417,6 +447,63 @@ mod tests {
                 boxed.to_bits(),
                 "{o:?} {ang}: {along} vs {boxed}"
             );
+        }
+    }
+
+    #[test]
+    fn the_clearance_grid_is_what_testing_every_polygon_gives() {
+        use rand::{RngExt, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
+        let mut obstacles: Vec<Vec<Point2<f32>>> = (0..60)
+            .map(|_| {
+                let (x, y) = (rng.random_range(1.0..37.0), rng.random_range(1.0..27.0));
+                let s = rng.random_range(0.2..2.0);
+                vec![
+                    Point2::new(x, y),
+                    Point2::new(x + s, y),
+                    Point2::new(x + s, y + s),
+                    Point2::new(x, y + s),
+                ]
+            })
+            .collect();
+        // A concave polygon and one touching the border.
+        obstacles.push(vec![
+            Point2::new(5.0, 5.0),
+            Point2::new(15.0, 5.0),
+            Point2::new(15.0, 15.0),
+            Point2::new(10.0, 8.0),
+            Point2::new(5.0, 15.0),
+        ]);
+        obstacles.push(vec![
+            Point2::new(38.0, 0.0),
+            Point2::new(40.0, 0.0),
+            Point2::new(40.0, 30.0),
+        ]);
+        let def = MapDef {
+            name: "scatter".into(),
+            width: 40.0,
+            height: 30.0,
+            obstacles,
+            robot_spawns: vec![[0.5, 0.5, 0.0]],
+            opponent_spawns: vec![Point2::new(39.0, 29.0)],
+            landmarks: vec![],
+        };
+        let a = Arena::new(def.clone());
+        let g = &a.grid;
+        for r in 0..g.rows {
+            for c in 0..g.cols {
+                let p = Point2::new((c as f32 + 0.5) * g.cell, (r as f32 + 0.5) * g.cell);
+                let inside = p.x >= def.width
+                    || p.y >= def.height
+                    || def.obstacles.iter().any(|poly| point_in_polygon(p, poly));
+                let expected = if inside {
+                    0.0
+                } else {
+                    (a.walls.project_local_point(&p, false).point - p).norm()
+                };
+                let got = g.clearance[r * g.cols + c];
+                assert_eq!(got.to_bits(), expected.to_bits(), "cell ({c}, {r})");
+            }
         }
     }
 

@@ -41,9 +41,17 @@ impl<S: Send + Sync> axum::extract::FromRequestParts<S> for Bearer {
 }
 
 impl Bearer {
-    /// Lets the request change `what` (e.g. "match 3f2a…") when it carries its owner's token
-    /// or the admin token: 401 without a token, 403 with another one.
-    pub fn may_change(&self, state: &AppState, owner: &Owner, what: &str) -> Result<(), ApiError> {
+    /// Lets the request change `what` (e.g. "match 3f2a…") when it carries the owner's token
+    /// or the admin token: 401 without a token, 403 with another one. The token is checked
+    /// before the thing is looked up (`owner` is `None` when there is no such thing), so
+    /// only the operator learns from a change request whether something exists: the owner
+    /// of a match that has gone gets 403, like anyone whose token opens nothing there.
+    pub fn may_change(
+        &self,
+        state: &AppState,
+        owner: Option<&Owner>,
+        what: &str,
+    ) -> Result<(), ApiError> {
         let metrics = &state.registry.metrics;
         let Some(token) = &self.0 else {
             metrics.refuse(Refusal::Unauthorized);
@@ -55,18 +63,16 @@ impl Bearer {
             ));
         };
         let admin = state.registry.config.admin_token.as_ref();
-        if owner.is(token) || admin.is_some_and(|a| same_secret(&a.0, token)) {
+        if admin.is_some_and(|a| same_secret(&a.0, token)) || owner.is_some_and(|o| o.is(token)) {
             return Ok(());
         }
         metrics.refuse(Refusal::Forbidden);
-        let whose = if owner.token.is_some() {
-            "that is not the owner_token of"
-        } else {
-            "only the operator may change"
+        let message = match owner {
+            Some(o) if o.token.is_none() => {
+                format!("authorization: only the operator may change {what}")
+            }
+            _ => format!("authorization: that is not the owner_token of {what}"),
         };
-        Err(ApiError::new(
-            StatusCode::FORBIDDEN,
-            format!("authorization: {whose} {what}"),
-        ))
+        Err(ApiError::new(StatusCode::FORBIDDEN, message))
     }
 }

@@ -53,6 +53,18 @@ fn no_room(why: NoRoom) -> ApiError {
     }
 }
 
+/// The match `id` for a request that changes it: the token is checked first (see
+/// [`Bearer::may_change`]), then whether the match exists.
+fn owned(state: &AppState, bearer: &Bearer, id: &str) -> Result<MatchHandle, ApiError> {
+    let handle = state.registry.get(id);
+    bearer.may_change(
+        state,
+        handle.as_ref().map(|h| &*h.owner),
+        &format!("match {id}"),
+    )?;
+    handle.ok_or_else(|| ApiError::not_found(format!("no match {id}")))
+}
+
 fn find(state: &AppState, id: &str) -> Result<MatchHandle, ApiError> {
     state
         .registry
@@ -188,23 +200,25 @@ pub async fn delete_map(
     bearer: Bearer,
     Path(name): Path<String>,
 ) -> Result<StatusCode, ApiError> {
-    let stored = {
-        let maps = state
-            .registry
-            .maps
-            .read()
-            .unwrap_or_else(|e| e.into_inner());
-        maps.get(&name)
-            .cloned()
-            .ok_or_else(|| ApiError::not_found(format!("no map {name:?}")))?
-    };
+    let stored = state
+        .registry
+        .maps
+        .read()
+        .unwrap_or_else(|e| e.into_inner())
+        .get(&name)
+        .cloned();
+    bearer.may_change(
+        &state,
+        stored.as_ref().map(|m| &m.owner),
+        &format!("map {name:?}"),
+    )?;
+    let stored = stored.ok_or_else(|| ApiError::not_found(format!("no map {name:?}")))?;
     if stored.owner.token.is_none() {
         return Err(ApiError::new(
             StatusCode::FORBIDDEN,
             format!("map {name:?} is shipped with the server and cannot be removed"),
         ));
     }
-    bearer.may_change(&state, &stored.owner, &format!("map {name:?}"))?;
     let in_use = state.registry.all().into_iter().any(|h| {
         Arc::ptr_eq(&h.hub.arena, &stored.arena)
             && h.hub.frames.borrow().status == lasertag_core::world::MatchStatus::Running
@@ -369,8 +383,9 @@ pub async fn delete_match(
     bearer: Bearer,
     Path(id): Path<String>,
 ) -> Result<StatusCode, ApiError> {
-    let handle = find(&state, &id)?;
-    bearer.may_change(&state, &handle.owner, &format!("match {id}"))?;
+    let handle = state.registry.get(&id);
+    let owner = handle.as_ref().map(|h| &*h.owner);
+    bearer.may_change(&state, owner, &format!("match {id}"))?;
     if state.registry.remove(&id).await {
         Ok(StatusCode::NO_CONTENT)
     } else {
@@ -389,8 +404,7 @@ pub async fn step(
     Path(id): Path<String>,
     JsonBody(body): JsonBody<StepRequest>,
 ) -> Result<Json<MatchState>, ApiError> {
-    let handle = find(&state, &id)?;
-    bearer.may_change(&state, &handle.owner, &format!("match {id}"))?;
+    let handle = owned(&state, &bearer, &id)?;
     if !(1..=100_000).contains(&body.ticks) {
         return Err(ApiError::bad_request(format!(
             "ticks: {} must be in 1..=100000",
@@ -464,8 +478,7 @@ pub async fn command(
     Path((id, oid)): Path<(String, String)>,
     JsonBody(body): JsonBody<OpponentCommand>,
 ) -> Result<StatusCode, ApiError> {
-    let handle = find(&state, &id)?;
-    bearer.may_change(&state, &handle.owner, &format!("match {id}"))?;
+    let handle = owned(&state, &bearer, &id)?;
     let order = body.order()?;
     // Like an unknown robot, anything that is not an opponent id names no opponent here.
     let Ok(AgentId::Opponent(opponent)) = oid.parse() else {
