@@ -32,6 +32,17 @@ pub mod defaults {
     pub const MAX_MAPS_PER_ADDRESS: usize = 10;
     pub const IDLE_MANUAL_AFTER: &str = "600";
     pub const MAX_CONNECTIONS: usize = 4096;
+    pub const MAX_REQUEST_MEMORY_MB: u64 = 512;
+    pub const MAX_BUILD_S: f64 = 2.0;
+    pub const MAX_TICK_MS: f64 = 20.0;
+    pub const MEMORY_BUDGET_MB: u64 = 4096;
+
+    /// Tick milliseconds all matches together may be priced at: 80% of every core's 50 ms
+    /// at 20 Hz.
+    pub fn tick_budget_ms() -> f64 {
+        let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+        0.8 * 50.0 * cores as f64
+    }
     pub const HEADER_READ_TIMEOUT: &str = "10";
 }
 
@@ -166,6 +177,32 @@ pub struct Config {
     #[arg(long = "header-read-timeout-s", value_name = "SECONDS", env = "LASERTAG_HEADER_READ_TIMEOUT_S",
           default_value = defaults::HEADER_READ_TIMEOUT, value_parser = seconds)]
     pub header_read_timeout: Duration,
+    /// Megabytes one request may make the server keep: a map upload, or a match with its
+    /// inline map (priced from the request before anything is built); more is refused
+    /// with 400 naming what is too big.
+    #[arg(long, env = "LASERTAG_MAX_REQUEST_MEMORY_MB", default_value_t = defaults::MAX_REQUEST_MEMORY_MB,
+          value_parser = clap::value_parser!(u64).range(1..))]
+    pub max_request_memory_mb: u64,
+    /// Seconds of one core that validating and building what one request asks for may be
+    /// priced at; more is refused with 400.
+    #[arg(long, env = "LASERTAG_MAX_BUILD_S", default_value_t = defaults::MAX_BUILD_S,
+          value_parser = positive)]
+    pub max_build_s: f64,
+    /// Milliseconds of one core that one tick of one match may be priced at (the tick
+    /// period is 50 ms); more is refused with 400.
+    #[arg(long, env = "LASERTAG_MAX_TICK_MS", default_value_t = defaults::MAX_TICK_MS,
+          value_parser = positive)]
+    pub max_tick_ms: f64,
+    /// Megabytes all admitted matches and uploaded maps together may be priced at; past it
+    /// new ones are refused with 503 until some go.
+    #[arg(long, env = "LASERTAG_MEMORY_BUDGET_MB", default_value_t = defaults::MEMORY_BUDGET_MB,
+          value_parser = clap::value_parser!(u64).range(1..))]
+    pub memory_budget_mb: u64,
+    /// Tick milliseconds all running matches together may be priced at (default: 80% of
+    /// 50 ms on every core); past it new matches are refused with 503.
+    #[arg(long, env = "LASERTAG_TICK_BUDGET_MS", default_value_t = defaults::tick_budget_ms(),
+          value_parser = positive)]
+    pub tick_budget_ms: f64,
 }
 
 impl Default for Config {
@@ -194,6 +231,11 @@ impl Default for Config {
             idle_manual_after: secs(defaults::IDLE_MANUAL_AFTER),
             max_connections: defaults::MAX_CONNECTIONS,
             header_read_timeout: secs(defaults::HEADER_READ_TIMEOUT),
+            max_request_memory_mb: defaults::MAX_REQUEST_MEMORY_MB,
+            max_build_s: defaults::MAX_BUILD_S,
+            max_tick_ms: defaults::MAX_TICK_MS,
+            memory_budget_mb: defaults::MEMORY_BUDGET_MB,
+            tick_budget_ms: defaults::tick_budget_ms(),
         }
     }
 }

@@ -13,6 +13,7 @@
 //! library never imports `lasertag-lab`.
 
 pub mod access;
+pub mod admission;
 pub mod config;
 pub mod game;
 pub mod http;

@@ -26,7 +26,7 @@ struct Cli {
 #[derive(Debug, Subcommand)]
 enum Command {
     /// Serve the game and the API (the default command).
-    Serve(ServeArgs),
+    Serve(Box<ServeArgs>),
     /// Reproduce one of the paper's experiments: CSV files and SVG plots.
     #[command(subcommand)]
     Experiment(lasertag_lab::cli::Experiment),
@@ -82,7 +82,7 @@ fn main() -> ExitCode {
         .init();
     let cli = Cli::parse();
     let args = match cli.command {
-        Some(Command::Serve(args)) => args,
+        Some(Command::Serve(args)) => *args,
         Some(Command::Experiment(e)) => {
             return match lasertag_lab::cli::run(e, load_maps) {
                 Ok(()) => ExitCode::SUCCESS,

@@ -17,16 +17,7 @@ use lasertag_core::sim::arena::{Arena, MapDef, point_in_polygon};
 
 /// Largest map file or inline map accepted.
 pub const MAX_MAP_BYTES: usize = 1 << 20;
-/// Most obstacle vertices a map may have, over all polygons.
-pub const MAX_VERTICES: usize = 10_000;
-/// Most vertices of one polygon: checking that it does not cross itself compares every
-/// pair of its edges.
-pub const MAX_POLYGON_VERTICES: usize = 1_000;
-/// Most robot spawns, and most opponent spawns (matches have at most 8 robots and 32
-/// opponents; spawns wrap): each is checked against every wall.
-pub const MAX_SPAWNS: usize = 64;
-/// Most landmarks: a localising robot looks for every one of them each tick.
-pub const MAX_LANDMARKS: usize = 256;
+pub use crate::schema::{MAX_LANDMARKS, MAX_POLYGON_VERTICES, MAX_SPAWNS, MAX_VERTICES};
 
 /// The JSON object of a map, as in files and API bodies.
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq, utoipa::ToSchema)]
@@ -345,6 +336,8 @@ pub struct StoredMap {
     pub arena: Arc<Arena>,
     /// Who uploaded it; the default (no token) for shipped maps, which nobody removes.
     pub owner: Owner,
+    /// Bytes it was priced at when admitted (0 for shipped maps, which are always there).
+    pub memory: u64,
 }
 
 /// Every map the server knows, by name (sorted, so listings are stable).
@@ -410,23 +403,34 @@ impl MapStore {
 
     /// Adds an already-built arena. Returns false (and changes nothing) when the name is taken.
     pub fn insert_arena(&mut self, arena: Arc<Arena>) -> bool {
-        self.insert_owned(arena, Owner::default())
+        self.insert_owned(arena, Owner::default(), 0)
     }
 
     /// Adds an uploaded map with its owner. Returns false (and changes nothing) when the name
     /// is taken.
-    pub fn insert_owned(&mut self, arena: Arc<Arena>, owner: Owner) -> bool {
+    pub fn insert_owned(&mut self, arena: Arc<Arena>, owner: Owner, memory: u64) -> bool {
         if self.maps.contains_key(&arena.def.name) {
             return false;
         }
-        self.maps
-            .insert(arena.def.name.clone(), StoredMap { arena, owner });
+        self.maps.insert(
+            arena.def.name.clone(),
+            StoredMap {
+                arena,
+                owner,
+                memory,
+            },
+        );
         true
     }
 
     /// Forgets a map (matches playing on it keep their arena).
     pub fn remove(&mut self, name: &str) -> Option<StoredMap> {
         self.maps.remove(name)
+    }
+
+    /// Bytes the uploaded maps were priced at, together.
+    pub fn uploaded_memory(&self) -> u64 {
+        self.maps.values().map(|m| m.memory).sum()
     }
 
     /// Maps uploaded by `client` held now.

@@ -43,10 +43,12 @@ pub enum Refusal {
     Unauthorized,
     /// A change with a token that is not the owner's (403).
     Forbidden,
+    /// A request priced past a per-request limit (400) or the server's budgets (503).
+    Budget,
 }
 
 impl Refusal {
-    pub const ALL: [Refusal; 15] = [
+    pub const ALL: [Refusal; 16] = [
         Refusal::RateLimited,
         Refusal::ConnectionsPerAddress,
         Refusal::MatchesFull,
@@ -62,6 +64,7 @@ impl Refusal {
         Refusal::MapsFull,
         Refusal::Unauthorized,
         Refusal::Forbidden,
+        Refusal::Budget,
     ];
 
     pub fn label(self) -> &'static str {
@@ -81,6 +84,7 @@ impl Refusal {
             Refusal::MapsFull => "maps_full",
             Refusal::Unauthorized => "unauthorized",
             Refusal::Forbidden => "forbidden",
+            Refusal::Budget => "budget",
         }
     }
 }

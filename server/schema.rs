@@ -12,6 +12,19 @@ use utoipa::openapi::schema::{
 };
 use utoipa::openapi::{RefOr, schema::Ref};
 
+// The map format's limits: the validator in `maps` enforces them and the OpenAPI schema
+// states them.
+/// Most obstacle vertices a map may have, over all polygons.
+pub const MAX_VERTICES: usize = 10_000;
+/// Most vertices of one polygon: checking that it does not cross itself compares every
+/// pair of its edges.
+pub const MAX_POLYGON_VERTICES: usize = 1_000;
+/// Most robot spawns, and most opponent spawns (matches have at most 8 robots and 32
+/// opponents; spawns wrap): each is checked against every wall.
+pub const MAX_SPAWNS: usize = 64;
+/// Most landmarks: a localising robot looks for every one of them each tick.
+pub const MAX_LANDMARKS: usize = 256;
+
 /// The largest coordinate a request may give (start positions, waypoints).
 pub const MAX_COORDINATE: f64 = 1e6;
 
@@ -106,7 +119,7 @@ pub fn obstacles() -> RefOr<Schema> {
             ArrayBuilder::new()
                 .items(tuple(2, 0.0, 500.0))
                 .min_items(Some(3))
-                .max_items(Some(crate::maps::MAX_POLYGON_VERTICES)),
+                .max_items(Some(MAX_POLYGON_VERTICES)),
         )
         .description(Some(
             "Polygons, each of 3 to 1000 vertices `[x, y]` inside the arena, not intersecting itself; 10000 vertices in all at most.",
@@ -140,7 +153,7 @@ pub fn robot_spawns() -> RefOr<Schema> {
     map_points(
         3,
         1,
-        crate::maps::MAX_SPAWNS,
+        MAX_SPAWNS,
         "Robot spawns `[x, y, heading]`, 1 to 64, each inside the arena and at least 0.25 m from walls.",
     )
 }
@@ -149,7 +162,7 @@ pub fn opponent_spawns() -> RefOr<Schema> {
     map_points(
         2,
         1,
-        crate::maps::MAX_SPAWNS,
+        MAX_SPAWNS,
         "Opponent spawns `[x, y]`, 1 to 64, each inside the arena and at least 0.25 m from walls.",
     )
 }
@@ -158,7 +171,7 @@ pub fn landmarks() -> RefOr<Schema> {
     map_points(
         2,
         0,
-        crate::maps::MAX_LANDMARKS,
+        MAX_LANDMARKS,
         "Landmarks `[x, y]` inside the arena, at most 256 (optional).",
     )
 }

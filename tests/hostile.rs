@@ -164,3 +164,100 @@ async fn a_stranger_cannot_end_someone_elses_match() {
     );
     unharmed(&s, &live, t0).await;
 }
+
+/// A 500 m map whose thin obstacles run corner to corner: a small body whose long
+/// diagonal walls were the costliest thing to build.
+fn diagonal_slivers(n: usize) -> serde_json::Value {
+    let obstacles: Vec<_> = (0..n)
+        .map(|k| {
+            let y = 20.0 + k as f64 * 0.02;
+            json!([[10.0, y], [470.0, y + 460.0], [470.5, y + 460.0], [10.5, y]])
+        })
+        .collect();
+    json!({"name": "slivers", "width": 500.0, "height": 500.0, "obstacles": obstacles,
+           "robot_spawns": [[2.0, 2.0, 0.0]], "opponent_spawns": [[498.0, 2.0]]})
+}
+
+#[tokio::test]
+async fn expensive_maps_are_priced_and_refused_before_they_are_built() {
+    let s = TestServer::start().await;
+    let live = bystander(&s).await;
+    let t0 = tick_of(&s, &live).await;
+    let before = resident_mib();
+    // A 3 KB body that would take seconds of CPU to build (and, with the old segment
+    // index, hundreds of megabytes).
+    let r = s.post("/api/maps", &diagonal_slivers(64)).await;
+    assert_error(&r, 400, "s of CPU to build");
+    assert_eq!(s.get("/api/maps/slivers").await.status, 404);
+    // The same inside a match.
+    let r = s
+        .post("/api/matches", &json!({"map": diagonal_slivers(64)}))
+        .await;
+    assert_error(&r, 400, "limit of 2 s");
+    // Counts that drove validation or ticks are bounded by the format.
+    let mut m = common::duel_map();
+    m["landmarks"] = json!(vec![[5.0, 2.0]; 300]);
+    assert_error(&s.post("/api/maps", &m).await, 400, "limit is 256");
+    let mut m = common::duel_map();
+    m["opponent_spawns"] = json!(vec![[12.0, 2.0]; 65]);
+    assert_error(&s.post("/api/maps", &m).await, 400, "limit is 64");
+    unharmed(&s, &live, t0).await;
+    assert!(
+        resident_mib() < before + 200,
+        "memory grew by more than 200 MiB"
+    );
+}
+
+#[tokio::test]
+async fn an_expensive_match_is_priced_and_refused_before_it_is_built() {
+    let s = TestServer::start().await;
+    let live = bystander(&s).await;
+    let t0 = tick_of(&s, &live).await;
+    let before = resident_mib();
+    // 335 bytes that held 1.5 GB: a big empty map, eight robots each with its own tracker
+    // behind a lossy radio, and a fine merge grid.
+    let big = json!({"name": "big", "width": 500.0, "height": 500.0, "obstacles": [],
+                     "robot_spawns": [[2.0, 2.0, 0.0]], "opponent_spawns": [[498.0, 498.0]]});
+    let r = s
+        .post(
+            "/api/matches",
+            &json!({"map": big, "robots": 8, "opponents": 8,
+                    "radio": {"loss": 0.5}, "tracker": {"grid_cell": 0.1}}),
+        )
+        .await;
+    assert_error(&r, 400, "limit of 512 MB per request");
+    // Eight robots on a big map: cheap in memory, too slow a tick.
+    let r = s
+        .post("/api/matches", &json!({"map": big, "robots": 8}))
+        .await;
+    assert_error(&r, 400, "ms per match");
+    unharmed(&s, &live, t0).await;
+    assert!(
+        resident_mib() < before + 200,
+        "memory grew by more than 200 MiB"
+    );
+}
+
+#[tokio::test]
+async fn the_servers_budget_refuses_what_it_cannot_hold() {
+    let s = TestServer::start_with(Config {
+        memory_budget_mb: 60,
+        ..test_config()
+    })
+    .await;
+    let live = bystander(&s).await;
+    let t0 = tick_of(&s, &live).await;
+    let mut refused = None;
+    for _ in 0..30 {
+        let r = s
+            .post("/api/matches", &json!({"map": "office", "clock": "manual"}))
+            .await;
+        if r.status != 201 {
+            refused = Some(r);
+            break;
+        }
+    }
+    let r = refused.expect("the budget never ran out");
+    assert_error(&r, 503, "memory budget of 60 MB");
+    unharmed(&s, &live, t0).await;
+}

@@ -21,7 +21,15 @@ const SIM_FLOORS: &[&str] = &[
 
 /// The server library's modules from the ground floor up.
 const SERVER_FLOORS: &[&str] = &[
-    "config", "access", "metrics", "schema", "maps", "protocol", "game", "http",
+    "config",
+    "access",
+    "metrics",
+    "schema",
+    "maps",
+    "protocol",
+    "admission",
+    "game",
+    "http",
 ];
 
 /// The only crates the core may depend on: geometry, seeded randomness and typed errors.

@@ -211,10 +211,17 @@ pub struct ClearanceGrid {
 const MAX_GRID_CELLS: f32 = 400_000.0;
 
 impl ClearanceGrid {
+    /// Cell size, columns and rows for a `width` × `height` arena: 10 cm cells, coarser on
+    /// maps so big that there would be more than 400,000.
+    pub fn shape(width: f32, height: f32) -> (f32, usize, usize) {
+        let cell = (0.1f32).max((width * height / MAX_GRID_CELLS).sqrt());
+        let cols = (width / cell).ceil().max(1.0) as usize;
+        let rows = (height / cell).ceil().max(1.0) as usize;
+        (cell, cols, rows)
+    }
+
     fn build(def: &MapDef, walls: &Polyline) -> ClearanceGrid {
-        let cell = (0.1f32).max((def.width * def.height / MAX_GRID_CELLS).sqrt());
-        let cols = (def.width / cell).ceil().max(1.0) as usize;
-        let rows = (def.height / cell).ceil().max(1.0) as usize;
+        let (cell, cols, rows) = Self::shape(def.width, def.height);
         let centre =
             |c: usize, r: usize| Point2::new((c as f32 + 0.5) * cell, (r as f32 + 0.5) * cell);
         // Each obstacle tests only the cells of its bounding box (grown by a millimetre

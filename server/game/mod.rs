@@ -16,6 +16,7 @@ use tokio::sync::{mpsc, oneshot, watch};
 use tokio_util::sync::CancellationToken;
 
 use crate::access::{ClientKey, Owner};
+use crate::admission::Price;
 use crate::config::Config;
 use crate::maps::MapStore;
 use crate::metrics::Metrics;
@@ -138,6 +139,8 @@ pub struct MatchHandle {
     pub id: String,
     /// Who may change it (step, commands, delete).
     pub owner: Arc<Owner>,
+    /// What it was priced at when admitted.
+    pub price: Price,
     /// Creation order, for stable listings.
     pub order: u64,
     pub clock: Clock,
@@ -263,7 +266,13 @@ impl Registry {
     /// may change it.
     pub fn start(&self, world: World, meta: protocol::MatchMeta) -> MatchHandle {
         let mut matches = self.matches.write().unwrap_or_else(|e| e.into_inner());
-        self.start_locked(&mut matches, world, meta, Owner::default())
+        self.start_locked(
+            &mut matches,
+            world,
+            meta,
+            Owner::default(),
+            Price::default(),
+        )
     }
 
     /// Starts a match for `owner` unless the server holds `config.max_matches` already or
@@ -273,10 +282,50 @@ impl Registry {
         world: World,
         meta: protocol::MatchMeta,
         owner: Owner,
+        price: Price,
     ) -> Result<MatchHandle, NoRoom> {
         let mut matches = self.matches.write().unwrap_or_else(|e| e.into_inner());
         self.room_in(&matches, owner.client)?;
-        Ok(self.start_locked(&mut matches, world, meta, owner))
+        self.budget_in(&matches, price)?;
+        Ok(self.start_locked(&mut matches, world, meta, owner, price))
+    }
+
+    /// Whether `price` fits in what the server has left of its budgets (see `Config`).
+    pub fn has_budget(&self, price: Price) -> Result<(), NoRoom> {
+        let matches = self.matches.read().unwrap_or_else(|e| e.into_inner());
+        self.budget_in(&matches, price)
+    }
+
+    fn budget_in(
+        &self,
+        matches: &BTreeMap<String, MatchHandle>,
+        price: Price,
+    ) -> Result<(), NoRoom> {
+        let cfg = &self.config;
+        let admitted: Price = matches.values().map(|h| h.price).sum();
+        let maps = self
+            .maps
+            .read()
+            .unwrap_or_else(|e| e.into_inner())
+            .uploaded_memory();
+        let memory = admitted.memory + maps + price.memory;
+        if memory > cfg.memory_budget_mb * 1_000_000 {
+            self.metrics.refuse(crate::metrics::Refusal::Budget);
+            return Err(NoRoom::Memory {
+                held: admitted.memory + maps,
+                asked: price.memory,
+                budget: cfg.memory_budget_mb * 1_000_000,
+            });
+        }
+        if price.tick_ms > 0.0 && admitted.tick_ms + price.tick_ms > cfg.tick_budget_ms {
+            self.metrics.refuse(crate::metrics::Refusal::Budget);
+            return Err(NoRoom::Cpu {
+                held_ms: admitted.tick_ms,
+                asked_ms: price.tick_ms,
+                budget_ms: cfg.tick_budget_ms,
+            });
+        }
+        Ok(())
     }
 
     /// Whether a new match from `client` would be let in now (a cheap check before
@@ -318,6 +367,7 @@ impl Registry {
         world: World,
         meta: protocol::MatchMeta,
         owner: Owner,
+        price: Price,
     ) -> MatchHandle {
         let id = meta.id.clone();
         let clock = meta.clock;
@@ -346,6 +396,7 @@ impl Registry {
         let handle = MatchHandle {
             id: id.clone(),
             owner: Arc::new(owner),
+            price,
             order: self.next_order.fetch_add(1, Ordering::Relaxed),
             clock,
             hub,
@@ -443,10 +494,18 @@ impl Registry {
 }
 
 /// Why a new match was not let in.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq)]
 pub enum NoRoom {
     /// The server holds its most matches (the number).
     Server(usize),
     /// This client holds its most matches.
     Client { client: ClientKey, max: usize },
+    /// What is admitted already and this would take the server past its memory budget.
+    Memory { held: u64, asked: u64, budget: u64 },
+    /// The running matches and this one would be priced past the tick budget.
+    Cpu {
+        held_ms: f64,
+        asked_ms: f64,
+        budget_ms: f64,
+    },
 }

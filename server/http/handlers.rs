@@ -9,7 +9,9 @@ use axum::http::StatusCode;
 use axum::response::IntoResponse;
 
 use crate::access::{ClientKey, Owner};
-use crate::game::{MatchHandle, NoRoom, random_id};
+use crate::admission;
+use crate::game::{MatchHandle, random_id};
+use crate::http::admit::{no_room, off_workers, within_request_limits};
 use crate::http::auth::Bearer;
 use crate::http::body::JsonBody;
 use crate::http::limits::ClientIp;
@@ -21,37 +23,8 @@ use crate::protocol::{
     MatchCreated, MatchMeta, MatchState, MatchStats, MatchSummary, OpponentCommand, StepRequest,
 };
 use lasertag_core::sim::AgentId;
-use lasertag_core::sim::arena::{Arena, MapDef};
+use lasertag_core::sim::arena::Arena;
 use lasertag_core::world::World;
-
-/// Builds an arena off the async workers: the clearance grid of a big map takes a while.
-async fn build_arena(def: MapDef) -> Result<Arc<Arena>, ApiError> {
-    tokio::task::spawn_blocking(move || Arc::new(Arena::new(def)))
-        .await
-        .map_err(|e| {
-            ApiError::new(
-                StatusCode::INTERNAL_SERVER_ERROR,
-                format!("building the map failed: {e}"),
-            )
-        })
-}
-
-fn no_room(why: NoRoom) -> ApiError {
-    match why {
-        NoRoom::Server(max) => ApiError::new(
-            StatusCode::SERVICE_UNAVAILABLE,
-            format!(
-                "the server holds {max} matches, its most; try again when one has finished (finished matches are removed after a grace period)"
-            ),
-        ),
-        NoRoom::Client { client, max } => ApiError::new(
-            StatusCode::TOO_MANY_REQUESTS,
-            format!(
-                "{client} holds {max} matches, the most one client may; delete one (DELETE /api/matches/{{id}} with its owner_token) or wait for one to end"
-            ),
-        ),
-    }
-}
 
 /// The match `id` for a request that changes it: the token is checked first (see
 /// [`Bearer::may_change`]), then whether the match exists.
@@ -125,17 +98,27 @@ pub async fn add_map(
     ClientIp(ip): ClientIp,
     JsonBody(value): JsonBody<serde_json::Value>,
 ) -> Result<impl IntoResponse, ApiError> {
-    let def = maps::from_value(value).map_err(|e| ApiError::bad_request(e.to_string()))?;
+    let def = off_workers(&state, "validating the map", move || {
+        maps::from_value(value)
+    })
+    .await?
+    .map_err(|e| ApiError::bad_request(e.to_string()))?;
     let client = ClientKey::of(ip);
     map_room(&state, &def.name, client)?;
+    let price = admission::map(&def);
+    within_request_limits(&state, "the map", price)?;
+    state.registry.has_budget(price).map_err(no_room)?;
     let name = def.name.clone();
     let info = MapInfo {
         name: def.name.clone(),
         width: def.width as f64,
         height: def.height as f64,
     };
-    let arena = build_arena(def).await?;
-    // Checked again under the write lock: others may have uploaded while this one was built.
+    let arena = off_workers(&state, "building the map", move || {
+        Arc::new(Arena::new(def))
+    })
+    .await?;
+    // Checked again: others may have uploaded while this one was built.
     map_room(&state, &name, client)?;
     let owner = Owner::new(client);
     let owner_token = owner.token.clone().unwrap_or_default();
@@ -144,7 +127,7 @@ pub async fn add_map(
         .maps
         .write()
         .unwrap_or_else(|e| e.into_inner());
-    if !store.insert_owned(arena, owner) {
+    if !store.insert_owned(arena, owner, price.memory) {
         return Err(ApiError::conflict(format!("a map named {name:?} exists")));
     }
     Ok((
@@ -297,22 +280,30 @@ pub async fn create_match(
             cfg.max_particles_per_match
         )));
     }
-    // Refused before the world is built; `try_start` checks again under the lock.
+    // Refused before anything is built; `try_start` checks again under the lock.
     state.registry.has_room(Some(client)).map_err(no_room)?;
-    let arena: Arc<Arena> = match req.map {
+    // A stored map is built already (and was priced when it was added); an inline one is
+    // validated, priced with the match and built for it alone.
+    let source = match req.map {
         serde_json::Value::String(name) => {
             let maps = state
                 .registry
                 .maps
                 .read()
                 .unwrap_or_else(|e| e.into_inner());
-            maps.get(&name)
+            let arena = maps
+                .get(&name)
                 .map(|m| m.arena.clone())
-                .ok_or_else(|| ApiError::not_found(format!("map: no map {name:?}")))?
+                .ok_or_else(|| ApiError::not_found(format!("map: no map {name:?}")))?;
+            MapSource::Stored(arena)
         }
         value @ serde_json::Value::Object(_) => {
-            let def = maps::from_value(value).map_err(|e| {
-                // Name the field as the request has it: `map.obstacles[2]`, or `map` itself.
+            let def = off_workers(&state, "validating the map", move || {
+                maps::from_value(value)
+            })
+            .await?
+            .map_err(|e| {
+                // Name the field as the request has it: `map.obstacles[2]`, or `map`.
                 let path = if e.path == "map" {
                     e.path
                 } else {
@@ -320,7 +311,7 @@ pub async fn create_match(
                 };
                 ApiError::bad_request(format!("{path}: {}", e.message))
             })?;
-            build_arena(def).await?
+            MapSource::Inline(def)
         }
         _ => {
             return Err(ApiError::bad_request(
@@ -328,17 +319,23 @@ pub async fn create_match(
             ));
         }
     };
-    let map_name = arena.def.name.clone();
-    // Off the async workers: a new map's planner views take tens of milliseconds to build.
-    let world = tokio::task::spawn_blocking(move || World::new(arena, req.config))
-        .await
-        .map_err(|e| {
-            ApiError::new(
-                StatusCode::INTERNAL_SERVER_ERROR,
-                format!("setting up the match failed: {e}"),
-            )
-        })?
-        .map_err(|e| ApiError::bad_request(e.to_string()))?;
+    let price = match &source {
+        MapSource::Stored(arena) => admission::match_on(&arena.def, &req.config),
+        MapSource::Inline(def) => admission::map(def) + admission::match_on(def, &req.config),
+    };
+    within_request_limits(&state, "the match", price)?;
+    state.registry.has_budget(price).map_err(no_room)?;
+    let config = req.config;
+    let world = off_workers(&state, "setting up the match", move || {
+        let arena = match source {
+            MapSource::Stored(arena) => arena,
+            MapSource::Inline(def) => Arc::new(Arena::new(def)),
+        };
+        World::new(arena, config)
+    })
+    .await?
+    .map_err(|e| ApiError::bad_request(e.to_string()))?;
+    let map_name = world.arena.def.name.clone();
     let meta = MatchMeta {
         id: random_id(8),
         map: map_name,
@@ -352,7 +349,7 @@ pub async fn create_match(
     let owner_token = owner.token.clone().unwrap_or_default();
     let handle = state
         .registry
-        .try_start(world, meta, owner)
+        .try_start(world, meta, owner, price)
         .map_err(no_room)?;
     // Asked of the task so that fields it owns (free slots) are filled in.
     let summary = handle.summary().await?;
@@ -363,6 +360,14 @@ pub async fn create_match(
             owner_token,
         }),
     ))
+}
+
+/// Where a new match's map comes from.
+enum MapSource {
+    /// A map the server holds, built already.
+    Stored(Arc<Arena>),
+    /// A map in the request, validated and to be built for this match alone.
+    Inline(lasertag_core::sim::arena::MapDef),
 }
 
 #[utoipa::path(get, path = "/api/matches/{id}", params(("id" = String, Path)),

@@ -2,6 +2,7 @@
 //! call directly. Handlers parse and validate at the edge ([`body::JsonBody`]), then talk to
 //! the [`Registry`] and to match tasks; they never hold a world.
 
+mod admit;
 mod auth;
 mod body;
 mod error;
@@ -33,6 +34,8 @@ pub use serve::{ConnectionLimits, serve};
 pub struct AppState {
     pub registry: Arc<Registry>,
     pub limits: Arc<limits::AddressLimits>,
+    /// Permits to build maps and worlds on the blocking pool: one per core.
+    pub builders: Arc<tokio::sync::Semaphore>,
 }
 
 /// The whole HTTP surface: the API under `/api`, WebSockets under `/ws`, metrics at
@@ -41,9 +44,11 @@ pub struct AppState {
 /// per-address limits key on the peer's address.
 pub fn app(registry: Arc<Registry>, web_dir: PathBuf) -> Router {
     let max_body = registry.config.max_body_bytes;
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
     let state = AppState {
         registry,
         limits: Arc::default(),
+        builders: Arc::new(tokio::sync::Semaphore::new(cores)),
     };
     let api = Router::new()
         .route("/health", get(handlers::health))

@@ -1,0 +1,248 @@
+//! What a request that creates state will cost, priced from its inputs before anything is
+//! built: the memory a map or a match keeps, the CPU it takes to build, and the CPU each
+//! tick of a match takes. Handlers compare a [`Price`] with the per-request limits and
+//! with what the server has already admitted (see `Config`).
+//!
+//! The coefficients come from `examples/admission_probe.rs` (a counting allocator and a
+//! clock around each phase, one input varied at a time; the figures are in
+//! docs/operations.md). Each is rounded up from the measurement, and where a cost depends
+//! on how a match plays out (how many roles the tracker splits into) the worst case is
+//! priced: a price is a bound, not a forecast.
+
+use lasertag_core::sim::arena::{ClearanceGrid, MapDef};
+use lasertag_core::world::MatchConfig;
+use nalgebra::Point2;
+
+/// Bytes, build seconds and tick milliseconds of one admitted thing.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Price {
+    /// Bytes kept while it lives.
+    pub memory: u64,
+    /// Seconds of one core to validate and build it.
+    pub build_s: f64,
+    /// Milliseconds of one core per tick (matches only).
+    pub tick_ms: f64,
+}
+
+impl std::ops::Add for Price {
+    type Output = Price;
+
+    fn add(self, o: Price) -> Price {
+        Price {
+            memory: self.memory + o.memory,
+            build_s: self.build_s + o.build_s,
+            tick_ms: self.tick_ms + o.tick_ms,
+        }
+    }
+}
+
+impl std::iter::Sum for Price {
+    fn sum<I: Iterator<Item = Price>>(iter: I) -> Price {
+        iter.fold(Price::default(), |a, b| a + b)
+    }
+}
+
+/// Bytes per clearance-grid cell kept by the arena (its clearance) and by the likelihood
+/// field a localising match derives from it.
+const GRID_BYTES_PER_CELL: f64 = 4.0 + 16.0;
+/// Bytes per vertex: the polyline, its bounding-volume tree and the definition's copy.
+const BYTES_PER_VERTEX: f64 = 200.0;
+/// Bytes per segment-index entry, with the slack of a growing vector.
+const BYTES_PER_INDEX_ENTRY: f64 = 32.0;
+/// The planner's table of candidate views: at most 1,500 positions, so it peaks on maps
+/// of about 60 m (67 MB measured) and shrinks on bigger ones; per square metre it never
+/// came above 21 KB.
+const VIEW_TABLE_BYTES_PER_M2: f64 = 22_000.0;
+const VIEW_TABLE_MAX_BYTES: f64 = 72e6;
+/// Seconds to build the grids of a map, whatever its size (400k cells at most).
+const MAP_BASE_S: f64 = 0.08;
+/// Seconds per (grid cell × edge whose bounding box covers it): the nearest-wall queries
+/// of the clearance grid and of the likelihood field visit every edge whose box contains
+/// the query point, so long diagonal walls cost by the area of their boxes.
+const S_PER_BOX_CELL: f64 = 40e-9;
+/// Seconds per (cell of an obstacle's box × its vertices): the inside test.
+const S_PER_INSIDE_TEST: f64 = 3e-9;
+/// Seconds per pair of edges of one polygon: the self-intersection check.
+const S_PER_EDGE_PAIR: f64 = 8e-9;
+
+/// Memory a match keeps whatever its settings (the world, its queues, its frames).
+const MATCH_BASE_BYTES: f64 = 4e6;
+/// Per robot: its localiser's particles, scan and plan.
+const BYTES_PER_ROBOT: f64 = 64e3;
+/// Per tracker particle (position, weight, step and the resampling buffers).
+const BYTES_PER_PARTICLE: f64 = 24.0;
+/// Per cell of the merge histogram, twice (the tracker's grid and the histograms it
+/// fills when it checks roles for a merge).
+const BYTES_PER_MERGE_CELL: f64 = 16.0;
+/// Milliseconds per tick whatever the settings.
+const TICK_BASE_MS: f64 = 0.3;
+/// Per robot and clearance cell: its planner's distance field over the grid.
+const TICK_MS_PER_ROBOT_CELL: f64 = 8e-6;
+/// Per tracker particle and tracker copy.
+const TICK_MS_PER_PARTICLE: f64 = 1.5e-4;
+/// Per landmark and localising robot.
+const TICK_MS_PER_LANDMARK: f64 = 4e-4;
+
+/// The price of keeping and building an arena for `def` (the planner's view table and the
+/// likelihood field it will derive included: a stored map keeps them once a match has been
+/// played on it).
+pub fn map(def: &MapDef) -> Price {
+    let (cell, cols, rows) = ClearanceGrid::shape(def.width, def.height);
+    let cells = (cols * rows) as f64;
+    let border = [
+        Point2::new(0.0, 0.0),
+        Point2::new(def.width, 0.0),
+        Point2::new(def.width, def.height),
+        Point2::new(0.0, def.height),
+    ];
+    let polygons = std::iter::once(&border[..]).chain(def.obstacles.iter().map(Vec::as_slice));
+    let (mut vertices, mut box_cells, mut inside_tests, mut edge_pairs, mut entries) =
+        (0.0, 0.0, 0.0, 0.0, 0.0);
+    // The segment index's cells: 0.5 m, coarser on huge maps (250k at most).
+    let index_cell = 0.5f32.max((def.width * def.height / 250_000.0).sqrt());
+    for poly in polygons {
+        let n = poly.len() as f64;
+        vertices += n;
+        edge_pairs += n * n / 2.0;
+        let (lo, hi) = bounds(poly);
+        inside_tests += cells_in(lo, hi, cell) * n;
+        for i in 0..poly.len() {
+            let (a, b) = (poly[i], poly[(i + 1) % poly.len()]);
+            box_cells += cells_in(a.inf(&b), a.sup(&b), cell).min(cells);
+            entries += ((a.x - b.x).abs() + (a.y - b.y).abs()) as f64 / index_cell as f64 + 2.0;
+        }
+    }
+    let area = (def.width * def.height) as f64;
+    let views = (area * VIEW_TABLE_BYTES_PER_M2).min(VIEW_TABLE_MAX_BYTES);
+    let memory = cells * GRID_BYTES_PER_CELL
+        + vertices * BYTES_PER_VERTEX
+        + entries * BYTES_PER_INDEX_ENTRY
+        + def.landmarks.len() as f64 * 8.0
+        + views;
+    Price {
+        memory: memory as u64,
+        // Both the clearance grid and the likelihood field query every cell.
+        build_s: MAP_BASE_S
+            + 2.0 * box_cells * S_PER_BOX_CELL
+            + inside_tests * S_PER_INSIDE_TEST
+            + edge_pairs * S_PER_EDGE_PAIR,
+        tick_ms: 0.0,
+    }
+}
+
+/// The price of a match with `config` on a map of `def`'s size (the map's own price is
+/// separate: charged once for a stored map, with the match for an inline one).
+pub fn match_on(def: &MapDef, config: &MatchConfig) -> Price {
+    let (_, cols, rows) = ClearanceGrid::shape(def.width, def.height);
+    let cells = (cols * rows) as f64;
+    let robots = config.robots as f64;
+    let tracker = &config.tracker;
+    // One tracker for the team, or one per robot behind an imperfect radio.
+    let copies = if config.radio.perfect() { 1.0 } else { robots };
+    // The worst case: one role per opponent, each with its own particles.
+    let particles = tracker.particles_per_role as f64 * config.opponents as f64;
+    let merge_cells = ((def.width / tracker.grid_cell).ceil() as f64)
+        * ((def.height / tracker.grid_cell).ceil() as f64);
+    let landmarks = def.landmarks.len() as f64;
+    let per_copy =
+        cells * 4.0 + merge_cells * BYTES_PER_MERGE_CELL + particles * BYTES_PER_PARTICLE;
+    let memory =
+        MATCH_BASE_BYTES + robots * (BYTES_PER_ROBOT + landmarks * 8.0) + copies * per_copy;
+    let localising = if config.localisation { robots } else { 0.0 };
+    Price {
+        memory: memory as u64,
+        // The world's own setup (particles drawn, trackers copied); the map's grids are in
+        // the map's price.
+        build_s: 0.01 + copies * (merge_cells + particles) * 20e-9,
+        tick_ms: TICK_BASE_MS
+            + robots * cells * TICK_MS_PER_ROBOT_CELL
+            + copies * particles * TICK_MS_PER_PARTICLE
+            + localising * landmarks * TICK_MS_PER_LANDMARK,
+    }
+}
+
+fn bounds(poly: &[Point2<f32>]) -> (Point2<f32>, Point2<f32>) {
+    poly.iter().fold(
+        (
+            Point2::new(f32::MAX, f32::MAX),
+            Point2::new(f32::MIN, f32::MIN),
+        ),
+        |(lo, hi), v| (lo.inf(v), hi.sup(v)),
+    )
+}
+
+/// Grid cells of size `cell` that a box from `lo` to `hi` touches.
+fn cells_in(lo: Point2<f32>, hi: Point2<f32>, cell: f32) -> f64 {
+    (((hi.x - lo.x) / cell).floor() as f64 + 1.0) * (((hi.y - lo.y) / cell).floor() as f64 + 1.0)
+}
+
+/// Megabytes, for messages.
+pub fn mb(bytes: u64) -> String {
+    format!("{:.0} MB", bytes as f64 / 1e6)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn empty(side: f32) -> MapDef {
+        MapDef {
+            name: "t".into(),
+            width: side,
+            height: side,
+            obstacles: vec![],
+            robot_spawns: vec![[1.0, 1.0, 0.0]],
+            opponent_spawns: vec![Point2::new(2.0, 2.0)],
+            landmarks: vec![],
+        }
+    }
+
+    #[test]
+    fn long_diagonal_walls_are_priced_by_the_area_of_their_boxes() {
+        let mut def = empty(500.0);
+        let plain = map(&def).build_s;
+        def.obstacles = (0..64)
+            .map(|k| {
+                let y = 1.0 + k as f32 * 0.01;
+                vec![
+                    Point2::new(10.0, y),
+                    Point2::new(490.0, y + 480.0),
+                    Point2::new(490.5, y + 480.0),
+                    Point2::new(10.5, y),
+                ]
+            })
+            .collect();
+        let slivers = map(&def).build_s;
+        // Measured: about 2.4 s to build the arena and 2 s more for the match's field.
+        assert!(plain < 0.2 && slivers > 2.0, "{plain} {slivers}");
+    }
+
+    #[test]
+    fn a_fine_merge_grid_behind_a_lossy_radio_is_priced_per_robot() {
+        let def = empty(500.0);
+        let mut config = MatchConfig {
+            robots: 8,
+            opponents: 8,
+            ..MatchConfig::default()
+        };
+        config.tracker.grid_cell = 0.1;
+        let shared = match_on(&def, &config).memory;
+        config.radio.loss = 0.5;
+        let lossy = match_on(&def, &config).memory;
+        // Measured: 210 MB kept with one tracker, 1.62 GB with eight.
+        assert!(
+            shared > 200_000_000 && lossy > 1_600_000_000,
+            "{shared} {lossy}"
+        );
+    }
+
+    #[test]
+    fn the_default_match_on_a_shipped_sized_map_is_cheap() {
+        let def = empty(24.0);
+        let p = map(&def) + match_on(&def, &MatchConfig::default());
+        assert!(
+            p.memory < 30_000_000 && p.tick_ms < 2.0 && p.build_s < 0.5,
+            "{p:?}"
+        );
+    }
+}
