@@ -36,6 +36,7 @@ pub mod defaults {
     pub const MAX_BUILD_S: f64 = 2.0;
     pub const MAX_TICK_MS: f64 = 20.0;
     pub const MEMORY_BUDGET_MB: u64 = 4096;
+    pub const TICK_OVERRUN_MS: f64 = 50.0;
 
     /// Tick milliseconds all matches together may be priced at: 80% of every core's 50 ms
     /// at 20 Hz.
@@ -203,6 +204,12 @@ pub struct Config {
     #[arg(long, env = "LASERTAG_TICK_BUDGET_MS", default_value_t = defaults::tick_budget_ms(),
           value_parser = positive)]
     pub tick_budget_ms: f64,
+    /// Milliseconds past which one tick of a match counts as an overrun (reported in
+    /// `lasertag_tick_overruns_total` and the log); a match whose ticks overran in half of
+    /// its last 200 ends with reason `overloaded`, so that it cannot starve the others.
+    #[arg(long, env = "LASERTAG_TICK_OVERRUN_MS", default_value_t = defaults::TICK_OVERRUN_MS,
+          value_parser = positive)]
+    pub tick_overrun_ms: f64,
 }
 
 impl Default for Config {
@@ -236,6 +243,7 @@ impl Default for Config {
             max_tick_ms: defaults::MAX_TICK_MS,
             memory_budget_mb: defaults::MEMORY_BUDGET_MB,
             tick_budget_ms: defaults::tick_budget_ms(),
+            tick_overrun_ms: defaults::TICK_OVERRUN_MS,
         }
     }
 }

@@ -111,6 +111,8 @@ pub struct Metrics {
     pub refused: IntCounterVec,
     /// Ticks that started more than half a period late (real-time matches).
     pub late_ticks: IntCounter,
+    /// Ticks whose computation took longer than `--tick-overrun-ms`.
+    pub tick_overruns: IntCounter,
 }
 
 /// Tick-scale buckets: 50 µs to 100 ms (a tick has 50 ms).
@@ -181,6 +183,11 @@ impl Metrics {
             &["reason"],
         )
         .expect("valid metric");
+        let tick_overruns = IntCounter::new(
+            "lasertag_tick_overruns_total",
+            "Ticks whose computation took longer than the overrun limit",
+        )
+        .expect("valid metric");
         let late_ticks = IntCounter::new(
             "lasertag_late_ticks_total",
             "Real-time ticks that started over half a period late",
@@ -196,6 +203,7 @@ impl Metrics {
             Box::new(snapshot_bytes.clone()),
             Box::new(refused.clone()),
             Box::new(late_ticks.clone()),
+            Box::new(tick_overruns.clone()),
         ] {
             registry.register(c).expect("metric names are distinct");
         }
@@ -231,6 +239,7 @@ impl Metrics {
             snapshot_bytes,
             refused,
             late_ticks,
+            tick_overruns,
         }
     }
 

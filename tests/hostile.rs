@@ -261,3 +261,28 @@ async fn the_servers_budget_refuses_what_it_cannot_hold() {
     assert_error(&r, 503, "memory budget of 60 MB");
     unharmed(&s, &live, t0).await;
 }
+
+#[tokio::test]
+async fn a_match_that_keeps_overrunning_its_ticks_is_ended() {
+    // Every tick overruns a budget of a microsecond: the match is ended after 100 of them,
+    // whatever its time limit, and the overruns are counted.
+    let s = TestServer::start_with(Config {
+        tick_overrun_ms: 0.001,
+        ..test_config()
+    })
+    .await;
+    let id = s
+        .create_match(json!({"map": "office", "clock": "manual"}))
+        .await;
+    let state = s.step(&id, 1000).await;
+    assert_eq!(state["status"], "finished");
+    assert_eq!(state["tick"], 100, "ended at the hundredth overrun");
+    let events = s.events(&id).await;
+    let finished = events.last().unwrap();
+    assert_eq!(finished["kind"], "finished");
+    assert_eq!(finished["reason"], "overloaded");
+    assert_eq!(finished["winner"], serde_json::Value::Null);
+    let metrics = s.client.get(s.url("/metrics")).send().await.unwrap();
+    let text = metrics.text().await.unwrap();
+    assert!(text.contains("lasertag_tick_overruns_total 100"), "{text}");
+}

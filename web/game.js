@@ -231,6 +231,7 @@ export class Game {
       stopped: `the match was stopped at ${fmtTime(f.time_s)}`,
       server_shutdown: `the server shut down at ${fmtTime(f.time_s)}`,
       abandoned: `nobody was playing; the match was ended at ${fmtTime(f.time_s)}`,
+      overloaded: `the server could not keep up with this match; it was ended at ${fmtTime(f.time_s)}`,
     }[f.reason] || `at ${fmtTime(f.time_s)}`;
     let you = "";
     if (this.role === "player" && f.winner) {

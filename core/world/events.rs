@@ -26,6 +26,9 @@ pub enum FinishReason {
     ServerShutdown,
     /// Nobody took part for too long (the server's clean-up): nobody won.
     Abandoned,
+    /// Its ticks took longer than the server could give them, again and again (the
+    /// server's protection of its other matches): nobody won.
+    Overloaded,
 }
 
 impl FinishReason {
@@ -36,7 +39,9 @@ impl FinishReason {
         match self {
             FinishReason::AllTagged => Some(Side::Robots),
             FinishReason::TimeLimit | FinishReason::Stopped => Some(Side::Opponents),
-            FinishReason::ServerShutdown | FinishReason::Abandoned => None,
+            FinishReason::ServerShutdown | FinishReason::Abandoned | FinishReason::Overloaded => {
+                None
+            }
         }
     }
 }

@@ -11,6 +11,7 @@ mod task;
 use std::collections::BTreeMap;
 use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
 use std::sync::{Arc, RwLock, Weak};
+use std::time::Duration;
 
 use tokio::sync::{mpsc, oneshot, watch};
 use tokio_util::sync::CancellationToken;
@@ -389,6 +390,7 @@ impl Registry {
                 abandoned_after: self.config.abandoned_after,
                 idle_manual_after: self.config.idle_manual_after,
                 max_players: self.config.max_players_per_match,
+                tick_overrun: Duration::from_secs_f64(self.config.tick_overrun_ms / 1e3),
                 metrics: self.metrics.clone(),
                 on_exit: Box::new(on_exit),
             },

@@ -25,6 +25,12 @@ use lasertag_core::sim::{AgentId, TICK_HZ};
 use lasertag_core::world::{Control, FinishReason, HumanInput, StepMark};
 use lasertag_core::world::{MatchStatus, World};
 
+/// Ticks over which overruns are counted, and how many of them may overrun before the match
+/// is ended (`overloaded`): ten seconds of real time at 20 Hz, half of it over budget, is
+/// no passing hiccup but a match the server cannot carry without starving the others.
+const OVERRUN_WINDOW: usize = 200;
+const OVERRUN_LIMIT: usize = 100;
+
 /// Ticks a manual step runs before it lets other requests in.
 const STEP_CHUNK: u64 = 250;
 /// Tick compute times kept for the stats percentiles.
@@ -73,6 +79,8 @@ pub struct TaskSettings {
     pub idle_manual_after: Duration,
     /// People who may hold a slot at once.
     pub max_players: usize,
+    /// A tick that takes longer overruns (see [`OVERRUN_WINDOW`]).
+    pub tick_overrun: Duration,
     pub metrics: Metrics,
     /// Called once when the task ends by itself (cleaned up, abandoned): unregisters it.
     pub on_exit: Box<dyn FnOnce() + Send>,
@@ -137,6 +145,8 @@ pub fn spawn_match(
         tick_us: Vec::with_capacity(TICK_WINDOW),
         tick_next: 0,
         late_ticks: 0,
+        overruns: std::collections::VecDeque::with_capacity(OVERRUN_WINDOW),
+        overrun_count: 0,
     };
     task.publish_summary();
     handle.spawn(task.run(rx).instrument(span));
@@ -189,6 +199,9 @@ struct MatchTask {
     tick_us: Vec<u32>,
     tick_next: usize,
     late_ticks: u64,
+    /// Whether each of the last ticks overran, and how many did.
+    overruns: std::collections::VecDeque<bool>,
+    overrun_count: usize,
 }
 
 impl MatchTask {
@@ -431,6 +444,33 @@ impl MatchTask {
 
     fn record(&mut self, took: Duration) {
         self.histograms.tick.observe(took.as_secs_f64());
+        let overran = took > self.settings.tick_overrun;
+        if self.overruns.len() == OVERRUN_WINDOW && self.overruns.pop_front() == Some(true) {
+            self.overrun_count -= 1;
+        }
+        self.overruns.push_back(overran);
+        if overran {
+            self.overrun_count += 1;
+            self.settings.metrics.tick_overruns.inc();
+            // The first and then every 20th, so a struggling match does not flood the log.
+            if self.overrun_count % 20 == 1 {
+                tracing::warn!(
+                    tick = self.world.tick,
+                    took_ms = took.as_secs_f64() * 1e3,
+                    overruns = self.overrun_count,
+                    "tick overran its budget"
+                );
+            }
+            if self.overrun_count >= OVERRUN_LIMIT && self.world.status == MatchStatus::Running {
+                tracing::warn!(
+                    "ending the match: {} of its last {} ticks overran",
+                    self.overrun_count,
+                    self.overruns.len()
+                );
+                self.world.end(FinishReason::Overloaded);
+                self.publish();
+            }
+        }
         let us = took.as_micros().min(u32::MAX as u128) as u32;
         if self.tick_us.len() < TICK_WINDOW {
             self.tick_us.push(us);

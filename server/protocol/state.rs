@@ -444,6 +444,7 @@ pub fn finish_reason(reason: FinishReason) -> &'static str {
         FinishReason::Stopped => "stopped",
         FinishReason::ServerShutdown => "server_shutdown",
         FinishReason::Abandoned => "abandoned",
+        FinishReason::Overloaded => "overloaded",
     }
 }
 
