@@ -37,6 +37,8 @@ pub mod defaults {
     pub const MAX_TICK_MS: f64 = 20.0;
     pub const MEMORY_BUDGET_MB: u64 = 4096;
     pub const TICK_OVERRUN_MS: f64 = 50.0;
+    pub const JOIN_HOLD: &str = "10";
+    pub const MAX_HOLDS_PER_ADDRESS: usize = 1;
 
     /// Tick milliseconds all matches together may be priced at: 80% of every core's 50 ms
     /// at 20 Hz.
@@ -210,6 +212,16 @@ pub struct Config {
     #[arg(long, env = "LASERTAG_TICK_OVERRUN_MS", default_value_t = defaults::TICK_OVERRUN_MS,
           value_parser = positive)]
     pub tick_overrun_ms: f64,
+    /// Seconds a slot joined with `POST …/players` is held for a WebSocket to play it; then
+    /// it is freed.
+    #[arg(long = "join-hold-s", value_name = "SECONDS", env = "LASERTAG_JOIN_HOLD_S",
+          default_value = defaults::JOIN_HOLD, value_parser = seconds)]
+    pub join_hold: Duration,
+    /// Slots of one match that one client (an IPv4 address, or an IPv6 /64) may hold
+    /// without playing them; more joins are refused with 429 until one is played or lapses.
+    #[arg(long, env = "LASERTAG_MAX_HOLDS_PER_ADDRESS", default_value_t = defaults::MAX_HOLDS_PER_ADDRESS,
+          value_parser = clap::value_parser!(u64).range(1..).map(|v| v as usize))]
+    pub max_holds_per_address: usize,
 }
 
 impl Default for Config {
@@ -244,6 +256,8 @@ impl Default for Config {
             memory_budget_mb: defaults::MEMORY_BUDGET_MB,
             tick_budget_ms: defaults::tick_budget_ms(),
             tick_overrun_ms: defaults::TICK_OVERRUN_MS,
+            join_hold: secs(defaults::JOIN_HOLD),
+            max_holds_per_address: defaults::MAX_HOLDS_PER_ADDRESS,
         }
     }
 }

@@ -266,3 +266,61 @@ async fn a_manual_match_nobody_changes_ends_and_goes() {
         "{text}"
     );
 }
+
+#[tokio::test]
+async fn a_slot_nobody_plays_is_held_briefly_and_one_client_holds_few() {
+    let s = TestServer::start_with(Config {
+        join_hold: Duration::from_millis(300),
+        max_holds_per_address: 1,
+        ..test_config()
+    })
+    .await;
+    // Bots people may take over, as in the showcase.
+    let (id, _) = create(
+        &s,
+        json!({"map": "office", "opponents": 3, "bots_joinable": true}),
+    )
+    .await;
+    assert_eq!(free_slots(&s, &id).await, 3);
+    let players = format!("/api/matches/{id}/players");
+    let r = s
+        .post_as(&players, &json!({"name": "squatter"}), None)
+        .await;
+    assert_eq!(r.status, 201, "{}", r.body);
+    // The same client cannot hold a second slot it does not play.
+    let r = s
+        .post_as(&players, &json!({"name": "squatter 2"}), None)
+        .await;
+    assert_error(&r, 429, "without playing");
+    assert_eq!(free_slots(&s, &id).await, 2);
+    // Nobody connects: the hold lapses and the bot is back.
+    let mut lapsed = false;
+    for _ in 0..100 {
+        tokio::time::sleep(Duration::from_millis(50)).await;
+        if free_slots(&s, &id).await == 3 {
+            lapsed = true;
+            break;
+        }
+    }
+    assert!(lapsed, "the unplayed slot is still held");
+    // A slot that is played is not a hold: its player may join another.
+    let (_, token) = s.join(&id, "player").await;
+    let _ws = s.ws(&id, Some(&token)).await.unwrap();
+    let mut joined = false;
+    for _ in 0..100 {
+        let r = s.post_as(&players, &json!({"name": "friend"}), None).await;
+        if r.status == 201 {
+            joined = true;
+            break;
+        }
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+    assert!(joined, "a played slot counted as a hold");
+}
+
+/// The `free_slots` of match `id` as the lobby lists it.
+async fn free_slots(s: &TestServer, id: &str) -> u64 {
+    let all = s.get("/api/matches").await.body;
+    let found = all.as_array().unwrap().iter().find(|m| m["id"] == id);
+    found.expect("listed")["free_slots"].as_u64().unwrap()
+}

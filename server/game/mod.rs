@@ -43,6 +43,9 @@ pub enum MatchError {
     Gone(String),
     #[error("{0}")]
     Unauthorized(String),
+    /// The client holds as much as it may.
+    #[error("{0}")]
+    TooMany(String),
 }
 
 /// What a handler may ask of a match task.
@@ -70,6 +73,8 @@ pub enum Request {
     },
     Join {
         name: String,
+        /// Who asks (for the rule of one unplayed hold per client).
+        client: Option<ClientKey>,
         reply: oneshot::Sender<Result<Joined, MatchError>>,
     },
     Stats(oneshot::Sender<MatchStats>),
@@ -192,8 +197,17 @@ impl MatchHandle {
         .await?
     }
 
-    pub async fn join(&self, name: String) -> Result<Joined, MatchError> {
-        self.ask(|reply| Request::Join { name, reply }).await?
+    pub async fn join(
+        &self,
+        name: String,
+        client: Option<ClientKey>,
+    ) -> Result<Joined, MatchError> {
+        self.ask(|reply| Request::Join {
+            name,
+            client,
+            reply,
+        })
+        .await?
     }
 
     pub async fn stats(&self) -> Result<MatchStats, MatchError> {
@@ -390,6 +404,8 @@ impl Registry {
                 abandoned_after: self.config.abandoned_after,
                 idle_manual_after: self.config.idle_manual_after,
                 max_players: self.config.max_players_per_match,
+                join_hold: self.config.join_hold,
+                max_holds: self.config.max_holds_per_address,
                 tick_overrun: Duration::from_secs_f64(self.config.tick_overrun_ms / 1e3),
                 metrics: self.metrics.clone(),
                 on_exit: Box::new(on_exit),

@@ -16,7 +16,7 @@ use tokio::sync::{mpsc, oneshot, watch};
 use tokio::time::MissedTickBehavior;
 use tracing::Instrument;
 
-use crate::access::same_secret;
+use crate::access::{ClientKey, same_secret};
 use crate::game::{Hub, MatchError, Request, Seat, random_id};
 use crate::metrics::{Metrics, Refusal, TickHistograms};
 use crate::protocol::frame::{BELIEF_EVERY, Frame};
@@ -53,6 +53,10 @@ struct Player {
     away_since: Option<Instant>,
     /// The bot a person took over (the showcase), given back when the slot is freed.
     bot: Option<Control>,
+    /// Whether a connection ever played it: until then the slot is only held, briefly.
+    ever_connected: bool,
+    /// Who joined (for the one-unconnected-hold-per-client rule).
+    client: Option<ClientKey>,
 }
 
 impl Player {
@@ -79,6 +83,10 @@ pub struct TaskSettings {
     pub idle_manual_after: Duration,
     /// People who may hold a slot at once.
     pub max_players: usize,
+    /// How long a slot joined but never connected to is held.
+    pub join_hold: Duration,
+    /// Such slots one client may hold at once.
+    pub max_holds: usize,
     /// A tick that takes longer overruns (see [`OVERRUN_WINDOW`]).
     pub tick_overrun: Duration,
     pub metrics: Metrics,
@@ -378,8 +386,12 @@ impl MatchTask {
                     });
                 let _ = reply.send(result);
             }
-            Request::Join { name, reply } => {
-                let result = self.join(name);
+            Request::Join {
+                name,
+                client,
+                reply,
+            } => {
+                let result = self.join(name, client);
                 if result.is_ok() {
                     self.publish();
                 }
@@ -534,7 +546,7 @@ impl MatchTask {
             }
     }
 
-    fn join(&mut self, name: String) -> Result<Joined, MatchError> {
+    fn join(&mut self, name: String, client: Option<ClientKey>) -> Result<Joined, MatchError> {
         let id = &self.meta.id;
         // The length counts what was sent, as the OpenAPI schema (`maxLength`) does; the
         // name kept is trimmed.
@@ -555,6 +567,23 @@ impl MatchTask {
                 "players: match {id} is at this server's limit of {max} per match"
             )));
         }
+        // A slot joined but not played is held only briefly, and one client holds at most
+        // one such slot at a time: otherwise a few anonymous requests keep every slot taken.
+        if let Some(c) = client {
+            let held = self
+                .players
+                .iter()
+                .flatten()
+                .filter(|p| p.client == Some(c) && !p.ever_connected)
+                .count();
+            if held >= self.settings.max_holds {
+                self.settings.metrics.refuse(Refusal::ClientQuota);
+                return Err(MatchError::TooMany(format!(
+                    "{c} holds {held} slot(s) of match {id} without playing them, its most; connect with a token, or wait {} s for a hold to lapse",
+                    self.settings.join_hold.as_secs_f64()
+                )));
+            }
+        }
         let slot = (0..self.players.len())
             .find(|&i| self.slot_free(i))
             .ok_or_else(|| MatchError::Conflict(format!("match {id} has no free opponent slot")))?;
@@ -574,6 +603,8 @@ impl MatchTask {
             kick: None,
             away_since: Some(Instant::now()),
             bot,
+            ever_connected: false,
+            client,
         };
         tracing::info!(player = %player.name, slot, "player joined");
         let joined = Joined {
@@ -604,6 +635,7 @@ impl MatchTask {
         }
         let (kick, kicked) = oneshot::channel();
         p.kick = Some(kick);
+        p.ever_connected = true;
         p.generation += 1;
         p.away_since = None;
         tracing::info!(player = %p.name, slot, generation = p.generation, "player connected");
@@ -657,9 +689,12 @@ impl MatchTask {
                 self.world.set_human_input(slot, HumanInput::default());
                 changed = true;
             }
-            let gone = p
-                .away_since
-                .is_some_and(|t| now - t >= self.settings.reconnect_grace);
+            let grace = if p.ever_connected {
+                self.settings.reconnect_grace
+            } else {
+                self.settings.join_hold
+            };
+            let gone = p.away_since.is_some_and(|t| now - t >= grace);
             if gone && let Some(p) = self.players[slot].take() {
                 tracing::info!(player = %p.name, slot, "player slot freed");
                 if let Some(bot) = p.bot {

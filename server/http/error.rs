@@ -41,6 +41,7 @@ impl From<MatchError> for ApiError {
             MatchError::NotFound(_) | MatchError::Gone(_) => StatusCode::NOT_FOUND,
             MatchError::Conflict(_) => StatusCode::CONFLICT,
             MatchError::Unauthorized(_) => StatusCode::UNAUTHORIZED,
+            MatchError::TooMany(_) => StatusCode::TOO_MANY_REQUESTS,
         };
         ApiError::new(status, e.to_string())
     }

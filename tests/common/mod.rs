@@ -49,6 +49,7 @@ pub fn test_config() -> Config {
         // Every test client is 127.0.0.1; the per-client quotas are crossed in tests/access.rs.
         max_matches_per_address: 1000,
         max_maps_per_address: 1000,
+        max_holds_per_address: 1000,
         ..Config::default()
     }
 }
