@@ -49,6 +49,11 @@ impl SegmentGrid {
                 }
             }
         }
+        Self::packed(cell, cols, rows, per_cell)
+    }
+
+    /// The index of per-cell lists, packed into one vector with offsets.
+    fn packed(cell: f32, cols: usize, rows: usize, per_cell: Vec<Vec<[Point2<f32>; 2]>>) -> Self {
         let mut starts = Vec::with_capacity(cols * rows + 1);
         let mut items = Vec::new();
         for segs in per_cell {
@@ -83,20 +88,7 @@ impl SegmentGrid {
                 }
             }
         }
-        let mut starts = Vec::new();
-        let mut items = Vec::new();
-        for segs in per_cell {
-            starts.push(items.len() as u32);
-            items.extend(segs);
-        }
-        starts.push(items.len() as u32);
-        SegmentGrid {
-            cell,
-            cols,
-            rows,
-            starts,
-            items,
-        }
+        Self::packed(cell, cols, rows, per_cell)
     }
 
     pub(crate) fn cast(&self, o: Point2<f32>, d: Vector2<f32>, max: f32) -> f32 {

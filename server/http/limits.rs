@@ -1,5 +1,6 @@
-//! Per-address limits: a token bucket of HTTP requests and a count of open WebSocket
-//! connections for each client IP address.
+//! Per-client limits: a token bucket of HTTP requests and a count of open WebSocket
+//! connections for each client, an IPv4 address or an IPv6 /64 (`ClientKey`: one
+//! subscriber usually holds a whole /64, which would otherwise be 2^64 fresh budgets).
 //!
 //! Hand-written rather than `tower_governor`: we need the refusal in the API's own JSON error
 //! shape with a `Retry-After`, a count of concurrent WebSockets (which a rate limiter does not
@@ -19,6 +20,7 @@ use axum::http::{HeaderValue, StatusCode, header};
 use axum::middleware::Next;
 use axum::response::{IntoResponse, Response};
 
+use crate::access::ClientKey;
 use crate::http::{ApiError, AppState};
 use crate::metrics::Refusal;
 
@@ -70,7 +72,7 @@ struct PerAddress {
 /// The per-address state of one server.
 #[derive(Debug, Default)]
 pub struct AddressLimits {
-    map: Mutex<HashMap<IpAddr, PerAddress>>,
+    map: Mutex<HashMap<ClientKey, PerAddress>>,
     sweep_at: Mutex<usize>,
 }
 
@@ -78,7 +80,7 @@ impl AddressLimits {
     fn check_request(&self, ip: IpAddr, capacity: f64, rate: f64) -> Result<(), Duration> {
         let mut map = self.map.lock().unwrap_or_else(|e| e.into_inner());
         self.sweep(&mut map);
-        map.entry(ip)
+        map.entry(ClientKey::of(ip))
             .or_default()
             .requests
             .get_or_insert_with(|| Bucket::new(capacity, rate))
@@ -88,20 +90,21 @@ impl AddressLimits {
     /// Counts a WebSocket connection from `ip` unless it has `max` open already.
     pub fn open_connection(self: &Arc<Self>, ip: IpAddr, max: usize) -> Option<AddressConnection> {
         let mut map = self.map.lock().unwrap_or_else(|e| e.into_inner());
-        let entry = map.entry(ip).or_default();
+        let client = ClientKey::of(ip);
+        let entry = map.entry(client).or_default();
         if entry.connections >= max {
             return None;
         }
         entry.connections += 1;
         Some(AddressConnection {
             limits: self.clone(),
-            ip,
+            client,
         })
     }
 
     /// Forgets addresses with no connection whose bucket has been idle long enough to be
     /// full; runs when the map has doubled since the last sweep.
-    fn sweep(&self, map: &mut HashMap<IpAddr, PerAddress>) {
+    fn sweep(&self, map: &mut HashMap<ClientKey, PerAddress>) {
         let mut at = self.sweep_at.lock().unwrap_or_else(|e| e.into_inner());
         if map.len() < (*at).max(SWEEP_AT) {
             return;
@@ -126,13 +129,13 @@ impl AddressLimits {
 #[derive(Debug)]
 pub struct AddressConnection {
     limits: Arc<AddressLimits>,
-    ip: IpAddr,
+    client: ClientKey,
 }
 
 impl Drop for AddressConnection {
     fn drop(&mut self) {
         let mut map = self.limits.map.lock().unwrap_or_else(|e| e.into_inner());
-        if let Some(a) = map.get_mut(&self.ip) {
+        if let Some(a) = map.get_mut(&self.client) {
             a.connections = a.connections.saturating_sub(1);
         }
     }
@@ -161,7 +164,8 @@ pub async fn rate_limit(State(state): State<AppState>, req: Request, next: Next)
             let mut resp = ApiError::new(
                 StatusCode::TOO_MANY_REQUESTS,
                 format!(
-                    "too many requests from {ip}: at most {} per second (bursts of {}); retry in {secs} s",
+                    "too many requests from {}: at most {} per second (bursts of {}); retry in {secs} s",
+                    ClientKey::of(ip),
                     cfg.requests_per_s, cfg.request_burst
                 ),
             )
@@ -191,5 +195,33 @@ impl<S: Send + Sync> axum::extract::FromRequestParts<S> for ClientIp {
                 .get::<ConnectInfo<SocketAddr>>()
                 .map_or(IpAddr::V4(Ipv4Addr::UNSPECIFIED), |c| c.0.ip()),
         ))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_addresses_of_one_ipv6_64_share_a_budget() {
+        let limits = AddressLimits::default();
+        let ip = |s: &str| s.parse::<IpAddr>().unwrap();
+        // A bucket of two that refills once in a thousand seconds.
+        assert!(limits.check_request(ip("2001:db8::1"), 2.0, 0.001).is_ok());
+        assert!(
+            limits
+                .check_request(ip("2001:db8::ffff:2"), 2.0, 0.001)
+                .is_ok()
+        );
+        assert!(limits.check_request(ip("2001:db8::3"), 2.0, 0.001).is_err());
+        // The next /64 has its own.
+        assert!(
+            limits
+                .check_request(ip("2001:db8:0:1::1"), 2.0, 0.001)
+                .is_ok()
+        );
+        // IPv4 addresses are one client each.
+        assert!(limits.check_request(ip("192.0.2.1"), 2.0, 0.001).is_ok());
+        assert!(limits.check_request(ip("192.0.2.2"), 2.0, 0.001).is_ok());
     }
 }
