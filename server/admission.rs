@@ -9,7 +9,7 @@
 //! on how a match plays out (how many roles the tracker splits into) the worst case is
 //! priced: a price is a bound, not a forecast.
 
-use lasertag_core::sim::arena::{ClearanceGrid, MapDef};
+use lasertag_core::sim::arena::{ClearanceGrid, MapDef, bounding_box};
 use lasertag_core::world::MatchConfig;
 use nalgebra::Point2;
 
@@ -104,7 +104,7 @@ pub fn map(def: &MapDef) -> Price {
         let n = poly.len() as f64;
         vertices += n;
         edge_pairs += n * n / 2.0;
-        let (lo, hi) = bounds(poly);
+        let (lo, hi) = bounding_box(poly);
         inside_tests += cells_in(lo, hi, cell) * n;
         for i in 0..poly.len() {
             let (a, b) = (poly[i], poly[(i + 1) % poly.len()]);
@@ -159,16 +159,6 @@ pub fn match_on(def: &MapDef, config: &MatchConfig) -> Price {
             + copies * particles * TICK_MS_PER_PARTICLE
             + localising * landmarks * TICK_MS_PER_LANDMARK,
     }
-}
-
-fn bounds(poly: &[Point2<f32>]) -> (Point2<f32>, Point2<f32>) {
-    poly.iter().fold(
-        (
-            Point2::new(f32::MAX, f32::MAX),
-            Point2::new(f32::MIN, f32::MIN),
-        ),
-        |(lo, hi), v| (lo.inf(v), hi.sup(v)),
-    )
 }
 
 /// Grid cells of size `cell` that a box from `lo` to `hi` touches.

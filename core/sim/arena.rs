@@ -181,6 +181,17 @@ impl Arena {
     }
 }
 
+/// The lowest and highest corners of the box around `poly`'s vertices.
+pub fn bounding_box(poly: &[Point2<f32>]) -> (Point2<f32>, Point2<f32>) {
+    poly.iter().fold(
+        (
+            Point2::new(f32::MAX, f32::MAX),
+            Point2::new(f32::MIN, f32::MIN),
+        ),
+        |(lo, hi), v| (lo.inf(v), hi.sup(v)),
+    )
+}
+
 /// Even-odd point-in-polygon test (either winding).
 pub fn point_in_polygon(p: Point2<f32>, poly: &[Point2<f32>]) -> bool {
     let mut inside = false;
@@ -230,13 +241,7 @@ impl ClearanceGrid {
         // obstacles).
         let mut inside = vec![false; cols * rows];
         for poly in &def.obstacles {
-            let (lo, hi) = poly.iter().fold(
-                (
-                    Point2::new(f32::MAX, f32::MAX),
-                    Point2::new(f32::MIN, f32::MIN),
-                ),
-                |(lo, hi), v| (lo.inf(v), hi.sup(v)),
-            );
+            let (lo, hi) = bounding_box(poly);
             let first = |v: f32| ((v - 1e-3) / cell - 0.5).ceil().max(0.0) as usize;
             let last = |v: f32, n: usize| {
                 let k = ((v + 1e-3) / cell - 0.5).floor();
