@@ -161,6 +161,54 @@ pub fn match_on(def: &MapDef, config: &MatchConfig) -> Price {
     }
 }
 
+/// Bytes of a held frame besides its robots, opponents and belief points (the frame, its
+/// belief's roles, a few events).
+const HELD_FRAME_BYTES: f64 = 1_500.0;
+/// Bytes of a robot in a held frame besides its scan, sightings and cloud.
+const HELD_ROBOT_BYTES: f64 = 160.0;
+/// Bytes of an opponent in a held frame, and of a role in a held belief.
+const HELD_AGENT_BYTES: f64 = 96.0;
+/// Bytes per particle of a held belief (position and weight as `f32`s).
+const HELD_BYTES_PER_PARTICLE: f64 = 12.0;
+
+/// The price of what a match people play keeps to show its truth `delay_ticks` late
+/// (`game::delay`): a frame per tick of the delay and a belief of the team and of each
+/// robot with a tracker of its own every `BELIEF_HOLD_EVERY` ticks. Nothing for a live match.
+pub fn held_back(config: &MatchConfig, delay_ticks: u64) -> Price {
+    use crate::protocol::frame::{
+        BELIEF_BUDGET, BELIEF_EVERY, BELIEF_HOLD_EVERY, BELIEF_MIN_PER_ROLE, CLOUD_POINTS,
+    };
+    if delay_ticks == 0 {
+        return Price::default();
+    }
+    let robots = config.robots as f64;
+    let opponents = config.opponents as f64;
+    let robot = HELD_ROBOT_BYTES
+        + config.physics.laser_beams as f64 * 4.0
+        + opponents * 8.0
+        + CLOUD_POINTS as f64 * 8.0;
+    let points = (BELIEF_BUDGET as f64).max(opponents * BELIEF_MIN_PER_ROLE as f64);
+    let belief_view = points * 8.0 + opponents * HELD_AGENT_BYTES;
+    let frame = HELD_FRAME_BYTES
+        + robots * robot
+        + opponents * HELD_AGENT_BYTES
+        + belief_view / BELIEF_EVERY as f64;
+    // The team's belief, and each robot's own behind an imperfect radio.
+    let copies = if config.radio.perfect() {
+        1.0
+    } else {
+        1.0 + robots
+    };
+    let particles = config.tracker.particles_per_role as f64 * opponents;
+    let belief = copies * (particles * HELD_BYTES_PER_PARTICLE + opponents * HELD_AGENT_BYTES);
+    let beliefs = (delay_ticks / BELIEF_HOLD_EVERY + 2) as f64;
+    Price {
+        memory: ((delay_ticks + 1) as f64 * frame + beliefs * belief) as u64,
+        build_s: 0.0,
+        tick_ms: 0.0,
+    }
+}
+
 /// Grid cells of size `cell` that a box from `lo` to `hi` touches.
 fn cells_in(lo: Point2<f32>, hi: Point2<f32>, cell: f32) -> f64 {
     (((hi.x - lo.x) / cell).floor() as f64 + 1.0) * (((hi.y - lo.y) / cell).floor() as f64 + 1.0)

@@ -216,6 +216,11 @@ pub struct CreateMatch {
     pub opponent_starts: Option<Vec<[f64; 2]>>,
     /// Whether people may take over bot opponents (default false; the showcase allows it).
     pub bots_joinable: Option<bool>,
+    /// Seconds, 0..=600 (default 30): how far behind the match its state, belief, events and
+    /// spectator WebSocket run for everyone but its owner, when people may play it (human
+    /// opponents, or `bots_joinable`). Ignored, and echoed as 0, when they may not.
+    #[schema(minimum = 0.0, maximum = 600.0)]
+    pub spectator_delay_s: Option<f64>,
     /// Whether robots localise themselves from odometry, laser and landmarks (default true;
     /// false leaves each robot its odometry alone, which drifts).
     pub localisation: Option<bool>,
@@ -238,7 +243,14 @@ pub struct MatchRequest {
     pub config: MatchConfig,
     pub clock: Clock,
     pub bots_joinable: bool,
+    /// Ticks the truth is held back (0 when no person may play).
+    pub spectator_delay_ticks: u64,
 }
+
+/// Default of `spectator_delay_s`.
+pub const SPECTATOR_DELAY_S: f64 = 30.0;
+/// Most of `spectator_delay_s`: what a match holds back is priced by it.
+pub const MAX_SPECTATOR_DELAY_S: f64 = 600.0;
 
 fn refused(field: &str, message: String) -> FieldError {
     FieldError {
@@ -358,11 +370,25 @@ impl CreateMatch {
             physics,
             ..config
         };
+        let bots_joinable = self.bots_joinable.unwrap_or(false);
+        let delay_s = finite_in(
+            "spectator_delay_s",
+            self.spectator_delay_s.unwrap_or(SPECTATOR_DELAY_S),
+            0.0,
+            MAX_SPECTATOR_DELAY_S,
+            false,
+        )?;
+        let people = bots_joinable || config.opponent_control == ControlKind::Human;
         Ok(MatchRequest {
             map: self.map,
             config,
             clock: self.clock.unwrap_or(Clock::Realtime),
-            bots_joinable: self.bots_joinable.unwrap_or(false),
+            bots_joinable,
+            spectator_delay_ticks: if people {
+                (delay_s * TICK_HZ as f64).round() as u64
+            } else {
+                0
+            },
         })
     }
 }

@@ -75,11 +75,18 @@ async fn play_and_spectate_in_headless_chromium() {
     save(&mut b, "screenshot-lobby.png").await;
     b.eval("document.getElementById('showcase-watch').click()")
         .await;
+    // People may play the showcase, so spectators see it 30 s late (its first frame, this
+    // early on), and the page says so.
     b.wait_for(
-        "__lasertag.role === 'spectator' && __lasertag.snapshots > 10 && __lasertag.drawn.particles > 0",
+        "__lasertag.role === 'spectator' && __lasertag.snapshots > 0 && __lasertag.drawn.particles > 0",
         20,
     )
     .await;
+    assert_eq!(b.eval("__lasertag.delay").await, json!(30));
+    let hud = b
+        .eval("document.getElementById('hud-match').textContent")
+        .await;
+    assert!(hud.as_str().unwrap().contains("delayed 30 s"), "{hud}");
     let drawn = b.eval("__lasertag.drawn").await;
     assert!(drawn["walls"].as_u64().unwrap() > 10, "{drawn}");
     assert_eq!(drawn["robots"], 2, "{drawn}");

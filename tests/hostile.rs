@@ -286,3 +286,130 @@ async fn a_match_that_keeps_overrunning_its_ticks_is_ended() {
     let text = metrics.text().await.unwrap();
     assert!(text.contains("lasertag_tick_overruns_total 100"), "{text}");
 }
+
+#[tokio::test]
+async fn a_match_people_play_shows_its_truth_late_to_all_but_its_owner() {
+    let s = TestServer::start().await;
+    let bots = bystander(&s).await;
+    let t0 = tick_of(&s, &bots).await;
+    // The default delay (30 s) is longer than this test: nothing after the first frame may
+    // reach anyone but the owner and the player's own fogged socket.
+    let created = s
+        .post(
+            "/api/matches",
+            &json!({"map": "office", "robots": 2, "opponent_control": "human"}),
+        )
+        .await;
+    assert_eq!(created.status, 201, "{}", created.body);
+    assert_eq!(created.body["spectator_delay_s"], 30.0);
+    let id = created.body["id"].as_str().unwrap().to_string();
+    let (_, token) = s.join(&id, "mallory").await;
+    let mut player = s.ws(&id, Some(&token)).await.unwrap();
+    let welcome = player.json().await;
+    assert_eq!(welcome["spectator_delay_s"], 30.0);
+    while tick_of(&s, &id).await < 40 {
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+    // The same person in a second tab: state, belief, events and a spectator socket.
+    let path = format!("/api/matches/{id}");
+    let state = s.get_as(&path, None).await;
+    assert_eq!(
+        state.body["tick"], 0,
+        "the public state is live: {}",
+        state.body
+    );
+    let belief = s.get_as(&format!("{path}/belief"), None).await;
+    assert_eq!(belief.body["tick"], 0);
+    let robot = s.get_as(&format!("{path}/belief?robot=r1"), None).await;
+    assert_eq!(robot.body["tick"], 0);
+    let public: Vec<String> = s.get_as(&format!("{path}/events"), None).await.body["events"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|e| e["kind"].as_str().unwrap().to_owned())
+        .collect();
+    assert!(public.is_empty(), "events shown live: {public:?}");
+    let mut spectator = s.ws(&id, None).await.unwrap();
+    let welcome = spectator.json().await;
+    assert_eq!(welcome["spectator_delay_s"], 30.0);
+    assert_eq!(spectator.next_of("snapshot").await["tick"], 0);
+    // The player's own socket stays live (and fogged); the owner sees everything live.
+    let mut mine = 0;
+    while mine < 40 {
+        mine = player.next_of("snapshot").await["tick"].as_u64().unwrap();
+    }
+    assert!(s.get(&format!("{path}/belief")).await.body["tick"].as_u64() > Some(0));
+    let owned = s.events(&id).await;
+    assert!(
+        owned.iter().any(|e| e["kind"] == "player_joined"),
+        "{owned:?}"
+    );
+    // A token that is not the owner's (the player's own, say) opens nothing.
+    assert_error(&s.get_as(&path, Some(&token)).await, 403, "owner_token");
+    // A match nobody plays is live for everyone.
+    let headless = s.post("/api/matches", &json!({"map": "office"})).await;
+    assert_eq!(headless.body["spectator_delay_s"], 0.0);
+    let headless = headless.body["id"].as_str().unwrap().to_string();
+    let mut tick = 0;
+    while tick == 0 {
+        tokio::time::sleep(Duration::from_millis(50)).await;
+        tick = s
+            .get_as(&format!("/api/matches/{headless}"), None)
+            .await
+            .body["tick"]
+            .as_u64()
+            .unwrap();
+    }
+    unharmed(&s, &bots, t0).await;
+}
+
+#[tokio::test]
+async fn spectators_follow_a_held_back_match_to_its_end() {
+    let s = TestServer::start().await;
+    // Held back half a second (10 ticks), over in two.
+    let id = s
+        .create_match(
+            json!({"map": "office", "opponent_control": "human", "planner": "idle",
+            "time_limit_s": 2, "spectator_delay_s": 0.5}),
+        )
+        .await;
+    let path = format!("/api/matches/{id}");
+    let mut spectator = s.ws(&id, None).await.unwrap();
+    assert_eq!(spectator.json().await["spectator_delay_s"], 0.5);
+    let mut checked = 0;
+    loop {
+        let before = tick_of(&s, &id).await;
+        let public = s.get_as(&path, None).await.body;
+        let after = tick_of(&s, &id).await;
+        let shown = public["tick"].as_u64().unwrap();
+        if public["status"] == "finished" {
+            // Over: nothing is left to hide.
+            assert_eq!(shown, 40);
+            break;
+        }
+        // Released once 10 ticks old, and not before (the first frame is shown from the
+        // start).
+        assert!(
+            (shown == 0 || shown + 10 <= after) && (before < 10 || shown + 10 >= before),
+            "shown {shown}, live {before}..{after}"
+        );
+        checked += 1;
+        tokio::time::sleep(Duration::from_millis(30)).await;
+    }
+    assert!(checked > 5, "{checked} reads while running");
+    // The spectator sees every tick's frame in order, up to the last, then `finished`.
+    let mut last = 0;
+    loop {
+        let m = spectator.json().await;
+        match m["type"].as_str() {
+            Some("snapshot") => {
+                let tick = m["tick"].as_u64().unwrap();
+                assert!(tick >= last, "tick {tick} after {last}");
+                last = tick;
+            }
+            Some("finished") => break,
+            _ => {}
+        }
+    }
+    assert_eq!(last, 40, "the spectator saw the match's last tick");
+}

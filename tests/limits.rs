@@ -429,9 +429,10 @@ async fn abandoned_human_matches_end_and_go_but_bot_and_watched_matches_run_on()
     let empty = s
         .create_match(json!({"map": "office", "opponent_control": "human"}))
         .await;
-    // This one has a spectator the whole time.
+    // This one has a spectator the whole time (shown live, so that snapshots keep coming).
     let watched = s
-        .create_match(json!({"map": "office", "opponent_control": "human"}))
+        .create_match(json!({"map": "office", "opponent_control": "human",
+            "spectator_delay_s": 0}))
         .await;
     let mut watcher = s.ws(&watched, None).await.unwrap();
     // Bots and API opponents with nobody watching: never abandoned.

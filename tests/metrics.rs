@@ -63,7 +63,8 @@ async fn metrics_expose_every_family_and_they_move() {
     // A real-time coordinated match with a spectator and a player, a manual one stepped.
     let live = s
         .create_match(
-            json!({"map": "office", "opponent_control": "human", "planner": "coordinated"}),
+            json!({"map": "office", "opponent_control": "human", "planner": "coordinated",
+                "spectator_delay_s": 0}),
         )
         .await;
     let manual = s

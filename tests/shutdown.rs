@@ -115,7 +115,8 @@ async fn sigterm_tells_every_client_closes_cleanly_and_exits_within_5_s() {
         &client,
         addr,
         "/api/matches",
-        json!({"map": "office", "opponent_control": "human", "planner": "idle"}),
+        json!({"map": "office", "opponent_control": "human", "planner": "idle",
+            "spectator_delay_s": 0}),
     )
     .await["id"]
         .as_str()

@@ -397,6 +397,7 @@ async fn events_and_the_end_reach_players_and_spectators() {
     let id = s
         .create_match(json!({"map": duel_map(), "robots": 1, "opponents": 1,
             "opponent_control": "human", "planner": "idle", "clock": "realtime",
+            "spectator_delay_s": 0,
             "robot_starts": [[6.0, 4.0, std::f64::consts::PI]], "opponent_starts": [[3.0, 4.0]],
             "time_limit_s": 3}))
         .await;
@@ -494,4 +495,45 @@ async fn idle_human_match(s: &TestServer) -> String {
                           "planner": "idle"}),
     )
     .await
+}
+
+#[tokio::test]
+async fn a_tagged_player_watches_as_late_as_spectators() {
+    let s = TestServer::start().await;
+    // o0 stands right behind a searching robot; o1, far off, keeps the match going.
+    let id = s
+        .create_match(json!({"map": duel_map(), "robots": 1, "opponents": 2,
+            "opponent_control": "human", "planner": "baseline", "clock": "manual",
+            "robot_starts": [[6.0, 4.0, std::f64::consts::PI]],
+            "opponent_starts": [[8.0, 4.0], [13.0, 1.0]],
+            "spectator_delay_s": 1}))
+        .await;
+    let (me, token) = s.join(&id, "erin").await;
+    assert_eq!(me, "o0");
+    let mut player = s.ws(&id, Some(&token)).await.unwrap();
+    assert_eq!(player.json().await["spectator_delay_s"], 1.0);
+    // Live while it plays.
+    let truth = s.step(&id, 1).await;
+    let live = loop {
+        let snap = player.next_of("snapshot").await;
+        if snap["tick"] == truth["tick"] {
+            break snap;
+        }
+    };
+    assert_eq!(live["view"], "player");
+    let mut now = 1;
+    while s.get(&format!("/api/matches/{id}")).await.body["opponents"][0]["tagged"] != true {
+        assert!(now < 400, "o0 was never tagged");
+        now = s.step(&id, 1).await["tick"].as_u64().unwrap();
+    }
+    // Then everything, but 20 ticks (1 s) late.
+    let now = s.step(&id, 1).await["tick"].as_u64().unwrap();
+    for _ in 0..1000 {
+        let snap = player.next_of("snapshot").await;
+        if snap["view"] == "spectator" && snap["tick"].as_u64().unwrap() < now - 1 {
+            assert!(snap["tick"].as_u64().unwrap() + 20 <= now, "{snap}");
+            return;
+        }
+    }
+    panic!("the tagged player never watched late");
 }

@@ -140,14 +140,19 @@ export class Game {
     this.you = w.you;
     this.role = w.role;
     this.tickHz = w.tick_hz;
+    // A match people play is shown to spectators late (so that nobody can watch where the
+    // robots are while playing them): say so, wherever the page shows everything.
+    this.delay = w.spectator_delay_s > 0 ? `${Math.round(w.spectator_delay_s)} s behind` : "";
     debug.you = w.you;
     debug.role = w.role;
+    debug.delay = w.spectator_delay_s;
     if (w.belief !== this.beliefOn) this.send({ type: "belief", on: this.beliefOn });
-    $("hud-match").textContent = `${w.map.name} · ${w.role === "player" ? `playing ${w.you} (${w.name})` : "spectating"}`;
+    const watching = this.delay ? `spectating, delayed ${this.delay}` : "spectating";
+    $("hud-match").textContent = `${w.map.name} · ${w.role === "player" ? `playing ${w.you} (${w.name})` : watching}`;
     $("hud-status").textContent = "";
     $("controls").innerHTML = w.role === "player"
       ? "<kbd>W</kbd><kbd>A</kbd><kbd>S</kbd><kbd>D</kbd> / arrows move and turn · <kbd>Space</kbd> tag · <kbd>B</kbd> robots' belief"
-      : "spectating: true positions, scans, goals and belief · <kbd>B</kbd> belief on/off";
+      : `spectating${this.delay ? ` (delayed ${this.delay}: people are playing)` : ""}: true positions, scans, goals and belief · <kbd>B</kbd> belief on/off`;
   }
 
   snapshot(s) {
@@ -155,7 +160,11 @@ export class Game {
     const sample = now - s.tick * TICK_MS;
     // The offset follows the earliest arrivals (least delayed), drifting up slowly.
     this.offset = this.offset === null ? sample : Math.min(this.offset + 0.5, sample);
-    if (this.snaps.length && s.tick < this.snaps[this.snaps.length - 1].tick) this.snaps = [];
+    if (this.snaps.length && s.tick < this.snaps[this.snaps.length - 1].tick) {
+      // Time went back (a tagged player now watches as late as spectators): start over.
+      this.snaps = [];
+      this.offset = sample;
+    }
     this.snaps.push(s);
     if (this.snaps.length > 12) this.snaps.shift();
     if (s.belief) this.belief = s.belief;
@@ -168,7 +177,7 @@ export class Game {
       `robots tagged ${sc.tags}/${sc.opponents} opponents · opponents tagged robots ${sc.robot_tags}×`;
     $("hud-timer").textContent = fmtTime(s.time_left_s);
     if (this.role === "player" && s.view === "spectator" && !this.ended) {
-      $("hud-status").textContent = "you were tagged — spectating";
+      $("hud-status").textContent = `you were tagged — spectating${this.delay ? `, delayed ${this.delay}` : ""}`;
     }
     this.legend();
   }

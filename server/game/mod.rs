@@ -5,6 +5,7 @@
 //! world, no torn reads). A real-time match ticks on a 50 ms interval; a manual one advances
 //! only when asked, in chunks between which it keeps answering other requests.
 
+pub mod delay;
 pub mod showcase;
 mod task;
 
@@ -48,18 +49,33 @@ pub enum MatchError {
     TooMany(String),
 }
 
+/// Whether a reader may see a match's truth as it is now, or only as long ago as the match
+/// holds it back (see [`delay`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Sight {
+    /// The owner, the operator, or the server itself.
+    Live,
+    /// Everybody else.
+    Public,
+}
+
 /// What a handler may ask of a match task.
 #[derive(Debug)]
 pub enum Request {
     Summary(oneshot::Sender<MatchSummary>),
-    State(oneshot::Sender<MatchState>),
+    State {
+        sight: Sight,
+        reply: oneshot::Sender<MatchState>,
+    },
     /// One robot's belief (by index), or the team's merged one.
     Belief {
         robot: Option<usize>,
+        sight: Sight,
         reply: oneshot::Sender<Result<Belief, MatchError>>,
     },
     Events {
         since: u64,
+        sight: Sight,
         reply: oneshot::Sender<Events>,
     },
     Step {
@@ -105,11 +121,15 @@ pub struct Seat {
     pub kicked: oneshot::Receiver<()>,
 }
 
-/// What viewers of a match share: the latest published frame, the arena (for line of
-/// sight) and the count of spectators.
+/// What viewers of a match share: the latest published frame, the one spectators may see,
+/// the arena (for line of sight) and the count of spectators.
 #[derive(Debug, Clone)]
 pub struct Hub {
+    /// The match as it is now (players filter it to their own line of sight).
     pub frames: watch::Receiver<Arc<Frame>>,
+    /// What spectators see: `frames` again, or `delay_ticks` behind when people play.
+    pub spectate: watch::Receiver<Arc<Frame>>,
+    pub delay_ticks: u64,
     /// The match's summary as of its latest frame (what listings show).
     pub summary: watch::Receiver<Arc<MatchSummary>>,
     pub arena: Arc<Arena>,
@@ -171,17 +191,27 @@ impl MatchHandle {
         self.ask(Request::Summary).await
     }
 
-    pub async fn state(&self) -> Result<MatchState, MatchError> {
-        self.ask(Request::State).await
+    pub async fn state(&self, sight: Sight) -> Result<MatchState, MatchError> {
+        self.ask(|reply| Request::State { sight, reply }).await
     }
 
     /// Robot `robot`'s own belief, or the team's merged view when `None`.
-    pub async fn belief(&self, robot: Option<usize>) -> Result<Belief, MatchError> {
-        self.ask(|reply| Request::Belief { robot, reply }).await?
+    pub async fn belief(&self, robot: Option<usize>, sight: Sight) -> Result<Belief, MatchError> {
+        self.ask(|reply| Request::Belief {
+            robot,
+            sight,
+            reply,
+        })
+        .await?
     }
 
-    pub async fn events(&self, since: u64) -> Result<Events, MatchError> {
-        self.ask(|reply| Request::Events { since, reply }).await
+    pub async fn events(&self, since: u64, sight: Sight) -> Result<Events, MatchError> {
+        self.ask(|reply| Request::Events {
+            since,
+            sight,
+            reply,
+        })
+        .await
     }
 
     pub async fn step(&self, ticks: u64) -> Result<MatchState, MatchError> {

@@ -5,11 +5,12 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use crate::game::{Registry, random_id};
-use crate::protocol::{Clock, MatchMeta, Status};
+use crate::protocol::{Clock, MatchMeta};
 use lasertag_core::bots::BotKind;
 use lasertag_core::planner::PlannerKind;
-use lasertag_core::world::World;
+use lasertag_core::sim::TICK_HZ;
 use lasertag_core::world::{ControlKind, MatchConfig};
+use lasertag_core::world::{MatchStatus, World};
 
 /// Preferred map of the showcase, when the server has it; otherwise the first map.
 const SHOWCASE_MAP: &str = "office";
@@ -50,6 +51,8 @@ async fn start(registry: &Registry, round: u64) -> Option<String> {
         free_slots: 0,
         // Anyone who opens the server can take one of the showcase's bots with one click.
         bots_joinable: true,
+        // People play it: its truth is shown late, as in any match with people.
+        spectator_delay_ticks: (crate::protocol::SPECTATOR_DELAY_S * TICK_HZ as f64) as u64,
     };
     Some(registry.start(world, meta).id)
 }
@@ -67,7 +70,8 @@ pub async fn keep_running(registry: Arc<Registry>) {
             return; // no new showcase while the server stops
         }
         let finished = match registry.get(&id) {
-            Some(h) => matches!(h.summary().await, Ok(s) if s.status == Status::Finished),
+            // Finished as spectators see it: they watch the end before the next round.
+            Some(h) => h.hub.spectate.borrow().status == MatchStatus::Finished,
             None => true, // deleted by someone: bring it back
         };
         if finished {

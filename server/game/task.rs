@@ -17,7 +17,8 @@ use tokio::time::MissedTickBehavior;
 use tracing::Instrument;
 
 use crate::access::{ClientKey, same_secret};
-use crate::game::{Hub, MatchError, Request, Seat, random_id};
+use crate::game::delay::HeldBack;
+use crate::game::{Hub, MatchError, Request, Seat, Sight, random_id};
 use crate::metrics::{Metrics, Refusal, TickHistograms};
 use crate::protocol::frame::{BELIEF_EVERY, Frame};
 use crate::protocol::{self, Clock, Joined, MatchMeta, MatchState, MatchStats, MatchSummary};
@@ -115,10 +116,19 @@ pub fn spawn_match(
 ) -> (mpsc::Sender<Request>, Hub) {
     let (tx, rx) = mpsc::channel(256);
     let first = Arc::new(Frame::build(&world, &[], 0, 0, true));
-    let (frames_tx, frames) = watch::channel(first);
+    let (frames_tx, frames) = watch::channel(first.clone());
+    let (held, spectate) = match meta.spectator_delay_ticks {
+        0 => (None, frames.clone()),
+        delay => {
+            let (held, rx) = HeldBack::new(delay, first, &world);
+            (Some(held), rx)
+        }
+    };
     let (summaries_tx, summary) = watch::channel(Arc::new(protocol::summary(&world, &meta)));
     let hub = Hub {
         frames,
+        spectate,
+        delay_ticks: meta.spectator_delay_ticks,
         summary,
         arena: world.arena.clone(),
         spectators: Arc::new(AtomicUsize::new(0)),
@@ -144,6 +154,7 @@ pub fn spawn_match(
         meta,
         settings,
         frames: frames_tx,
+        held,
         summaries: summaries_tx,
         spectators: hub.spectators.clone(),
         published_seq: 0,
@@ -195,6 +206,8 @@ struct MatchTask {
     settings: TaskSettings,
     players: Vec<Option<Player>>,
     frames: watch::Sender<Arc<Frame>>,
+    /// What spectators see, when people play (see `delay`).
+    held: Option<HeldBack>,
     /// The match as listings show it, published with each frame so that the lobby never
     /// waits on this task.
     summaries: watch::Sender<Arc<MatchSummary>>,
@@ -227,6 +240,7 @@ impl MatchTask {
         let mut last_tick: Option<Instant> = None;
         loop {
             let running = self.world.status == MatchStatus::Running;
+            let draining = self.held.as_ref().is_some_and(|h| !h.drained());
             tokio::select! {
                 biased;
                 req = rx.recv() => {
@@ -234,19 +248,31 @@ impl MatchTask {
                     if let Request::Stop(reason) = req {
                         self.world.end(reason);
                         self.publish();
+                        // Nothing is left to hide, and the task (and its channels) ends now.
+                        if let Some(held) = &mut self.held {
+                            held.flush();
+                        }
                         break;
                     }
                     if !matches!(req, Request::Input { .. }) {
                         self.last_activity = Instant::now();
                     }
-                    let changes_seats = !matches!(req, Request::Input { .. } | Request::Summary(_) | Request::State(_) | Request::Belief { .. } | Request::Events { .. } | Request::Stats(_));
+                    let changes_seats = !matches!(req, Request::Input { .. } | Request::Summary(_) | Request::State { .. } | Request::Belief { .. } | Request::Events { .. } | Request::Stats(_));
                     self.answer(req, realtime, &mut pending);
                     // Joins, seats and commands change what the lobby shows.
                     if changes_seats {
                         self.publish_summary();
                     }
                 }
-                _ = interval.tick(), if realtime && running => {
+                _ = interval.tick(), if realtime && (running || draining) => {
+                    if !running {
+                        // Finished, but spectators are still that far behind: the last
+                        // frames come out at the pace they were made.
+                        if let Some(held) = &mut self.held {
+                            held.tick_on();
+                        }
+                        continue;
+                    }
                     let now = Instant::now();
                     if last_tick.is_some_and(|t| now - t > period + period / 2) {
                         self.late_ticks += 1;
@@ -274,7 +300,7 @@ impl MatchTask {
                         self.publish();
                         step.remaining -= n;
                         if step.remaining == 0 || self.world.status == MatchStatus::Finished {
-                            let _ = step.reply.send(Ok(protocol::state(&self.world, &self.meta)));
+                            let _ = step.reply.send(Ok(self.state(Sight::Live)));
                         } else {
                             pending = Some(step);
                             tokio::task::yield_now().await;
@@ -327,11 +353,19 @@ impl MatchTask {
                 self.refresh_meta();
                 let _ = reply.send(protocol::summary(&self.world, &self.meta));
             }
-            Request::State(reply) => {
-                let _ = reply.send(protocol::state(&self.world, &self.meta));
+            Request::State { sight, reply } => {
+                let _ = reply.send(self.state(sight));
             }
-            Request::Belief { robot, reply } => {
-                let belief = protocol::belief(&self.world, robot).ok_or_else(|| {
+            Request::Belief {
+                robot,
+                sight,
+                reply,
+            } => {
+                let belief = match self.held_back(sight) {
+                    Some(held) => held.belief(robot),
+                    None => protocol::belief(&self.world, robot),
+                };
+                let belief = belief.ok_or_else(|| {
                     MatchError::NotFound(format!(
                         "robot: no robot r{} in this match (it has {})",
                         robot.unwrap_or_default(),
@@ -340,11 +374,17 @@ impl MatchTask {
                 });
                 let _ = reply.send(belief);
             }
-            Request::Events { since, reply } => {
+            Request::Events {
+                since,
+                sight,
+                reply,
+            } => {
+                let shown = self.held_back(sight).map_or(u64::MAX, |h| h.shown_seq());
                 let events = self
                     .world
                     .events_since(since)
                     .iter()
+                    .take_while(|e| e.seq <= shown)
                     .map(protocol::event)
                     .collect();
                 let _ = reply.send(protocol::Events { events });
@@ -442,9 +482,37 @@ impl MatchTask {
         self.robot_tags = frame.robot_tags;
         self.published_seq = frame.last_seq;
         self.frames_published += 1;
+        let frame = Arc::new(frame);
         // `send_replace` never fails nor waits, whoever (if anyone) is watching.
-        self.frames.send_replace(Arc::new(frame));
+        self.frames.send_replace(frame.clone());
+        if let Some(held) = &mut self.held {
+            held.push(frame, &self.world);
+            // A manual match has no real time to release its last frames by.
+            if finished && self.meta.clock == Clock::Manual {
+                held.flush();
+            }
+        }
         self.publish_summary();
+    }
+
+    /// What is held back from a viewer with `sight`: nothing for the owner, nor once the
+    /// match is over (then nothing is left to hide).
+    fn held_back(&self, sight: Sight) -> Option<&HeldBack> {
+        match sight {
+            Sight::Live => None,
+            Sight::Public if self.world.status == MatchStatus::Finished => None,
+            Sight::Public => self.held.as_ref(),
+        }
+    }
+
+    /// The ground truth as a viewer with `sight` may see it. The latest published frame is
+    /// the world as it is now: whatever changes what the state shows publishes one.
+    fn state(&self, sight: Sight) -> MatchState {
+        let frame = match self.held_back(sight) {
+            Some(held) => held.shown().clone(),
+            None => self.frames.borrow().clone(),
+        };
+        protocol::state(&frame, &self.meta, &self.world.config)
     }
 
     /// Publishes the match as listings show it (players and spectators counted now).
@@ -653,10 +721,13 @@ impl MatchTask {
     fn housekeeping(&mut self) -> Option<&'static str> {
         let now = Instant::now();
         if self.world.status == MatchStatus::Finished {
-            let at = *self.finished_at.get_or_insert(now);
-            if now - at >= self.settings.finished_grace {
-                tracing::info!("removing the match: finished {:?} ago", now - at);
-                return Some("finished");
+            // The grace starts once spectators have seen the end.
+            if self.held.as_ref().is_none_or(HeldBack::drained) {
+                let at = *self.finished_at.get_or_insert(now);
+                if now - at >= self.settings.finished_grace {
+                    tracing::info!("removing the match: finished {:?} ago", now - at);
+                    return Some("finished");
+                }
             }
         } else if self.meta.clock == Clock::Manual
             && now - self.last_change >= self.settings.idle_manual_after
@@ -675,6 +746,9 @@ impl MatchTask {
             );
             self.world.end(FinishReason::Abandoned);
             self.publish();
+            if let Some(held) = &mut self.held {
+                held.flush();
+            }
             return Some("abandoned");
         }
         let mut changed = false;

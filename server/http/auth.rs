@@ -1,11 +1,13 @@
 //! Who may change what: the owner token handed out when a match or map was made, or the
-//! operator's admin token, presented as `Authorization: Bearer <token>`. Reading is open.
+//! operator's admin token, presented as `Authorization: Bearer <token>`. Reading is open;
+//! with one of those tokens it also sees a match people play live (see `game::delay`).
 
 use axum::http::StatusCode;
 use axum::http::header::AUTHORIZATION;
 use axum::http::request::Parts;
 
 use crate::access::{Owner, same_secret};
+use crate::game::Sight;
 use crate::http::{ApiError, AppState};
 use crate::metrics::Refusal;
 
@@ -74,5 +76,16 @@ impl Bearer {
             _ => format!("authorization: that is not the owner_token of {what}"),
         };
         Err(ApiError::new(StatusCode::FORBIDDEN, message))
+    }
+
+    /// How a read of `what` (owned by `owner`) sees it: live with the owner's or the admin
+    /// token, as everybody does without a token; a token that is neither is refused (403)
+    /// rather than quietly shown the delayed view.
+    pub fn sight(&self, state: &AppState, owner: &Owner, what: &str) -> Result<Sight, ApiError> {
+        if self.0.is_none() {
+            return Ok(Sight::Public);
+        }
+        self.may_change(state, Some(owner), what)?;
+        Ok(Sight::Live)
     }
 }

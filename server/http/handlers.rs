@@ -10,7 +10,7 @@ use axum::response::IntoResponse;
 
 use crate::access::{ClientKey, Owner};
 use crate::admission;
-use crate::game::{MatchHandle, random_id};
+use crate::game::{MatchHandle, Sight, random_id};
 use crate::http::admit::{no_room, off_workers, within_request_limits};
 use crate::http::auth::Bearer;
 use crate::http::body::JsonBody;
@@ -36,6 +36,14 @@ fn owned(state: &AppState, bearer: &Bearer, id: &str) -> Result<MatchHandle, Api
         &format!("match {id}"),
     )?;
     handle.ok_or_else(|| ApiError::not_found(format!("no match {id}")))
+}
+
+/// The match `id` for a read of its truth, and how the reader sees it (see
+/// [`Bearer::sight`]).
+fn readable(state: &AppState, bearer: &Bearer, id: &str) -> Result<(MatchHandle, Sight), ApiError> {
+    let handle = find(state, id)?;
+    let sight = bearer.sight(state, &handle.owner, &format!("match {id}"))?;
+    Ok((handle, sight))
 }
 
 fn find(state: &AppState, id: &str) -> Result<MatchHandle, ApiError> {
@@ -319,10 +327,12 @@ pub async fn create_match(
             ));
         }
     };
-    let price = match &source {
-        MapSource::Stored(arena) => admission::match_on(&arena.def, &req.config),
-        MapSource::Inline(def) => admission::map(def) + admission::match_on(def, &req.config),
-    };
+    let held = admission::held_back(&req.config, req.spectator_delay_ticks);
+    let price = held
+        + match &source {
+            MapSource::Stored(arena) => admission::match_on(&arena.def, &req.config),
+            MapSource::Inline(def) => admission::map(def) + admission::match_on(def, &req.config),
+        };
     within_request_limits(&state, "the match", price)?;
     state.registry.has_budget(price).map_err(no_room)?;
     let config = req.config;
@@ -344,6 +354,7 @@ pub async fn create_match(
         spectators: 0,
         free_slots: 0,
         bots_joinable: req.bots_joinable,
+        spectator_delay_ticks: req.spectator_delay_ticks,
     };
     let owner = Owner::new(client);
     let owner_token = owner.token.clone().unwrap_or_default();
@@ -371,12 +382,16 @@ enum MapSource {
 }
 
 #[utoipa::path(get, path = "/api/matches/{id}", params(("id" = String, Path)),
-    responses((status = 200, body = MatchState), (status = 404, body = ErrorBody)))]
+    security((), ("owner_token" = [])),
+    responses((status = 200, body = MatchState), (status = 401, body = ErrorBody), (status = 403, body = ErrorBody),
+              (status = 404, body = ErrorBody)))]
 pub async fn get_match(
     State(state): State<AppState>,
+    bearer: Bearer,
     Path(id): Path<String>,
 ) -> Result<Json<MatchState>, ApiError> {
-    Ok(Json(find(&state, &id)?.state().await?))
+    let (handle, sight) = readable(&state, &bearer, &id)?;
+    Ok(Json(handle.state(sight).await?))
 }
 
 #[utoipa::path(delete, path = "/api/matches/{id}", params(("id" = String, Path)),
@@ -421,13 +436,16 @@ pub async fn step(
 
 #[utoipa::path(get, path = "/api/matches/{id}/belief",
     params(("id" = String, Path), ("robot" = Option<String>, Query, description = "a robot id (r0, r1, …): that robot's own belief (404 for anything that is not one of the match's robots); without it the team's merged view")),
-    responses((status = 200, body = Belief), (status = 400, body = ErrorBody), (status = 404, body = ErrorBody)))]
+    security((), ("owner_token" = [])),
+    responses((status = 200, body = Belief), (status = 400, body = ErrorBody), (status = 401, body = ErrorBody),
+              (status = 403, body = ErrorBody), (status = 404, body = ErrorBody)))]
 pub async fn belief(
     State(state): State<AppState>,
+    bearer: Bearer,
     Path(id): Path<String>,
     Query(query): Query<HashMap<String, String>>,
 ) -> Result<Json<Belief>, ApiError> {
-    let handle = find(&state, &id)?;
+    let (handle, sight) = readable(&state, &bearer, &id)?;
     let robot = match query.get("robot") {
         None => None,
         // Anything that is not one of the match's robots is a robot it does not have: 404,
@@ -442,18 +460,21 @@ pub async fn belief(
             }
         },
     };
-    Ok(Json(handle.belief(robot).await?))
+    Ok(Json(handle.belief(robot, sight).await?))
 }
 
 #[utoipa::path(get, path = "/api/matches/{id}/events",
     params(("id" = String, Path), ("since" = Option<i64>, Query, minimum = 0, description = "only events with a greater seq")),
-    responses((status = 200, body = Events), (status = 400, body = ErrorBody), (status = 404, body = ErrorBody)))]
+    security((), ("owner_token" = [])),
+    responses((status = 200, body = Events), (status = 400, body = ErrorBody), (status = 401, body = ErrorBody),
+              (status = 403, body = ErrorBody), (status = 404, body = ErrorBody)))]
 pub async fn events(
     State(state): State<AppState>,
+    bearer: Bearer,
     Path(id): Path<String>,
     Query(query): Query<HashMap<String, String>>,
 ) -> Result<Json<Events>, ApiError> {
-    let handle = find(&state, &id)?;
+    let (handle, sight) = readable(&state, &bearer, &id)?;
     let since = match query.get("since") {
         None => 0,
         // 0..=i64::MAX, as the OpenAPI document states (`format: int64`; schemathesis sent
@@ -468,7 +489,7 @@ pub async fn events(
                 ))
             })?,
     };
-    Ok(Json(handle.events(since).await?))
+    Ok(Json(handle.events(since, sight).await?))
 }
 
 #[utoipa::path(post, path = "/api/matches/{id}/opponents/{oid}/command",

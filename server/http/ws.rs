@@ -20,7 +20,7 @@ use tokio_util::sync::CancellationToken;
 use tracing::Instrument;
 
 use crate::config::Config;
-use crate::game::{ConnectionGuard, MatchHandle, Seat, SpectatorSeat};
+use crate::game::{ConnectionGuard, MatchHandle, Seat, Sight, SpectatorSeat};
 use crate::http::limits::{AddressConnection, Bucket, ClientIp};
 use crate::http::{ApiError, AppState};
 use crate::metrics::{ClientGuard, Metrics, Refusal};
@@ -161,6 +161,9 @@ struct Connection {
     metrics: Metrics,
     shutdown: CancellationToken,
     role: &'static str,
+    /// Whether it is shown everything (from the spectators' frames): a spectator, or a
+    /// player whose opponent was tagged and has left the arena.
+    watching: bool,
     belief: bool,
     last_seq: u64,
     finished_sent: bool,
@@ -185,6 +188,7 @@ impl Connection {
         let cfg = registry.config.clone();
         Connection {
             socket,
+            watching: seat.is_none(),
             belief: seat.is_none(),
             role: if seat.is_some() {
                 "player"
@@ -241,7 +245,14 @@ impl Connection {
     }
 
     async fn serve(&mut self) -> Result<(), End> {
-        let mut frames = self.handle.hub.frames.clone();
+        // Players see the match as it is now (through their opponent's eyes); spectators
+        // see it as late as it is held back.
+        let hub = &self.handle.hub;
+        let mut frames = if self.watching {
+            hub.spectate.clone()
+        } else {
+            hub.frames.clone()
+        };
         let frame = frames.borrow_and_update().clone();
         let welcome = Welcome {
             kind: "welcome",
@@ -257,6 +268,8 @@ impl Connection {
             tick_hz: lasertag_core::sim::TICK_HZ,
             time_limit_s: frame.time_limit_s,
             belief_every: BELIEF_EVERY,
+            spectator_delay_s: self.handle.hub.delay_ticks as f64
+                / lasertag_core::sim::TICK_HZ as f64,
             belief: self.belief,
             limits: Limits {
                 max_message_bytes: self.config.max_message_bytes,
@@ -289,6 +302,14 @@ impl Connection {
                     }
                     let frame = frames.borrow_and_update().clone();
                     self.deliver(&frame, true).await?;
+                    if !self.watching && !self.finished_sent && self.tagged(&frame) {
+                        // Its opponent has left the arena: the player now watches, as
+                        // spectators do (as late as they do, or a tagged player could tell
+                        // the others where everyone is).
+                        self.watching = true;
+                        frames = self.handle.hub.spectate.clone();
+                        frames.mark_changed();
+                    }
                 }
                 msg = self.socket.recv() => match msg {
                     None | Some(Ok(Message::Close(_))) => return Err(End::Gone),
@@ -331,6 +352,14 @@ impl Connection {
         }
     }
 
+    /// Whether this connection's opponent is tagged in `frame`.
+    fn tagged(&self, frame: &Frame) -> bool {
+        self.seat
+            .as_ref()
+            .and_then(|s| frame.opponents.get(s.slot))
+            .is_some_and(|o| o.tagged)
+    }
+
     /// How to close once the match has ended.
     fn ended(&self) -> End {
         if self.shutdown.is_cancelled() {
@@ -343,6 +372,7 @@ impl Connection {
     /// Sends a frame's snapshot, the events since the last one sent, and `finished` once.
     async fn deliver(&mut self, frame: &Frame, with_events: bool) -> Result<(), End> {
         let snapshot = match &self.seat {
+            Some(_) if self.watching => wire::spectator_snapshot(frame, self.belief),
             None => wire::spectator_snapshot(frame, self.belief),
             Some(seat) => match visible_to(frame, &self.handle.hub.arena, seat.slot) {
                 Some(v) => wire::player_snapshot(frame, &seat.opponent_id, &v, self.belief),
@@ -360,7 +390,7 @@ impl Connection {
                 // Frames were skipped while this client was slow: fetch what it missed.
                 let missed = self
                     .handle
-                    .events(self.last_seq)
+                    .events(self.last_seq, Sight::Live)
                     .await
                     .map(|e| e.events)
                     .unwrap_or_default();

@@ -19,11 +19,15 @@ use crate::protocol::ws::WireCache;
 use lasertag_core::localise::Localiser;
 use lasertag_core::sim::Pose;
 use lasertag_core::sim::arena::Arena;
+use lasertag_core::sim::sensors::Detection;
 use lasertag_core::world::{ControlKind, EventKind};
 use lasertag_core::world::{MatchStatus, Side, World};
 
 /// Ticks between two belief updates sent to viewers (5 Hz at 20 Hz ticks).
 pub const BELIEF_EVERY: u64 = 4;
+/// Ticks between two beliefs a match people play keeps to show late (2 s at 20 Hz; see
+/// `game::delay`): its delayed `/belief` moves in steps of this size.
+pub const BELIEF_HOLD_EVERY: u64 = 40;
 /// Points of the belief shown in all, shared among the untagged roles.
 pub const BELIEF_BUDGET: usize = 480;
 /// No role is shown with fewer points than this (unless it has fewer particles).
@@ -36,6 +40,8 @@ pub struct RobotFrame {
     pub goal: Option<Pose>,
     /// This tick's laser ranges (metres), empty while frozen.
     pub scan: Vec<f32>,
+    /// This tick's anonymous sightings.
+    pub detections: Vec<Detection>,
     /// The robot's own belief about its pose, and that belief's spread (m).
     pub estimate: Pose,
     pub spread: f32,
@@ -162,6 +168,7 @@ impl Frame {
                     frozen: world.robot_frozen(i),
                     goal: r.command.goal,
                     scan: r.scan.ranges.clone(),
+                    detections: r.scan.detections.clone(),
                     estimate: r.estimate,
                     spread: r.spread,
                     cloud: r
@@ -205,6 +212,34 @@ impl Frame {
                 .flatten(),
             wire: WireCache::default(),
         }
+    }
+}
+
+impl Frame {
+    /// Bytes it keeps (what a match holding frames back is priced by), its serialised
+    /// forms aside: they are made only once a frame is shown.
+    pub fn bytes(&self) -> usize {
+        let robots: usize = self
+            .robots
+            .iter()
+            .map(|r| {
+                std::mem::size_of::<RobotFrame>()
+                    + r.scan.capacity() * 4
+                    + r.detections.capacity() * std::mem::size_of::<Detection>()
+                    + r.cloud.capacity() * 8
+            })
+            .sum();
+        let belief = self.belief.as_ref().map_or(0, |b| {
+            b.roles
+                .iter()
+                .map(|r| std::mem::size_of::<RoleView>() + r.points.capacity() * 8)
+                .sum::<usize>()
+        });
+        std::mem::size_of::<Frame>()
+            + robots
+            + self.opponents.capacity() * std::mem::size_of::<OpponentFrame>()
+            + belief
+            + self.events.capacity() * std::mem::size_of::<EventDto>()
     }
 }
 

@@ -2,6 +2,7 @@
 //! robot team's belief and the event log, converted from the core's types with coordinates rounded to the
 //! millimetre.
 
+use super::frame::Frame;
 use super::*;
 
 /// What the shell knows about a match besides its world.
@@ -17,6 +18,9 @@ pub struct MatchMeta {
     pub free_slots: usize,
     /// Whether people may take over bot opponents (the showcase).
     pub bots_joinable: bool,
+    /// How far behind the match its truth is shown to all but its owner (0: live). Set
+    /// when people may play it (see `MatchRequest::spectator_delay_ticks`).
+    pub spectator_delay_ticks: u64,
 }
 
 /// A match in listings and the reply to `POST /api/matches`.
@@ -66,11 +70,14 @@ pub struct MatchSummary {
     pub bots_joinable: bool,
     /// Caveats a user should know, e.g. a fallback in effect.
     pub notes: Vec<String>,
+    /// How far behind the match its state, belief, events and spectator view run for
+    /// everyone but its owner: `spectator_delay_s` as asked when people may play it, 0
+    /// (live) when they may not.
+    pub spectator_delay_s: f64,
 }
 
 /// Caveats about a match: settings that were accepted but do nothing as asked.
-pub fn notes(world: &World) -> Vec<String> {
-    let c = &world.config;
+pub fn notes(c: &MatchConfig) -> Vec<String> {
     let mut notes = Vec::new();
     if !c.localisation
         && c.planner == PlannerKind::Coordinated
@@ -119,7 +126,8 @@ pub fn summary(world: &World, meta: &MatchMeta) -> MatchSummary {
         spectators: meta.spectators,
         free_slots: meta.free_slots,
         bots_joinable: meta.bots_joinable,
-        notes: notes(world),
+        notes: notes(&world.config),
+        spectator_delay_s: meta.spectator_delay_ticks as f64 / TICK_HZ as f64,
     }
 }
 
@@ -212,19 +220,21 @@ pub struct MatchState {
     pub opponents: Vec<OpponentState>,
 }
 
-pub fn state(world: &World, meta: &MatchMeta) -> MatchState {
+/// The ground truth of `frame` (the latest one for those who may see it live, an older
+/// one held back for everybody else); `config` is the match's, for what does not change.
+pub fn state(frame: &Frame, meta: &MatchMeta, config: &MatchConfig) -> MatchState {
     MatchState {
         id: meta.id.clone(),
         map: meta.map.clone(),
-        tick: world.tick,
-        time_s: world.time_s(),
+        tick: frame.tick,
+        time_s: frame.time_s,
         tick_hz: TICK_HZ,
-        status: status(world.status),
-        winner: winner(world.winner),
-        planner: planner_dto(world.team.kind()),
-        planner_active: planner_dto(world.team.kind()),
-        notes: notes(world),
-        robots: world
+        status: status(frame.status),
+        winner: winner(frame.winner),
+        planner: planner_dto(config.planner),
+        planner_active: planner_dto(config.planner),
+        notes: notes(config),
+        robots: frame
             .robots
             .iter()
             .enumerate()
@@ -235,11 +245,10 @@ pub fn state(world: &World, meta: &MatchMeta) -> MatchState {
                 theta: rad(r.pose.theta),
                 estimate: pose(r.estimate),
                 spread: mm(r.spread),
-                frozen: world.robot_frozen(i),
-                goal: r.command.goal.map(pose),
-                scan: r.scan.ranges.iter().map(|v| mm(*v)).collect(),
+                frozen: r.frozen,
+                goal: r.goal.map(pose),
+                scan: r.scan.iter().map(|v| mm(*v)).collect(),
                 detections: r
-                    .scan
                     .detections
                     .iter()
                     .map(|d| DetectionDto {
@@ -249,7 +258,7 @@ pub fn state(world: &World, meta: &MatchMeta) -> MatchState {
                     .collect(),
             })
             .collect(),
-        opponents: world
+        opponents: frame
             .opponents
             .iter()
             .enumerate()
@@ -259,7 +268,7 @@ pub fn state(world: &World, meta: &MatchMeta) -> MatchState {
                 y: mm(o.pose.pos.y),
                 theta: rad(o.pose.theta),
                 tagged: o.tagged,
-                control: o.control.kind().into(),
+                control: o.control.into(),
             })
             .collect(),
     }
@@ -307,31 +316,96 @@ pub struct Belief {
     pub roles: Vec<Role>,
 }
 
-/// Robot `robot`'s belief, or the team's merged one (with a perfect radio both are the
-/// shared tracker's; see `Team::merged_belief`). `None` for a robot the match does not have.
-pub fn belief(world: &World, robot: Option<usize>) -> Option<Belief> {
-    let roles = match robot {
-        Some(i) => {
-            std::borrow::Cow::Borrowed(&world.team.belief_of(i, world.robots.len())?.roles[..])
+/// A belief as the tracker held it at one tick, kept compact (the tracker's own `f32`s) so
+/// that a match can hold some back: see `game::delay`.
+#[derive(Debug, Clone)]
+pub struct HeldBelief {
+    pub tick: u64,
+    roles: Vec<HeldRole>,
+}
+
+#[derive(Debug, Clone)]
+struct HeldRole {
+    id: u64,
+    count: u32,
+    tagged: bool,
+    confidence: f32,
+    state: ConfidenceState,
+    particles: Vec<nalgebra::Point2<f32>>,
+    weights: Vec<f32>,
+}
+
+impl HeldBelief {
+    /// The team's merged belief in `world` (with a perfect radio, the shared tracker's; see
+    /// `Team::merged_belief`).
+    pub fn team(world: &World) -> HeldBelief {
+        HeldBelief::from_roles(world.tick, &world.team.merged_belief())
+    }
+
+    /// Robot `robot`'s own belief in `world`; `None` for a robot the match does not have.
+    pub fn robot(world: &World, robot: usize) -> Option<HeldBelief> {
+        let tracker = world.team.belief_of(robot, world.robots.len())?;
+        Some(HeldBelief::from_roles(world.tick, &tracker.roles))
+    }
+
+    fn from_roles(tick: u64, roles: &[lasertag_core::tracker::Role]) -> HeldBelief {
+        HeldBelief {
+            tick,
+            roles: roles
+                .iter()
+                .map(|r| HeldRole {
+                    id: r.id,
+                    count: r.count,
+                    tagged: r.tagged,
+                    confidence: r.confidence,
+                    state: r.confidence_state().into(),
+                    particles: r.particles().to_vec(),
+                    weights: r.weights().to_vec(),
+                })
+                .collect(),
         }
-        None => world.team.merged_belief(),
+    }
+
+    /// Bytes it keeps.
+    pub fn bytes(&self) -> usize {
+        std::mem::size_of::<Self>()
+            + self
+                .roles
+                .iter()
+                .map(|r| std::mem::size_of::<HeldRole>() + r.particles.len() * 12)
+                .sum::<usize>()
+    }
+
+    /// As the API shows it, for `robot` (or the team when `None`).
+    pub fn to_belief(&self, robot: Option<usize>) -> Belief {
+        Belief {
+            tick: self.tick,
+            robot: robot.map(|i| AgentId::Robot(i).to_string()),
+            roles: self
+                .roles
+                .iter()
+                .map(|r| Role {
+                    id: r.id,
+                    count: r.count,
+                    tagged: r.tagged,
+                    confidence: (r.confidence as f64 * 1000.0).round() / 1000.0,
+                    state: r.state,
+                    particles: r.particles.iter().map(|p| [mm(p.x), mm(p.y)]).collect(),
+                    weights: r.weights.iter().map(|w| *w as f64).collect(),
+                })
+                .collect(),
+        }
+    }
+}
+
+/// Robot `robot`'s belief now, or the team's merged one; `None` for a robot the match does
+/// not have.
+pub fn belief(world: &World, robot: Option<usize>) -> Option<Belief> {
+    let held = match robot {
+        None => Some(HeldBelief::team(world)),
+        Some(i) => HeldBelief::robot(world, i),
     };
-    Some(Belief {
-        tick: world.tick,
-        robot: robot.map(|i| AgentId::Robot(i).to_string()),
-        roles: roles
-            .iter()
-            .map(|r| Role {
-                id: r.id,
-                count: r.count,
-                tagged: r.tagged,
-                confidence: (r.confidence as f64 * 1000.0).round() / 1000.0,
-                state: r.confidence_state().into(),
-                particles: r.particles().iter().map(|p| [mm(p.x), mm(p.y)]).collect(),
-                weights: r.weights().iter().map(|w| *w as f64).collect(),
-            })
-            .collect(),
-    })
+    held.map(|b| b.to_belief(robot))
 }
 
 /// One entry of the event log. Fields beyond `seq`, `tick` and `kind` depend on the kind.

@@ -147,6 +147,9 @@ pub struct Welcome<'a> {
     pub belief_every: u64,
     /// Whether this connection's snapshots carry the belief now.
     pub belief: bool,
+    /// How far behind the match spectators' snapshots run (0: live). A player's own view is
+    /// live; once its opponent is tagged it watches as spectators do, this far behind.
+    pub spectator_delay_s: f64,
     pub limits: Limits,
 }
 

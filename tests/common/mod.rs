@@ -133,8 +133,19 @@ impl TestServer {
         Reply { status, body }
     }
 
+    /// GET as the owner of the match it names (who sees a match people play live; see
+    /// [`TestServer::owner_token`]).
     pub async fn get(&self, path: &str) -> Reply {
-        Self::reply(self.client.get(self.url(path)).send().await.unwrap()).await
+        self.get_as(path, self.owner_token(path).as_deref()).await
+    }
+
+    /// GET with `Authorization: Bearer <token>`, or without one (as anybody).
+    pub async fn get_as(&self, path: &str, token: Option<&str>) -> Reply {
+        let mut r = self.client.get(self.url(path));
+        if let Some(t) = token {
+            r = r.bearer_auth(t);
+        }
+        Self::reply(r.send().await.unwrap()).await
     }
 
     /// The owner token of the match `path` is under, if a helper created it.
