@@ -183,6 +183,17 @@ async fn play_and_spectate_in_headless_chromium() {
     let after = state(&s, &id).await["opponents"][0].clone();
     let moved = after["x"].as_f64().unwrap() - before["x"].as_f64().unwrap();
     assert!(moved > 0.2, "moved {moved} m: {before} -> {after}");
+    // The page numbers its inputs and predicts its own disc; the server's answers land
+    // where the page had put it (corrections are what prediction got wrong, in metres).
+    let p = b
+        .eval("({sent: __lasertag.sent, ack: __lasertag.ack, own: __lasertag.own, worst: Math.max(0, ...(__lasertag.corrections || []))})")
+        .await;
+    assert!(
+        p["sent"].as_u64() > Some(10) && p["ack"].as_u64() > Some(10),
+        "{p}"
+    );
+    assert!(p["own"]["x"].as_f64().unwrap() > 3.2, "{p}");
+    assert!(p["worst"].as_f64().unwrap() < 0.05, "{p}");
     // A turns it.
     b.tap("KeyA", Duration::from_millis(400)).await;
     tokio::time::sleep(Duration::from_millis(200)).await;

@@ -6,7 +6,7 @@ use std::collections::BTreeSet;
 use std::path::Path;
 use std::time::Duration;
 
-use common::{Got, TestServer, WsError, duel_map};
+use common::{Got, TestServer, WsError, duel_map, idle_human_match};
 use lasertag::config::Config;
 use lasertag::maps::MapStore;
 use nalgebra::Point2;
@@ -485,16 +485,6 @@ async fn input_at_20_hz_is_never_rate_limited() {
             break;
         }
     }
-}
-
-/// A manual match on `office` with one human slot and robots that never move: what players
-/// do is all that happens.
-async fn idle_human_match(s: &TestServer) -> String {
-    s.create_match(
-        json!({"map": "office", "opponent_control": "human", "clock": "manual",
-                          "planner": "idle"}),
-    )
-    .await
 }
 
 #[tokio::test]

@@ -3,6 +3,7 @@
 
 import { segments, visibility, castRay, angleDiff } from "./geometry.js";
 import { draw, fit, roleColor } from "./render.js";
+import { Predictor } from "./predict.js";
 
 const $ = (id) => document.getElementById(id);
 const TICK_MS = 50;
@@ -34,8 +35,11 @@ export class Game {
     this.keys = new Set();
     this.beliefOn = !token;
     this.belief = null;
-    this.lastInput = null;
-    this.lastInputAt = 0;
+    // Numbered inputs, one per 50 ms tick (see predict.js).
+    this.seq = 0;
+    this.tickAt = null;
+    this.tagLatch = false;
+    this.predictor = null;
     this.ended = null;
     this.closedByUs = false;
     this.retries = 0;
@@ -50,13 +54,13 @@ export class Game {
     this.onKey = (e) => this.key(e);
     window.addEventListener("keydown", this.onKey);
     window.addEventListener("keyup", this.onKey);
-    this.onBlur = () => { this.keys.clear(); this.sendInput(true); };
+    this.onBlur = () => { this.keys.clear(); };
     window.addEventListener("blur", this.onBlur);
     $("end-lobby").onclick = () => this.onLobby();
     $("end-replay").onclick = () => this.onReplay(this);
     this.connect();
     this.pingTimer = setInterval(() => this.send({ type: "ping", t: performance.now() }), 1000);
-    this.inputTimer = setInterval(() => this.sendInput(false), 50);
+    this.inputTimer = setInterval(() => this.inputTicks(performance.now()), 10);
     const loop = (t) => { if (!this.stopped) { this.frame(t); requestAnimationFrame(loop); } };
     requestAnimationFrame(loop);
   }
@@ -147,6 +151,10 @@ export class Game {
     debug.role = w.role;
     debug.delay = w.spectator_delay_s;
     if (w.belief !== this.beliefOn) this.send({ type: "belief", on: this.beliefOn });
+    // A (re)connection numbers its inputs from 1 again, and predicts only as a player.
+    this.seq = 0;
+    this.tickAt = null;
+    this.predictor = w.role === "player" && w.kinematics ? new Predictor(w.map, this.segs, w.kinematics) : null;
     const watching = this.delay ? `spectating, delayed ${this.delay}` : "spectating";
     $("hud-match").textContent = `${w.map.name} · ${w.role === "player" ? `playing ${w.you} (${w.name})` : watching}`;
     $("hud-status").textContent = "";
@@ -168,6 +176,15 @@ export class Game {
     this.snaps.push(s);
     if (this.snaps.length > 12) this.snaps.shift();
     if (s.belief) this.belief = s.belief;
+    if (this.predictor && s.view === "player" && s.ack !== undefined) {
+      const me = s.opponents.find((o) => o.id === this.you);
+      const others = [...s.robots, ...s.opponents].filter((a) => a !== me && !a.tagged).map((a) => [a.x, a.y]);
+      if (me) this.predictor.reconcile(me, s.ack, others);
+      debug.ack = s.ack;
+      debug.corrections = this.predictor.corrections;
+    } else if (s.view === "spectator") {
+      this.predictor = null; // tagged: nothing of ours moves any more
+    }
     for (const o of s.opponents) if (o.name) this.names[o.id] = o.name;
     debug.snapshots++;
     debug.lastTick = s.tick;
@@ -281,24 +298,33 @@ export class Game {
     if (!codes.includes(e.code)) return;
     e.preventDefault();
     if (e.type === "keydown") this.keys.add(e.code); else this.keys.delete(e.code);
-    this.sendInput(false);
+    // A tap shorter than a tick still fires.
+    if (e.code === "Space" && e.type === "keydown") this.tagLatch = true;
   }
 
-  sendInput(force) {
-    if (this.role !== "player") return;
+  /** The keys held now, as an input. */
+  held() {
     const k = this.keys;
     const forward = (k.has("KeyW") || k.has("ArrowUp") ? 1 : 0) - (k.has("KeyS") || k.has("ArrowDown") ? 1 : 0);
     const turn = (k.has("KeyA") || k.has("ArrowLeft") ? 1 : 0) - (k.has("KeyD") || k.has("ArrowRight") ? 1 : 0);
-    const tag = k.has("Space");
-    const input = { type: "input", forward, turn, tag };
-    const same = this.lastInput && this.lastInput.forward === forward && this.lastInput.turn === turn && this.lastInput.tag === tag;
-    const now = performance.now();
-    // At most 20 a second; a change goes at once, the same keys are repeated once a second.
-    if (now - this.lastInputAt < 50) return;
-    if (same && !force && now - this.lastInputAt < 1000) return;
-    this.send(input);
-    this.lastInput = input;
-    this.lastInputAt = now;
+    return { forward, turn, tag: k.has("Space") };
+  }
+
+  /** Sends one numbered input per 50 ms tick that is due (the server applies one per tick,
+   * in order) and predicts it. Timers run late in a busy or hidden tab: a long gap starts
+   * the ticks again rather than sending a burst. */
+  inputTicks(now) {
+    if (this.role !== "player" || !this.ws || this.ws.readyState !== WebSocket.OPEN) return;
+    if (this.tickAt === null || now - this.tickAt > 500) this.tickAt = now - TICK_MS;
+    while (now - this.tickAt >= TICK_MS) {
+      this.tickAt += TICK_MS;
+      const { forward, turn, tag } = this.held();
+      this.seq += 1;
+      this.send({ type: "input", seq: this.seq, forward, turn, tag: tag || this.tagLatch });
+      this.tagLatch = false;
+      if (this.predictor) this.predictor.push(this.seq, forward, turn);
+      debug.sent = this.seq;
+    }
   }
 
   /** The world at render time: snapshots interpolated by tick. */
@@ -326,10 +352,20 @@ export class Game {
     const v = fit(this.canvas, this.map);
     const w = this.interpolated(now);
     const robots = w ? w.robots : [];
-    const opponents = w ? w.opponents : [];
+    const opponents = w ? [...w.opponents] : [];
     let visible = null;
     if (w && w.snap.view === "player") {
-      const me = opponents.find((o) => o.id === this.you);
+      this.inputTicks(now);
+      let me = opponents.find((o) => o.id === this.you);
+      // Our own disc where we predict it (drawn from the keys held this very frame).
+      const { forward, turn } = this.held();
+      const own = this.predictor && this.predictor.drawn(now, (now - this.tickAt) / TICK_MS, forward, turn);
+      if (me && own) {
+        const i = opponents.indexOf(me);
+        me = { ...me, ...own };
+        opponents.splice(i, 1, me);
+        debug.own = own;
+      }
       if (me) visible = visibility(this.segs, me.x, me.y);
     }
     this.beams = this.beams.filter((b) => now - b.t0 < 450);

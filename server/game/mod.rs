@@ -99,11 +99,13 @@ pub enum Request {
         token: String,
         reply: oneshot::Sender<Result<Seat, MatchError>>,
     },
-    /// A seated connection's latest keys (ignored unless `generation` is the slot's current one).
+    /// A seated connection's keys (ignored unless `generation` is the slot's current one):
+    /// numbered ones are queued and applied one per tick; others hold until the next.
     Input {
         slot: usize,
         generation: u64,
         input: HumanInput,
+        seq: Option<u64>,
     },
     /// End the match for this reason (deleted, or the server is shutting down) and its task.
     Stop(FinishReason),
@@ -130,6 +132,8 @@ pub struct Hub {
     /// What spectators see: `frames` again, or `delay_ticks` behind when people play.
     pub spectate: watch::Receiver<Arc<Frame>>,
     pub delay_ticks: u64,
+    /// How its opponents move (sent to players, who predict their own).
+    pub kinematics: crate::protocol::ws::Kinematics,
     /// The match's summary as of its latest frame (what listings show).
     pub summary: watch::Receiver<Arc<MatchSummary>>,
     pub arena: Arc<Arena>,
@@ -249,12 +253,19 @@ impl MatchHandle {
     }
 
     /// Forwards a player's keys; waits only for room in the task's queue.
-    pub async fn input(&self, slot: usize, generation: u64, input: HumanInput) -> bool {
+    pub async fn input(
+        &self,
+        slot: usize,
+        generation: u64,
+        input: HumanInput,
+        seq: Option<u64>,
+    ) -> bool {
         self.tx
             .send(Request::Input {
                 slot,
                 generation,
                 input,
+                seq,
             })
             .await
             .is_ok()

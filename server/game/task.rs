@@ -20,7 +20,7 @@ use crate::access::{ClientKey, same_secret};
 use crate::game::delay::HeldBack;
 use crate::game::{Hub, MatchError, Request, Seat, Sight, random_id};
 use crate::metrics::{Metrics, Refusal, TickHistograms};
-use crate::protocol::frame::{BELIEF_EVERY, Frame};
+use crate::protocol::frame::{BELIEF_EVERY, Frame, SeatView};
 use crate::protocol::{self, Clock, Joined, MatchMeta, MatchState, MatchStats, MatchSummary};
 use lasertag_core::sim::{AgentId, TICK_HZ};
 use lasertag_core::world::{Control, FinishReason, HumanInput, StepMark};
@@ -31,6 +31,11 @@ use lasertag_core::world::{MatchStatus, World};
 /// no passing hiccup but a match the server cannot carry without starving the others.
 const OVERRUN_WINDOW: usize = 200;
 const OVERRUN_LIMIT: usize = 100;
+
+/// Numbered inputs a player may have queued (ticks ahead of the match): a client whose
+/// clock runs fast, or that sends a burst after a stall, would otherwise build up a lag of
+/// its own; past this the oldest are merged away.
+const MAX_QUEUED_INPUTS: usize = 8;
 
 /// Ticks a manual step runs before it lets other requests in.
 const STEP_CHUNK: u64 = 250;
@@ -58,6 +63,11 @@ struct Player {
     ever_connected: bool,
     /// Who joined (for the one-unconnected-hold-per-client rule).
     client: Option<ClientKey>,
+    /// Numbered inputs not applied yet, oldest first, one per tick.
+    inputs: std::collections::VecDeque<(u64, HumanInput)>,
+    /// The `seq` of the newest numbered input received, and of the last applied.
+    received: u64,
+    applied: u64,
 }
 
 impl Player {
@@ -129,6 +139,7 @@ pub fn spawn_match(
         frames,
         spectate,
         delay_ticks: meta.spectator_delay_ticks,
+        kinematics: crate::protocol::ws::Kinematics::of(&world.config.physics),
         summary,
         arena: world.arena.clone(),
         spectators: Arc::new(AtomicUsize::new(0)),
@@ -322,8 +333,22 @@ impl MatchTask {
         tracing::info!(tick = self.world.tick, "match ended");
     }
 
+    /// Hands each player's next numbered input to the world: one per tick, in order. With
+    /// none queued, the last one holds (keys still down).
+    fn feed_inputs(&mut self) {
+        for (slot, p) in self.players.iter_mut().enumerate() {
+            if let Some(p) = p
+                && let Some((seq, input)) = p.inputs.pop_front()
+            {
+                self.world.set_human_input(slot, input);
+                p.applied = seq;
+            }
+        }
+    }
+
     /// One tick of the world, its team's halves timed into the metrics.
     fn step(&mut self) {
+        self.feed_inputs();
         let mut started: Option<Instant> = None;
         let h = &self.histograms;
         self.world.step_marked(&mut |m| {
@@ -448,12 +473,32 @@ impl MatchTask {
                 slot,
                 generation,
                 input,
+                seq,
             } => {
-                if self.players[slot]
-                    .as_ref()
-                    .is_some_and(|p| p.generation == generation && p.connected())
-                {
-                    self.world.set_human_input(slot, input);
+                let Some(p) = self.players[slot]
+                    .as_mut()
+                    .filter(|p| p.generation == generation && p.connected())
+                else {
+                    return;
+                };
+                match seq {
+                    None => {
+                        self.world.set_human_input(slot, input);
+                    }
+                    // Late or repeated: already applied or queued.
+                    Some(s) if s <= p.received => {}
+                    Some(s) => {
+                        p.received = s;
+                        p.inputs.push_back((s, input));
+                        while p.inputs.len() > MAX_QUEUED_INPUTS {
+                            // Merge the oldest into the next: its tag press is not lost.
+                            if let Some((_, old)) = p.inputs.pop_front()
+                                && let Some((_, next)) = p.inputs.front_mut()
+                            {
+                                next.tag |= old.tag;
+                            }
+                        }
+                    }
                 }
             }
         }
@@ -461,10 +506,16 @@ impl MatchTask {
 
     /// Builds and publishes the frame of the world as it is now. O(agents + belief points).
     fn publish(&mut self) {
-        let players: Vec<Option<(Arc<str>, bool)>> = self
+        let players: Vec<Option<SeatView>> = self
             .players
             .iter()
-            .map(|p| p.as_ref().map(|p| (p.name.clone(), p.connected())))
+            .map(|p| {
+                p.as_ref().map(|p| SeatView {
+                    name: p.name.clone(),
+                    connected: p.connected(),
+                    ack: p.applied,
+                })
+            })
             .collect();
         let tick = self.world.tick;
         let finished = self.world.status == MatchStatus::Finished;
@@ -673,6 +724,9 @@ impl MatchTask {
             bot,
             ever_connected: false,
             client,
+            inputs: Default::default(),
+            received: 0,
+            applied: 0,
         };
         tracing::info!(player = %player.name, slot, "player joined");
         let joined = Joined {
@@ -705,6 +759,10 @@ impl MatchTask {
         p.kick = Some(kick);
         p.ever_connected = true;
         p.generation += 1;
+        // A new connection numbers its inputs from 1 again.
+        p.inputs.clear();
+        p.received = 0;
+        p.applied = 0;
         p.away_since = None;
         tracing::info!(player = %p.name, slot, generation = p.generation, "player connected");
         Ok(Seat {

@@ -270,6 +270,7 @@ impl Connection {
             belief_every: BELIEF_EVERY,
             spectator_delay_s: self.handle.hub.delay_ticks as f64
                 / lasertag_core::sim::TICK_HZ as f64,
+            kinematics: self.handle.hub.kinematics,
             belief: self.belief,
             limits: Limits {
                 max_message_bytes: self.config.max_message_bytes,
@@ -449,7 +450,12 @@ impl Connection {
                 self.belief = on;
                 Ok(())
             }
-            ClientMessage::Input { forward, turn, tag } => {
+            ClientMessage::Input {
+                forward,
+                turn,
+                tag,
+                seq,
+            } => {
                 let Some(seat) = &self.seat else {
                     return self
                         .strike(
@@ -469,7 +475,7 @@ impl Connection {
                     turn: turn as f32,
                     tag,
                 };
-                if !self.handle.input(slot, generation, input).await {
+                if !self.handle.input(slot, generation, input, seq).await {
                     return Err(End::Close(NORMAL, "the match has ended".into()));
                 }
                 Ok(())

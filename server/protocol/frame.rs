@@ -84,6 +84,17 @@ pub struct OpponentFrame {
     pub player: Option<Arc<str>>,
     /// Whether that person is connected right now.
     pub connected: bool,
+    /// The `seq` of that person's last numbered input applied.
+    pub ack: u64,
+}
+
+/// A person at an opponent slot, as frames show it.
+#[derive(Debug, Clone)]
+pub struct SeatView {
+    pub name: Arc<str>,
+    pub connected: bool,
+    /// The `seq` of the last numbered input applied.
+    pub ack: u64,
 }
 
 /// One role of the belief, thinned for display.
@@ -140,7 +151,7 @@ impl Frame {
     /// The frame of a world that has not changed since `since_seq`.
     pub fn build(
         world: &World,
-        players: &[Option<(Arc<str>, bool)>],
+        players: &[Option<SeatView>],
         since_seq: u64,
         robot_tags: u32,
         with_belief: bool,
@@ -182,9 +193,9 @@ impl Frame {
                 .iter()
                 .enumerate()
                 .map(|(i, o)| {
-                    let (player, connected) = match players.get(i) {
-                        Some(Some((name, connected))) => (Some(name.clone()), *connected),
-                        _ => (None, false),
+                    let (player, connected, ack) = match players.get(i) {
+                        Some(Some(s)) => (Some(s.name.clone()), s.connected, s.ack),
+                        _ => (None, false, 0),
                     };
                     OpponentFrame {
                         pose: o.pose,
@@ -192,6 +203,7 @@ impl Frame {
                         control: o.control.kind(),
                         player,
                         connected,
+                        ack,
                     }
                 })
                 .collect(),

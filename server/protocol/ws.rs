@@ -31,8 +31,15 @@ pub struct WireCache {
 /// A message from a client. Unknown types and fields are errors.
 #[derive(Debug, Clone, PartialEq)]
 pub enum ClientMessage {
-    /// A player's keys; the latest holds until the next.
-    Input { forward: f64, turn: f64, tag: bool },
+    /// A player's keys. Numbered (`seq`), each is applied for one tick, in order, and
+    /// acknowledged in the player's snapshots; without a number, the latest holds until
+    /// the next.
+    Input {
+        forward: f64,
+        turn: f64,
+        tag: bool,
+        seq: Option<u64>,
+    },
     /// Switch the team's belief on or off in this connection's snapshots.
     Belief { on: bool },
     /// Answered at once with a `pong` carrying the same `t` (for the ping display).
@@ -46,6 +53,8 @@ struct InputMsg {
     turn: f64,
     #[serde(default)]
     tag: bool,
+    #[serde(default)]
+    seq: Option<u64>,
 }
 
 #[derive(Deserialize)]
@@ -85,6 +94,7 @@ impl ClientMessage {
                     forward: m.forward,
                     turn: m.turn,
                     tag: m.tag,
+                    seq: m.seq,
                 }
             }
             "belief" => ClientMessage::Belief {
@@ -150,7 +160,35 @@ pub struct Welcome<'a> {
     /// How far behind the match spectators' snapshots run (0: live). A player's own view is
     /// live; once its opponent is tagged it watches as spectators do, this far behind.
     pub spectator_delay_s: f64,
+    /// How the player's opponent moves, for prediction on the client.
+    pub kinematics: Kinematics,
     pub limits: Limits,
+}
+
+/// The motion of an opponent, as the server simulates it (`core/sim/motion.rs`): each tick
+/// of `dt` seconds it turns by `turn × turn_rate × dt` and moves `forward × speed × dt` along
+/// the mean heading of the tick, then its disc of `radius` slides out of walls and agents.
+#[derive(Debug, Clone, Copy, Serialize)]
+pub struct Kinematics {
+    pub dt: f64,
+    /// Metres per second at `forward` 1.
+    pub speed: f64,
+    /// Radians per second at `turn` 1.
+    pub turn_rate: f64,
+    pub radius: f64,
+}
+
+impl Kinematics {
+    pub fn of(physics: &lasertag_core::sim::Physics) -> Kinematics {
+        // The core's `f32`s, as the decimals they were written as (no `0.05000000074505806`).
+        let exact = |v: f32| ((v as f64) * 1e6).round() / 1e6;
+        Kinematics {
+            dt: 1.0 / lasertag_core::sim::TICK_HZ as f64,
+            speed: exact(physics.opponent_speed),
+            turn_rate: exact(physics.opponent_turn_rate),
+            radius: exact(lasertag_core::sim::AGENT_RADIUS),
+        }
+    }
 }
 
 #[derive(Debug, Clone, Serialize)]
@@ -211,6 +249,9 @@ struct Snapshot<'a> {
     /// `player` (line of sight only) or `spectator` (everything).
     view: &'static str,
     you: Option<&'a str>,
+    /// A player's: the `seq` of its last numbered input applied (0 before the first).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    ack: Option<u64>,
     robots: Vec<RobotWire>,
     opponents: Vec<OpponentWire>,
     score: Score,
@@ -301,6 +342,12 @@ fn snapshot_json(frame: &Frame, you: Option<&str>, visible: Option<&Visible>) ->
         winner: winner(frame.winner),
         view: if spectator { "spectator" } else { "player" },
         you,
+        ack: you
+            .and_then(|y| y.parse::<AgentId>().ok())
+            .and_then(|id| match id {
+                AgentId::Opponent(i) => frame.opponents.get(i).map(|o| o.ack),
+                AgentId::Robot(_) => None,
+            }),
         robots: frame
             .robots
             .iter()
@@ -471,7 +518,17 @@ mod tests {
             Ok(ClientMessage::Input {
                 forward: 1.0,
                 turn: -0.5,
-                tag: true
+                tag: true,
+                seq: None,
+            })
+        );
+        assert_eq!(
+            ClientMessage::parse(r#"{"type":"input","forward":0,"turn":1,"seq":7}"#),
+            Ok(ClientMessage::Input {
+                forward: 0.0,
+                turn: 1.0,
+                tag: false,
+                seq: Some(7),
             })
         );
         assert_eq!(

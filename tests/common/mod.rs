@@ -364,3 +364,13 @@ pub fn assert_error(r: &Reply, status: u16, mentions: &str) {
         "{msg:?} should mention {mentions:?}"
     );
 }
+
+/// A manual match on `office` with one human slot and robots that never move: what players
+/// do is all that happens.
+pub async fn idle_human_match(s: &TestServer) -> String {
+    s.create_match(
+        json!({"map": "office", "opponent_control": "human", "clock": "manual",
+                          "planner": "idle"}),
+    )
+    .await
+}

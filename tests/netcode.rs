@@ -1,0 +1,81 @@
+//! Playing over a network: numbered inputs applied one per tick and acknowledged, what a
+//! page needs to predict its own motion.
+
+mod common;
+
+use std::time::Duration;
+
+use common::{TestServer, idle_human_match};
+use serde_json::json;
+
+#[tokio::test]
+async fn numbered_inputs_are_applied_one_per_tick_in_order_and_acknowledged() {
+    let s = TestServer::start().await;
+    let id = idle_human_match(&s).await;
+    let (_, token) = s.join(&id, "frank").await;
+    let mut ws = s.ws(&id, Some(&token)).await.unwrap();
+    let welcome = ws.json().await;
+    // What the client needs to predict its own motion.
+    let k = &welcome["kinematics"];
+    assert_eq!(k["dt"], 0.05);
+    assert!(k["speed"].as_f64().unwrap() > 0.5 && k["radius"].as_f64().unwrap() > 0.1);
+    assert_eq!(ws.next_of("snapshot").await["ack"], 0);
+    // Three ticks' worth at once: forward, turn left, forward. None may be dropped for
+    // arriving within one tick, and each is applied for exactly one tick.
+    for (seq, forward, turn) in [(1, 1.0, 0.0), (2, 0.0, 1.0), (3, 1.0, 0.0)] {
+        ws.send_json(&json!({"type": "input", "seq": seq, "forward": forward, "turn": turn}))
+            .await
+            .unwrap();
+    }
+    // A repeat of an applied or queued number is ignored.
+    ws.send_json(&json!({"type": "input", "seq": 2, "forward": -1.0, "turn": 0.0}))
+        .await
+        .unwrap();
+    tokio::time::sleep(Duration::from_millis(100)).await;
+    let start = s.get(&format!("/api/matches/{id}")).await.body["opponents"][0].clone();
+    let speed = k["speed"].as_f64().unwrap();
+    let turn = k["turn_rate"].as_f64().unwrap() * 0.05;
+    let mut poses = vec![];
+    for expected_ack in 1..=4u64 {
+        let truth = s.step(&id, 1).await;
+        let snap = loop {
+            let v = ws.next_of("snapshot").await;
+            if v["tick"] == truth["tick"] {
+                break v;
+            }
+        };
+        // The fourth tick repeats the last input (keys still down).
+        assert_eq!(snap["ack"], expected_ack.min(3), "{snap}");
+        let o = &truth["opponents"][0];
+        poses.push([
+            o["x"].as_f64().unwrap(),
+            o["y"].as_f64().unwrap(),
+            o["theta"].as_f64().unwrap(),
+        ]);
+    }
+    let x0 = start["x"].as_f64().unwrap();
+    let t0 = start["theta"].as_f64().unwrap();
+    let step = speed * 0.05;
+    assert!(
+        (poses[0][0] - x0).abs() > 0.5 * step
+            || (poses[0][1] - start["y"].as_f64().unwrap()).abs() > 0.5 * step,
+        "tick 1 moved: {poses:?}"
+    );
+    assert!(
+        (poses[1][2] - t0).abs() > 0.9 * turn,
+        "tick 2 turned: {poses:?}"
+    );
+    let moved = |a: [f64; 3], b: [f64; 3]| ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)).sqrt();
+    assert!(
+        moved(poses[0], poses[1]) < 1e-3,
+        "tick 2 only turned: {poses:?}"
+    );
+    assert!(
+        moved(poses[1], poses[2]) > 0.5 * step,
+        "tick 3 moved: {poses:?}"
+    );
+    assert!(
+        moved(poses[2], poses[3]) > 0.5 * step,
+        "tick 4 held the keys: {poses:?}"
+    );
+}
