@@ -1,11 +1,15 @@
 //! Playing over a network: numbered inputs applied one per tick and acknowledged, what a
-//! page needs to predict its own motion.
+//! page needs to predict its own motion, and all of it through a proxy that adds a real
+//! network's delay, jitter and loss (`common/netem.rs`).
 
 mod common;
+#[path = "common/netem.rs"]
+mod netem;
 
 use std::time::Duration;
 
-use common::{TestServer, idle_human_match};
+use common::{TestServer, Ws, idle_human_match};
+use netem::{Conditions, Netem};
 use serde_json::json;
 
 #[tokio::test]
@@ -77,5 +81,60 @@ async fn numbered_inputs_are_applied_one_per_tick_in_order_and_acknowledged() {
     assert!(
         moved(poses[2], poses[3]) > 0.5 * step,
         "tick 4 held the keys: {poses:?}"
+    );
+}
+
+#[tokio::test]
+async fn over_a_slow_lossy_network_every_input_is_applied_in_order() {
+    let s = TestServer::start().await;
+    let net = Netem::start(
+        s.addr,
+        Conditions {
+            rtt: Duration::from_millis(150),
+            jitter: Duration::from_millis(20),
+            loss: 0.02,
+            ..Conditions::rtt_ms(150)
+        },
+    )
+    .await;
+    let id = s
+        .create_match(
+            json!({"map": "office", "opponent_control": "human", "planner": "idle",
+            "spectator_delay_s": 0}),
+        )
+        .await;
+    let (_, token) = s.join(&id, "gina").await;
+    let url = format!("ws://{}/ws/matches/{id}?token={token}", net.addr);
+    let (stream, _) = tokio_tungstenite::connect_async(url).await.unwrap();
+    let mut ws = Ws { stream };
+    assert_eq!(ws.json().await["type"], "welcome");
+    // The proxy really delays: a ping takes at least its round trip.
+    let sent = std::time::Instant::now();
+    ws.send_json(&json!({"type": "ping", "t": 1}))
+        .await
+        .unwrap();
+    ws.next_of("pong").await;
+    let rtt = sent.elapsed();
+    assert!(rtt >= Duration::from_millis(130), "round trip {rtt:?}");
+    // Two seconds of inputs at 20 Hz, as a page sends them: each is applied, in order.
+    let mut tick = tokio::time::interval(Duration::from_millis(50));
+    for seq in 1..=40u64 {
+        tick.tick().await;
+        let turn = if seq % 10 < 5 { 1.0 } else { -1.0 };
+        ws.send_json(&json!({"type": "input", "seq": seq, "forward": 1.0, "turn": turn}))
+            .await
+            .unwrap();
+    }
+    let mut last = 0;
+    while last < 40 {
+        let snap = ws.next_of("snapshot").await;
+        let ack = snap["ack"].as_u64().unwrap();
+        assert!(ack >= last, "ack went back from {last} to {ack}");
+        last = ack;
+    }
+    let events = s.events(&id).await;
+    assert!(
+        events.iter().all(|e| e["kind"] != "player_left"),
+        "{events:?}"
     );
 }
