@@ -7,8 +7,16 @@ import { Predictor } from "./predict.js";
 
 const $ = (id) => document.getElementById(id);
 const TICK_MS = 50;
-/** Render this many ticks behind the newest snapshot, so there is always a next one. */
-const DELAY_TICKS = 2;
+/** Other agents are drawn this much later than the snapshots' steady arrival, plus what the
+ * measured jitter needs (most arrivals in time to interpolate), in milliseconds... */
+const MARGIN_MS = 10;
+/** ...between these bounds (ticks behind the newest snapshot's time). */
+const MIN_DELAY_TICKS = 0.3;
+const MAX_DELAY_TICKS = 4;
+/** A snapshot that is late is bridged by extrapolating this many ticks at most, not frozen. */
+const MAX_EXTRAPOLATE_TICKS = 2;
+/** Arrivals kept to measure the jitter. */
+const JITTER_WINDOW = 60;
 
 /** What tests read: counts of what was drawn, the feed, the end. */
 export const debug = (window.__lasertag = window.__lasertag || {});
@@ -30,6 +38,8 @@ export class Game {
     this.ctx = this.canvas.getContext("2d");
     this.snaps = [];
     this.offset = null;
+    this.lateness = []; // recent arrivals' lateness (ms) against the steadiest one
+    this.delayTicks = MAX_DELAY_TICKS / 2;
     this.beams = [];
     this.names = {};
     this.keys = new Set();
@@ -40,6 +50,7 @@ export class Game {
     this.tickAt = null;
     this.tagLatch = false;
     this.predictor = null;
+    this.renderTick = null;
     this.ended = null;
     this.closedByUs = false;
     this.retries = 0;
@@ -127,7 +138,11 @@ export class Game {
       case "pong": {
         const rtt = performance.now() - msg.t;
         debug.ping = rtt;
-        $("hud-ping").textContent = `ping ${rtt.toFixed(0)} ms`;
+        const jitter = debug.jitterMs || 0;
+        // A hint a player can act on: what the round trip and the jitter will feel like.
+        const quality = rtt < 120 && jitter < 40 ? "good" : rtt < 250 && jitter < 100 ? "fair" : "poor";
+        $("hud-ping").textContent = `ping ${rtt.toFixed(0)} ms · jitter ${jitter.toFixed(0)} ms · ${quality}`;
+        $("hud-ping").dataset.quality = quality;
         return;
       }
       case "error":
@@ -154,7 +169,9 @@ export class Game {
     // A (re)connection numbers its inputs from 1 again, and predicts only as a player.
     this.seq = 0;
     this.tickAt = null;
-    this.predictor = w.role === "player" && w.kinematics ? new Predictor(w.map, this.segs, w.kinematics) : null;
+    // (`localStorage["lasertag.predict"] = "off"` turns prediction off, to measure what it buys.)
+    const predict = w.role === "player" && w.kinematics && localStorage.getItem("lasertag.predict") !== "off";
+    this.predictor = predict ? new Predictor(w.map, this.segs, w.kinematics) : null;
     const watching = this.delay ? `spectating, delayed ${this.delay}` : "spectating";
     $("hud-match").textContent = `${w.map.name} · ${w.role === "player" ? `playing ${w.you} (${w.name})` : watching}`;
     $("hud-status").textContent = "";
@@ -166,13 +183,22 @@ export class Game {
   snapshot(s) {
     const now = performance.now();
     const sample = now - s.tick * TICK_MS;
-    // The offset follows the earliest arrivals (least delayed), drifting up slowly.
-    this.offset = this.offset === null ? sample : Math.min(this.offset + 0.5, sample);
     if (this.snaps.length && s.tick < this.snaps[this.snaps.length - 1].tick) {
       // Time went back (a tagged player now watches as late as spectators): start over.
       this.snaps = [];
       this.offset = sample;
+      this.lateness = [];
     }
+    // The offset follows the earliest arrivals (least delayed), drifting up slowly.
+    this.offset = this.offset === null ? sample : Math.min(this.offset + 0.5, sample);
+    this.lateness.push(sample - this.offset);
+    if (this.lateness.length > JITTER_WINDOW) this.lateness.shift();
+    // Draw as late as 95% of arrivals need, so interpolation seldom runs out of snapshots.
+    const sorted = [...this.lateness].sort((a, b) => a - b);
+    const jitter = sorted[Math.floor(0.95 * (sorted.length - 1))];
+    this.delayTicks = Math.max(MIN_DELAY_TICKS, Math.min(MAX_DELAY_TICKS, (jitter + MARGIN_MS) / TICK_MS));
+    debug.jitterMs = jitter;
+    debug.delayMs = this.delayTicks * TICK_MS;
     this.snaps.push(s);
     if (this.snaps.length > 12) this.snaps.shift();
     if (s.belief) this.belief = s.belief;
@@ -320,31 +346,49 @@ export class Game {
       this.tickAt += TICK_MS;
       const { forward, turn, tag } = this.held();
       this.seq += 1;
-      this.send({ type: "input", seq: this.seq, forward, turn, tag: tag || this.tagLatch });
+      // The tick whose robots are on screen: a shot is judged where they were drawn.
+      const view = this.renderTick === null ? undefined : Math.max(0, Math.round(this.renderTick));
+      this.send({ type: "input", seq: this.seq, forward, turn, tag: tag || this.tagLatch, view_tick: view });
       this.tagLatch = false;
       if (this.predictor) this.predictor.push(this.seq, forward, turn);
       debug.sent = this.seq;
     }
   }
 
-  /** The world at render time: snapshots interpolated by tick. */
+  /** The world at render time: snapshots interpolated by tick, a late one bridged by
+   * extrapolating from the last two for a moment. */
   interpolated(now) {
     const snaps = this.snaps;
     if (!snaps.length) return null;
     const latest = snaps[snaps.length - 1];
-    const t = Math.min((now - this.offset) / TICK_MS - DELAY_TICKS, latest.tick);
+    const t = (now - this.offset) / TICK_MS - this.delayTicks;
+    this.renderTick = Math.min(t, latest.tick);
+    if (t >= latest.tick) {
+      const prev = snaps.length > 1 ? snaps[snaps.length - 2] : null;
+      const ahead = Math.min(t - latest.tick, MAX_EXTRAPOLATE_TICKS);
+      if (!prev || ahead <= 0) return { snap: latest, robots: latest.robots, opponents: latest.opponents };
+      // Beyond the newest snapshot: carry each agent on along its last step.
+      return { snap: latest, ...this.lerp(prev, latest, 1 + ahead / (latest.tick - prev.tick)) };
+    }
     let a = snaps[0], b = latest;
     for (let i = snaps.length - 1; i > 0; i--) {
       if (snaps[i - 1].tick <= t) { a = snaps[i - 1]; b = snaps[i]; break; }
     }
-    if (t <= a.tick || a === b) return { snap: t <= a.tick ? a : b, robots: (t <= a.tick ? a : b).robots, opponents: (t <= a.tick ? a : b).opponents };
-    const f = Math.max(0, Math.min(1, (t - a.tick) / (b.tick - a.tick)));
-    const lerp = (list0, list1) => list1.map((q) => {
+    if (t <= a.tick || a === b) {
+      const s = t <= a.tick ? a : b;
+      return { snap: s, robots: s.robots, opponents: s.opponents };
+    }
+    return { snap: b, ...this.lerp(a, b, (t - a.tick) / (b.tick - a.tick)) };
+  }
+
+  /** Agents of `b`, moved `f` of the way from where they were in `a` (f > 1 extrapolates). */
+  lerp(a, b, f) {
+    const move = (list0, list1) => list1.map((q) => {
       const p = list0.find((x) => x.id === q.id);
-      if (!p) return q;
+      if (!p || q.tagged) return q;
       return { ...q, x: p.x + (q.x - p.x) * f, y: p.y + (q.y - p.y) * f, theta: p.theta + angleDiff(p.theta, q.theta) * f };
     });
-    return { snap: b, robots: lerp(a.robots, b.robots), opponents: lerp(a.opponents, b.opponents) };
+    return { robots: move(a.robots, b.robots), opponents: move(a.opponents, b.opponents) };
   }
 
   frame(now) {
@@ -364,8 +408,9 @@ export class Game {
         const i = opponents.indexOf(me);
         me = { ...me, ...own };
         opponents.splice(i, 1, me);
-        debug.own = own;
       }
+      // Where the player's own disc is drawn (what a latency measurement watches).
+      if (me) debug.own = { x: me.x, y: me.y, theta: me.theta };
       if (me) visible = visibility(this.segs, me.x, me.y);
     }
     this.beams = this.beams.filter((b) => now - b.t0 < 450);

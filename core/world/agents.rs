@@ -39,6 +39,10 @@ pub struct HumanInput {
     pub forward: f32,
     pub turn: f32,
     pub tag: bool,
+    /// The tick whose robots the person's screen showed when these keys were pressed: a
+    /// shot is judged against the robots where they were then (at most
+    /// [`MAX_REWIND_TICKS`](crate::world::MAX_REWIND_TICKS) back).
+    pub seen_tick: Option<u64>,
 }
 
 #[derive(Debug, Clone)]

@@ -64,11 +64,18 @@ pub struct World {
     pub opponents: Vec<Opponent>,
     pub team: Team,
     events: Vec<Event>,
+    /// Robot positions at the end of each of the last ticks (oldest first), to judge a
+    /// person's shot where its screen showed the robots (lag compensation).
+    robot_trail: std::collections::VecDeque<(u64, Vec<Point2<f32>>)>,
     rng_sense: ChaCha8Rng,
     rng_bots: ChaCha8Rng,
     rng_odometry: ChaCha8Rng,
     rng_localise: ChaCha8Rng,
 }
+
+/// How far back a person's shot may be judged (250 ms at 20 Hz): enough for a player on
+/// another continent, short enough that a robot cannot be tagged long after it left cover.
+pub const MAX_REWIND_TICKS: u64 = 5;
 
 /// Independent streams of the match seed.
 const STREAM_SENSE: u64 = 1;
@@ -176,6 +183,7 @@ impl World {
             status: MatchStatus::Running,
             winner: None,
             events: Vec::new(),
+            robot_trail: Default::default(),
             rng_sense: stream(config.seed, STREAM_SENSE),
             rng_bots: stream(config.seed, STREAM_BOTS),
             rng_odometry: stream(config.seed, STREAM_ODOMETRY),
@@ -236,6 +244,25 @@ impl World {
         self.localise();
         self.rules();
         self.think(mark);
+        self.keep_trail();
+    }
+
+    /// Notes where the robots ended this tick, keeping [`MAX_REWIND_TICKS`] of them.
+    fn keep_trail(&mut self) {
+        if self.robot_trail.len() as u64 >= MAX_REWIND_TICKS {
+            self.robot_trail.pop_front();
+        }
+        let at = self.robots.iter().map(|r| r.pose.pos).collect();
+        self.robot_trail.push_back((self.tick, at));
+    }
+
+    /// Where the robots were at the end of tick `seen`, if it is one of the last
+    /// [`MAX_REWIND_TICKS`] before this one.
+    fn robots_at(&self, seen: u64) -> Option<&[Point2<f32>]> {
+        self.robot_trail
+            .iter()
+            .find(|(t, _)| *t == seen)
+            .map(|(_, at)| at.as_slice())
     }
 
     /// Stage 1: this tick's motion of every agent (robots first, then opponents).
@@ -430,23 +457,24 @@ impl World {
         let tick = self.tick;
         let cooldown = self.config.physics.tag_cooldown_ticks;
         // Who pulls a trigger this tick: robots by their command, opponents by control.
-        let mut shooters: Vec<AgentId> = Vec::new();
+        // With a person's shot, the tick its screen showed (for lag compensation).
+        let mut shooters: Vec<(AgentId, Option<u64>)> = Vec::new();
         for (i, r) in self.robots.iter().enumerate() {
             if r.command.tag && !self.robot_frozen(i) && tick >= r.cooldown_until {
-                shooters.push(AgentId::Robot(i));
+                shooters.push((AgentId::Robot(i), None));
             }
         }
         for (i, o) in self.opponents.iter_mut().enumerate() {
-            let wants = match &mut o.control {
-                Control::Api(route) => std::mem::take(&mut route.fire),
-                Control::Human(input) => input.tag,
-                Control::Bot(_) => false,
+            let (wants, seen) = match &mut o.control {
+                Control::Api(route) => (std::mem::take(&mut route.fire), None),
+                Control::Human(input) => (input.tag, input.seen_tick),
+                Control::Bot(_) => (false, None),
             };
             if wants && !o.tagged && tick >= o.cooldown_until {
-                shooters.push(AgentId::Opponent(i));
+                shooters.push((AgentId::Opponent(i), seen));
             }
         }
-        for shooter in shooters {
+        for (shooter, seen) in shooters {
             // An opponent eliminated earlier this tick no longer fires.
             let (pose, alive) = match shooter {
                 AgentId::Robot(i) => (self.robots[i].pose, !self.robot_frozen(i)),
@@ -455,11 +483,26 @@ impl World {
             if !alive {
                 continue;
             }
-            let others: Vec<_> = self
+            let mut others: Vec<_> = self
                 .present()
                 .into_iter()
                 .filter(|(id, _)| *id != shooter)
                 .collect();
+            // A person aimed at the robots where its screen showed them, up to
+            // MAX_REWIND_TICKS ago: judge the shot there (as Source does). Everything else
+            // (walls, the other opponents, who is frozen) is as it is now.
+            if let Some(past) = seen
+                .filter(|s| *s < tick && tick - s <= MAX_REWIND_TICKS)
+                .and_then(|s| self.robots_at(s))
+            {
+                for (id, at) in &mut others {
+                    if let AgentId::Robot(r) = id
+                        && let Some(p) = past.get(*r)
+                    {
+                        *at = *p;
+                    }
+                }
+            }
             let hit = rules::shot_target(&self.arena, &self.config.physics, pose, &others);
             match shooter {
                 AgentId::Robot(i) => self.robots[i].cooldown_until = tick + cooldown,

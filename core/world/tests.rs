@@ -232,3 +232,55 @@ fn a_hit_by_a_robot_frozen_in_the_same_tick_still_counts() {
     );
     assert_eq!(w.team.trackers[0].untagged_count(), 1);
 }
+
+#[test]
+fn a_persons_shot_is_judged_where_its_screen_showed_the_robots() {
+    let mut w = World::new(duel(), config(PlannerKind::Idle, ControlKind::Human)).unwrap();
+    // The opponent faces east along y = 3; the robot stands in its line of fire...
+    w.opponents[0].pose = Pose::new(3.0, 3.0, 0.0);
+    w.robots[0].pose = Pose::new(5.0, 3.0, 0.0);
+    w.step();
+    w.step();
+    let seen = w.tick;
+    // ...then is somewhere else, well outside the ±5° cone.
+    w.robots[0].pose = Pose::new(5.0, 1.0, 0.0);
+    w.step();
+    let tagged = |w: &World| {
+        w.events()
+            .iter()
+            .any(|e| matches!(e.kind, EventKind::RobotTagged { .. }))
+    };
+    let fire = |seen_tick: Option<u64>| {
+        let mut w = w.clone();
+        w.set_human_input(
+            0,
+            HumanInput {
+                tag: true,
+                seen_tick,
+                ..HumanInput::default()
+            },
+        );
+        w.step();
+        w
+    };
+    // Fired at what the screen showed two ticks ago: a hit, where the robot was.
+    assert!(tagged(&fire(Some(seen))));
+    // On the present (no tick said, or one from the future): a miss.
+    assert!(!tagged(&fire(None)));
+    assert!(!tagged(&fire(Some(w.tick + 1))));
+    // Beyond the bound: judged on the present, a miss.
+    let mut old = w.clone();
+    for _ in 0..MAX_REWIND_TICKS {
+        old.step();
+    }
+    old.set_human_input(
+        0,
+        HumanInput {
+            tag: true,
+            seen_tick: Some(seen),
+            ..HumanInput::default()
+        },
+    );
+    old.step();
+    assert!(!tagged(&old));
+}

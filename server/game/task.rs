@@ -494,8 +494,11 @@ impl MatchTask {
                             // Merge the oldest into the next: its tag press is not lost.
                             if let Some((_, old)) = p.inputs.pop_front()
                                 && let Some((_, next)) = p.inputs.front_mut()
+                                && old.tag
+                                && !next.tag
                             {
-                                next.tag |= old.tag;
+                                next.tag = true;
+                                next.seen_tick = old.seen_tick;
                             }
                         }
                     }

@@ -455,6 +455,7 @@ impl Connection {
                 turn,
                 tag,
                 seq,
+                view_tick,
             } => {
                 let Some(seat) = &self.seat else {
                     return self
@@ -474,6 +475,7 @@ impl Connection {
                     forward: forward as f32,
                     turn: turn as f32,
                     tag,
+                    seen_tick: view_tick,
                 };
                 if !self.handle.input(slot, generation, input, seq).await {
                     return Err(End::Close(NORMAL, "the match has ended".into()));

@@ -39,6 +39,9 @@ pub enum ClientMessage {
         turn: f64,
         tag: bool,
         seq: Option<u64>,
+        /// The tick whose robots the page was drawing (a shot is judged there, within a
+        /// bound).
+        view_tick: Option<u64>,
     },
     /// Switch the team's belief on or off in this connection's snapshots.
     Belief { on: bool },
@@ -55,6 +58,8 @@ struct InputMsg {
     tag: bool,
     #[serde(default)]
     seq: Option<u64>,
+    #[serde(default)]
+    view_tick: Option<u64>,
 }
 
 #[derive(Deserialize)]
@@ -95,6 +100,7 @@ impl ClientMessage {
                     turn: m.turn,
                     tag: m.tag,
                     seq: m.seq,
+                    view_tick: m.view_tick,
                 }
             }
             "belief" => ClientMessage::Belief {
@@ -520,6 +526,7 @@ mod tests {
                 turn: -0.5,
                 tag: true,
                 seq: None,
+                view_tick: None,
             })
         );
         assert_eq!(
@@ -529,6 +536,7 @@ mod tests {
                 turn: 1.0,
                 tag: false,
                 seq: Some(7),
+                view_tick: None,
             })
         );
         assert_eq!(
