@@ -33,6 +33,11 @@
 //! Output: one CSV row per scenario (bytes and milliseconds), then a readable table (MB =
 //! 10^6 bytes).
 //!
+//! Some scenarios are over the map format's limits (`MAX_LANDMARKS`, `MAX_POLYGON_VERTICES`,
+//! `MAX_VERTICES`, `MAX_SPAWNS`): the validator refuses them before anything is built. They
+//! stay in the table, to show what the limits cut off, as `refused by the map format (…)`
+//! when the validator refused them with a limit in phase 1.
+//!
 //! Long file: the scenario table, the child-process harness, the counting allocator and the
 //! report belong together in one program that can be read top to bottom.
 
@@ -600,6 +605,36 @@ fn run_child(sc: &Scenario) -> Result<(), String> {
 // The table (the parent process).
 // ---------------------------------------------------------------------------------------
 
+/// The map format's limit a scenario's map is over, if any, from the constants the validator
+/// (`maps::validate`) enforces. Such a map is refused at validation before anything is built;
+/// the scenario stays to show what the limit cuts off, and its row says so instead of
+/// reporting a failed child.
+fn over_format_limit(m: &Value) -> Option<String> {
+    use lasertag::maps::{MAX_LANDMARKS, MAX_POLYGON_VERTICES, MAX_SPAWNS, MAX_VERTICES};
+    let count = |v: &Value| v.as_array().map_or(0, Vec::len);
+    let polygons: Vec<usize> = m["obstacles"]
+        .as_array()
+        .map_or(Vec::new(), |ps| ps.iter().map(count).collect());
+    [
+        (
+            "obstacle vertices in all",
+            polygons.iter().sum(),
+            MAX_VERTICES,
+        ),
+        (
+            "vertices in one polygon",
+            polygons.iter().copied().max().unwrap_or(0),
+            MAX_POLYGON_VERTICES,
+        ),
+        ("robot spawns", count(&m["robot_spawns"]), MAX_SPAWNS),
+        ("opponent spawns", count(&m["opponent_spawns"]), MAX_SPAWNS),
+        ("landmarks", count(&m["landmarks"]), MAX_LANDMARKS),
+    ]
+    .into_iter()
+    .find(|&(_, n, limit)| n > limit)
+    .map(|(what, n, limit)| format!("{n} {what}, the limit is {limit}"))
+}
+
 /// CSV columns, in order (the child's keys, plus the parent's `scenario`, `group`, `note`).
 const COLUMNS: &[&str] = &[
     "json_text_bytes",
@@ -655,6 +690,7 @@ fn run_parent(
     timeout: Duration,
     cap: usize,
 ) -> Result<Row, String> {
+    let over_limit = over_format_limit(&map_json(sc.map));
     let mut child = Command::new(exe)
         .args(["--child", sc.name, "--cap-bytes", &cap.to_string()])
         .stdout(Stdio::piped())
@@ -713,9 +749,18 @@ fn run_parent(
             "stopped: over the {:.1} GiB cap, in phase {phase}",
             cap as f64 / (1u64 << 30) as f64
         )
+    } else if let Some(limit) = &over_limit
+        && !status.success()
+        && phase == "map"
+        && errors.contains("the limit is")
+    {
+        // The validator refused it, as the limits say it must: not a failure of the probe.
+        format!("refused by the map format ({limit})")
     } else if !status.success() {
         let last = errors.lines().last().unwrap_or("").to_string();
         format!("failed in phase {phase} ({status}): {last}")
+    } else if let Some(limit) = &over_limit {
+        format!("over the map format's limits ({limit}) but accepted: the validator disagrees")
     } else {
         skipped
     };

@@ -28,20 +28,24 @@
 //!
 //! The classes (valid requests, each chosen to be expensive):
 //! - `map-64-slivers`, `map-256-slivers`: `POST /api/maps` of a 500 m map of thin diagonal
-//!   obstacles running corner to corner (a few KB that were the costliest thing to build);
+//!   obstacles running corner to corner (a few KB whose long walls cost the most to build);
 //! - `expensive-match`: an inline empty 500 m map, 8 robots, 8 opponents, a lossy radio (a
 //!   tracker per robot) and a 0.1 m merge grid;
-//! - `landmarks`: a match on `office` with 100,000 landmarks; if admitted, the bystander's
-//!   ticks per second over the next 5 s;
-//! - `spawns-obstacles`: a 200 m map of 2,000 spawns among 2,000 small squares (validation
-//!   compared every spawn with every edge);
+//! - `landmarks`: a match on `office` with 100,000 landmarks (whole metres, 700 KB); if
+//!   admitted, its own and the bystander's ticks per second over the next 5 s, and its tick
+//!   times (`/stats`);
+//! - `spawns-obstacles`: a 200 m map of 2,000 spawns among 2,000 small squares (a validator
+//!   that compares every spawn with every edge takes seconds over it);
 //! - `slowloris`: 300 connections that send half a request header, then nothing; after 15 s,
 //!   whether a new request is answered and how many of them the server closed;
 //! - `match-table`: 100 cheap manual matches from one address;
 //! - `stranger-delete`: `DELETE` of someone else's match without `Authorization`;
 //! - `wallhack`: the public state of a match a person plays, against its live tick;
-//! - `lobby-stall`: `GET /api/matches` timed again and again while a manual match steps 20,000
-//!   ticks.
+//! - `lobby-stall`: `GET /api/matches` timed again and again while a manual match (8 idle
+//!   robots, 8 bots, warehouse) steps 20,000 ticks in one request.
+//!
+//! "request ms" is the wall time of the class's main request (for `match-table`, all 100; for
+//! `slowloris`, the newcomer's request after 15 s; for `wallhack`, the first public read).
 //!
 //! Output: a Markdown table on stdout (one row per class), or JSON with `--json`; progress on
 //! stderr.
@@ -121,8 +125,8 @@ async fn drain<R: AsyncBufRead + Unpin>(mut lines: Lines<R>, tail: Tail) {
     }
 }
 
-/// The address in a `serving http://127.0.0.1:41234` log line (both old and new builds log it
-/// when they listen; `--addr 127.0.0.1:0` lets the kernel choose a free port, so no race).
+/// The address in a `serving http://127.0.0.1:41234` log line (the server logs it once it
+/// listens; `--addr 127.0.0.1:0` lets the kernel choose a free port, so there is no race).
 fn serving_addr(line: &str) -> Option<SocketAddr> {
     let at = line.find("serving http://")? + "serving http://".len();
     line[at..].split_whitespace().next()?.parse().ok()
@@ -570,7 +574,7 @@ fn r3(x: f64) -> f64 {
 }
 
 /// 500 m, `n` thin obstacles from near (10, 20) to (470, 480): the shape `tests/hostile.rs`
-/// sends, a few KB whose long diagonal walls were the costliest thing to build.
+/// sends, a few KB whose long diagonal walls cost the most to build.
 fn slivers(n: usize) -> Value {
     let obstacles: Vec<Value> = (0..n)
         .map(|k| {
