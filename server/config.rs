@@ -39,6 +39,7 @@ pub mod defaults {
     pub const TICK_OVERRUN_MS: f64 = 50.0;
     pub const JOIN_HOLD: &str = "10";
     pub const MAX_HOLDS_PER_ADDRESS: usize = 1;
+    pub const CLIENT_BUDGET_SHARE: f64 = 0.25;
 
     /// Tick milliseconds all matches together may be priced at: 80% of every core's 50 ms
     /// at 20 Hz.
@@ -206,6 +207,12 @@ pub struct Config {
     #[arg(long, env = "LASERTAG_TICK_BUDGET_MS", default_value_t = defaults::tick_budget_ms(),
           value_parser = positive)]
     pub tick_budget_ms: f64,
+    /// Share (0..=1) of the memory and tick budgets one client (address or IPv6 /64) may hold
+    /// with its matches and uploaded maps together; past it, 429. So that one visitor's
+    /// admitted requests can never take the whole server.
+    #[arg(long, env = "LASERTAG_CLIENT_BUDGET_SHARE", default_value_t = defaults::CLIENT_BUDGET_SHARE,
+          value_parser = share)]
+    pub client_budget_share: f64,
     /// Milliseconds past which one tick of a match counts as an overrun (reported in
     /// `lasertag_tick_overruns_total` and the log); a match whose ticks overran in half of
     /// its last 200 ends with reason `overloaded`, so that it cannot starve the others.
@@ -255,6 +262,7 @@ impl Default for Config {
             max_tick_ms: defaults::MAX_TICK_MS,
             memory_budget_mb: defaults::MEMORY_BUDGET_MB,
             tick_budget_ms: defaults::tick_budget_ms(),
+            client_budget_share: defaults::CLIENT_BUDGET_SHARE,
             tick_overrun_ms: defaults::TICK_OVERRUN_MS,
             join_hold: secs(defaults::JOIN_HOLD),
             max_holds_per_address: defaults::MAX_HOLDS_PER_ADDRESS,
@@ -290,6 +298,15 @@ fn positive(s: &str) -> Result<f64, String> {
         Ok(v)
     } else {
         Err(format!("{s}: must be a positive number"))
+    }
+}
+
+fn share(s: &str) -> Result<f64, String> {
+    let v = positive(s)?;
+    if v <= 1.0 {
+        Ok(v)
+    } else {
+        Err(format!("{s}: must be a share in (0, 1]"))
     }
 }
 

@@ -433,6 +433,15 @@ impl MapStore {
         self.maps.values().map(|m| m.memory).sum()
     }
 
+    /// Bytes the maps uploaded by `client` were priced at, together.
+    pub fn uploaded_memory_by(&self, client: ClientKey) -> u64 {
+        self.maps
+            .values()
+            .filter(|m| m.owner.client == Some(client))
+            .map(|m| m.memory)
+            .sum()
+    }
+
     /// Maps uploaded by `client` held now.
     pub fn uploaded_by(&self, client: ClientKey) -> usize {
         self.maps

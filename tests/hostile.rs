@@ -263,6 +263,35 @@ async fn the_servers_budget_refuses_what_it_cannot_hold() {
 }
 
 #[tokio::test]
+async fn one_client_holds_at_most_its_share_of_the_budget() {
+    let s = TestServer::start_with(Config {
+        memory_budget_mb: 60,
+        client_budget_share: 0.5,
+        ..test_config()
+    })
+    .await;
+    let live = bystander(&s).await;
+    let t0 = tick_of(&s, &live).await;
+    let mut admitted = 0;
+    let mut refused = None;
+    for _ in 0..30 {
+        let r = s
+            .post("/api/matches", &json!({"map": "office", "clock": "manual"}))
+            .await;
+        if r.status != 201 {
+            refused = Some(r);
+            break;
+        }
+        admitted += 1;
+    }
+    // Refused as a client (429, naming its share), long before the server's budget is gone.
+    let r = refused.expect("the client's share never ran out");
+    assert_error(&r, 429, "past the share one client may hold (30 MB");
+    assert!(admitted >= 1, "{admitted}");
+    unharmed(&s, &live, t0).await;
+}
+
+#[tokio::test]
 async fn a_match_that_keeps_overrunning_its_ticks_is_ended() {
     // Every tick overruns a budget of a microsecond: the match is ended after 100 of them,
     // whatever its time limit, and the overruns are counted.

@@ -342,20 +342,22 @@ impl Registry {
     ) -> Result<MatchHandle, NoRoom> {
         let mut matches = self.matches.write().unwrap_or_else(|e| e.into_inner());
         self.room_in(&matches, owner.client)?;
-        self.budget_in(&matches, price)?;
+        self.budget_in(&matches, price, owner.client)?;
         Ok(self.start_locked(&mut matches, world, meta, owner, price))
     }
 
-    /// Whether `price` fits in what the server has left of its budgets (see `Config`).
-    pub fn has_budget(&self, price: Price) -> Result<(), NoRoom> {
+    /// Whether `price` fits in what the server has left of its budgets, and in `client`'s
+    /// share of them (see `Config`).
+    pub fn has_budget(&self, price: Price, client: Option<ClientKey>) -> Result<(), NoRoom> {
         let matches = self.matches.read().unwrap_or_else(|e| e.into_inner());
-        self.budget_in(&matches, price)
+        self.budget_in(&matches, price, client)
     }
 
     fn budget_in(
         &self,
         matches: &BTreeMap<String, MatchHandle>,
         price: Price,
+        client: Option<ClientKey>,
     ) -> Result<(), NoRoom> {
         let cfg = &self.config;
         let admitted: Price = matches.values().map(|h| h.price).sum();
@@ -380,6 +382,36 @@ impl Registry {
                 asked_ms: price.tick_ms,
                 budget_ms: cfg.tick_budget_ms,
             });
+        }
+        // Then the client's share (a server that is full says so first).
+        if let Some(client) = client {
+            let maps = self
+                .maps
+                .read()
+                .unwrap_or_else(|e| e.into_inner())
+                .uploaded_memory_by(client);
+            let held: Price = matches
+                .values()
+                .filter(|h| h.owner.client == Some(client))
+                .map(|h| h.price)
+                .sum();
+            let memory = (cfg.memory_budget_mb as f64 * 1e6 * cfg.client_budget_share) as u64;
+            let tick_ms = cfg.tick_budget_ms * cfg.client_budget_share;
+            if held.memory + maps + price.memory > memory
+                || (price.tick_ms > 0.0 && held.tick_ms + price.tick_ms > tick_ms)
+            {
+                self.metrics.refuse(crate::metrics::Refusal::ClientQuota);
+                return Err(NoRoom::ClientBudget {
+                    client,
+                    held: Price {
+                        memory: held.memory + maps,
+                        ..held
+                    },
+                    asked: price,
+                    memory,
+                    tick_ms,
+                });
+            }
         }
         Ok(())
     }
@@ -561,6 +593,16 @@ pub enum NoRoom {
     Client { client: ClientKey, max: usize },
     /// What is admitted already and this would take the server past its memory budget.
     Memory { held: u64, asked: u64, budget: u64 },
+    /// This client's matches and maps and this would be priced past its share of the
+    /// server's budgets.
+    ClientBudget {
+        client: ClientKey,
+        held: Price,
+        asked: Price,
+        /// Its share: bytes, and tick milliseconds.
+        memory: u64,
+        tick_ms: f64,
+    },
     /// The running matches and this one would be priced past the tick budget.
     Cpu {
         held_ms: f64,

@@ -86,6 +86,23 @@ pub fn no_room(why: NoRoom) -> ApiError {
                 admission::mb(asked)
             ),
         ),
+        NoRoom::ClientBudget {
+            client,
+            held,
+            asked,
+            memory,
+            tick_ms,
+        } => ApiError::new(
+            StatusCode::TOO_MANY_REQUESTS,
+            format!(
+                "{client} holds matches and maps priced at {} and {:.1} ms per tick; this needs {} and {:.1} ms, past the share one client may hold ({} and {tick_ms:.1} ms); delete a match or map (with its owner_token) or wait for one to end",
+                admission::mb(held.memory),
+                held.tick_ms,
+                admission::mb(asked.memory),
+                asked.tick_ms,
+                admission::mb(memory)
+            ),
+        ),
         NoRoom::Cpu {
             held_ms,
             asked_ms,

@@ -115,7 +115,10 @@ pub async fn add_map(
     map_room(&state, &def.name, client)?;
     let price = admission::map(&def);
     within_request_limits(&state, "the map", price)?;
-    state.registry.has_budget(price).map_err(no_room)?;
+    state
+        .registry
+        .has_budget(price, Some(client))
+        .map_err(no_room)?;
     let name = def.name.clone();
     let info = MapInfo {
         name: def.name.clone(),
@@ -334,7 +337,10 @@ pub async fn create_match(
             MapSource::Inline(def) => admission::map(def) + admission::match_on(def, &req.config),
         };
     within_request_limits(&state, "the match", price)?;
-    state.registry.has_budget(price).map_err(no_room)?;
+    state
+        .registry
+        .has_budget(price, Some(client))
+        .map_err(no_room)?;
     let config = req.config;
     let world = off_workers(&state, "setting up the match", move || {
         let arena = match source {

@@ -50,6 +50,7 @@ pub fn test_config() -> Config {
         max_matches_per_address: 1000,
         max_maps_per_address: 1000,
         max_holds_per_address: 1000,
+        client_budget_share: 1.0,
         ..Config::default()
     }
 }
