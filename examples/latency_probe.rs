@@ -133,7 +133,9 @@ async fn run(args: Args) -> Result<(), String> {
                 percentile(&lat, 0.5),
                 percentile(&lat, 0.95),
                 percentile(&lat, 1.0),
-                if predict {
+                if predict && corrections.is_empty() {
+                    "none".into()
+                } else if predict {
                     format!(
                         "{:.1} / {:.1}",
                         percentile(&corrections, 0.95) * 100.0,

@@ -53,6 +53,20 @@ async fn unharmed(s: &TestServer, id: &str, since: u64) {
     assert!(rss < RESIDENT_BOUND_MIB, "resident memory {rss} MiB");
 }
 
+/// Creates cheap manual matches until one is refused: how many were admitted, and the
+/// refusal.
+async fn until_refused(s: &TestServer) -> (usize, common::Reply) {
+    for admitted in 0..30 {
+        let r = s
+            .post("/api/matches", &json!({"map": "office", "clock": "manual"}))
+            .await;
+        if r.status != 201 {
+            return (admitted, r);
+        }
+    }
+    panic!("30 matches admitted: no budget ran out");
+}
+
 /// Reads until the server closes the connection; false if it is still open after `wait`.
 async fn closed_within(stream: &mut TcpStream, wait: Duration) -> bool {
     let mut buf = [0u8; 1024];
@@ -247,17 +261,7 @@ async fn the_servers_budget_refuses_what_it_cannot_hold() {
     .await;
     let live = bystander(&s).await;
     let t0 = tick_of(&s, &live).await;
-    let mut refused = None;
-    for _ in 0..30 {
-        let r = s
-            .post("/api/matches", &json!({"map": "office", "clock": "manual"}))
-            .await;
-        if r.status != 201 {
-            refused = Some(r);
-            break;
-        }
-    }
-    let r = refused.expect("the budget never ran out");
+    let (_, r) = until_refused(&s).await;
     assert_error(&r, 503, "memory budget of 60 MB");
     unharmed(&s, &live, t0).await;
 }
@@ -272,20 +276,8 @@ async fn one_client_holds_at_most_its_share_of_the_budget() {
     .await;
     let live = bystander(&s).await;
     let t0 = tick_of(&s, &live).await;
-    let mut admitted = 0;
-    let mut refused = None;
-    for _ in 0..30 {
-        let r = s
-            .post("/api/matches", &json!({"map": "office", "clock": "manual"}))
-            .await;
-        if r.status != 201 {
-            refused = Some(r);
-            break;
-        }
-        admitted += 1;
-    }
     // Refused as a client (429, naming its share), long before the server's budget is gone.
-    let r = refused.expect("the client's share never ran out");
+    let (admitted, r) = until_refused(&s).await;
     assert_error(&r, 429, "past the share one client may hold (30 MB");
     assert!(admitted >= 1, "{admitted}");
     unharmed(&s, &live, t0).await;
