@@ -1,5 +1,6 @@
 //! The web client in headless Chromium against a real server: spectate the showcase and check
-//! the canvas's pixels; play with the keyboard; tag a robot; get tagged and see the end.
+//! the canvas's pixels; play with the keyboard; tag a robot; get tagged and see the end; and
+//! play through a proxy with a slow network's round trip.
 //!
 //! Needs Chromium (`bash tests/run.sh` installs Debian's package when it is missing). With
 //! `LASERTAG_SCREENSHOTS=<dir>` set, the test also saves its screenshots there (that is how
@@ -8,6 +9,8 @@
 #[path = "common/cdp.rs"]
 mod cdp;
 mod common;
+#[path = "common/netem.rs"]
+mod netem;
 
 use std::time::Duration;
 
@@ -247,4 +250,56 @@ async fn play_and_spectate_in_headless_chromium() {
         .await;
     assert!(text.as_str().unwrap().contains("tagged"), "{text}");
     save(&mut b, "screenshot-end.png").await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn over_a_slow_network_a_key_moves_the_players_disc_at_once() {
+    let s = TestServer::start().await;
+    // 300 ms round trip: an input needs at least 150 ms to reach the server, and its
+    // acknowledgement 150 ms more to come back.
+    let net = netem::Netem::start(s.addr, netem::Conditions::rtt_ms(300)).await;
+    let mut b = Browser::launch().await;
+    let base = format!("http://{}", net.addr);
+    let id = s
+        .create_match(json!({"map": "office", "robots": 2, "opponents": 1,
+            "opponent_control": "human", "planner": "idle", "time_limit_s": 120,
+            "robot_starts": [[22.0, 1.5, 0.0], [22.0, 14.0, 0.0]],
+            "opponent_starts": [[6.0, 8.0]]}))
+        .await;
+    b.navigate(&format!("{base}/#/play/{id}")).await;
+    b.wait_for(
+        &format!("__lasertag.matchId === '{id}' && __lasertag.role === 'player' && __lasertag.snapshots > 10 && __lasertag.own && __lasertag.ack > 0"),
+        30,
+    )
+    .await;
+    b.eval("window.__before = { sent: __lasertag.sent, x: __lasertag.own.x, y: __lasertag.own.y }")
+        .await;
+    b.key("KeyW", true).await;
+    // The disc moves on the page before the server has applied any input sent after the
+    // press: it is predicted, not waited for.
+    let at_move = b
+        .wait_for(
+            "Math.hypot(__lasertag.own.x - __before.x, __lasertag.own.y - __before.y) > 0.01 && ({ack: __lasertag.ack, before: __before.sent})",
+            5,
+        )
+        .await;
+    assert!(
+        at_move["ack"].as_u64() <= at_move["before"].as_u64(),
+        "the disc waited for the server: {at_move}"
+    );
+    tokio::time::sleep(Duration::from_millis(600)).await;
+    b.key("KeyW", false).await;
+    // Once the server's answers are in, they agree with where the page had put it.
+    b.wait_for(
+        "__lasertag.ack === __lasertag.sent || __lasertag.ack + 1 >= __lasertag.sent - 8",
+        5,
+    )
+    .await;
+    let worst = b
+        .eval("Math.max(0, ...(__lasertag.corrections || []))")
+        .await;
+    assert!(
+        worst.as_f64().unwrap() < 0.05,
+        "corrections up to {worst} m"
+    );
 }
