@@ -289,12 +289,9 @@ async fn over_a_slow_network_a_key_moves_the_players_disc_at_once() {
     );
     tokio::time::sleep(Duration::from_millis(600)).await;
     b.key("KeyW", false).await;
-    // Once the server's answers are in, they agree with where the page had put it.
-    b.wait_for(
-        "__lasertag.ack === __lasertag.sent || __lasertag.ack + 1 >= __lasertag.sent - 8",
-        5,
-    )
-    .await;
+    // Once the server's answers are in (a round trip and a bit), they agree with where the
+    // page had put it.
+    tokio::time::sleep(Duration::from_millis(800)).await;
     let worst = b
         .eval("Math.max(0, ...(__lasertag.corrections || []))")
         .await;
