@@ -13,9 +13,10 @@
 //! disc stays in the corridor) through the DevTools protocol; a hook in the page notes the
 //! time of the key event and the first animation frame in which the disc it draws for the
 //! player has moved. Every condition runs with the page's prediction on and off
-//! (`localStorage["lasertag.predict"]`), so the table shows what prediction buys. It also
-//! reports the page's reconciliation corrections (how far the server's answer was from
-//! where the page had drawn the disc).
+//! (`localStorage["lasertag.predict"]`), so the table shows what prediction buys. With
+//! prediction on it then drives for 10 s into walls and corners and reports the page's
+//! reconciliation corrections over the whole run (how far the server's answer was from where
+//! the page had put the disc).
 
 // The browser driver and the network proxy of the tests, shared rather than copied (this
 // program uses only part of the driver).
@@ -151,7 +152,8 @@ async fn run(args: Args) -> Result<(), String> {
 }
 
 /// One condition and mode: a fresh match played through `addr`; the latencies (ms) and the
-/// page's corrections (m).
+/// page's corrections (m), with prediction on over the trials and 10 s of driving along
+/// walls after them.
 async fn trials(
     b: &mut cdp::Browser,
     addr: std::net::SocketAddr,
@@ -203,9 +205,26 @@ async fn trials(
     }
     let lat: Vec<f64> =
         serde_json::from_value(b.eval("window.__probe.lat").await).map_err(|e| e.to_string())?;
-    let corrections: Vec<f64> =
+    let mut corrections: Vec<f64> =
         serde_json::from_value(b.eval("window.__lasertag.corrections || []").await)
             .unwrap_or_default();
+    if predict {
+        // Then into the walls: forward all the time, turning now one way, now the other,
+        // so the disc keeps sliding along walls and corners (where a prediction that
+        // disagreed with the server's collisions would show).
+        b.key("KeyW", true).await;
+        for k in 0..10 {
+            let turn = if k % 3 == 2 { "KeyD" } else { "KeyA" };
+            b.key(turn, true).await;
+            tokio::time::sleep(Duration::from_millis(350)).await;
+            b.key(turn, false).await;
+            tokio::time::sleep(Duration::from_millis(650)).await;
+        }
+        b.key("KeyW", false).await;
+        tokio::time::sleep(Duration::from_millis(800)).await;
+        corrections = serde_json::from_value(b.eval("window.__lasertag.corrections || []").await)
+            .unwrap_or_default();
+    }
     let _ = http
         .delete(format!("{base}/api/matches/{id}"))
         .bearer_auth(created["owner_token"].as_str().unwrap_or_default())
