@@ -52,6 +52,9 @@ struct Args {
     /// Bot opponents per match (evading bots, so that matches last).
     #[arg(long, default_value_t = 3)]
     opponents: usize,
+    /// Snapshot format the spectators ask for: `json` or `compact` (the game page's).
+    #[arg(long, default_value = "json", value_parser = ["json", "compact"])]
+    format: String,
     /// Directory of map files (in-process server).
     #[arg(long, default_value = "maps")]
     maps: PathBuf,
@@ -80,9 +83,15 @@ fn tick_of(text: &str) -> Option<u64> {
     rest[..end].parse().ok()
 }
 
-async fn spectate(addr: SocketAddr, id: String, until: Instant, start: Instant) -> ClientStats {
+async fn spectate(
+    addr: SocketAddr,
+    id: String,
+    until: Instant,
+    start: Instant,
+    format: &str,
+) -> ClientStats {
     let mut st = ClientStats::default();
-    let url = format!("ws://{addr}/ws/matches/{id}");
+    let url = format!("ws://{addr}/ws/matches/{id}?format={format}");
     let Ok((mut ws, _)) = tokio_tungstenite::connect_async(url).await else {
         st.closed_early = true;
         return st;
@@ -101,28 +110,23 @@ async fn spectate(addr: SocketAddr, id: String, until: Instant, start: Instant) 
                 break;
             }
         };
-        let Message::Text(t) = msg else { continue };
-        let text = t.as_str();
         if Instant::now() < start {
             continue; // warm-up: connecting clients
         }
-        if text.starts_with("{\"type\":\"snapshot\"") {
-            st.snapshots += 1;
-            let len = text.len() as u64;
-            if let Some(tick) = tick_of(text)
-                && last_tick != Some(tick)
-            {
-                st.distinct_ticks += 1;
-                last_tick = Some(tick);
+        if let Message::Binary(b) = &msg {
+            // A compact snapshot: kind 1, flags (2: with the belief), the tick.
+            if b.len() >= 6 && b[0] == 1 {
+                let tick = u32::from_le_bytes([b[2], b[3], b[4], b[5]]) as u64;
+                st.count(tick, &mut last_tick, b[1] & 2 != 0, b.len() as u64);
             }
-            if text.contains("\"belief\":") {
-                st.bytes_belief += len;
-                st.n_belief += 1;
-                st.max_belief = st.max_belief.max(len);
-            } else {
-                st.bytes_plain += len;
-                st.n_plain += 1;
-                st.max_plain = st.max_plain.max(len);
+            continue;
+        }
+        let Message::Text(t) = msg else { continue };
+        let text = t.as_str();
+        if text.starts_with("{\"type\":\"snapshot\"") {
+            if let Some(tick) = tick_of(text) {
+                let belief = text.contains("\"belief\":");
+                st.count(tick, &mut last_tick, belief, text.len() as u64);
             }
         } else if text.starts_with("{\"type\":\"event\"") {
             st.events += 1;
@@ -130,6 +134,26 @@ async fn spectate(addr: SocketAddr, id: String, until: Instant, start: Instant) 
     }
     let _ = ws.close(None).await;
     st
+}
+
+impl ClientStats {
+    /// One snapshot of `len` bytes for `tick`.
+    fn count(&mut self, tick: u64, last_tick: &mut Option<u64>, belief: bool, len: u64) {
+        self.snapshots += 1;
+        if *last_tick != Some(tick) {
+            self.distinct_ticks += 1;
+            *last_tick = Some(tick);
+        }
+        if belief {
+            self.bytes_belief += len;
+            self.n_belief += 1;
+            self.max_belief = self.max_belief.max(len);
+        } else {
+            self.bytes_plain += len;
+            self.n_plain += 1;
+            self.max_plain = self.max_plain.max(len);
+        }
+    }
 }
 
 fn pct(sorted: &[f64], q: f64) -> f64 {
@@ -213,7 +237,10 @@ async fn run(args: Args) -> Result<(), String> {
     let mut clients = Vec::new();
     for k in 0..args.spectators {
         let id = ids[k % ids.len()].clone();
-        clients.push(tokio::spawn(spectate(addr, id, until, start)));
+        let format = args.format.clone();
+        clients.push(tokio::spawn(async move {
+            spectate(addr, id, until, start, &format).await
+        }));
         if k % 50 == 49 {
             tokio::time::sleep(Duration::from_millis(20)).await;
         }
@@ -363,8 +390,9 @@ async fn run(args: Args) -> Result<(), String> {
         (bb + bp) as f64 / (nb + np).max(1) as f64
     );
     println!(
-        "  throughput       {:.1} MB/s to all spectators",
-        (bb + bp) as f64 / secs / 1e6
+        "  throughput       {:.1} MB/s to all spectators; {:.1} KiB/s per spectator",
+        (bb + bp) as f64 / secs / 1e6,
+        (bb + bp) as f64 / secs / 1024.0 / stats.len().max(1) as f64
     );
     for (id, token) in ids.iter().zip(&owner_tokens) {
         let _ = http

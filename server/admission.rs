@@ -219,6 +219,36 @@ pub fn mb(bytes: u64) -> String {
     format!("{:.0} MB", bytes as f64 / 1e6)
 }
 
+/// Why a new match was not let in.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum NoRoom {
+    /// The server holds its most matches (the number).
+    Server(usize),
+    /// This client holds its most matches.
+    Client {
+        client: crate::access::ClientKey,
+        max: usize,
+    },
+    /// What is admitted already and this would take the server past its memory budget.
+    Memory { held: u64, asked: u64, budget: u64 },
+    /// This client's matches and maps and this would be priced past its share of the
+    /// server's budgets.
+    ClientBudget {
+        client: crate::access::ClientKey,
+        held: Price,
+        asked: Price,
+        /// Its share: bytes, and tick milliseconds.
+        memory: u64,
+        tick_ms: f64,
+    },
+    /// The running matches and this one would be priced past the tick budget.
+    Cpu {
+        held_ms: f64,
+        asked_ms: f64,
+        budget_ms: f64,
+    },
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

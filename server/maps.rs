@@ -428,18 +428,10 @@ impl MapStore {
         self.maps.remove(name)
     }
 
-    /// Bytes the uploaded maps were priced at, together.
-    pub fn uploaded_memory(&self) -> u64 {
-        self.maps.values().map(|m| m.memory).sum()
-    }
-
-    /// Bytes the maps uploaded by `client` were priced at, together.
-    pub fn uploaded_memory_by(&self, client: ClientKey) -> u64 {
-        self.maps
-            .values()
-            .filter(|m| m.owner.client == Some(client))
-            .map(|m| m.memory)
-            .sum()
+    /// Bytes the uploaded maps (all, or `client`'s) were priced at, together.
+    pub fn uploaded_memory(&self, client: Option<ClientKey>) -> u64 {
+        let of = |m: &&StoredMap| client.is_none_or(|c| m.owner.client == Some(c));
+        self.maps.values().filter(of).map(|m| m.memory).sum()
     }
 
     /// Maps uploaded by `client` held now.

@@ -8,6 +8,7 @@
 //! What a match shows of itself (its summary, ground truth, the team's belief, the event
 //! log) is in [`state`]; requests and the small shapes are here.
 
+pub mod compact;
 pub mod frame;
 pub mod settings;
 pub mod state;

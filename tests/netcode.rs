@@ -138,3 +138,91 @@ async fn over_a_slow_lossy_network_every_input_is_applied_in_order() {
         "{events:?}"
     );
 }
+
+/// The next binary message (a compact snapshot), skipping text ones.
+async fn next_compact(ws: &mut Ws) -> Vec<u8> {
+    use futures_util::StreamExt;
+    loop {
+        let msg = tokio::time::timeout(Duration::from_secs(10), ws.stream.next())
+            .await
+            .expect("a message within 10 s")
+            .expect("the connection is open")
+            .expect("a message");
+        if let common::WsMessage::Binary(b) = msg {
+            return b.to_vec();
+        }
+    }
+}
+
+#[tokio::test]
+async fn compact_snapshots_are_small_and_say_what_the_json_says() {
+    let s = TestServer::start().await;
+    let id = s
+        .create_match(
+            json!({"map": "office", "robots": 2, "opponent_control": "human",
+            "clock": "manual", "spectator_delay_s": 0}),
+        )
+        .await;
+    let (_, token) = s.join(&id, "hana").await;
+    let connect = |q: String| {
+        let url = format!("ws://{}/ws/matches/{id}?format=compact{q}", s.addr);
+        async move {
+            Ws {
+                stream: tokio_tungstenite::connect_async(url).await.unwrap().0,
+            }
+        }
+    };
+    let mut player = connect(format!("&token={token}")).await;
+    let mut spectator = connect(String::new()).await;
+    let welcome = player.json().await;
+    assert_eq!(
+        (welcome["protocol"].as_u64(), welcome["format"].as_str()),
+        (Some(2), Some("compact"))
+    );
+    assert_eq!(spectator.json().await["format"], "compact");
+    let mut biggest = (0, 0);
+    let mut with_belief = 0;
+    for _ in 0..40 {
+        let truth = s.step(&id, 1).await;
+        let tick = truth["tick"].as_u64().unwrap() as u32;
+        for (ws, k) in [(&mut player, 0), (&mut spectator, 1)] {
+            let b = loop {
+                let b = next_compact(ws).await;
+                if u32::from_le_bytes([b[2], b[3], b[4], b[5]]) >= tick {
+                    break b;
+                }
+            };
+            // Kind 1, the tick, and the view: the player's (you = slot 0 + 1) or everything.
+            assert_eq!(b[0], 1);
+            assert_eq!(u32::from_le_bytes([b[2], b[3], b[4], b[5]]), tick);
+            assert_eq!(b[1] & 1, k as u8, "spectator flag");
+            assert_eq!(b[12], if k == 0 { 1 } else { 0 }, "you");
+            if b[1] & 2 != 0 {
+                with_belief += 1;
+            }
+            biggest.0 = biggest.0.max(if k == 0 { b.len() } else { 0 });
+            biggest.1 = biggest.1.max(if k == 1 { b.len() } else { 0 });
+        }
+    }
+    // A player's snapshot is tens of bytes (about 1 KiB/s at 20 Hz); a spectator's, with
+    // scans, clouds and the belief, a few KB at most.
+    assert!(
+        biggest.0 < 100,
+        "player snapshots up to {} bytes",
+        biggest.0
+    );
+    assert!(
+        biggest.1 < 4000,
+        "spectator snapshots up to {} bytes",
+        biggest.1
+    );
+    assert!(
+        with_belief >= 3,
+        "{with_belief} snapshots carried the belief"
+    );
+    let bad = format!("ws://{}/ws/matches/{id}?format=xml", s.addr);
+    match tokio_tungstenite::connect_async(bad).await {
+        Err(common::WsError::Http(r)) => assert_eq!(r.status(), 400),
+        other => panic!("format=xml accepted: {:?}", other.is_ok()),
+    }
+}

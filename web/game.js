@@ -4,6 +4,7 @@
 import { segments, visibility, castRay, angleDiff } from "./geometry.js";
 import { draw, fit, roleColor } from "./render.js";
 import { Predictor } from "./predict.js";
+import { CompactDecoder } from "./compact.js";
 
 const $ = (id) => document.getElementById(id);
 const TICK_MS = 50;
@@ -89,13 +90,22 @@ export class Game {
 
   connect() {
     const proto = location.protocol === "https:" ? "wss" : "ws";
-    const q = this.token ? `?token=${encodeURIComponent(this.token)}` : "";
+    // Snapshots in the compact binary form (see compact.js); the rest stays JSON text.
+    const q = `?format=compact${this.token ? `&token=${encodeURIComponent(this.token)}` : ""}`;
     const ws = new WebSocket(`${proto}://${location.host}/ws/matches/${encodeURIComponent(this.matchId)}${q}`);
+    ws.binaryType = "arraybuffer";
+    this.decoder = new CompactDecoder();
     this.ws = ws;
     ws.onopen = () => { debug.connected = true; this.retries = 0; };
     ws.onmessage = (m) => {
+      const binary = typeof m.data !== "string";
+      // What the page receives, for measurements of the bandwidth a client needs.
+      debug.rxBytes = (debug.rxBytes || 0) + (binary ? m.data.byteLength : m.data.length);
       let msg;
-      try { msg = JSON.parse(m.data); } catch { return; }
+      try { msg = binary ? this.decoder.decode(m.data) : JSON.parse(m.data); } catch (e) {
+        debug.errors.push(String(e));
+        return;
+      }
       this.message(msg);
     };
     ws.onclose = (e) => {

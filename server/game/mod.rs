@@ -18,7 +18,7 @@ use tokio::sync::{mpsc, oneshot, watch};
 use tokio_util::sync::CancellationToken;
 
 use crate::access::{ClientKey, Owner};
-use crate::admission::Price;
+use crate::admission::{NoRoom, Price};
 use crate::config::Config;
 use crate::maps::MapStore;
 use crate::metrics::Metrics;
@@ -365,7 +365,7 @@ impl Registry {
             .maps
             .read()
             .unwrap_or_else(|e| e.into_inner())
-            .uploaded_memory();
+            .uploaded_memory(None);
         let memory = admitted.memory + maps + price.memory;
         if memory > cfg.memory_budget_mb * 1_000_000 {
             self.metrics.refuse(crate::metrics::Refusal::Budget);
@@ -389,7 +389,7 @@ impl Registry {
                 .maps
                 .read()
                 .unwrap_or_else(|e| e.into_inner())
-                .uploaded_memory_by(client);
+                .uploaded_memory(Some(client));
             let held: Price = matches
                 .values()
                 .filter(|h| h.owner.client == Some(client))
@@ -582,31 +582,4 @@ impl Registry {
             None => false,
         }
     }
-}
-
-/// Why a new match was not let in.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub enum NoRoom {
-    /// The server holds its most matches (the number).
-    Server(usize),
-    /// This client holds its most matches.
-    Client { client: ClientKey, max: usize },
-    /// What is admitted already and this would take the server past its memory budget.
-    Memory { held: u64, asked: u64, budget: u64 },
-    /// This client's matches and maps and this would be priced past its share of the
-    /// server's budgets.
-    ClientBudget {
-        client: ClientKey,
-        held: Price,
-        asked: Price,
-        /// Its share: bytes, and tick milliseconds.
-        memory: u64,
-        tick_ms: f64,
-    },
-    /// The running matches and this one would be priced past the tick budget.
-    Cpu {
-        held_ms: f64,
-        asked_ms: f64,
-        budget_ms: f64,
-    },
 }

@@ -4,8 +4,8 @@
 
 use axum::http::StatusCode;
 
+use crate::admission::NoRoom;
 use crate::admission::{self, Price};
-use crate::game::NoRoom;
 use crate::http::{ApiError, AppState};
 use crate::metrics::Refusal;
 

@@ -64,11 +64,23 @@ pub async fn upgrade(
     let handle = registry
         .get(&id)
         .ok_or_else(|| ApiError::not_found(format!("no match {id}")))?;
-    if let Some(k) = query.keys().find(|k| k.as_str() != "token") {
+    if let Some(k) = query
+        .keys()
+        .find(|k| !matches!(k.as_str(), "token" | "format"))
+    {
         return Err(ApiError::bad_request(format!(
-            "{k}: unknown query parameter (only token)"
+            "{k}: unknown query parameter (token, format)"
         )));
     }
+    let compact = match query.get("format").map(String::as_str) {
+        None | Some("json") => false,
+        Some("compact") => true,
+        Some(other) => {
+            return Err(ApiError::bad_request(format!(
+                "format: {other:?} is not a snapshot format (json or compact)"
+            )));
+        }
+    };
     let ws = ws.map_err(|e| {
         ApiError::new(
             axum::http::StatusCode::BAD_REQUEST,
@@ -123,9 +135,9 @@ pub async fn upgrade(
                     _open: registry.connection(),
                     _client: registry.metrics.client(role),
                 };
-                Connection::new(socket, handle, seat, &registry, guards)
-                    .run()
-                    .await;
+                let mut connection = Connection::new(socket, handle, seat, &registry, guards);
+                connection.compact = compact;
+                connection.run().await;
                 tracing::debug!("disconnected");
             }
             .instrument(span)
@@ -165,6 +177,11 @@ struct Connection {
     /// player whose opponent was tagged and has left the arena.
     watching: bool,
     belief: bool,
+    /// Snapshots as compact binary messages (else JSON text), and the ticks whose snapshot
+    /// last carried the slow parts and the belief (each is sent again once it is due).
+    compact: bool,
+    slow_at: Option<u64>,
+    belief_at: Option<u64>,
     last_seq: u64,
     finished_sent: bool,
     messages: Bucket,
@@ -190,6 +207,9 @@ impl Connection {
             socket,
             watching: seat.is_none(),
             belief: seat.is_none(),
+            compact: false,
+            slow_at: None,
+            belief_at: None,
             role: if seat.is_some() {
                 "player"
             } else {
@@ -271,6 +291,8 @@ impl Connection {
             spectator_delay_s: self.handle.hub.delay_ticks as f64
                 / lasertag_core::sim::TICK_HZ as f64,
             kinematics: self.handle.hub.kinematics,
+            protocol: 2,
+            format: if self.compact { "compact" } else { "json" },
             belief: self.belief,
             limits: Limits {
                 max_message_bytes: self.config.max_message_bytes,
@@ -372,6 +394,52 @@ impl Connection {
 
     /// Sends a frame's snapshot, the events since the last one sent, and `finished` once.
     async fn deliver(&mut self, frame: &Frame, with_events: bool) -> Result<(), End> {
+        if self.compact {
+            self.deliver_compact(frame).await?;
+        } else {
+            self.deliver_json(frame).await?;
+        }
+        self.deliver_events(frame, with_events).await
+    }
+
+    /// The compact snapshot of `frame` (see `protocol::compact`).
+    async fn deliver_compact(&mut self, frame: &Frame) -> Result<(), End> {
+        use crate::protocol::compact::{self, BELIEF_COMPACT_EVERY, SLOW_EVERY};
+        let finished = frame.status == MatchStatus::Finished;
+        let due = |at: Option<u64>, every: u64| {
+            finished || at.is_none_or(|t| frame.tick >= t + every || frame.tick < t)
+        };
+        let slow = due(self.slow_at, SLOW_EVERY);
+        let belief =
+            self.belief && frame.belief.is_some() && due(self.belief_at, BELIEF_COMPACT_EVERY);
+        let visible = match &self.seat {
+            Some(seat) if !self.watching => {
+                visible_to(frame, &self.handle.hub.arena, seat.slot).map(|v| (seat.slot, v))
+            }
+            _ => None,
+        };
+        let bytes = match &visible {
+            None => wire::spectator_compact(frame, belief, slow),
+            Some((slot, v)) => compact::snapshot(frame, Some(*slot), Some(v), belief, false).into(),
+        };
+        if visible.is_none() && slow {
+            self.slow_at = Some(frame.tick);
+        }
+        if belief {
+            self.belief_at = Some(frame.tick);
+        }
+        self.metrics
+            .snapshot_bytes
+            .with_label_values(&[self.role])
+            .inc_by(bytes.len() as u64);
+        match tokio::time::timeout(SEND_TIMEOUT, self.socket.send(Message::Binary(bytes))).await {
+            Ok(Ok(())) => Ok(()),
+            _ => Err(End::Gone),
+        }
+    }
+
+    /// The JSON snapshot of `frame`.
+    async fn deliver_json(&mut self, frame: &Frame) -> Result<(), End> {
         let snapshot = match &self.seat {
             Some(_) if self.watching => wire::spectator_snapshot(frame, self.belief),
             None => wire::spectator_snapshot(frame, self.belief),
@@ -385,7 +453,11 @@ impl Connection {
             .snapshot_bytes
             .with_label_values(&[self.role])
             .inc_by(snapshot.len() as u64);
-        self.send(snapshot).await?;
+        self.send(snapshot).await
+    }
+
+    /// The events since the last one sent, and `finished` once.
+    async fn deliver_events(&mut self, frame: &Frame, with_events: bool) -> Result<(), End> {
         if with_events && frame.last_seq > self.last_seq {
             if self.last_seq < frame.since_seq {
                 // Frames were skipped while this client was slow: fetch what it missed.

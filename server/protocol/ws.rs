@@ -26,6 +26,8 @@ pub struct WireCache {
     spectator: OnceLock<Utf8Bytes>,
     spectator_belief: OnceLock<Utf8Bytes>,
     belief: OnceLock<String>,
+    /// Compact spectator snapshots, by (with the belief, with the slow parts).
+    compact: [OnceLock<axum::body::Bytes>; 4],
 }
 
 /// A message from a client. Unknown types and fields are errors.
@@ -168,6 +170,10 @@ pub struct Welcome<'a> {
     pub spectator_delay_s: f64,
     /// How the player's opponent moves, for prediction on the client.
     pub kinematics: Kinematics,
+    /// The version of these messages (2: numbered inputs, `ack`, compact snapshots).
+    pub protocol: u32,
+    /// `json` or `compact`: how this connection's snapshots come (`?format=`).
+    pub format: &'static str,
     pub limits: Limits,
 }
 
@@ -452,6 +458,15 @@ pub fn spectator_snapshot(frame: &Frame, belief: bool) -> Utf8Bytes {
     } else {
         frame.wire.spectator.get_or_init(make).clone()
     }
+}
+
+/// A spectator's compact snapshot (see [`crate::protocol::compact`]): serialised once per
+/// frame and variant, and shared.
+pub fn spectator_compact(frame: &Frame, belief: bool, slow: bool) -> axum::body::Bytes {
+    let belief = belief && frame.belief.is_some();
+    frame.wire.compact[belief as usize * 2 + slow as usize]
+        .get_or_init(|| crate::protocol::compact::snapshot(frame, None, None, belief, slow).into())
+        .clone()
 }
 
 /// A player's snapshot: what its opponent sees, plus the belief when switched on.

@@ -1,0 +1,224 @@
+//! Compact snapshots: the same content as the JSON `snapshot`, as a binary WebSocket message
+//! for clients that ask for it (`?format=compact`, what the game page uses).
+//!
+//! JSON spends most of a spectator's bytes on digits: 181 scan ranges per robot and 480
+//! belief points every 4th tick came to about 74 KiB/s. Here positions are centimetres in a
+//! `u16` (maps are at most 500 m), headings a `u16` turn, scan ranges a byte each (1/32 m),
+//! and the parts a viewer can do with less often come less often: scans and localisation
+//! clouds every [`SLOW_EVERY`] ticks, the belief every [`BELIEF_COMPACT_EVERY`]. The page
+//! keeps the last of each until the next arrives. `web/compact.js` is the decoder; the
+//! layout is in docs/api.md ("Compact snapshots").
+//!
+//! All integers little-endian. A message is one snapshot:
+//!
+//! ```text
+//! u8 kind = 1 | u8 flags | u32 tick | u16 time_left (1/10 s) | u32 ack | u8 you (slot+1, 0)
+//! u8 tags | u16 robot_tags | u8 opponents | u8 opponents_left | u8 robots_frozen
+//! u8 robots, each: u8 index | u16 x | u16 y | u16 theta | u8 bits (frozen, goal, extras)
+//!     [goal: u16 x, y, theta] [extras: u16 estimate x, y, theta | u16 spread (mm)]
+//!     [slow: u8 cloud points, each u16 x, y | u8 beams, each u8 range]
+//! u8 opponents, each: u8 index | u16 x | u16 y | u16 theta | u8 bits (tagged, control ×2,
+//!     name, connected) [name: u8 bytes, UTF-8]
+//! [belief: u32 tick | u8 roles, each: u32 id | u8 count | u8 bits (tagged, state ×2) |
+//!     u8 confidence (/255) | u32 particles | u16 mean x, y | u16 points, each u16 x, y]
+//! ```
+//!
+//! `flags`: 1 spectator view, 2 belief, 4 slow parts, 8 finished, 16 robots won, 32
+//! opponents won.
+
+use crate::protocol::frame::{BeliefView, Frame, Visible};
+use lasertag_core::world::{ControlKind, MatchStatus, Side};
+
+/// Scans and clouds come with every this many ticks' snapshot (5 Hz).
+pub const SLOW_EVERY: u64 = 4;
+/// The belief comes with every this many ticks' snapshot (2.5 Hz), when switched on.
+pub const BELIEF_COMPACT_EVERY: u64 = 8;
+
+/// A coordinate in metres as centimetres, clamped to what a `u16` holds.
+fn cm(v: f32) -> u16 {
+    (v * 100.0).round().clamp(0.0, u16::MAX as f32) as u16
+}
+
+/// A heading in radians as a fraction of a turn.
+fn turn(theta: f32) -> u16 {
+    let t = theta.rem_euclid(std::f32::consts::TAU) / std::f32::consts::TAU;
+    ((t * 65_536.0).round() as u32 % 65_536) as u16
+}
+
+struct Out(Vec<u8>);
+
+impl Out {
+    fn u8(&mut self, v: u8) {
+        self.0.push(v);
+    }
+    fn u16(&mut self, v: u16) {
+        self.0.extend_from_slice(&v.to_le_bytes());
+    }
+    fn u32(&mut self, v: u32) {
+        self.0.extend_from_slice(&v.to_le_bytes());
+    }
+    fn count(&mut self, n: usize) {
+        self.u8(n.min(u8::MAX as usize) as u8);
+    }
+    fn pose(&mut self, x: f32, y: f32, theta: f32) {
+        self.u16(cm(x));
+        self.u16(cm(y));
+        self.u16(turn(theta));
+    }
+}
+
+/// The compact form of `frame` for a viewer: everything (`visible` is `None`), or what the
+/// player of slot `you` sees; with the belief when `belief` (and this frame carries one),
+/// and with the scans and clouds when `slow` (spectators). Each connection decides when
+/// those are due ([`SLOW_EVERY`], [`BELIEF_COMPACT_EVERY`]).
+pub fn snapshot(
+    frame: &Frame,
+    you: Option<usize>,
+    visible: Option<&Visible>,
+    belief: bool,
+    slow: bool,
+) -> Vec<u8> {
+    let spectator = visible.is_none();
+    let slow = spectator && slow;
+    let belief = belief.then_some(frame.belief.as_deref()).flatten();
+    let mut o = Out(Vec::with_capacity(256));
+    let mut flags = 0u8;
+    if spectator {
+        flags |= 1;
+    }
+    if belief.is_some() {
+        flags |= 2;
+    }
+    if slow {
+        flags |= 4;
+    }
+    if frame.status == MatchStatus::Finished {
+        flags |= 8;
+    }
+    match frame.winner {
+        Some(Side::Robots) => flags |= 16,
+        Some(Side::Opponents) => flags |= 32,
+        None => {}
+    }
+    o.u8(1);
+    o.u8(flags);
+    o.u32(frame.tick.min(u32::MAX as u64) as u32);
+    let left = (frame.time_limit_s - frame.time_s).max(0.0) * 10.0;
+    o.u16(left.round().min(u16::MAX as f64) as u16);
+    let ack = you
+        .and_then(|i| frame.opponents.get(i))
+        .map_or(0, |p| p.ack);
+    o.u32(ack.min(u32::MAX as u64) as u32);
+    o.u8(you.map_or(0, |i| (i + 1).min(u8::MAX as usize) as u8));
+    o.count(frame.opponents.iter().filter(|p| p.tagged).count());
+    o.u16(frame.robot_tags.min(u16::MAX as u32) as u16);
+    o.count(frame.opponents.len());
+    o.count(frame.opponents.iter().filter(|p| !p.tagged).count());
+    o.count(frame.robots.iter().filter(|r| r.frozen).count());
+    let robots: Vec<_> = frame
+        .robots
+        .iter()
+        .enumerate()
+        .filter(|(i, _)| visible.is_none_or(|v| v.robots[*i]))
+        .take(u8::MAX as usize)
+        .collect();
+    o.count(robots.len());
+    for (i, r) in robots {
+        o.u8(i as u8);
+        o.pose(r.pose.pos.x, r.pose.pos.y, r.pose.theta);
+        let goal = r.goal.filter(|_| spectator);
+        o.u8(r.frozen as u8 | (goal.is_some() as u8) << 1 | (spectator as u8) << 2);
+        if let Some(g) = goal {
+            o.pose(g.pos.x, g.pos.y, g.theta);
+        }
+        if spectator {
+            o.pose(r.estimate.pos.x, r.estimate.pos.y, r.estimate.theta);
+            o.u16((r.spread * 1000.0).round().clamp(0.0, u16::MAX as f32) as u16);
+        }
+        if slow {
+            o.count(r.cloud.len());
+            for p in r.cloud.iter().take(u8::MAX as usize) {
+                o.u16(p[0].clamp(0, u16::MAX as i32) as u16);
+                o.u16(p[1].clamp(0, u16::MAX as i32) as u16);
+            }
+            o.count(r.scan.len());
+            for v in r.scan.iter().take(u8::MAX as usize) {
+                o.u8((v * 32.0).round().clamp(0.0, 255.0) as u8);
+            }
+        }
+    }
+    let opponents: Vec<_> = frame
+        .opponents
+        .iter()
+        .enumerate()
+        .filter(|(i, _)| visible.is_none_or(|v| v.opponents[*i]))
+        .take(u8::MAX as usize)
+        .collect();
+    o.count(opponents.len());
+    for (i, p) in opponents {
+        o.u8(i as u8);
+        o.pose(p.pose.pos.x, p.pose.pos.y, p.pose.theta);
+        let control = match p.control {
+            ControlKind::Bot => 0u8,
+            ControlKind::Api => 1,
+            ControlKind::Human => 2,
+        };
+        let name = p
+            .player
+            .as_deref()
+            .map(|n| &n.as_bytes()[..n.len().min(64)]);
+        o.u8(p.tagged as u8
+            | control << 1
+            | (name.is_some() as u8) << 3
+            | (p.connected as u8) << 4);
+        if let Some(n) = name {
+            o.count(n.len());
+            o.0.extend_from_slice(n);
+        }
+    }
+    if let Some(b) = belief {
+        encode_belief(&mut o, b);
+    }
+    o.0
+}
+
+fn encode_belief(o: &mut Out, b: &BeliefView) {
+    o.u32(b.tick.min(u32::MAX as u64) as u32);
+    o.count(b.roles.len());
+    for r in b.roles.iter().take(u8::MAX as usize) {
+        o.u32(r.id.min(u32::MAX as u64) as u32);
+        o.count(r.count as usize);
+        let state = match r.state {
+            crate::protocol::ConfidenceState::Valid => 0u8,
+            crate::protocol::ConfidenceState::Suspicious => 1,
+            crate::protocol::ConfidenceState::Invalid => 2,
+        };
+        o.u8(r.tagged as u8 | state << 1);
+        o.u8((r.confidence.clamp(0.0, 1.0) * 255.0).round() as u8);
+        o.u32(r.particles.min(u32::MAX as usize) as u32);
+        o.u16(cm(r.mean[0]));
+        o.u16(cm(r.mean[1]));
+        let n = r.points.len().min(u16::MAX as usize);
+        o.u16(n as u16);
+        for p in &r.points[..n] {
+            o.u16(p[0].clamp(0, u16::MAX as i32) as u16);
+            o.u16(p[1].clamp(0, u16::MAX as i32) as u16);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn headings_and_coordinates_round_to_their_units() {
+        assert_eq!(turn(0.0), 0);
+        assert_eq!(turn(std::f32::consts::PI), 32_768);
+        assert_eq!(turn(-std::f32::consts::FRAC_PI_2), 49_152);
+        assert_eq!(turn(std::f32::consts::TAU - 1e-7), 0);
+        assert_eq!(cm(12.344), 1234);
+        assert_eq!(cm(-1.0), 0);
+        assert_eq!(cm(1e6), u16::MAX);
+    }
+}
