@@ -64,8 +64,7 @@ impl Bearer {
                 ),
             ));
         };
-        let admin = state.registry.config.admin_token.as_ref();
-        if admin.is_some_and(|a| same_secret(&a.0, token)) || owner.is_some_and(|o| o.is(token)) {
+        if opens(state, owner, token) {
             return Ok(());
         }
         metrics.refuse(Refusal::Forbidden);
@@ -82,10 +81,24 @@ impl Bearer {
     /// token, as everybody does without a token; a token that is neither is refused (403)
     /// rather than quietly shown the delayed view.
     pub fn sight(&self, state: &AppState, owner: &Owner, what: &str) -> Result<Sight, ApiError> {
-        if self.0.is_none() {
+        let Some(token) = &self.0 else {
             return Ok(Sight::Public);
+        };
+        if opens(state, Some(owner), token) {
+            return Ok(Sight::Live);
         }
-        self.may_change(state, Some(owner), what)?;
-        Ok(Sight::Live)
+        state.registry.metrics.refuse(Refusal::Forbidden);
+        Err(ApiError::new(
+            StatusCode::FORBIDDEN,
+            format!(
+                "authorization: that token does not open the live view of {what} (its owner_token or the admin token does; without a token a match people play is shown late)"
+            ),
+        ))
     }
+}
+
+/// Whether `token` is the admin token or `owner`'s.
+fn opens(state: &AppState, owner: Option<&Owner>, token: &str) -> bool {
+    let admin = state.registry.config.admin_token.as_ref();
+    admin.is_some_and(|a| same_secret(&a.0, token)) || owner.is_some_and(|o| o.is(token))
 }
