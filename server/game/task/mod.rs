@@ -5,6 +5,8 @@
 //! the people who play: their tokens, which connection is theirs, and how long a dropped
 //! player has to come back (a freed slot a person took from a bot goes back to the bot).
 //!
+//! The people at the match and their inputs are in `seats.rs`.
+//!
 //! Long file: one match task's loop, its messages and its clean-up rules share the
 //! task's state.
 
@@ -13,6 +15,9 @@ use std::sync::{Arc, OnceLock};
 use std::time::{Duration, Instant};
 
 use tokio::sync::{mpsc, oneshot, watch};
+
+mod seats;
+use seats::Player;
 use tokio::time::MissedTickBehavior;
 use tracing::Instrument;
 
@@ -32,49 +37,12 @@ use lasertag_core::world::{MatchStatus, World};
 const OVERRUN_WINDOW: usize = 200;
 const OVERRUN_LIMIT: usize = 100;
 
-/// Numbered inputs a player may have queued (ticks ahead of the match): a client whose
-/// clock runs fast, or that sends a burst after a stall, would otherwise build up a lag of
-/// its own; past this the oldest are merged away.
-const MAX_QUEUED_INPUTS: usize = 8;
-
 /// Ticks a manual step runs before it lets other requests in.
 const STEP_CHUNK: u64 = 250;
 /// Tick compute times kept for the stats percentiles.
 const TICK_WINDOW: usize = 4096;
 /// How often the task looks for players whose connection has gone.
 const HOUSEKEEPING: Duration = Duration::from_millis(100);
-
-/// A person holding an opponent slot.
-#[derive(Debug)]
-struct Player {
-    id: String,
-    name: Arc<str>,
-    token: String,
-    /// Bumped at every connection with this token; inputs from older ones are ignored.
-    generation: u64,
-    /// Held while a connection plays this slot: its receiver is dropped when the
-    /// connection ends (so the task notices), and sending on it closes an older connection.
-    kick: Option<oneshot::Sender<()>>,
-    /// Since when nobody plays this slot (joined but not connected yet, or dropped).
-    away_since: Option<Instant>,
-    /// The bot a person took over (the showcase), given back when the slot is freed.
-    bot: Option<Control>,
-    /// Whether a connection ever played it: until then the slot is only held, briefly.
-    ever_connected: bool,
-    /// Who joined (for the one-unconnected-hold-per-client rule).
-    client: Option<ClientKey>,
-    /// Numbered inputs not applied yet, oldest first, one per tick.
-    inputs: std::collections::VecDeque<(u64, HumanInput)>,
-    /// The `seq` of the newest numbered input received, and of the last applied.
-    received: u64,
-    applied: u64,
-}
-
-impl Player {
-    fn connected(&self) -> bool {
-        self.kick.as_ref().is_some_and(|k| !k.is_closed())
-    }
-}
 
 struct PendingStep {
     remaining: u64,
@@ -333,19 +301,6 @@ impl MatchTask {
         tracing::info!(tick = self.world.tick, "match ended");
     }
 
-    /// Hands each player's next numbered input to the world: one per tick, in order. With
-    /// none queued, the last one holds (keys still down).
-    fn feed_inputs(&mut self) {
-        for (slot, p) in self.players.iter_mut().enumerate() {
-            if let Some(p) = p
-                && let Some((seq, input)) = p.inputs.pop_front()
-            {
-                self.world.set_human_input(slot, input);
-                p.applied = seq;
-            }
-        }
-    }
-
     /// One tick of the world, its team's halves timed into the metrics.
     fn step(&mut self) {
         self.feed_inputs();
@@ -475,34 +430,7 @@ impl MatchTask {
                 input,
                 seq,
             } => {
-                let Some(p) = self.players[slot]
-                    .as_mut()
-                    .filter(|p| p.generation == generation && p.connected())
-                else {
-                    return;
-                };
-                match seq {
-                    None => {
-                        self.world.set_human_input(slot, input);
-                    }
-                    // Late or repeated: already applied or queued.
-                    Some(s) if s <= p.received => {}
-                    Some(s) => {
-                        p.received = s;
-                        p.inputs.push_back((s, input));
-                        while p.inputs.len() > MAX_QUEUED_INPUTS {
-                            // Merge the oldest into the next: its tag press is not lost.
-                            if let Some((_, old)) = p.inputs.pop_front()
-                                && let Some((_, next)) = p.inputs.front_mut()
-                                && old.tag
-                                && !next.tag
-                            {
-                                next.tag = true;
-                                next.seen_tick = old.seen_tick;
-                            }
-                        }
-                    }
-                }
+                self.queue_input(slot, generation, input, seq);
             }
         }
     }
@@ -654,127 +582,6 @@ impl MatchTask {
         self.meta.free_slots = (0..self.players.len())
             .filter(|&i| self.slot_free(i))
             .count();
-    }
-
-    fn slot_free(&self, i: usize) -> bool {
-        let o = &self.world.opponents[i];
-        self.world.status == MatchStatus::Running
-            && self.players[i].is_none()
-            && !o.tagged
-            && match o.control {
-                Control::Human(_) => true,
-                Control::Bot(_) => self.meta.bots_joinable,
-                Control::Api(_) => false,
-            }
-    }
-
-    fn join(&mut self, name: String, client: Option<ClientKey>) -> Result<Joined, MatchError> {
-        let id = &self.meta.id;
-        // The length counts what was sent, as the OpenAPI schema (`maxLength`) does; the
-        // name kept is trimmed.
-        let sent = name.chars().count();
-        let name = name.trim().to_string();
-        if name.is_empty() || sent > 32 || name.chars().any(char::is_control) {
-            return Err(MatchError::BadRequest(
-                "name: must be 1 to 32 printable characters".into(),
-            ));
-        }
-        if self.world.status == MatchStatus::Finished {
-            return Err(MatchError::Conflict(format!("match {id} has finished")));
-        }
-        let max = self.settings.max_players;
-        if self.players.iter().flatten().count() >= max {
-            self.settings.metrics.refuse(Refusal::PlayersFull);
-            return Err(MatchError::Conflict(format!(
-                "players: match {id} is at this server's limit of {max} per match"
-            )));
-        }
-        // A slot joined but not played is held only briefly, and one client holds at most
-        // one such slot at a time: otherwise a few anonymous requests keep every slot taken.
-        if let Some(c) = client {
-            let held = self
-                .players
-                .iter()
-                .flatten()
-                .filter(|p| p.client == Some(c) && !p.ever_connected)
-                .count();
-            if held >= self.settings.max_holds {
-                self.settings.metrics.refuse(Refusal::ClientQuota);
-                return Err(MatchError::TooMany(format!(
-                    "{c} holds {held} slot(s) of match {id} without playing them, its most; connect with a token, or wait {} s for a hold to lapse",
-                    self.settings.join_hold.as_secs_f64()
-                )));
-            }
-        }
-        let slot = (0..self.players.len())
-            .find(|&i| self.slot_free(i))
-            .ok_or_else(|| MatchError::Conflict(format!("match {id} has no free opponent slot")))?;
-        let o = &mut self.world.opponents[slot];
-        let bot = match o.control {
-            Control::Bot(_) => Some(std::mem::replace(
-                &mut o.control,
-                Control::Human(HumanInput::default()),
-            )),
-            _ => None,
-        };
-        let player = Player {
-            id: random_id(8),
-            name: name.as_str().into(),
-            token: random_id(24),
-            generation: 0,
-            kick: None,
-            away_since: Some(Instant::now()),
-            bot,
-            ever_connected: false,
-            client,
-            inputs: Default::default(),
-            received: 0,
-            applied: 0,
-        };
-        tracing::info!(player = %player.name, slot, "player joined");
-        let joined = Joined {
-            player_id: player.id.clone(),
-            opponent_id: AgentId::Opponent(slot).to_string(),
-            token: player.token.clone(),
-        };
-        self.players[slot] = Some(player);
-        self.world.log_player(slot, name, true);
-        Ok(joined)
-    }
-
-    /// Seats a WebSocket connection on the slot `token` belongs to; an older connection with
-    /// the same token is closed.
-    fn connect(&mut self, token: &str) -> Result<Seat, MatchError> {
-        let slot = self
-            .players
-            .iter()
-            .position(|p| p.as_ref().is_some_and(|p| same_secret(&p.token, token)))
-            .ok_or_else(|| {
-                MatchError::Unauthorized(format!("token: not a player of match {}", self.meta.id))
-            })?;
-        let Some(p) = self.players[slot].as_mut() else {
-            return Err(MatchError::Unauthorized("token: slot was freed".into()));
-        };
-        if let Some(old) = p.kick.take() {
-            let _ = old.send(());
-        }
-        let (kick, kicked) = oneshot::channel();
-        p.kick = Some(kick);
-        p.ever_connected = true;
-        p.generation += 1;
-        // A new connection numbers its inputs from 1 again.
-        p.inputs.clear();
-        p.received = 0;
-        p.applied = 0;
-        p.away_since = None;
-        tracing::info!(player = %p.name, slot, generation = p.generation, "player connected");
-        Ok(Seat {
-            slot,
-            opponent_id: AgentId::Opponent(slot).to_string(),
-            name: p.name.to_string(),
-            generation: p.generation,
-            kicked,
-        })
     }
 
     /// Notices dropped players (they stand still), frees the slots of those gone too long,

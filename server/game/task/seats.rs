@@ -1,0 +1,220 @@
+//! The people at a match: who holds which opponent slot, joining and connecting, and the
+//! numbered inputs each one's connection sends, queued and applied one per tick.
+
+use super::*;
+
+/// Numbered inputs a player may have queued (ticks ahead of the match): a client whose
+/// clock runs fast, or that sends a burst after a stall, would otherwise build up a lag of
+/// its own; past this the oldest are merged away.
+const MAX_QUEUED_INPUTS: usize = 8;
+
+/// A person holding an opponent slot.
+#[derive(Debug)]
+pub(super) struct Player {
+    pub(super) id: String,
+    pub(super) name: Arc<str>,
+    pub(super) token: String,
+    /// Bumped at every connection with this token; inputs from older ones are ignored.
+    pub(super) generation: u64,
+    /// Held while a connection plays this slot: its receiver is dropped when the
+    /// connection ends (so the task notices), and sending on it closes an older connection.
+    pub(super) kick: Option<oneshot::Sender<()>>,
+    /// Since when nobody plays this slot (joined but not connected yet, or dropped).
+    pub(super) away_since: Option<Instant>,
+    /// The bot a person took over (the showcase), given back when the slot is freed.
+    pub(super) bot: Option<Control>,
+    /// Whether a connection ever played it: until then the slot is only held, briefly.
+    pub(super) ever_connected: bool,
+    /// Who joined (for the one-unconnected-hold-per-client rule).
+    pub(super) client: Option<ClientKey>,
+    /// Numbered inputs not applied yet, oldest first, one per tick.
+    pub(super) inputs: std::collections::VecDeque<(u64, HumanInput)>,
+    /// The `seq` of the newest numbered input received, and of the last applied.
+    pub(super) received: u64,
+    pub(super) applied: u64,
+}
+
+impl Player {
+    pub(super) fn connected(&self) -> bool {
+        self.kick.as_ref().is_some_and(|k| !k.is_closed())
+    }
+}
+
+impl MatchTask {
+    /// Hands each player's next numbered input to the world: one per tick, in order. With
+    /// none queued, the last one holds (keys still down).
+    pub(super) fn feed_inputs(&mut self) {
+        for (slot, p) in self.players.iter_mut().enumerate() {
+            if let Some(p) = p
+                && let Some((seq, input)) = p.inputs.pop_front()
+            {
+                self.world.set_human_input(slot, input);
+                p.applied = seq;
+            }
+        }
+    }
+
+    /// A seated connection's keys: numbered ones are queued (one per tick, in order), others
+    /// hold from the next tick. Ignored unless `generation` is the slot's current one.
+    pub(super) fn queue_input(
+        &mut self,
+        slot: usize,
+        generation: u64,
+        input: HumanInput,
+        seq: Option<u64>,
+    ) {
+        let Some(p) = self.players[slot]
+            .as_mut()
+            .filter(|p| p.generation == generation && p.connected())
+        else {
+            return;
+        };
+        match seq {
+            None => {
+                self.world.set_human_input(slot, input);
+            }
+            // Late or repeated: already applied or queued.
+            Some(s) if s <= p.received => {}
+            Some(s) => {
+                p.received = s;
+                p.inputs.push_back((s, input));
+                while p.inputs.len() > MAX_QUEUED_INPUTS {
+                    // Merge the oldest into the next: its tag press is not lost.
+                    if let Some((_, old)) = p.inputs.pop_front()
+                        && let Some((_, next)) = p.inputs.front_mut()
+                        && old.tag
+                        && !next.tag
+                    {
+                        next.tag = true;
+                        next.seen_tick = old.seen_tick;
+                    }
+                }
+            }
+        }
+    }
+
+    pub(super) fn slot_free(&self, i: usize) -> bool {
+        let o = &self.world.opponents[i];
+        self.world.status == MatchStatus::Running
+            && self.players[i].is_none()
+            && !o.tagged
+            && match o.control {
+                Control::Human(_) => true,
+                Control::Bot(_) => self.meta.bots_joinable,
+                Control::Api(_) => false,
+            }
+    }
+
+    pub(super) fn join(
+        &mut self,
+        name: String,
+        client: Option<ClientKey>,
+    ) -> Result<Joined, MatchError> {
+        let id = &self.meta.id;
+        // The length counts what was sent, as the OpenAPI schema (`maxLength`) does; the
+        // name kept is trimmed.
+        let sent = name.chars().count();
+        let name = name.trim().to_string();
+        if name.is_empty() || sent > 32 || name.chars().any(char::is_control) {
+            return Err(MatchError::BadRequest(
+                "name: must be 1 to 32 printable characters".into(),
+            ));
+        }
+        if self.world.status == MatchStatus::Finished {
+            return Err(MatchError::Conflict(format!("match {id} has finished")));
+        }
+        let max = self.settings.max_players;
+        if self.players.iter().flatten().count() >= max {
+            self.settings.metrics.refuse(Refusal::PlayersFull);
+            return Err(MatchError::Conflict(format!(
+                "players: match {id} is at this server's limit of {max} per match"
+            )));
+        }
+        // A slot joined but not played is held only briefly, and one client holds at most
+        // one such slot at a time: otherwise a few anonymous requests keep every slot taken.
+        if let Some(c) = client {
+            let held = self
+                .players
+                .iter()
+                .flatten()
+                .filter(|p| p.client == Some(c) && !p.ever_connected)
+                .count();
+            if held >= self.settings.max_holds {
+                self.settings.metrics.refuse(Refusal::ClientQuota);
+                return Err(MatchError::TooMany(format!(
+                    "{c} holds {held} slot(s) of match {id} without playing them, its most; connect with a token, or wait {} s for a hold to lapse",
+                    self.settings.join_hold.as_secs_f64()
+                )));
+            }
+        }
+        let slot = (0..self.players.len())
+            .find(|&i| self.slot_free(i))
+            .ok_or_else(|| MatchError::Conflict(format!("match {id} has no free opponent slot")))?;
+        let o = &mut self.world.opponents[slot];
+        let bot = match o.control {
+            Control::Bot(_) => Some(std::mem::replace(
+                &mut o.control,
+                Control::Human(HumanInput::default()),
+            )),
+            _ => None,
+        };
+        let player = Player {
+            id: random_id(8),
+            name: name.as_str().into(),
+            token: random_id(24),
+            generation: 0,
+            kick: None,
+            away_since: Some(Instant::now()),
+            bot,
+            ever_connected: false,
+            client,
+            inputs: Default::default(),
+            received: 0,
+            applied: 0,
+        };
+        tracing::info!(player = %player.name, slot, "player joined");
+        let joined = Joined {
+            player_id: player.id.clone(),
+            opponent_id: AgentId::Opponent(slot).to_string(),
+            token: player.token.clone(),
+        };
+        self.players[slot] = Some(player);
+        self.world.log_player(slot, name, true);
+        Ok(joined)
+    }
+
+    /// Seats a WebSocket connection on the slot `token` belongs to; an older connection with
+    /// the same token is closed.
+    pub(super) fn connect(&mut self, token: &str) -> Result<Seat, MatchError> {
+        let slot = self
+            .players
+            .iter()
+            .position(|p| p.as_ref().is_some_and(|p| same_secret(&p.token, token)))
+            .ok_or_else(|| {
+                MatchError::Unauthorized(format!("token: not a player of match {}", self.meta.id))
+            })?;
+        let Some(p) = self.players[slot].as_mut() else {
+            return Err(MatchError::Unauthorized("token: slot was freed".into()));
+        };
+        if let Some(old) = p.kick.take() {
+            let _ = old.send(());
+        }
+        let (kick, kicked) = oneshot::channel();
+        p.kick = Some(kick);
+        p.ever_connected = true;
+        p.generation += 1;
+        // A new connection numbers its inputs from 1 again.
+        p.inputs.clear();
+        p.received = 0;
+        p.applied = 0;
+        p.away_since = None;
+        tracing::info!(player = %p.name, slot, generation = p.generation, "player connected");
+        Ok(Seat {
+            slot,
+            opponent_id: AgentId::Opponent(slot).to_string(),
+            name: p.name.to_string(),
+            generation: p.generation,
+            kicked,
+        })
+    }
+}
