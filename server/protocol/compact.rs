@@ -60,6 +60,11 @@ impl Out {
     fn count(&mut self, n: usize) {
         self.u8(n.min(u8::MAX as usize) as u8);
     }
+    /// A point already in centimetres.
+    fn point(&mut self, p: [i32; 2]) {
+        self.u16(p[0].clamp(0, u16::MAX as i32) as u16);
+        self.u16(p[1].clamp(0, u16::MAX as i32) as u16);
+    }
     fn pose(&mut self, x: f32, y: f32, theta: f32) {
         self.u16(cm(x));
         self.u16(cm(y));
@@ -115,13 +120,7 @@ pub fn snapshot(
     o.count(frame.opponents.len());
     o.count(frame.opponents.iter().filter(|p| !p.tagged).count());
     o.count(frame.robots.iter().filter(|r| r.frozen).count());
-    let robots: Vec<_> = frame
-        .robots
-        .iter()
-        .enumerate()
-        .filter(|(i, _)| visible.is_none_or(|v| v.robots[*i]))
-        .take(u8::MAX as usize)
-        .collect();
+    let robots = shown(&frame.robots, visible.map(|v| &v.robots[..]));
     o.count(robots.len());
     for (i, r) in robots {
         o.u8(i as u8);
@@ -138,8 +137,7 @@ pub fn snapshot(
         if slow {
             o.count(r.cloud.len());
             for p in r.cloud.iter().take(u8::MAX as usize) {
-                o.u16(p[0].clamp(0, u16::MAX as i32) as u16);
-                o.u16(p[1].clamp(0, u16::MAX as i32) as u16);
+                o.point(*p);
             }
             o.count(r.scan.len());
             for v in r.scan.iter().take(u8::MAX as usize) {
@@ -147,13 +145,7 @@ pub fn snapshot(
             }
         }
     }
-    let opponents: Vec<_> = frame
-        .opponents
-        .iter()
-        .enumerate()
-        .filter(|(i, _)| visible.is_none_or(|v| v.opponents[*i]))
-        .take(u8::MAX as usize)
-        .collect();
+    let opponents = shown(&frame.opponents, visible.map(|v| &v.opponents[..]));
     o.count(opponents.len());
     for (i, p) in opponents {
         o.u8(i as u8);
@@ -182,6 +174,17 @@ pub fn snapshot(
     o.0
 }
 
+/// The agents a viewer is sent, with their indices: all, or those `visible` (at most 255,
+/// what a count byte holds).
+fn shown<'a, T>(agents: &'a [T], visible: Option<&[bool]>) -> Vec<(usize, &'a T)> {
+    agents
+        .iter()
+        .enumerate()
+        .filter(|(i, _)| visible.is_none_or(|v| v.get(*i).copied().unwrap_or(false)))
+        .take(u8::MAX as usize)
+        .collect()
+}
+
 fn encode_belief(o: &mut Out, b: &BeliefView) {
     o.u32(b.tick.min(u32::MAX as u64) as u32);
     o.count(b.roles.len());
@@ -201,8 +204,7 @@ fn encode_belief(o: &mut Out, b: &BeliefView) {
         let n = r.points.len().min(u16::MAX as usize);
         o.u16(n as u16);
         for p in &r.points[..n] {
-            o.u16(p[0].clamp(0, u16::MAX as i32) as u16);
-            o.u16(p[1].clamp(0, u16::MAX as i32) as u16);
+            o.point(*p);
         }
     }
 }
