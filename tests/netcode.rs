@@ -9,6 +9,7 @@ mod netem;
 use std::time::Duration;
 
 use common::{TestServer, Ws, idle_human_match};
+use lasertag::protocol::compact;
 use netem::{Conditions, Netem};
 use serde_json::json;
 
@@ -182,28 +183,51 @@ async fn compact_snapshots_are_small_and_say_what_the_json_says() {
     assert_eq!(spectator.json().await["format"], "compact");
     let mut biggest = (0, 0);
     let mut with_belief = 0;
+    // The last whole snapshot each holds, and the bytes of the deltas the player got.
+    let mut held: [Vec<u8>; 2] = [Vec::new(), Vec::new()];
+    let (mut deltas, mut delta_bytes, mut whole_bytes) = (0, 0, 0);
     for _ in 0..40 {
         let truth = s.step(&id, 1).await;
         let tick = truth["tick"].as_u64().unwrap() as u32;
         for (ws, k) in [(&mut player, 0), (&mut spectator, 1)] {
             let b = loop {
-                let b = next_compact(ws).await;
+                let m = next_compact(ws).await;
+                let b = if m[0] == compact::KIND_DELTA {
+                    if k == 0 {
+                        deltas += 1;
+                        delta_bytes += m.len();
+                    }
+                    compact::apply_delta(&held[k], &m).expect("a delta against the last one")
+                } else {
+                    m
+                };
+                held[k] = b.clone();
                 if u32::from_le_bytes([b[2], b[3], b[4], b[5]]) >= tick {
                     break b;
                 }
             };
             // Kind 1, the tick, and the view: the player's (you = slot 0 + 1) or everything.
-            assert_eq!(b[0], 1);
+            assert_eq!(b[0], compact::KIND_WHOLE);
             assert_eq!(u32::from_le_bytes([b[2], b[3], b[4], b[5]]), tick);
             assert_eq!(b[1] & 1, k as u8, "spectator flag");
             assert_eq!(b[12], if k == 0 { 1 } else { 0 }, "you");
             if b[1] & 2 != 0 {
                 with_belief += 1;
             }
+            if k == 0 {
+                whole_bytes += b.len();
+            }
             biggest.0 = biggest.0.max(if k == 0 { b.len() } else { 0 });
             biggest.1 = biggest.1.max(if k == 1 { b.len() } else { 0 });
         }
     }
+    // Between two ticks little of a player's snapshot changes: most come as deltas, at
+    // under half the bytes of the whole.
+    assert!(deltas >= 20, "{deltas} of 40 player snapshots were deltas");
+    assert!(
+        delta_bytes * 2 < whole_bytes * deltas / 40,
+        "deltas {delta_bytes} B for {deltas}, whole {whole_bytes} B for 40"
+    );
     // A player's snapshot is tens of bytes (about 1 KiB/s at 20 Hz); a spectator's, with
     // scans, clouds and the belief, a few KB at most.
     assert!(

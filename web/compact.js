@@ -1,7 +1,8 @@
 // Compact snapshots (`?format=compact`): the binary form of a `snapshot` message, decoded
 // into the same object the JSON form gives, so the rest of the page does not know which it
 // got. The layout is in server/protocol/compact.rs and docs/api.md. Scans and localisation
-// clouds come only every few ticks: between them each robot keeps its last ones.
+// clouds come only every few ticks: between them each robot keeps its last ones. A delta
+// (kind 2) patches the last whole snapshot into the next one.
 
 const TURN = (Math.PI * 2) / 65536;
 const CONTROL = ["bot", "api", "human"];
@@ -11,10 +12,36 @@ const utf8 = new TextDecoder();
 export class CompactDecoder {
   constructor() {
     this.slow = new Map(); // robot id -> {scan, cloud} from the last snapshot that had them
+    this.base = null; // the last whole snapshot (Uint8Array): what a delta is against
+  }
+
+  /** The whole snapshot a delta message stands for (see `apply_delta` in compact.rs). */
+  undelta(bytes) {
+    const d = new DataView(bytes.buffer, bytes.byteOffset, bytes.byteLength);
+    const base = this.base;
+    if (!base || d.getUint32(6, true) !== new DataView(base.buffer).getUint32(2, true)) {
+      throw new Error("a delta against a snapshot this page does not hold");
+    }
+    const out = base.slice();
+    let at = 0;
+    for (let i = 10; i < bytes.length; ) {
+      at += bytes[i];
+      const n = bytes[i + 1];
+      i += 2;
+      if (i + n > bytes.length || at + n > out.length) throw new Error("a delta past its end");
+      out.set(bytes.subarray(i, i + n), at);
+      at += n;
+      i += n;
+    }
+    return out;
   }
 
   /** Decodes one binary message (an ArrayBuffer) into a snapshot object. */
-  decode(buffer) {
+  decode(message) {
+    let bytes = new Uint8Array(message);
+    if (bytes[0] === 2) bytes = this.undelta(bytes);
+    this.base = bytes;
+    const buffer = bytes.buffer;
     const d = new DataView(buffer);
     let at = 0;
     const u8 = () => d.getUint8(at++);

@@ -182,6 +182,8 @@ struct Connection {
     compact: bool,
     slow_at: Option<u64>,
     belief_at: Option<u64>,
+    /// The last compact snapshot written, whole: the baseline of the next one's delta.
+    sent: Option<axum::body::Bytes>,
     last_seq: u64,
     finished_sent: bool,
     messages: Bucket,
@@ -210,6 +212,7 @@ impl Connection {
             compact: false,
             slow_at: None,
             belief_at: None,
+            sent: None,
             role: if seat.is_some() {
                 "player"
             } else {
@@ -418,10 +421,19 @@ impl Connection {
             }
             _ => None,
         };
-        let bytes = match &visible {
+        let whole = match &visible {
             None => wire::spectator_compact(frame, belief, slow),
             Some((slot, v)) => compact::snapshot(frame, Some(*slot), Some(v), belief, false).into(),
         };
+        let bytes = match self
+            .sent
+            .as_deref()
+            .and_then(|base| compact::delta(base, &whole))
+        {
+            Some(d) => d.into(),
+            None => whole.clone(),
+        };
+        self.sent = Some(whole);
         if visible.is_none() && slow {
             self.slow_at = Some(frame.tick);
         }

@@ -25,6 +25,19 @@
 //!
 //! `flags`: 1 spectator view, 2 belief, 4 slow parts, 8 finished, 16 robots won, 32
 //! opponents won.
+//!
+//! A snapshot the same length as the one before it on the connection comes as a delta
+//! against it ([`delta`], kind 2) when that is shorter: a WebSocket loses nothing and keeps
+//! order, so the snapshot last written is one the client holds when the next arrives; that
+//! is its acknowledgement, and no message of its own is needed (Fiedler's "Snapshot
+//! Compression" acknowledges explicitly because it runs over UDP).
+//!
+//! ```text
+//! u8 kind = 2 | u8 flags | u32 tick | u32 baseline tick | runs to the end, each:
+//!     u8 same (bytes as in the baseline) | u8 n | n bytes (the snapshot's own)
+//! ```
+//!
+//! Bytes after the last run are the baseline's.
 
 use crate::protocol::frame::{BeliefView, Frame, Visible};
 use lasertag_core::world::{ControlKind, MatchStatus, Side};
@@ -105,7 +118,7 @@ pub fn snapshot(
         Some(Side::Opponents) => flags |= 32,
         None => {}
     }
-    o.u8(1);
+    o.u8(KIND_WHOLE);
     o.u8(flags);
     o.u32(frame.tick.min(u32::MAX as u64) as u32);
     let left = (frame.time_limit_s - frame.time_s).max(0.0) * 10.0;
@@ -174,6 +187,97 @@ pub fn snapshot(
     o.0
 }
 
+/// Kind byte of a whole snapshot and of a delta against the one before it.
+pub const KIND_WHOLE: u8 = 1;
+pub const KIND_DELTA: u8 = 2;
+
+/// `next` as a delta against `base` (both whole snapshots), when they are the same length
+/// and the delta is shorter; `None` means send `next` whole.
+pub fn delta(base: &[u8], next: &[u8]) -> Option<Vec<u8>> {
+    if base.len() != next.len() || next.len() < 6 || base.len() < 6 {
+        return None;
+    }
+    let mut o = Out(Vec::with_capacity(next.len() / 2));
+    o.u8(KIND_DELTA);
+    o.u8(next[1]);
+    o.0.extend_from_slice(&next[2..6]);
+    o.0.extend_from_slice(&base[2..6]);
+    let n = next.len();
+    let mut at = 0;
+    loop {
+        let start = at;
+        while at < n && at - start < u8::MAX as usize && base[at] == next[at] {
+            at += 1;
+        }
+        if at == n {
+            break;
+        }
+        let same = at - start;
+        let from = at;
+        // A literal runs on over a single unchanged byte between changed ones: one byte
+        // copied costs less than the two a new run would.
+        while at < n
+            && at - from < u8::MAX as usize
+            && (base[at] != next[at] || (at + 1 < n && base[at + 1] != next[at + 1]))
+        {
+            at += 1;
+        }
+        o.u8(same as u8);
+        o.u8((at - from) as u8);
+        o.0.extend_from_slice(&next[from..at]);
+        if o.0.len() >= n {
+            return None;
+        }
+    }
+    Some(o.0)
+}
+
+/// Why a delta could not be applied.
+#[derive(Debug, thiserror::Error, PartialEq)]
+pub enum DeltaError {
+    #[error("not a delta message")]
+    NotDelta,
+    #[error("the delta is against tick {wanted}, the last snapshot held is tick {held}")]
+    WrongBaseline { wanted: u32, held: u32 },
+    #[error("the delta runs past the end of its baseline")]
+    Overrun,
+}
+
+/// The whole snapshot a delta stands for, given the whole snapshot it is against (what a
+/// client does; the page's copy is in `web/compact.js`).
+pub fn apply_delta(base: &[u8], delta: &[u8]) -> Result<Vec<u8>, DeltaError> {
+    let tick_at = |b: &[u8], i: usize| {
+        b.get(i..i + 4)
+            .map(|t| u32::from_le_bytes([t[0], t[1], t[2], t[3]]))
+    };
+    if delta.first() != Some(&KIND_DELTA) || delta.len() < 10 {
+        return Err(DeltaError::NotDelta);
+    }
+    let wanted = tick_at(delta, 6).ok_or(DeltaError::NotDelta)?;
+    let held = tick_at(base, 2).ok_or(DeltaError::Overrun)?;
+    if wanted != held {
+        return Err(DeltaError::WrongBaseline { wanted, held });
+    }
+    let mut out = base.to_vec();
+    let mut at = 0;
+    let mut i = 10;
+    while i < delta.len() {
+        let (same, n) = match delta.get(i..i + 2) {
+            Some(h) => (h[0] as usize, h[1] as usize),
+            None => return Err(DeltaError::Overrun),
+        };
+        i += 2;
+        at += same;
+        let bytes = delta.get(i..i + n).ok_or(DeltaError::Overrun)?;
+        out.get_mut(at..at + n)
+            .ok_or(DeltaError::Overrun)?
+            .copy_from_slice(bytes);
+        at += n;
+        i += n;
+    }
+    Ok(out)
+}
+
 /// The agents a viewer is sent, with their indices: all, or those `visible` (at most 255,
 /// what a count byte holds).
 fn shown<'a, T>(agents: &'a [T], visible: Option<&[bool]>) -> Vec<(usize, &'a T)> {
@@ -222,5 +326,50 @@ mod tests {
         assert_eq!(cm(12.344), 1234);
         assert_eq!(cm(-1.0), 0);
         assert_eq!(cm(1e6), u16::MAX);
+    }
+
+    fn snapshot_like(tick: u32, tail: &[u8]) -> Vec<u8> {
+        let mut v = vec![KIND_WHOLE, 0];
+        v.extend_from_slice(&tick.to_le_bytes());
+        v.extend_from_slice(tail);
+        v
+    }
+
+    #[test]
+    fn a_delta_gives_back_the_snapshot_it_stands_for() {
+        let base = snapshot_like(7, &[9; 600]);
+        let mut tail = vec![9u8; 600];
+        // Changes alone, in pairs with one byte between, and a long changed stretch.
+        tail[3] = 1;
+        tail[10] = 2;
+        tail[12] = 3;
+        for b in &mut tail[300..500] {
+            *b = 4;
+        }
+        tail[599] = 5;
+        let next = snapshot_like(8, &tail);
+        let d = delta(&base, &next).expect("a delta is shorter");
+        assert!(d.len() < next.len() / 2, "{} bytes", d.len());
+        assert_eq!(d[0], KIND_DELTA);
+        assert_eq!(apply_delta(&base, &d), Ok(next.clone()));
+        let other = snapshot_like(6, &[9; 600]);
+        assert_eq!(
+            apply_delta(&other, &d),
+            Err(DeltaError::WrongBaseline { wanted: 7, held: 6 })
+        );
+        assert_eq!(
+            apply_delta(&base, &d[..d.len() - 1]),
+            Err(DeltaError::Overrun)
+        );
+    }
+
+    #[test]
+    fn snapshots_that_differ_in_length_or_in_everything_go_whole() {
+        let base = snapshot_like(1, &[0; 40]);
+        assert_eq!(delta(&base, &snapshot_like(2, &[0; 41])), None);
+        assert_eq!(delta(&base, &snapshot_like(2, &[1; 40])), None);
+        let same = delta(&base, &snapshot_like(1, &[0; 40])).expect("nothing changed");
+        assert_eq!(same.len(), 10);
+        assert_eq!(apply_delta(&base, &same), Ok(base));
     }
 }
