@@ -50,11 +50,7 @@ pub(crate) fn bot_name(b: BotKind) -> &'static str {
 }
 
 fn planner_name(p: PlannerKind) -> &'static str {
-    match p {
-        PlannerKind::Coordinated => "coordinated",
-        PlannerKind::Baseline => "baseline",
-        PlannerKind::Idle => "idle",
-    }
+    p.name()
 }
 
 /// Seconds until the opponent was tagged, or `None` if it was not within the time limit.

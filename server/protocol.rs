@@ -10,6 +10,7 @@
 
 pub mod compact;
 pub mod frame;
+pub mod robots;
 pub mod settings;
 pub mod state;
 pub mod ws;
@@ -157,6 +158,8 @@ pub enum Planner {
     Coordinated,
     Baseline,
     Idle,
+    /// Robots driven from outside (`POST /api/matches/{id}/robots/{rid}/command`, `/act`).
+    Api,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, ToSchema)]
@@ -399,16 +402,13 @@ fn planner_kind(p: Planner) -> PlannerKind {
         Planner::Coordinated => PlannerKind::Coordinated,
         Planner::Baseline => PlannerKind::Baseline,
         Planner::Idle => PlannerKind::Idle,
+        Planner::Api => PlannerKind::Api,
     }
 }
 
 /// The planner's name as the API spells it (also the `kind` label of the tick metrics).
 pub fn planner_name(p: PlannerKind) -> &'static str {
-    match p {
-        PlannerKind::Coordinated => "coordinated",
-        PlannerKind::Baseline => "baseline",
-        PlannerKind::Idle => "idle",
-    }
+    p.name()
 }
 
 fn planner_dto(p: PlannerKind) -> Planner {
@@ -416,6 +416,7 @@ fn planner_dto(p: PlannerKind) -> Planner {
         PlannerKind::Coordinated => Planner::Coordinated,
         PlannerKind::Baseline => Planner::Baseline,
         PlannerKind::Idle => Planner::Idle,
+        PlannerKind::Api => Planner::Api,
     }
 }
 

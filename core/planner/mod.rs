@@ -66,6 +66,21 @@ pub enum PlannerKind {
     Idle,
     Baseline,
     Coordinated,
+    /// Robots driven from outside (a researcher's own brain): the team plans nothing and
+    /// each robot follows the orders it is given (see `World::order_robot`).
+    Api,
+}
+
+impl PlannerKind {
+    /// The planner's name as the API and the experiments spell it.
+    pub fn name(self) -> &'static str {
+        match self {
+            PlannerKind::Idle => "idle",
+            PlannerKind::Baseline => "baseline",
+            PlannerKind::Coordinated => "coordinated",
+            PlannerKind::Api => "api",
+        }
+    }
 }
 
 /// The team's brain: the opponent tracker(s), the chosen planner and its memory, and the
@@ -149,6 +164,7 @@ impl<'a> Knowledge<'a> {
 #[derive(Debug, Clone)]
 pub(crate) enum Brain {
     Idle,
+    Api,
     Baseline(Box<baseline::Baseline>),
     Coordinated(Box<coordinated::Coordinated>),
 }
@@ -157,7 +173,7 @@ impl Brain {
     /// Robot `i`'s plans as it announces them (see [`Status`]).
     fn status(&mut self, i: usize, pose: Pose) -> Status {
         match self {
-            Brain::Idle => Status::default(),
+            Brain::Idle | Brain::Api => Status::default(),
             Brain::Baseline(b) => b.status(i),
             Brain::Coordinated(c) => c.status(i, pose),
         }
@@ -179,6 +195,7 @@ impl Team {
     ) -> Team {
         let brain = match kind {
             PlannerKind::Idle => Brain::Idle,
+            PlannerKind::Api => Brain::Api,
             PlannerKind::Baseline => {
                 Brain::Baseline(Box::new(baseline::Baseline::new(arena, robots, rng)))
             }
@@ -217,6 +234,7 @@ impl Team {
     pub fn kind(&self) -> PlannerKind {
         match self.brain {
             Brain::Idle => PlannerKind::Idle,
+            Brain::Api => PlannerKind::Api,
             Brain::Baseline(_) => PlannerKind::Baseline,
             Brain::Coordinated(_) => PlannerKind::Coordinated,
         }
@@ -239,6 +257,27 @@ impl Team {
                 .and_then(|row| row.get(j))
                 .and_then(|m| m.as_ref())
                 .map(|m| m.pose.pos),
+        }
+    }
+
+    /// What robot `i` last heard of teammate `j`: its pose estimate and the tick it was sent.
+    /// With a perfect radio that is the teammate's current estimate (`estimates[j]`) as of
+    /// `tick`; otherwise the last message, or nothing before the first one arrives.
+    pub fn teammate_report(
+        &self,
+        i: usize,
+        j: usize,
+        estimates: &[Pose],
+        tick: u64,
+    ) -> Option<(Pose, u64)> {
+        match &self.channel {
+            None => estimates.get(j).map(|p| (*p, tick)),
+            Some(c) => c
+                .heard
+                .get(i)
+                .and_then(|row| row.get(j))
+                .and_then(|m| m.as_ref())
+                .map(|m| (m.pose, m.sent)),
         }
     }
 
@@ -454,7 +493,7 @@ fn plan(
     view: &TeamView,
 ) -> Vec<RobotCommand> {
     match brain {
-        Brain::Idle => vec![RobotCommand::default(); view.robots.len()],
+        Brain::Idle | Brain::Api => vec![RobotCommand::default(); view.robots.len()],
         Brain::Baseline(b) => b.decide(arena, physics, know, view),
         Brain::Coordinated(c) => c.decide_with(arena, physics, know, view),
     }

@@ -24,6 +24,8 @@ pub struct Robot {
     pub cooldown_until: u64,
     pub scan: Scan,
     pub command: RobotCommand,
+    /// Its last order, when the robots are driven from outside.
+    pub api: ApiDrive,
 }
 
 /// A route given to an API-driven opponent.

@@ -2,7 +2,8 @@
 //!
 //! [`World::step`] runs, in order:
 //! 1. inputs — opponents' motions (bots decide now; API routes; people's latest keys) and the
-//!    robots' commands decided at the end of the previous tick;
+//!    robots' commands decided at the end of the previous tick (or, for robots driven from
+//!    outside, their last orders);
 //! 2. motion — every agent moves, then collisions resolve (robots first, then opponents,
 //!    each in id order, so the result is deterministic);
 //! 3. sensing — every robot that is not frozen scans, detects and sights landmarks; then
@@ -38,8 +39,10 @@ mod config;
 mod digest;
 mod events;
 mod placement;
+mod robot_api;
 
 pub use agents::*;
+pub use robot_api::*;
 pub use config::*;
 pub use events::*;
 use placement::*;
@@ -128,6 +131,7 @@ impl World {
                 cooldown_until: 0,
                 scan: Scan::default(),
                 command: RobotCommand::default(),
+                api: ApiDrive::default(),
             })
             .collect();
         let opponents = opponent_starts
@@ -267,6 +271,9 @@ impl World {
 
     /// Stage 1: this tick's motion of every agent (robots first, then opponents).
     pub fn inputs(&mut self) -> Vec<Motion> {
+        if self.robots_api_driven() {
+            self.drive_api_robots();
+        }
         let mut motions: Vec<Motion> = (0..self.robots.len())
             .map(|i| {
                 if self.robot_frozen(i) {

@@ -284,3 +284,159 @@ fn a_persons_shot_is_judged_where_its_screen_showed_the_robots() {
     old.step();
     assert!(!tagged(&old));
 }
+
+fn api_duel() -> World {
+    World::new(duel(), config(PlannerKind::Api, ControlKind::Api)).unwrap()
+}
+
+#[test]
+fn an_api_robot_holds_its_velocities_until_told_otherwise_and_stands_still_before() {
+    let mut w = api_duel();
+    let start = w.robots[0].pose;
+    for _ in 0..10 {
+        w.step();
+    }
+    assert_eq!(w.robots[0].pose, start, "no order, no motion");
+    w.order_robot(
+        0,
+        RobotOrder::Drive {
+            forward: 1.0,
+            turn: 0.0,
+            tag: false,
+        },
+    )
+    .unwrap();
+    for _ in 0..20 {
+        w.step();
+    }
+    let moved = w.robots[0].pose.pos.x - start.pos.x;
+    let top = w.config.physics.robot_speed;
+    assert!(
+        (moved - top).abs() < 0.05,
+        "moved {moved} m in 1 s at {top} m/s"
+    );
+    w.order_robot(0, RobotOrder::Stop).unwrap();
+    let here = w.robots[0].pose;
+    w.step();
+    assert_eq!(w.robots[0].pose, here);
+}
+
+#[test]
+fn an_api_robot_drives_its_waypoints_around_a_pillar() {
+    let mut w = api_duel();
+    // Behind the pillar (5.5..6.5 × 4.5..5.5) from (1, 3): the straight line crosses it.
+    let goal = Point2::new(8.0, 5.0);
+    w.order_robot(0, RobotOrder::Waypoints(vec![Point2::new(4.0, 2.0), goal]))
+        .unwrap();
+    let mut closest = f32::MAX;
+    for _ in 0..600 {
+        w.step();
+        closest = closest.min((w.robots[0].pose.pos - goal).norm());
+    }
+    assert!(closest < 0.3, "got within {closest} m of the last waypoint");
+    assert_eq!(w.robots[0].command.motion, Motion::Stop, "it stops there");
+    let err = w
+        .order_robot(0, RobotOrder::Waypoints(vec![Point2::new(6.0, 5.0)]))
+        .unwrap_err();
+    assert!(
+        matches!(err, RobotOrderError::BadWaypoint { index: 0, .. }),
+        "{err}"
+    );
+    let err = w
+        .order_robot(0, RobotOrder::Waypoints(vec![Point2::new(13.0, 1.0)]))
+        .unwrap_err();
+    assert_eq!(
+        err.to_string(),
+        "waypoints[0]: [13, 1] lies outside the arena"
+    );
+}
+
+#[test]
+fn an_api_robot_fires_once_per_order_and_orders_are_checked() {
+    let mut w = api_duel();
+    w.order_robot(
+        0,
+        RobotOrder::Drive {
+            forward: 0.0,
+            turn: 0.0,
+            tag: true,
+        },
+    )
+    .unwrap();
+    for _ in 0..40 {
+        w.step();
+    }
+    let shots = w
+        .events()
+        .iter()
+        .filter(|e| {
+            matches!(
+                e.kind,
+                EventKind::Shot {
+                    by: AgentId::Robot(0),
+                    ..
+                }
+            )
+        })
+        .count();
+    assert_eq!(shots, 1);
+    assert_eq!(
+        w.order_robot(
+            0,
+            RobotOrder::Drive {
+                forward: 2.0,
+                turn: 0.0,
+                tag: false
+            }
+        ),
+        Err(RobotOrderError::OutOfRange {
+            field: "forward",
+            value: 2.0
+        })
+    );
+    assert!(matches!(
+        w.order_robot(3, RobotOrder::Stop),
+        Err(RobotOrderError::UnknownRobot(_))
+    ));
+    let mut planned = World::new(duel(), config(PlannerKind::Idle, ControlKind::Api)).unwrap();
+    assert_eq!(
+        planned.order_robot(0, RobotOrder::Stop),
+        Err(RobotOrderError::NotApiDriven)
+    );
+}
+
+#[test]
+fn an_observation_is_what_the_robot_knows() {
+    let mut w = World::new(
+        duel(),
+        MatchConfig {
+            robots: 2,
+            ..config(PlannerKind::Api, ControlKind::Api)
+        },
+    )
+    .unwrap();
+    w.order_robot(
+        0,
+        RobotOrder::Drive {
+            forward: 0.5,
+            turn: 0.2,
+            tag: false,
+        },
+    )
+    .unwrap();
+    for _ in 0..30 {
+        w.step();
+    }
+    let o = w.observation(0).unwrap();
+    assert_eq!(o.tick, 30);
+    assert_eq!(o.scan.len(), w.config.physics.laser_beams);
+    assert_eq!(o.estimate, w.robots[0].estimate);
+    assert_eq!(o.odometry, w.robots[0].odometry);
+    assert!(o.tag_ready && !o.frozen);
+    // A perfect radio: the teammate's own estimate, as of now.
+    assert_eq!(o.teammates.len(), 1);
+    assert_eq!(o.teammates[0].robot, 1);
+    assert_eq!(o.teammates[0].pose, w.robots[1].estimate);
+    assert_eq!(o.teammates[0].age_ticks, 0);
+    assert!(w.observation(2).is_none());
+}

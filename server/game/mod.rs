@@ -23,10 +23,11 @@ use crate::config::Config;
 use crate::maps::MapStore;
 use crate::metrics::Metrics;
 use crate::protocol::frame::Frame;
+use crate::protocol::robots::{ActResponse, Observation};
 use crate::protocol::{self, Belief, Clock, Events, Joined, MatchState, MatchStats, MatchSummary};
 use lasertag_core::sim::arena::Arena;
 use lasertag_core::world::World;
-use lasertag_core::world::{FinishReason, HumanInput, OpponentOrder};
+use lasertag_core::world::{FinishReason, HumanInput, OpponentOrder, RobotOrder};
 
 pub use crate::access::random_id;
 pub use task::{TaskSettings, spawn_match};
@@ -86,6 +87,24 @@ pub enum Request {
         opponent: usize,
         order: OpponentOrder,
         reply: oneshot::Sender<Result<(), MatchError>>,
+    },
+    /// An order for a robot driven from outside.
+    RobotOrder {
+        robot: usize,
+        order: RobotOrder,
+        reply: oneshot::Sender<Result<(), MatchError>>,
+    },
+    /// What one robot knows now.
+    Observation {
+        robot: usize,
+        reply: oneshot::Sender<Result<Observation, MatchError>>,
+    },
+    /// An environment step: every order (all or none), then `ticks` ticks, then every
+    /// robot's observation and the events of those ticks.
+    Act {
+        orders: Vec<(usize, RobotOrder)>,
+        ticks: u64,
+        reply: oneshot::Sender<Result<ActResponse, MatchError>>,
     },
     Join {
         name: String,
@@ -226,6 +245,33 @@ impl MatchHandle {
         self.ask(|reply| Request::Order {
             opponent,
             order,
+            reply,
+        })
+        .await?
+    }
+
+    pub async fn order_robot(&self, robot: usize, order: RobotOrder) -> Result<(), MatchError> {
+        self.ask(|reply| Request::RobotOrder {
+            robot,
+            order,
+            reply,
+        })
+        .await?
+    }
+
+    pub async fn observation(&self, robot: usize) -> Result<Observation, MatchError> {
+        self.ask(|reply| Request::Observation { robot, reply })
+            .await?
+    }
+
+    pub async fn act(
+        &self,
+        orders: Vec<(usize, RobotOrder)>,
+        ticks: u64,
+    ) -> Result<ActResponse, MatchError> {
+        self.ask(|reply| Request::Act {
+            orders,
+            ticks,
             reply,
         })
         .await?

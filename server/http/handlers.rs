@@ -28,7 +28,7 @@ use lasertag_core::world::World;
 
 /// The match `id` for a request that changes it: the token is checked first (see
 /// [`Bearer::may_change`]), then whether the match exists.
-fn owned(state: &AppState, bearer: &Bearer, id: &str) -> Result<MatchHandle, ApiError> {
+pub(super) fn owned(state: &AppState, bearer: &Bearer, id: &str) -> Result<MatchHandle, ApiError> {
     let handle = state.registry.get(id);
     bearer.may_change(
         state,
@@ -40,7 +40,11 @@ fn owned(state: &AppState, bearer: &Bearer, id: &str) -> Result<MatchHandle, Api
 
 /// The match `id` for a read of its truth, and how the reader sees it (see
 /// [`Bearer::sight`]).
-fn readable(state: &AppState, bearer: &Bearer, id: &str) -> Result<(MatchHandle, Sight), ApiError> {
+pub(super) fn readable(
+    state: &AppState,
+    bearer: &Bearer,
+    id: &str,
+) -> Result<(MatchHandle, Sight), ApiError> {
     let handle = find(state, id)?;
     let sight = bearer.sight(state, &handle.owner, &format!("match {id}"))?;
     Ok((handle, sight))

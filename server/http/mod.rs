@@ -9,6 +9,7 @@ mod error;
 mod handlers;
 pub mod limits;
 mod openapi;
+mod robots;
 mod serve;
 pub mod ws;
 
@@ -73,6 +74,12 @@ pub fn app(registry: Arc<Registry>, web_dir: PathBuf) -> Router {
             "/matches/{id}/opponents/{oid}/command",
             post(handlers::command),
         )
+        .route("/matches/{id}/robots/{rid}/command", post(robots::command))
+        .route(
+            "/matches/{id}/robots/{rid}/observation",
+            get(robots::observation),
+        )
+        .route("/matches/{id}/act", post(robots::act))
         .route("/matches/{id}/players", post(handlers::join))
         .route("/matches/{id}/stats", get(handlers::stats))
         .fallback(not_found)

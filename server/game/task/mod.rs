@@ -5,7 +5,8 @@
 //! the people who play: their tokens, which connection is theirs, and how long a dropped
 //! player has to come back (a freed slot a person took from a bot goes back to the bot).
 //!
-//! The people at the match and their inputs are in `seats.rs`.
+//! The people at the match and their inputs are in `seats.rs`; robots driven from outside
+//! (orders, observations, environment steps) in `robots.rs`.
 //!
 //! Long file: one match task's loop, its messages and its clean-up rules share the
 //! task's state.
@@ -16,6 +17,7 @@ use std::time::{Duration, Instant};
 
 use tokio::sync::{mpsc, oneshot, watch};
 
+mod robots;
 mod seats;
 use seats::Player;
 use tokio::time::MissedTickBehavior;
@@ -26,6 +28,7 @@ use crate::game::delay::HeldBack;
 use crate::game::{Hub, MatchError, Request, Seat, Sight, random_id};
 use crate::metrics::{Metrics, Refusal, TickHistograms};
 use crate::protocol::frame::{BELIEF_EVERY, Frame, SeatView};
+use crate::protocol::robots::ActResponse;
 use crate::protocol::{self, Clock, Joined, MatchMeta, MatchState, MatchStats, MatchSummary};
 use lasertag_core::sim::{AgentId, TICK_HZ};
 use lasertag_core::world::{Control, FinishReason, HumanInput, StepMark};
@@ -46,7 +49,18 @@ const HOUSEKEEPING: Duration = Duration::from_millis(100);
 
 struct PendingStep {
     remaining: u64,
-    reply: oneshot::Sender<Result<MatchState, MatchError>>,
+    answer: StepAnswer,
+}
+
+/// Who waits for a manual step, and for what.
+enum StepAnswer {
+    /// `POST /step`: the state after it.
+    State(oneshot::Sender<Result<MatchState, MatchError>>),
+    /// `POST /act`: the observations after it and the events from `since` on.
+    Act {
+        since: u64,
+        reply: oneshot::Sender<Result<ActResponse, MatchError>>,
+    },
 }
 
 /// What a match task needs from the shell besides its world.
@@ -236,7 +250,7 @@ impl MatchTask {
                     if !matches!(req, Request::Input { .. }) {
                         self.last_activity = Instant::now();
                     }
-                    let changes_seats = !matches!(req, Request::Input { .. } | Request::Summary(_) | Request::State { .. } | Request::Belief { .. } | Request::Events { .. } | Request::Stats(_));
+                    let changes_seats = !matches!(req, Request::Input { .. } | Request::Summary(_) | Request::State { .. } | Request::Belief { .. } | Request::Events { .. } | Request::Stats(_) | Request::Observation { .. });
                     self.answer(req, realtime, &mut pending);
                     // Joins, seats and commands change what the lobby shows.
                     if changes_seats {
@@ -279,7 +293,7 @@ impl MatchTask {
                         self.publish();
                         step.remaining -= n;
                         if step.remaining == 0 || self.world.status == MatchStatus::Finished {
-                            let _ = step.reply.send(Ok(self.state(Sight::Live)));
+                            self.answer_step(step.answer);
                         } else {
                             pending = Some(step);
                             tokio::task::yield_now().await;
@@ -385,9 +399,28 @@ impl MatchTask {
                 } else {
                     *pending = Some(PendingStep {
                         remaining: ticks,
-                        reply,
+                        answer: StepAnswer::State(reply),
                     });
                 }
+            }
+            Request::RobotOrder {
+                robot,
+                order,
+                reply,
+            } => {
+                self.last_change = Instant::now();
+                let _ = reply.send(self.order_robot(robot, order));
+            }
+            Request::Observation { robot, reply } => {
+                let _ = reply.send(self.observe(robot));
+            }
+            Request::Act {
+                orders,
+                ticks,
+                reply,
+            } => {
+                self.last_change = Instant::now();
+                self.act(orders, ticks, realtime, pending, reply);
             }
             Request::Order {
                 opponent,

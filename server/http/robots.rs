@@ -1,0 +1,83 @@
+//! The endpoints of robots driven from outside (`"planner": "api"`): one robot's command,
+//! one robot's observation, and the environment step over all of them.
+
+use axum::Json;
+use axum::extract::{Path, State};
+use axum::http::StatusCode;
+
+use crate::game::Sight;
+use crate::http::auth::Bearer;
+use crate::http::body::JsonBody;
+use crate::http::handlers::{owned, readable};
+use crate::http::{ApiError, AppState};
+use crate::protocol::ErrorBody;
+use crate::protocol::robots::{ActRequest, ActResponse, Observation, RobotCommand, robot_index};
+
+/// The index of robot `rid`, or a 404 naming it.
+fn robot(id: &str, rid: &str) -> Result<usize, ApiError> {
+    // Like the belief's `?robot=`, anything that is not a robot id names no robot here.
+    robot_index(rid)
+        .ok_or_else(|| ApiError::not_found(format!("no robot {rid:?} in match {id} (r0, r1, …)")))
+}
+
+#[utoipa::path(post, path = "/api/matches/{id}/robots/{rid}/command",
+    params(("id" = String, Path), ("rid" = String, Path)), request_body = RobotCommand,
+    security(("owner_token" = [])),
+    responses((status = 204), (status = 400, body = ErrorBody), (status = 401, body = ErrorBody),
+              (status = 403, body = ErrorBody), (status = 404, body = ErrorBody),
+              (status = 409, body = ErrorBody, description = "the match's robots are not driven from outside")))]
+pub async fn command(
+    State(state): State<AppState>,
+    bearer: Bearer,
+    Path((id, rid)): Path<(String, String)>,
+    JsonBody(body): JsonBody<RobotCommand>,
+) -> Result<StatusCode, ApiError> {
+    let handle = owned(&state, &bearer, &id)?;
+    let order = body.order("")?;
+    handle.order_robot(robot(&id, &rid)?, order).await?;
+    Ok(StatusCode::NO_CONTENT)
+}
+
+#[utoipa::path(get, path = "/api/matches/{id}/robots/{rid}/observation",
+    params(("id" = String, Path), ("rid" = String, Path)),
+    security((), ("owner_token" = [])),
+    responses((status = 200, body = Observation), (status = 401, body = ErrorBody),
+              (status = 403, body = ErrorBody, description = "people play this match: what its robots know is its owner's until it ends"),
+              (status = 404, body = ErrorBody)))]
+pub async fn observation(
+    State(state): State<AppState>,
+    bearer: Bearer,
+    Path((id, rid)): Path<(String, String)>,
+) -> Result<Json<Observation>, ApiError> {
+    let (handle, sight) = readable(&state, &bearer, &id)?;
+    // A robot's knowledge includes where it is and whom it sees: live, that would show a
+    // person the robots hidden from them, so a match people play keeps it to its owner (the
+    // delayed views are built from frames, which do not carry it).
+    let running = handle.hub.summary.borrow().status == crate::protocol::Status::Running;
+    if sight == Sight::Public && handle.hub.delay_ticks > 0 && running {
+        return Err(ApiError::new(
+            StatusCode::FORBIDDEN,
+            format!(
+                "people play match {id}: its robots' observations are its owner's until it ends"
+            ),
+        ));
+    }
+    Ok(Json(handle.observation(robot(&id, &rid)?).await?))
+}
+
+#[utoipa::path(post, path = "/api/matches/{id}/act", params(("id" = String, Path)),
+    request_body = ActRequest,
+    security(("owner_token" = [])),
+    responses((status = 200, body = ActResponse), (status = 400, body = ErrorBody), (status = 401, body = ErrorBody),
+              (status = 403, body = ErrorBody), (status = 404, body = ErrorBody),
+              (status = 409, body = ErrorBody, description = "a real-time match, one already stepping, or robots not driven from outside")))]
+pub async fn act(
+    State(state): State<AppState>,
+    bearer: Bearer,
+    Path(id): Path<String>,
+    JsonBody(body): JsonBody<ActRequest>,
+) -> Result<Json<ActResponse>, ApiError> {
+    let handle = owned(&state, &bearer, &id)?;
+    let (orders, ticks) = body.orders()?;
+    Ok(Json(handle.act(orders, ticks).await?))
+}

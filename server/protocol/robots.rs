@@ -1,0 +1,290 @@
+//! The shapes of robots driven from outside (`"planner": "api"`): a command for one robot,
+//! what one robot knows (its observation), and the environment step that applies every
+//! robot's command, advances the match and answers every observation.
+//!
+//! An observation is built from `World::observation`, which has no access path to the
+//! referee's truth; numbers are rounded as in the state (a millimetre, a ten-thousandth of a
+//! radian) so that a client parses short JSON.
+
+use std::collections::BTreeMap;
+
+use serde::{Deserialize, Serialize};
+use utoipa::ToSchema;
+
+use super::{EventDto, Invalid, PoseDto, Status, Winner, invalid, mm, rad};
+use crate::schema;
+use lasertag_core::sim::{AgentId, Pose};
+use lasertag_core::world::{RobotObservation, RobotOrder};
+
+/// Body of `POST /api/matches/{id}/robots/{rid}/command`, and each entry of an `act`'s
+/// `commands`: velocities (`forward`, `turn`, `tag`), or `waypoints`, or `stop`.
+#[derive(Debug, Clone, Default, Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct RobotCommand {
+    /// Fraction of top speed, -1..=1 (0 when only `turn` is given); holds until the next
+    /// command.
+    pub forward: Option<f64>,
+    /// Fraction of the top turn rate, -1..=1, counter-clockwise positive; holds.
+    pub turn: Option<f64>,
+    /// `true` fires the tag device once, on the next tick, if it is ready then.
+    pub tag: Option<bool>,
+    /// Drive through these points in order (around walls, by the built-in path follower,
+    /// at most 16) and stop at the last.
+    #[schema(schema_with = schema::waypoints)]
+    pub waypoints: Option<Vec<[f64; 2]>>,
+    /// `true` halts the robot.
+    pub stop: Option<bool>,
+}
+
+impl RobotCommand {
+    /// The core's order; `at` is the JSON path of this command (for errors).
+    pub fn order(self, at: &str) -> Result<RobotOrder, Invalid> {
+        let field = |f: &str| {
+            if at.is_empty() {
+                f.to_owned()
+            } else {
+                format!("{at}.{f}")
+            }
+        };
+        let drive = self.forward.is_some() || self.turn.is_some() || self.tag.is_some();
+        match (drive, self.waypoints, self.stop) {
+            (true, None, None) => {
+                let part = |name: &str, v: Option<f64>| match v {
+                    Some(v) if v.is_finite() && (-1.0..=1.0).contains(&v) => Ok(v as f32),
+                    Some(v) => Err(invalid(field(name), format!("{v} must be in -1..=1"))),
+                    None => Ok(0.0),
+                };
+                Ok(RobotOrder::Drive {
+                    forward: part("forward", self.forward)?,
+                    turn: part("turn", self.turn)?,
+                    tag: self.tag.unwrap_or(false),
+                })
+            }
+            (false, Some(w), None) => {
+                let max = lasertag_core::world::MAX_ROBOT_WAYPOINTS;
+                if w.len() > max {
+                    return Err(invalid(
+                        field("waypoints"),
+                        format!("{} points, at most {max}", w.len()),
+                    ));
+                }
+                let mut points = Vec::with_capacity(w.len());
+                for (i, p) in w.iter().enumerate() {
+                    if !(p[0].is_finite() && p[1].is_finite())
+                        || p[0].abs() > schema::MAX_COORDINATE
+                        || p[1].abs() > schema::MAX_COORDINATE
+                    {
+                        return Err(invalid(
+                            field(&format!("waypoints[{i}]")),
+                            format!("[{}, {}] is not a finite point", p[0], p[1]),
+                        ));
+                    }
+                    points.push(nalgebra::Point2::new(p[0] as f32, p[1] as f32));
+                }
+                Ok(RobotOrder::Waypoints(points))
+            }
+            (false, None, Some(true)) => Ok(RobotOrder::Stop),
+            (false, None, Some(false)) => Err(invalid(field("stop"), "must be true")),
+            _ => Err(invalid(
+                if at.is_empty() { "body" } else { at }.to_owned(),
+                "give velocities (forward, turn, tag), or waypoints, or stop",
+            )),
+        }
+    }
+}
+
+/// A robot id of the API (`r0`, `r1`, …) as an index, or why it names no robot.
+pub fn robot_index(rid: &str) -> Option<usize> {
+    match rid.parse() {
+        Ok(AgentId::Robot(i)) => Some(i),
+        _ => None,
+    }
+}
+
+/// Body of `POST /api/matches/{id}/act`.
+#[derive(Debug, Clone, Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct ActRequest {
+    /// A command per robot id (`r0`, …); robots left out keep their last one.
+    #[serde(default)]
+    pub commands: BTreeMap<String, RobotCommand>,
+    /// Ticks to advance after applying the commands, 1..=100000 (1).
+    #[serde(default = "one", deserialize_with = "schema::int")]
+    #[schema(minimum = 1, maximum = 100_000)]
+    pub ticks: i64,
+}
+
+fn one() -> i64 {
+    1
+}
+
+impl ActRequest {
+    /// Every command as (robot index, order), checked; the first bad one is the error.
+    pub fn orders(self) -> Result<(Vec<(usize, RobotOrder)>, u64), Invalid> {
+        if !(1..=100_000).contains(&self.ticks) {
+            return Err(invalid(
+                "ticks",
+                format!("{} must be in 1..=100000", self.ticks),
+            ));
+        }
+        let mut orders = Vec::with_capacity(self.commands.len());
+        for (rid, command) in self.commands {
+            let at = format!("commands.{rid}");
+            let index = robot_index(&rid)
+                .ok_or_else(|| invalid(at.clone(), "is not a robot id (r0, r1, …)"))?;
+            orders.push((index, command.order(&at)?));
+        }
+        Ok((orders, self.ticks as u64))
+    }
+}
+
+/// What one robot knows (never ground truth).
+#[derive(Debug, Clone, Serialize, ToSchema)]
+pub struct Observation {
+    pub tick: u64,
+    /// Laser ranges (m) across the field of view, right to left; empty while frozen.
+    pub scan: Vec<f64>,
+    /// Anonymous sightings of opponents, relative to the robot.
+    pub detections: Vec<super::DetectionDto>,
+    /// Landmarks recognised this tick (their ids are indices into the map's `landmarks`).
+    pub landmarks: Vec<LandmarkDto>,
+    /// Dead-reckoned pose from the wheel odometry.
+    pub odometry: PoseDto,
+    /// The robot's own estimate of its pose (its localiser's, or its odometry).
+    pub estimate: PoseDto,
+    /// Standard deviation of that estimate's position (m).
+    pub spread: f64,
+    pub frozen: bool,
+    /// The tag device would fire on the next tick.
+    pub tag_ready: bool,
+    /// What the radio delivered of each teammate.
+    pub teammates: Vec<TeammateDto>,
+}
+
+#[derive(Debug, Clone, Serialize, ToSchema)]
+pub struct LandmarkDto {
+    pub id: usize,
+    pub range: f64,
+    pub bearing: f64,
+}
+
+#[derive(Debug, Clone, Serialize, ToSchema)]
+pub struct TeammateDto {
+    pub id: String,
+    pub x: f64,
+    pub y: f64,
+    pub theta: f64,
+    /// Ticks since the teammate sent this (0 with a perfect radio).
+    pub age_ticks: u64,
+}
+
+fn pose(p: Pose) -> PoseDto {
+    PoseDto {
+        x: mm(p.pos.x),
+        y: mm(p.pos.y),
+        theta: rad(p.theta),
+    }
+}
+
+/// The observation's wire shape.
+pub fn observation(o: &RobotObservation) -> Observation {
+    Observation {
+        tick: o.tick,
+        scan: o.scan.iter().map(|r| mm(*r)).collect(),
+        detections: o
+            .detections
+            .iter()
+            .map(|d| super::DetectionDto {
+                range: mm(d.range),
+                bearing: rad(d.bearing),
+            })
+            .collect(),
+        landmarks: o
+            .landmarks
+            .iter()
+            .map(|l| LandmarkDto {
+                id: l.id,
+                range: mm(l.range),
+                bearing: rad(l.bearing),
+            })
+            .collect(),
+        odometry: pose(o.odometry),
+        estimate: pose(o.estimate),
+        spread: mm(o.spread),
+        frozen: o.frozen,
+        tag_ready: o.tag_ready,
+        teammates: o
+            .teammates
+            .iter()
+            .map(|t| TeammateDto {
+                id: AgentId::Robot(t.robot).to_string(),
+                x: mm(t.pose.pos.x),
+                y: mm(t.pose.pos.y),
+                theta: rad(t.pose.theta),
+                age_ticks: t.age_ticks,
+            })
+            .collect(),
+    }
+}
+
+/// The answer to `POST /api/matches/{id}/act`.
+#[derive(Debug, Clone, Serialize, ToSchema)]
+pub struct ActResponse {
+    pub tick: u64,
+    pub status: Status,
+    pub winner: Option<Winner>,
+    /// Every robot's observation after the last tick, by robot id.
+    pub observations: BTreeMap<String, Observation>,
+    /// What happened during these ticks.
+    pub events: Vec<EventDto>,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn command(json: &str) -> Result<RobotOrder, Invalid> {
+        super::super::parse::<RobotCommand>(json.as_bytes())?.order("")
+    }
+
+    #[test]
+    fn a_command_is_velocities_or_waypoints_or_stop() {
+        assert_eq!(
+            command(r#"{"forward": 0.5, "tag": true}"#),
+            Ok(RobotOrder::Drive {
+                forward: 0.5,
+                turn: 0.0,
+                tag: true
+            })
+        );
+        assert_eq!(command(r#"{"stop": true}"#), Ok(RobotOrder::Stop));
+        assert!(matches!(
+            command(r#"{"waypoints": [[1, 2]]}"#),
+            Ok(RobotOrder::Waypoints(p)) if p.len() == 1
+        ));
+        let e = command(r#"{"forward": 1.5}"#).unwrap_err();
+        assert_eq!(
+            (e.field.as_str(), e.message.as_str()),
+            ("forward", "1.5 must be in -1..=1")
+        );
+        let e = command(r#"{"forward": 1, "stop": true}"#).unwrap_err();
+        assert_eq!(e.field, "body");
+        let e = command(r#"{"speed": 1}"#).unwrap_err();
+        assert!(e.message.contains("unknown field `speed`"), "{e:?}");
+    }
+
+    #[test]
+    fn an_act_names_the_robot_whose_command_is_wrong() {
+        let act: ActRequest = super::super::parse(
+            br#"{"commands": {"r0": {"turn": 1}, "r1": {"forward": -3}}, "ticks": 2}"#,
+        )
+        .unwrap();
+        let e = act.orders().unwrap_err();
+        assert_eq!(e.field, "commands.r1.forward");
+        let act: ActRequest =
+            super::super::parse(br#"{"commands": {"o0": {"stop": true}}}"#).unwrap();
+        assert_eq!(act.orders().unwrap_err().field, "commands.o0");
+        let act: ActRequest = super::super::parse(br#"{}"#).unwrap();
+        assert_eq!(act.orders().map(|(o, t)| (o.len(), t)), Ok((0, 1)));
+    }
+}
