@@ -47,11 +47,12 @@ pub struct Owner {
 }
 
 impl Owner {
-    /// A fresh owner for something `client` makes now; the token is in `owner.token`.
-    pub fn new(client: ClientKey) -> Owner {
+    /// A fresh owner for something `client` makes now (`None`: the operator, whose matches
+    /// count against no client's quota); the token is in `owner.token`.
+    pub fn new(client: Option<ClientKey>) -> Owner {
         Owner {
             token: Some(random_id(16)),
-            client: Some(client),
+            client,
         }
     }
 
@@ -110,7 +111,7 @@ mod tests {
         assert!(same_secret("abcd", "abcd"));
         assert!(!same_secret("abcd", "abce"));
         assert!(!same_secret("abcd", "abc"));
-        let owner = Owner::new(ClientKey::of("192.0.2.7".parse().unwrap()));
+        let owner = Owner::new(Some(ClientKey::of("192.0.2.7".parse().unwrap())));
         let token = owner.token.clone().unwrap();
         assert_eq!(token.len(), 32);
         assert!(owner.is(&token) && !owner.is("") && !Owner::default().is(""));

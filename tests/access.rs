@@ -325,3 +325,43 @@ async fn free_slots(s: &TestServer, id: &str) -> u64 {
     let found = all.as_array().unwrap().iter().find(|m| m["id"] == id);
     found.expect("listed")["free_slots"].as_u64().unwrap()
 }
+
+#[tokio::test]
+async fn the_operators_token_is_held_to_no_address_rate_or_quota() {
+    // One match and five requests a second per address: a research client with the admin
+    // token steps a match hundreds of times and runs several; an anonymous one is refused.
+    let s = TestServer::start_with(Config {
+        admin_token: Some(Secret(ADMIN.into())),
+        max_matches_per_address: 1,
+        requests_per_s: 5.0,
+        request_burst: 5.0,
+        ..test_config()
+    })
+    .await;
+    let body = json!({"map": "office", "robots": 2, "planner": "api", "clock": "manual"});
+    let mut ids = Vec::new();
+    for _ in 0..3 {
+        let r = s.post_as("/api/matches", &body, Some(ADMIN)).await;
+        assert_eq!(r.status, 201, "{}", r.body);
+        ids.push(r.body["id"].as_str().unwrap().to_owned());
+    }
+    let act = format!("/api/matches/{}/act", ids[0]);
+    for k in 0..100 {
+        let r = s
+            .post_as(
+                &act,
+                &json!({"commands": {"r0": {"forward": 1}}}),
+                Some(ADMIN),
+            )
+            .await;
+        assert_eq!(r.status, 200, "step {k}: {}", r.body);
+    }
+    let mut refused = false;
+    for _ in 0..20 {
+        if s.get_as("/api/health", None).await.status == 429 {
+            refused = true;
+            break;
+        }
+    }
+    assert!(refused, "an anonymous client is still rate limited");
+}

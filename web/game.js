@@ -335,7 +335,11 @@ export class Game {
     e.preventDefault();
     if (e.type === "keydown") this.keys.add(e.code); else this.keys.delete(e.code);
     // A tap shorter than a tick still fires.
-    if (e.code === "Space" && e.type === "keydown") this.tagLatch = true;
+    if (e.code === "Space" && e.type === "keydown") {
+      this.tagLatch = true;
+      // The shot is aimed at what is drawn now, not at the next input tick's frame.
+      this.tagView = this.renderTick === null ? null : Math.max(0, Math.round(this.renderTick));
+    }
   }
 
   /** The keys held now, as an input. */
@@ -357,9 +361,11 @@ export class Game {
       const { forward, turn, tag } = this.held();
       this.seq += 1;
       // The tick whose robots are on screen: a shot is judged where they were drawn.
-      const view = this.renderTick === null ? undefined : Math.max(0, Math.round(this.renderTick));
+      let view = this.renderTick === null ? undefined : Math.max(0, Math.round(this.renderTick));
+      if (this.tagLatch && this.tagView !== null && this.tagView !== undefined) view = this.tagView;
       this.send({ type: "input", seq: this.seq, forward, turn, tag: tag || this.tagLatch, view_tick: view });
       this.tagLatch = false;
+      this.tagView = null;
       if (this.predictor) this.predictor.push(this.seq, forward, turn);
       debug.sent = this.seq;
     }

@@ -42,10 +42,10 @@ mod placement;
 mod robot_api;
 
 pub use agents::*;
-pub use robot_api::*;
 pub use config::*;
 pub use events::*;
 use placement::*;
+pub use robot_api::*;
 
 /// A match could not be set up as asked.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -76,9 +76,11 @@ pub struct World {
     rng_localise: ChaCha8Rng,
 }
 
-/// How far back a person's shot may be judged (250 ms at 20 Hz): enough for a player on
-/// another continent, short enough that a robot cannot be tagged long after it left cover.
-pub const MAX_REWIND_TICKS: u64 = 5;
+/// How far back a person's shot may be judged (500 ms at 20 Hz): what a player 300 ms away
+/// has behind the robots they see (the round trip, the page's drawing delay and the wait for
+/// the next input tick), short enough that a robot is not tagged long after it left cover.
+/// Valve's Source engine allows a second.
+pub const MAX_REWIND_TICKS: u64 = 10;
 
 /// Independent streams of the match seed.
 const STREAM_SENSE: u64 = 1;
@@ -495,11 +497,13 @@ impl World {
                 .into_iter()
                 .filter(|(id, _)| *id != shooter)
                 .collect();
-            // A person aimed at the robots where its screen showed them, up to
-            // MAX_REWIND_TICKS ago: judge the shot there (as Source does). Everything else
-            // (walls, the other opponents, who is frozen) is as it is now.
+            // A person aimed at the robots where its screen showed them: judge the shot
+            // there, at most MAX_REWIND_TICKS back (an older view is judged at the bound, as
+            // Source clamps to its limit). Everything else (walls, the other opponents, who
+            // is frozen) is as it is now.
             if let Some(past) = seen
-                .filter(|s| *s < tick && tick - s <= MAX_REWIND_TICKS)
+                .filter(|s| *s < tick)
+                .map(|s| s.max(tick.saturating_sub(MAX_REWIND_TICKS)))
                 .and_then(|s| self.robots_at(s))
             {
                 for (id, at) in &mut others {

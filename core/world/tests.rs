@@ -268,7 +268,7 @@ fn a_persons_shot_is_judged_where_its_screen_showed_the_robots() {
     // On the present (no tick said, or one from the future): a miss.
     assert!(!tagged(&fire(None)));
     assert!(!tagged(&fire(Some(w.tick + 1))));
-    // Beyond the bound: judged on the present, a miss.
+    // Beyond the bound: judged where the robot was at the bound, already gone: a miss.
     let mut old = w.clone();
     for _ in 0..MAX_REWIND_TICKS {
         old.step();

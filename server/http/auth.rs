@@ -43,6 +43,13 @@ impl<S: Send + Sync> axum::extract::FromRequestParts<S> for Bearer {
 }
 
 impl Bearer {
+    /// Whether this is the operator's (admin) token: such requests are not held to the
+    /// per-address rate and quotas (a local research client, the operator's own tools).
+    pub fn is_admin(&self, state: &AppState) -> bool {
+        let admin = state.registry.config.admin_token.as_ref();
+        matches!((&self.0, admin), (Some(t), Some(a)) if same_secret(&a.0, t))
+    }
+
     /// Lets the request change `what` (e.g. "match 3f2a…") when it carries the owner's token
     /// or the admin token: 401 without a token, 403 with another one. The token is checked
     /// before the thing is looked up (`owner` is `None` when there is no such thing), so
