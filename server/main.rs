@@ -30,6 +30,9 @@ enum Command {
     /// Reproduce one of the paper's experiments: CSV files and SVG plots.
     #[command(subcommand)]
     Experiment(lasertag_lab::cli::Experiment),
+    /// Import a ROS or MovingAI map as one of ours, or export one of ours as a ROS map.
+    #[command(subcommand)]
+    Map(lasertag::maps::cli::MapCommand),
     /// Ask a running server's `GET /api/health`; exit 0 when it answers ok (the container's
     /// HEALTHCHECK: the runtime image has no curl).
     Healthcheck {
@@ -86,6 +89,18 @@ fn main() -> ExitCode {
         Some(Command::Experiment(e)) => {
             return match lasertag_lab::cli::run(e, load_maps) {
                 Ok(()) => ExitCode::SUCCESS,
+                Err(e) => {
+                    eprintln!("error: {e}");
+                    ExitCode::FAILURE
+                }
+            };
+        }
+        Some(Command::Map(command)) => {
+            return match lasertag::maps::cli::run(&command) {
+                Ok(report) => {
+                    print!("{report}");
+                    ExitCode::SUCCESS
+                }
                 Err(e) => {
                     eprintln!("error: {e}");
                     ExitCode::FAILURE

@@ -71,6 +71,8 @@ pub struct Opponent {
     pub tagged: bool,
     pub cooldown_until: u64,
     pub control: Control,
+    /// The bot a person took this opponent over from, back when they leave.
+    pub bench: Option<Bot>,
 }
 
 /// An external order for an API-driven opponent.

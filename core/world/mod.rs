@@ -38,12 +38,14 @@ mod agents;
 mod config;
 mod digest;
 mod events;
+mod inputs;
 mod placement;
 mod robot_api;
 
 pub use agents::*;
 pub use config::*;
 pub use events::*;
+pub use inputs::*;
 use placement::*;
 pub use robot_api::*;
 
@@ -147,6 +149,7 @@ impl World {
                     ControlKind::Api => Control::Api(ApiRoute::default()),
                     ControlKind::Human => Control::Human(HumanInput::default()),
                 },
+                bench: None,
             })
             .collect();
         let mut tracker_settings = config.tracker.clone();

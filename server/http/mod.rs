@@ -9,6 +9,7 @@ mod error;
 mod handlers;
 pub mod limits;
 mod openapi;
+mod replays;
 mod robots;
 mod serve;
 pub mod ws;
@@ -81,6 +82,10 @@ pub fn app(registry: Arc<Registry>, web_dir: PathBuf) -> Router {
         )
         .route("/matches/{id}/act", post(robots::act))
         .route("/matches/{id}/players", post(handlers::join))
+        .route("/replays", get(replays::list))
+        .route("/replays/{id}", get(replays::detail))
+        .route("/replays/{id}/state", get(replays::state_at))
+        .route("/replays/{id}/belief", get(replays::belief_at))
         .route("/matches/{id}/stats", get(handlers::stats))
         .fallback(not_found)
         .method_not_allowed_fallback(method_not_allowed);

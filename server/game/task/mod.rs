@@ -25,13 +25,14 @@ use tracing::Instrument;
 
 use crate::access::{ClientKey, same_secret};
 use crate::game::delay::HeldBack;
+use crate::game::record::Recording;
 use crate::game::{Hub, MatchError, Request, Seat, Sight, random_id};
 use crate::metrics::{Metrics, Refusal, TickHistograms};
 use crate::protocol::frame::{BELIEF_EVERY, Frame, SeatView};
 use crate::protocol::robots::ActResponse;
 use crate::protocol::{self, Clock, Joined, MatchMeta, MatchState, MatchStats, MatchSummary};
 use lasertag_core::sim::{AgentId, TICK_HZ};
-use lasertag_core::world::{Control, FinishReason, HumanInput, StepMark};
+use lasertag_core::world::{Control, FinishReason, HumanInput, InputError, StepMark, WorldInput};
 use lasertag_core::world::{MatchStatus, World};
 
 /// Ticks over which overruns are counted, and how many of them may overrun before the match
@@ -83,6 +84,8 @@ pub struct TaskSettings {
     /// A tick that takes longer overruns (see [`OVERRUN_WINDOW`]).
     pub tick_overrun: Duration,
     pub metrics: Metrics,
+    /// Where the match goes for replay once it has finished.
+    pub history: Arc<crate::game::replay::History>,
     /// Called once when the task ends by itself (cleaned up, abandoned): unregisters it.
     pub on_exit: Box<dyn FnOnce() + Send>,
 }
@@ -138,6 +141,9 @@ pub fn spawn_match(
     let histograms = settings.metrics.tick_histograms(kind, clock);
     let now = Instant::now();
     let mut task = MatchTask {
+        recording: Recording::default(),
+        archived: false,
+        started_at: std::time::SystemTime::now(),
         players: (0..world.opponents.len()).map(|_| None).collect(),
         finished_at: None,
         last_activity: now,
@@ -188,6 +194,11 @@ fn match_runtime() -> Option<&'static tokio::runtime::Handle> {
 
 struct MatchTask {
     world: World,
+    /// Every change from outside applied to `world`, for its replay.
+    recording: Recording,
+    /// Whether the finished match went to the history already.
+    archived: bool,
+    started_at: std::time::SystemTime,
     /// When the world was first seen finished (for the clean-up grace).
     finished_at: Option<Instant>,
     /// The last time a request came or a client was connected (for abandonment).
@@ -232,6 +243,7 @@ impl MatchTask {
         let mut pending: Option<PendingStep> = None;
         let mut last_tick: Option<Instant> = None;
         loop {
+            self.archive();
             let running = self.world.status == MatchStatus::Running;
             let draining = self.held.as_ref().is_some_and(|h| !h.drained());
             tokio::select! {
@@ -239,12 +251,13 @@ impl MatchTask {
                 req = rx.recv() => {
                     let Some(req) = req else { break };
                     if let Request::Stop(reason) = req {
-                        self.world.end(reason);
+                        let _ = self.apply(WorldInput::End(reason));
                         self.publish();
                         // Nothing is left to hide, and the task (and its channels) ends now.
                         if let Some(held) = &mut self.held {
                             held.flush();
                         }
+                        self.archive();
                         break;
                     }
                     if !matches!(req, Request::Input { .. }) {
@@ -313,6 +326,30 @@ impl MatchTask {
             }
         }
         tracing::info!(tick = self.world.tick, "match ended");
+    }
+
+    /// Hands a finished match to the history, once.
+    fn archive(&mut self) {
+        if self.archived || self.world.status != MatchStatus::Finished {
+            return;
+        }
+        self.archived = true;
+        let replay = crate::game::replay::Replay::of(
+            &self.world,
+            self.meta.clone(),
+            self.world.arena.clone(),
+            self.world.config.clone(),
+            self.recording.inputs().to_vec(),
+            self.started_at,
+        );
+        self.settings.history.keep(replay);
+    }
+
+    /// Applies a change from outside to the world and records it (see `game::record`).
+    fn apply(&mut self, input: WorldInput) -> Result<(), InputError> {
+        self.world.apply(&input)?;
+        self.recording.note(&self.world, input);
+        Ok(())
     }
 
     /// One tick of the world, its team's halves timed into the metrics.
@@ -430,8 +467,14 @@ impl MatchTask {
                 self.last_change = Instant::now();
                 use lasertag_core::world::OrderError;
                 let result = self
-                    .world
-                    .order_opponent(opponent, order)
+                    .apply(WorldInput::Opponent {
+                        slot: opponent,
+                        order,
+                    })
+                    .map_err(|e| match e {
+                        InputError::Opponent(e) => e,
+                        other => OrderError::UnknownOpponent(other.to_string()),
+                    })
                     .map_err(|e| match e {
                         OrderError::UnknownOpponent(_) => MatchError::NotFound(e.to_string()),
                         OrderError::OutsideArena { .. } => MatchError::BadRequest(e.to_string()),
@@ -562,7 +605,7 @@ impl MatchTask {
                     self.overrun_count,
                     self.overruns.len()
                 );
-                self.world.end(FinishReason::Overloaded);
+                let _ = self.apply(WorldInput::End(FinishReason::Overloaded));
                 self.publish();
             }
         }
@@ -637,7 +680,7 @@ impl MatchTask {
                 "ending the match: a manual match unchanged for {:?}",
                 now - self.last_change
             );
-            self.world.end(FinishReason::Abandoned);
+            let _ = self.apply(WorldInput::End(FinishReason::Abandoned));
             self.publish();
             return Some("idle");
         } else if self.abandoned(now) {
@@ -645,7 +688,7 @@ impl MatchTask {
                 "ending the match: abandoned (no client for {:?})",
                 now - self.last_activity
             );
-            self.world.end(FinishReason::Abandoned);
+            let _ = self.apply(WorldInput::End(FinishReason::Abandoned));
             self.publish();
             if let Some(held) = &mut self.held {
                 held.flush();
@@ -657,12 +700,11 @@ impl MatchTask {
             let Some(p) = self.players[slot].as_mut() else {
                 continue;
             };
-            if p.kick.as_ref().is_some_and(|k| k.is_closed()) {
+            let dropped = p.kick.as_ref().is_some_and(|k| k.is_closed());
+            if dropped {
                 p.kick = None;
                 p.away_since = Some(now);
                 tracing::info!(player = %p.name, slot, "player dropped");
-                self.world.set_human_input(slot, HumanInput::default());
-                changed = true;
             }
             let grace = if p.ever_connected {
                 self.settings.reconnect_grace
@@ -670,12 +712,14 @@ impl MatchTask {
                 self.settings.join_hold
             };
             let gone = p.away_since.is_some_and(|t| now - t >= grace);
+            if dropped {
+                self.set_keys(slot, HumanInput::default());
+                changed = true;
+            }
             if gone && let Some(p) = self.players[slot].take() {
                 tracing::info!(player = %p.name, slot, "player slot freed");
-                if let Some(bot) = p.bot {
-                    self.world.opponents[slot].control = bot;
-                }
-                self.world.log_player(slot, p.name.to_string(), false);
+                let name = p.name.to_string();
+                let _ = self.apply(WorldInput::Unseat { slot, name });
                 changed = true;
             }
         }

@@ -7,7 +7,7 @@ use super::{MatchTask, PendingStep, StepAnswer};
 use crate::game::{MatchError, Sight};
 use crate::protocol::robots::{self, ActResponse, Observation};
 use lasertag_core::sim::AgentId;
-use lasertag_core::world::{RobotOrder, RobotOrderError};
+use lasertag_core::world::{InputError, RobotOrder, RobotOrderError, WorldInput};
 
 impl MatchTask {
     /// Robot `robot`'s new order, from the next tick on.
@@ -16,7 +16,8 @@ impl MatchTask {
         robot: usize,
         order: RobotOrder,
     ) -> Result<(), MatchError> {
-        self.world.order_robot(robot, order).map_err(order_error)
+        self.apply(WorldInput::Robot { robot, order })
+            .map_err(input_error)
     }
 
     /// What robot `robot` knows now.
@@ -54,15 +55,20 @@ impl MatchTask {
             ))));
             return;
         }
+        // Every order is checked on a copy of the robots' orders first: all apply, or none.
         let before: Vec<_> = self.world.robots.iter().map(|r| r.api.clone()).collect();
-        for (robot, order) in orders {
-            if let Err(e) = self.world.order_robot(robot, order) {
+        for (robot, order) in &orders {
+            if let Err(e) = self.world.order_robot(*robot, order.clone()) {
                 for (r, api) in self.world.robots.iter_mut().zip(before) {
                     r.api = api;
                 }
                 let _ = reply.send(Err(order_error(e)));
                 return;
             }
+        }
+        for (robot, order) in orders {
+            self.recording
+                .note(&self.world, WorldInput::Robot { robot, order });
         }
         let since = self.world.events().len() as u64;
         *pending = Some(PendingStep {
@@ -101,6 +107,13 @@ impl MatchTask {
                 .map(crate::protocol::event)
                 .collect(),
         }
+    }
+}
+
+fn input_error(e: InputError) -> MatchError {
+    match e {
+        InputError::Robot(e) => order_error(e),
+        other => MatchError::BadRequest(other.to_string()),
     }
 }
 

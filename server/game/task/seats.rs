@@ -21,8 +21,6 @@ pub(super) struct Player {
     pub(super) kick: Option<oneshot::Sender<()>>,
     /// Since when nobody plays this slot (joined but not connected yet, or dropped).
     pub(super) away_since: Option<Instant>,
-    /// The bot a person took over (the showcase), given back when the slot is freed.
-    pub(super) bot: Option<Control>,
     /// Whether a connection ever played it: until then the slot is only held, briefly.
     pub(super) ever_connected: bool,
     /// Who joined (for the one-unconnected-hold-per-client rule).
@@ -44,13 +42,25 @@ impl MatchTask {
     /// Hands each player's next numbered input to the world: one per tick, in order. With
     /// none queued, the last one holds (keys still down).
     pub(super) fn feed_inputs(&mut self) {
+        let mut keys = Vec::new();
         for (slot, p) in self.players.iter_mut().enumerate() {
             if let Some(p) = p
                 && let Some((seq, input)) = p.inputs.pop_front()
             {
-                self.world.set_human_input(slot, input);
                 p.applied = seq;
+                keys.push((slot, input));
             }
+        }
+        for (slot, input) in keys {
+            self.set_keys(slot, input);
+        }
+    }
+
+    /// A person's keys for `slot`, applied (and recorded) when they change anything.
+    pub(super) fn set_keys(&mut self, slot: usize, input: HumanInput) {
+        let input = crate::game::record::normalised(input);
+        if self.world.human_input(slot) != Some(input) {
+            let _ = self.apply(WorldInput::Keys { slot, input });
         }
     }
 
@@ -70,9 +80,7 @@ impl MatchTask {
             return;
         };
         match seq {
-            None => {
-                self.world.set_human_input(slot, input);
-            }
+            None => self.set_keys(slot, input),
             // Late or repeated: already applied or queued.
             Some(s) if s <= p.received => {}
             Some(s) => {
@@ -150,14 +158,6 @@ impl MatchTask {
         let slot = (0..self.players.len())
             .find(|&i| self.slot_free(i))
             .ok_or_else(|| MatchError::Conflict(format!("match {id} has no free opponent slot")))?;
-        let o = &mut self.world.opponents[slot];
-        let bot = match o.control {
-            Control::Bot(_) => Some(std::mem::replace(
-                &mut o.control,
-                Control::Human(HumanInput::default()),
-            )),
-            _ => None,
-        };
         let player = Player {
             id: random_id(8),
             name: name.as_str().into(),
@@ -165,7 +165,6 @@ impl MatchTask {
             generation: 0,
             kick: None,
             away_since: Some(Instant::now()),
-            bot,
             ever_connected: false,
             client,
             inputs: Default::default(),
@@ -179,7 +178,7 @@ impl MatchTask {
             token: player.token.clone(),
         };
         self.players[slot] = Some(player);
-        self.world.log_player(slot, name, true);
+        let _ = self.apply(WorldInput::Seat { slot, name });
         Ok(joined)
     }
 

@@ -1,19 +1,36 @@
-//! Map files (`docs/map-format.md`): parse, validate, and convert to a [`MapDef`].
+//! Map files (`docs/map-format.md`): parse, validate, and convert to a [`MapDef`]; and the
+//! formats researchers already have (`docs/map-import.md`), converted into ours.
 //!
-//! [`MapFile`] is the JSON shape (the only serde type here); [`validate`] enforces every rule
-//! of the spec and reports the first violation as a [`MapError`] naming field and index.
-//! [`MapStore`] holds the shipped and uploaded maps with their built [`Arena`]s.
-
-use std::collections::BTreeMap;
-use std::path::Path;
-use std::sync::Arc;
+//! [`MapFile`] is the JSON shape; [`validate`] enforces every rule of the spec and reports
+//! the first violation as a [`MapError`] naming field and index. Every other way into the
+//! server goes through [`validate`] too, so an imported map obeys the same rules as one
+//! written by hand:
+//! - [`import`]: a ROS map_server map ([`ros`]: YAML plus a PGM or PNG [`image`]) or a
+//!   MovingAI grid ([`movingai`]) becomes an occupancy [`grid`], then rectangles, spawns
+//!   ([`spawns`]) and landmarks;
+//! - [`raster`]: the way back, a map drawn onto a grid for a ROS export;
+//! - [`store`]: [`MapStore`], the shipped and uploaded maps with their built [`Arena`]s,
+//!   loaded from a folder of `.json`, `.yaml` and `.map` files;
+//! - [`cli`]: the binary's `map import` and `map export` commands.
 
 use nalgebra::Point2;
 use serde::{Deserialize, Serialize};
 
-use crate::access::{ClientKey, Owner};
 use lasertag_core::sim::AGENT_RADIUS;
-use lasertag_core::sim::arena::{Arena, MapDef, point_in_polygon};
+use lasertag_core::sim::arena::{MapDef, point_in_polygon};
+
+pub mod cli;
+pub mod grid;
+pub mod image;
+pub mod import;
+pub mod movingai;
+pub mod raster;
+pub mod ros;
+pub mod spawns;
+pub mod store;
+
+pub use import::{ImportError, ImportOptions, Imported, Problem};
+pub use store::{LoadError, MapStore, StoredMap};
 
 /// Largest map file or inline map accepted.
 pub const MAX_MAP_BYTES: usize = 1 << 20;
@@ -328,139 +345,6 @@ fn distance_to_polygon_edges(p: Point2<f32>, poly: &[Point2<f32>]) -> f32 {
             (a + ab * t - p).norm()
         })
         .fold(f32::INFINITY, f32::min)
-}
-
-/// A map known to the server: its definition and the arena built from it (shared by matches).
-#[derive(Debug, Clone)]
-pub struct StoredMap {
-    pub arena: Arc<Arena>,
-    /// Who uploaded it; the default (no token) for shipped maps, which nobody removes.
-    pub owner: Owner,
-    /// Bytes it was priced at when admitted (0 for shipped maps, which are always there).
-    pub memory: u64,
-}
-
-/// Every map the server knows, by name (sorted, so listings are stable).
-#[derive(Debug, Default)]
-pub struct MapStore {
-    maps: BTreeMap<String, StoredMap>,
-}
-
-/// A map file in the maps directory that could not be loaded.
-#[derive(Debug, thiserror::Error)]
-pub enum LoadError {
-    #[error("{file}: {source}")]
-    Io {
-        file: String,
-        source: std::io::Error,
-    },
-    #[error("{file}: {source}")]
-    Invalid { file: String, source: MapError },
-    #[error("{file}: the map is named {name:?}; a map file must be named <name>.json")]
-    NameMismatch { file: String, name: String },
-}
-
-impl MapStore {
-    /// Loads every `*.json` file in `dir`. Any invalid file is an error: shipping a broken map
-    /// should fail loudly at start-up, not when someone picks it.
-    pub fn load_dir(dir: &Path) -> Result<MapStore, LoadError> {
-        let io = |file: &Path, source| LoadError::Io {
-            file: file.display().to_string(),
-            source,
-        };
-        let mut store = MapStore::default();
-        let mut paths: Vec<_> = std::fs::read_dir(dir)
-            .map_err(|e| io(dir, e))?
-            .filter_map(|e| e.ok().map(|e| e.path()))
-            .filter(|p| p.extension().is_some_and(|x| x == "json"))
-            .collect();
-        paths.sort();
-        for path in paths {
-            let text = std::fs::read_to_string(&path).map_err(|e| io(&path, e))?;
-            let file = path.display().to_string();
-            let def = parse(&text).map_err(|source| LoadError::Invalid {
-                file: file.clone(),
-                source,
-            })?;
-            if path.file_stem().and_then(|s| s.to_str()) != Some(def.name.as_str()) {
-                return Err(LoadError::NameMismatch {
-                    file,
-                    name: def.name,
-                });
-            }
-            store.insert(def);
-        }
-        Ok(store)
-    }
-
-    /// Adds a map, building its arena. Returns false (and changes nothing) when the name is taken.
-    pub fn insert(&mut self, def: MapDef) -> bool {
-        if self.maps.contains_key(&def.name) {
-            return false; // do not build an arena only to throw it away
-        }
-        self.insert_arena(Arc::new(Arena::new(def)))
-    }
-
-    /// Adds an already-built arena. Returns false (and changes nothing) when the name is taken.
-    pub fn insert_arena(&mut self, arena: Arc<Arena>) -> bool {
-        self.insert_owned(arena, Owner::default(), 0)
-    }
-
-    /// Adds an uploaded map with its owner. Returns false (and changes nothing) when the name
-    /// is taken.
-    pub fn insert_owned(&mut self, arena: Arc<Arena>, owner: Owner, memory: u64) -> bool {
-        if self.maps.contains_key(&arena.def.name) {
-            return false;
-        }
-        self.maps.insert(
-            arena.def.name.clone(),
-            StoredMap {
-                arena,
-                owner,
-                memory,
-            },
-        );
-        true
-    }
-
-    /// Forgets a map (matches playing on it keep their arena).
-    pub fn remove(&mut self, name: &str) -> Option<StoredMap> {
-        self.maps.remove(name)
-    }
-
-    /// Bytes the uploaded maps (all, or `client`'s) were priced at, together.
-    pub fn uploaded_memory(&self, client: Option<ClientKey>) -> u64 {
-        let of = |m: &&StoredMap| client.is_none_or(|c| m.owner.client == Some(c));
-        self.maps.values().filter(of).map(|m| m.memory).sum()
-    }
-
-    /// Maps uploaded by `client` held now.
-    pub fn uploaded_by(&self, client: ClientKey) -> usize {
-        self.maps
-            .values()
-            .filter(|m| m.owner.client == Some(client))
-            .count()
-    }
-
-    pub fn contains(&self, name: &str) -> bool {
-        self.maps.contains_key(name)
-    }
-
-    pub fn get(&self, name: &str) -> Option<&StoredMap> {
-        self.maps.get(name)
-    }
-
-    pub fn iter(&self) -> impl Iterator<Item = &StoredMap> {
-        self.maps.values()
-    }
-
-    pub fn len(&self) -> usize {
-        self.maps.len()
-    }
-
-    pub fn is_empty(&self) -> bool {
-        self.maps.is_empty()
-    }
 }
 
 #[cfg(test)]

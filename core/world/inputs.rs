@@ -1,0 +1,98 @@
+//! Everything that changes a match from outside, as one type: a match is a function of its
+//! map, its settings, its seed and the [`WorldInput`]s applied between its ticks, so a log
+//! of them (with the tick each was applied at) replays it exactly.
+//!
+//! The shell applies every outside change through [`World::apply`] and records what it
+//! applied; a replay applies the same inputs at the same ticks.
+
+use super::*;
+
+/// One change from outside, applied between two ticks.
+#[derive(Debug, Clone, PartialEq)]
+pub enum WorldInput {
+    /// A person's keys for the opponent in `slot`.
+    Keys { slot: usize, input: HumanInput },
+    /// An order for an API-driven opponent.
+    Opponent { slot: usize, order: OpponentOrder },
+    /// An order for a robot driven from outside.
+    Robot { robot: usize, order: RobotOrder },
+    /// A person named `name` takes the opponent in `slot` (a bot there is kept aside).
+    Seat { slot: usize, name: String },
+    /// The person leaves `slot` (a bot kept aside comes back).
+    Unseat { slot: usize, name: String },
+    /// The match ends from outside.
+    End(FinishReason),
+}
+
+/// Why an input was refused (nothing changed).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum InputError {
+    #[error(transparent)]
+    Opponent(#[from] OrderError),
+    #[error(transparent)]
+    Robot(#[from] RobotOrderError),
+    #[error("no opponent slot {0} takes keys")]
+    NotHuman(usize),
+    #[error("no opponent slot {0} in this match")]
+    NoSlot(usize),
+}
+
+impl World {
+    /// Applies one change from outside (see the module docs).
+    pub fn apply(&mut self, input: &WorldInput) -> Result<(), InputError> {
+        match input {
+            WorldInput::Keys { slot, input } => {
+                if self.set_human_input(*slot, *input) {
+                    Ok(())
+                } else {
+                    Err(InputError::NotHuman(*slot))
+                }
+            }
+            WorldInput::Opponent { slot, order } => Ok(self.order_opponent(*slot, order.clone())?),
+            WorldInput::Robot { robot, order } => Ok(self.order_robot(*robot, order.clone())?),
+            WorldInput::Seat { slot, name } => {
+                let o = self
+                    .opponents
+                    .get_mut(*slot)
+                    .ok_or(InputError::NoSlot(*slot))?;
+                if let Control::Bot(_) = o.control {
+                    let bot =
+                        std::mem::replace(&mut o.control, Control::Human(HumanInput::default()));
+                    if let Control::Bot(bot) = bot {
+                        o.bench = Some(bot);
+                    }
+                }
+                self.log_player(*slot, name.clone(), true);
+                Ok(())
+            }
+            WorldInput::Unseat { slot, name } => {
+                let o = self
+                    .opponents
+                    .get_mut(*slot)
+                    .ok_or(InputError::NoSlot(*slot))?;
+                match o.bench.take() {
+                    Some(bot) => o.control = Control::Bot(bot),
+                    None => {
+                        if let Control::Human(keys) = &mut o.control {
+                            *keys = HumanInput::default();
+                        }
+                    }
+                }
+                self.log_player(*slot, name.clone(), false);
+                Ok(())
+            }
+            WorldInput::End(reason) => {
+                self.end(*reason);
+                Ok(())
+            }
+        }
+    }
+
+    /// The keys the person in `slot` holds now, if a person plays it.
+    pub fn human_input(&self, slot: usize) -> Option<HumanInput> {
+        match self.opponents.get(slot).map(|o| &o.control) {
+            Some(Control::Human(keys)) => Some(*keys),
+            _ => None,
+        }
+    }
+}

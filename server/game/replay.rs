@@ -1,0 +1,217 @@
+//! Replays: a finished match rebuilt from its map, settings, seed and recorded inputs
+//! (`game::record`), at any tick.
+//!
+//! The core is deterministic, so re-simulating the inputs gives back the match bit for bit:
+//! the state and belief a replay shows at tick N are what the live endpoints showed. To reach
+//! any tick quickly, the re-simulation keeps copies of the world (keyframes) at regular
+//! ticks as it passes them; a later seek starts from the nearest one before it. At most
+//! [`MAX_KEYFRAMES`] are kept, so a long match gets them farther apart rather than more.
+//!
+//! Re-simulating is real work (a whole match, the first time): callers run it off the async
+//! workers.
+
+use std::collections::VecDeque;
+use std::sync::{Arc, Mutex};
+use std::time::SystemTime;
+
+use lasertag_core::sim::arena::Arena;
+use lasertag_core::world::{MatchConfig, MatchStatus, SetupError, World, WorldInput};
+
+use crate::protocol::MatchMeta;
+
+/// Keyframes kept per replay: about 300 KB each for an office match, so at most tens of MB.
+pub const MAX_KEYFRAMES: u64 = 120;
+/// The closest keyframes may be (ticks): a seek then re-simulates at most this many.
+pub const MIN_KEYFRAME_SPACING: u64 = 50;
+
+/// A finished match, replayable.
+#[derive(Debug)]
+pub struct Replay {
+    pub meta: MatchMeta,
+    /// The last tick of the match.
+    pub last_tick: u64,
+    pub winner: Option<lasertag_core::world::Side>,
+    /// Names of the people who played, in the order they joined.
+    pub players: Vec<String>,
+    /// Wall-clock times the match was set up and ended.
+    pub started_at: SystemTime,
+    pub ended_at: SystemTime,
+    /// Why it ended (from its `finished` event).
+    pub reason: Option<lasertag_core::world::FinishReason>,
+    arena: Arc<Arena>,
+    config: MatchConfig,
+    inputs: Arc<[(u64, WorldInput)]>,
+    spacing: u64,
+    /// Worlds at multiples of `spacing`, in tick order (the start is always first).
+    keyframes: Mutex<Vec<World>>,
+}
+
+/// Why a tick of a replay could not be shown.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum ReplayError {
+    #[error("tick: {asked} is past the match's last tick, {last}")]
+    PastTheEnd { asked: u64, last: u64 },
+    #[error("the match could not be set up again: {0}")]
+    Setup(#[from] SetupError),
+}
+
+impl Replay {
+    /// The replay of a match that ended at `last`: `world` as it ended.
+    pub fn of(
+        world: &World,
+        meta: MatchMeta,
+        arena: Arc<Arena>,
+        config: MatchConfig,
+        inputs: Vec<(u64, WorldInput)>,
+        started_at: SystemTime,
+    ) -> Replay {
+        let last_tick = world.tick;
+        let reason = world.events().iter().rev().find_map(|e| match e.kind {
+            lasertag_core::world::EventKind::Finished { reason, .. } => Some(reason),
+            _ => None,
+        });
+        let players = world
+            .events()
+            .iter()
+            .filter_map(|e| match &e.kind {
+                lasertag_core::world::EventKind::PlayerJoined { name, .. } => Some(name.clone()),
+                _ => None,
+            })
+            .fold(Vec::new(), |mut names, n| {
+                if !names.contains(&n) {
+                    names.push(n);
+                }
+                names
+            });
+        Replay {
+            meta,
+            last_tick,
+            winner: world.winner,
+            players,
+            started_at,
+            ended_at: SystemTime::now(),
+            reason,
+            arena,
+            config,
+            inputs: inputs.into(),
+            spacing: MIN_KEYFRAME_SPACING.max(last_tick.div_ceil(MAX_KEYFRAMES)),
+            keyframes: Mutex::new(Vec::new()),
+        }
+    }
+
+    /// The match's settings and map.
+    pub fn config(&self) -> &MatchConfig {
+        &self.config
+    }
+
+    /// The world at the end of tick `tick` (after every input applied at it). Blocking: up
+    /// to a whole match of re-simulation the first time, at most a keyframe spacing after.
+    pub fn world_at(&self, tick: u64) -> Result<World, ReplayError> {
+        if tick > self.last_tick {
+            return Err(ReplayError::PastTheEnd {
+                asked: tick,
+                last: self.last_tick,
+            });
+        }
+        let mut keyframes = self.keyframes.lock().unwrap_or_else(|e| e.into_inner());
+        if keyframes.is_empty() {
+            keyframes.push(World::new(self.arena.clone(), self.config.clone())?);
+        }
+        let mut world = keyframes
+            .iter()
+            .rev()
+            .find(|w| w.tick <= tick)
+            .cloned()
+            .unwrap_or_else(|| keyframes[0].clone());
+        let mut next = self.inputs.partition_point(|(t, _)| *t < world.tick);
+        // A keyframe holds the world before the inputs of its tick.
+        loop {
+            while let Some((t, input)) = self.inputs.get(next)
+                && *t == world.tick
+            {
+                let _ = world.apply(input);
+                next += 1;
+            }
+            if world.tick >= tick || world.status == MatchStatus::Finished {
+                break;
+            }
+            world.step();
+            if world.tick % self.spacing == 0
+                && keyframes.last().is_some_and(|k| k.tick < world.tick)
+            {
+                keyframes.push(world.clone());
+            }
+        }
+        Ok(world)
+    }
+}
+
+/// Finished matches kept for replay by default.
+pub const HISTORY_CAPACITY: usize = 1000;
+/// Replays whose keyframes are kept (the most recently opened): the rest are re-simulated
+/// when opened again, so memory stays bounded whatever people open.
+const OPEN_REPLAYS: usize = 4;
+
+/// The finished matches a server keeps for replay, newest last, at most `capacity`.
+#[derive(Debug)]
+pub struct History {
+    replays: Mutex<VecDeque<Arc<Replay>>>,
+    capacity: usize,
+    opened: Mutex<VecDeque<Arc<Replay>>>,
+}
+
+impl Default for History {
+    fn default() -> Self {
+        History::new(HISTORY_CAPACITY)
+    }
+}
+
+impl History {
+    pub fn new(capacity: usize) -> History {
+        History {
+            replays: Mutex::new(VecDeque::new()),
+            capacity,
+            opened: Mutex::new(VecDeque::new()),
+        }
+    }
+
+    /// Notes that `replay` is being watched: it keeps its keyframes, and the replay opened
+    /// longest ago past [`OPEN_REPLAYS`] drops its own.
+    pub fn opened(&self, replay: &Arc<Replay>) {
+        let mut o = self.opened.lock().unwrap_or_else(|e| e.into_inner());
+        o.retain(|r| !Arc::ptr_eq(r, replay));
+        o.push_back(replay.clone());
+        while o.len() > OPEN_REPLAYS {
+            if let Some(old) = o.pop_front() {
+                old.keyframes
+                    .lock()
+                    .unwrap_or_else(|e| e.into_inner())
+                    .clear();
+            }
+        }
+    }
+
+    /// Keeps `replay`, forgetting the oldest past the capacity.
+    pub fn keep(&self, replay: Replay) {
+        let mut r = self.replays.lock().unwrap_or_else(|e| e.into_inner());
+        r.push_back(Arc::new(replay));
+        while r.len() > self.capacity {
+            r.pop_front();
+        }
+    }
+
+    pub fn get(&self, id: &str) -> Option<Arc<Replay>> {
+        let r = self.replays.lock().unwrap_or_else(|e| e.into_inner());
+        r.iter().find(|x| x.meta.id == id).cloned()
+    }
+
+    /// Newest first: at most `limit`, those older than `before` when given.
+    pub fn list(&self, limit: usize, before: Option<&str>) -> Vec<Arc<Replay>> {
+        let r = self.replays.lock().unwrap_or_else(|e| e.into_inner());
+        let newest_first = r.iter().rev();
+        let start = before
+            .and_then(|b| r.iter().rev().position(|x| x.meta.id == b).map(|i| i + 1))
+            .unwrap_or(0);
+        newest_first.skip(start).take(limit).cloned().collect()
+    }
+}

@@ -1,0 +1,141 @@
+//! The endpoints of history and replays: the finished matches, one replay's summary, and
+//! its state and belief at any tick (re-simulated off the async workers).
+
+use std::collections::HashMap;
+use std::sync::Arc;
+
+use axum::Json;
+use axum::extract::{Path, Query, State};
+
+use crate::game::replay::Replay;
+use crate::http::admit::off_workers;
+use crate::http::{ApiError, AppState};
+use crate::protocol::frame::Frame;
+use crate::protocol::replays::{ReplayDetail, ReplayListed, unix};
+use crate::protocol::{self, Belief, ErrorBody, MatchState};
+use lasertag_core::sim::AgentId;
+
+fn listed(r: &Replay) -> ReplayListed {
+    ReplayListed {
+        id: r.meta.id.clone(),
+        map: r.meta.map.clone(),
+        started_at: unix(r.started_at),
+        ended_at: unix(r.ended_at),
+        ticks: r.last_tick,
+        winner: protocol::winner(r.winner),
+        reason: r.reason.map(protocol::finish_reason),
+        complete: true,
+        players: r.players.clone(),
+    }
+}
+
+fn replay(state: &AppState, id: &str) -> Result<Arc<Replay>, ApiError> {
+    state.registry.history.get(id).ok_or_else(|| {
+        ApiError::not_found(format!(
+            "no replay {id} (matches are replayable once they have ended)"
+        ))
+    })
+}
+
+/// `?name=` as an integer in `0..=max`, or `default` when absent.
+fn number(
+    query: &HashMap<String, String>,
+    name: &str,
+    max: u64,
+    default: Option<u64>,
+) -> Result<u64, ApiError> {
+    match (query.get(name), default) {
+        (None, Some(d)) => Ok(d),
+        (None, None) => Err(ApiError::bad_request(format!(
+            "{name}: required (an integer in 0..={max})"
+        ))),
+        (Some(v), _) => v.parse::<u64>().ok().filter(|n| *n <= max).ok_or_else(|| {
+            ApiError::bad_request(format!("{name}: {v:?} is not an integer in 0..={max}"))
+        }),
+    }
+}
+
+/// The world of `r` at `tick`, re-simulated off the async workers.
+async fn world_at(
+    state: &AppState,
+    r: Arc<Replay>,
+    tick: u64,
+) -> Result<lasertag_core::world::World, ApiError> {
+    state.registry.history.opened(&r);
+    off_workers(state, "replaying the match", move || r.world_at(tick))
+        .await?
+        .map_err(|e| ApiError::bad_request(e.to_string()))
+}
+
+#[utoipa::path(get, path = "/api/replays",
+    params(("limit" = Option<u64>, Query, minimum = 1, maximum = 500, description = "at most this many (50)"),
+           ("before" = Option<String>, Query, description = "only matches that ended before this one")),
+    responses((status = 200, body = [ReplayListed]), (status = 400, body = ErrorBody)))]
+pub async fn list(
+    State(state): State<AppState>,
+    Query(query): Query<HashMap<String, String>>,
+) -> Result<Json<Vec<ReplayListed>>, ApiError> {
+    let limit = number(&query, "limit", 500, Some(50))?.max(1) as usize;
+    let before = query.get("before").map(String::as_str);
+    let replays = state.registry.history.list(limit, before);
+    Ok(Json(replays.iter().map(|r| listed(r)).collect()))
+}
+
+#[utoipa::path(get, path = "/api/replays/{id}", params(("id" = String, Path)),
+    responses((status = 200, body = ReplayDetail), (status = 404, body = ErrorBody)))]
+pub async fn detail(
+    State(state): State<AppState>,
+    Path(id): Path<String>,
+) -> Result<Json<ReplayDetail>, ApiError> {
+    let r = replay(&state, &id)?;
+    let last = r.last_tick;
+    let world = world_at(&state, r.clone(), last).await?;
+    Ok(Json(ReplayDetail {
+        listed: listed(&r),
+        settings: protocol::summary(&world, &r.meta),
+        events: world.events().iter().map(protocol::event).collect(),
+    }))
+}
+
+#[utoipa::path(get, path = "/api/replays/{id}/state",
+    params(("id" = String, Path), ("tick" = u64, Query, description = "a tick of the match, 0 to its last")),
+    responses((status = 200, body = MatchState), (status = 400, body = ErrorBody), (status = 404, body = ErrorBody)))]
+pub async fn state_at(
+    State(state): State<AppState>,
+    Path(id): Path<String>,
+    Query(query): Query<HashMap<String, String>>,
+) -> Result<Json<MatchState>, ApiError> {
+    let r = replay(&state, &id)?;
+    let tick = number(&query, "tick", r.last_tick, None)?;
+    let world = world_at(&state, r.clone(), tick).await?;
+    let frame = Frame::build(&world, &[], 0, 0, true);
+    Ok(Json(protocol::state(&frame, &r.meta, r.config())))
+}
+
+#[utoipa::path(get, path = "/api/replays/{id}/belief",
+    params(("id" = String, Path), ("tick" = u64, Query, description = "a tick of the match, 0 to its last"),
+           ("robot" = Option<String>, Query, description = "a robot id: that robot's own belief")),
+    responses((status = 200, body = Belief), (status = 400, body = ErrorBody), (status = 404, body = ErrorBody)))]
+pub async fn belief_at(
+    State(state): State<AppState>,
+    Path(id): Path<String>,
+    Query(query): Query<HashMap<String, String>>,
+) -> Result<Json<Belief>, ApiError> {
+    let r = replay(&state, &id)?;
+    let tick = number(&query, "tick", r.last_tick, None)?;
+    let robot = match query.get("robot") {
+        None => None,
+        Some(v) => match v.parse() {
+            Ok(AgentId::Robot(i)) => Some(i),
+            _ => {
+                return Err(ApiError::not_found(format!(
+                    "robot: no robot {v:?} in this match (r0, r1, …)"
+                )));
+            }
+        },
+    };
+    let world = world_at(&state, r, tick).await?;
+    protocol::belief(&world, robot)
+        .map(Json)
+        .ok_or_else(|| ApiError::not_found("robot: no such robot in this match"))
+}

@@ -1,0 +1,197 @@
+//! Replays against the live match: whole matches played with bots, robot commands and a
+//! WebSocket player sending random keys; once each has ended, its replay's state at every
+//! tick (and belief at many) must be the JSON the live endpoints gave then.
+
+mod common;
+
+use common::{TestServer, assert_error, duel_map};
+use rand::{RngExt, SeedableRng};
+use serde_json::{Value, json};
+
+/// Steps `id` one tick at a time for `ticks`, calling `between` before each step, and
+/// returns the live state after every tick and the belief after every 10th.
+async fn play(
+    s: &TestServer,
+    id: &str,
+    ticks: u64,
+    mut between: impl AsyncFnMut(u64),
+) -> (Vec<Value>, Vec<(u64, Value)>) {
+    let (mut states, mut beliefs) = (Vec::new(), Vec::new());
+    for k in 0..ticks {
+        between(k).await;
+        let state = s.step(id, 1).await;
+        let tick = state["tick"].as_u64().unwrap();
+        if tick % 10 == 0 {
+            let b = s.get(&format!("/api/matches/{id}/belief")).await;
+            beliefs.push((tick, b.body));
+        }
+        let finished = state["status"] == "finished";
+        states.push(state);
+        if finished {
+            break;
+        }
+    }
+    (states, beliefs)
+}
+
+async fn end(s: &TestServer, id: &str) {
+    assert_eq!(s.delete(&format!("/api/matches/{id}")).await.status, 204);
+}
+
+async fn check_replay(s: &TestServer, id: &str, states: &[Value], beliefs: &[(u64, Value)]) {
+    let r = s.get(&format!("/api/replays/{id}")).await;
+    assert_eq!(r.status, 200, "{}", r.body);
+    assert_eq!(r.body["id"], id);
+    assert_eq!(r.body["complete"], true);
+    let last = r.body["ticks"].as_u64().unwrap();
+    assert!(last >= states.last().unwrap()["tick"].as_u64().unwrap());
+    for live in states {
+        let tick = live["tick"].as_u64().unwrap();
+        let replayed = s.get(&format!("/api/replays/{id}/state?tick={tick}")).await;
+        assert_eq!(replayed.status, 200, "{}", replayed.body);
+        // The live read of a match that ended by deletion still said "running" at its last
+        // tick; the end is an input applied after it.
+        if tick < last {
+            assert_eq!(replayed.body, *live, "state at tick {tick}");
+        } else {
+            assert_eq!(
+                replayed.body["robots"], live["robots"],
+                "robots at tick {tick}"
+            );
+        }
+    }
+    for (tick, live) in beliefs {
+        let replayed = s
+            .get(&format!("/api/replays/{id}/belief?tick={tick}"))
+            .await;
+        assert_eq!(replayed.body, *live, "belief at tick {tick}");
+    }
+}
+
+#[tokio::test]
+async fn a_replay_shows_what_the_live_match_showed_at_every_tick() {
+    let s = TestServer::start().await;
+
+    // Bots against the coordinated planner.
+    let bots = s
+        .create_match(
+            json!({"map": "office", "robots": 2, "opponents": 2, "clock": "manual",
+            "opponent_bot": "evade", "seed": 3}),
+        )
+        .await;
+    let (states, beliefs) = play(&s, &bots, 300, async |_| {}).await;
+    end(&s, &bots).await;
+    check_replay(&s, &bots, &states, &beliefs).await;
+
+    // Robots driven from outside, and API-driven opponents, with random commands.
+    let api = s
+        .create_match(
+            json!({"map": duel_map(), "robots": 2, "opponents": 2, "planner": "api",
+            "opponent_control": "api", "clock": "manual", "seed": 5}),
+        )
+        .await;
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(9);
+    let mut commands = Vec::new();
+    for k in 0..200u64 {
+        if k % 7 == 0 {
+            let c = json!({"forward": rng.random_range(-1.0..=1.0), "turn": rng.random_range(-1.0..=1.0),
+                "tag": rng.random_bool(0.3)});
+            commands.push((k, "r0", c));
+        }
+        if k % 25 == 0 {
+            let p = [rng.random_range(1.0..13.0), rng.random_range(1.0..7.0)];
+            commands.push((k, "o1", json!({"waypoints": [p]})));
+        }
+    }
+    let (states, beliefs) = play(&s, &api, 200, async |k| {
+        for (_, who, c) in commands.iter().filter(|(at, _, _)| *at == k) {
+            let path = if who.starts_with('r') {
+                format!("/api/matches/{api}/robots/{who}/command")
+            } else {
+                format!("/api/matches/{api}/opponents/{who}/command")
+            };
+            let r = s.post(&path, c).await;
+            assert!(r.status == 204 || r.status == 409, "{}", r.body);
+        }
+    })
+    .await;
+    end(&s, &api).await;
+    check_replay(&s, &api, &states, &beliefs).await;
+}
+
+#[tokio::test]
+async fn a_replay_follows_a_player_over_the_websocket() {
+    let s = TestServer::start().await;
+    let id = s
+        .create_match(
+            json!({"map": "office", "robots": 1, "opponents": 2, "clock": "manual",
+            "opponent_control": "human", "spectator_delay_s": 0, "seed": 11}),
+        )
+        .await;
+    let (_, token) = s.join(&id, "ada").await;
+    let mut ws = s.ws(&id, Some(&token)).await.unwrap();
+    ws.next_of("welcome").await;
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(4);
+    let mut seq = 0;
+    let (mut states, mut beliefs) = (Vec::new(), Vec::new());
+    for _ in 0..150 {
+        seq += 1;
+        let keys = json!({"type": "input", "seq": seq, "forward": rng.random_range(-1..=1),
+            "turn": rng.random_range(-1..=1), "tag": rng.random_bool(0.1)});
+        ws.send_json(&keys).await.unwrap();
+        // The input is queued before the step: wait for its acknowledgement after it.
+        let state = s.step(&id, 1).await;
+        let tick = state["tick"].as_u64().unwrap();
+        if tick % 10 == 0 {
+            beliefs.push((tick, s.get(&format!("/api/matches/{id}/belief")).await.body));
+        }
+        let done = state["status"] == "finished";
+        states.push(state);
+        if done {
+            break;
+        }
+    }
+    drop(ws);
+    end(&s, &id).await;
+    check_replay(&s, &id, &states, &beliefs).await;
+    let listed = s.get("/api/replays").await.body;
+    let row = listed
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|r| r["id"] == id.as_str())
+        .cloned()
+        .expect("listed");
+    assert_eq!(row["players"], json!(["ada"]));
+    assert_eq!(row["reason"], "stopped");
+}
+
+#[tokio::test]
+async fn replays_name_what_is_wrong() {
+    let s = TestServer::start().await;
+    assert_error(&s.get("/api/replays/nope").await, 404, "no replay");
+    let id = s
+        .create_match(json!({"map": "office", "clock": "manual", "seed": 1}))
+        .await;
+    s.step(&id, 5).await;
+    // A match that runs is not a replay yet.
+    assert_error(&s.get(&format!("/api/replays/{id}")).await, 404, "ended");
+    end(&s, &id).await;
+    assert_error(
+        &s.get(&format!("/api/replays/{id}/state?tick=99")).await,
+        400,
+        "tick",
+    );
+    assert_error(
+        &s.get(&format!("/api/replays/{id}/state")).await,
+        400,
+        "tick",
+    );
+    assert_eq!(
+        s.get(&format!("/api/replays/{id}/state?tick=5"))
+            .await
+            .status,
+        200
+    );
+    assert_error(&s.get("/api/replays?limit=x").await, 400, "limit");
+}
