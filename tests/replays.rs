@@ -179,9 +179,10 @@ async fn replays_name_what_is_wrong() {
     end(&s, &id).await;
     assert_error(
         &s.get(&format!("/api/replays/{id}/state?tick=99")).await,
-        400,
+        404,
         "tick",
     );
+    assert_error(&s.get("/api/replays?limit=0").await, 400, "limit");
     assert_error(
         &s.get(&format!("/api/replays/{id}/state")).await,
         400,

@@ -55,6 +55,19 @@ fn number(
     }
 }
 
+/// `?tick=`: a number (else 400) that is one of the replay's ticks (else 404: a tick past
+/// the end is a state the replay does not have).
+fn tick(query: &HashMap<String, String>, r: &Replay) -> Result<u64, ApiError> {
+    let t = number(query, "tick", u64::MAX, None)?;
+    if t > r.last_tick {
+        return Err(ApiError::not_found(format!(
+            "tick: the replay has ticks 0 to {}, not {t}",
+            r.last_tick
+        )));
+    }
+    Ok(t)
+}
+
 /// The world of `r` at `tick`, re-simulated off the async workers.
 async fn world_at(
     state: &AppState,
@@ -75,7 +88,13 @@ pub async fn list(
     State(state): State<AppState>,
     Query(query): Query<HashMap<String, String>>,
 ) -> Result<Json<Vec<ReplayListed>>, ApiError> {
-    let limit = number(&query, "limit", 500, Some(50))?.max(1) as usize;
+    let limit = number(&query, "limit", 500, Some(50))?;
+    if limit == 0 {
+        return Err(ApiError::bad_request(
+            "limit: 0 is not an integer in 1..=500",
+        ));
+    }
+    let limit = limit as usize;
     let before = query.get("before").map(String::as_str);
     let replays = state.registry.history.list(limit, before);
     Ok(Json(replays.iter().map(|r| listed(r)).collect()))
@@ -99,14 +118,14 @@ pub async fn detail(
 
 #[utoipa::path(get, path = "/api/replays/{id}/state",
     params(("id" = String, Path), ("tick" = u64, Query, description = "a tick of the match, 0 to its last")),
-    responses((status = 200, body = MatchState), (status = 400, body = ErrorBody), (status = 404, body = ErrorBody)))]
+    responses((status = 200, body = MatchState), (status = 400, body = ErrorBody), (status = 404, body = ErrorBody, description = "no such replay, or a tick past its end")))]
 pub async fn state_at(
     State(state): State<AppState>,
     Path(id): Path<String>,
     Query(query): Query<HashMap<String, String>>,
 ) -> Result<Json<MatchState>, ApiError> {
     let r = replay(&state, &id)?;
-    let tick = number(&query, "tick", r.last_tick, None)?;
+    let tick = tick(&query, &r)?;
     let world = world_at(&state, r.clone(), tick).await?;
     let frame = Frame::build(&world, &[], 0, 0, true);
     Ok(Json(protocol::state(&frame, &r.meta, r.config())))
@@ -122,7 +141,7 @@ pub async fn belief_at(
     Query(query): Query<HashMap<String, String>>,
 ) -> Result<Json<Belief>, ApiError> {
     let r = replay(&state, &id)?;
-    let tick = number(&query, "tick", r.last_tick, None)?;
+    let tick = tick(&query, &r)?;
     let robot = match query.get("robot") {
         None => None,
         Some(v) => match v.parse() {
