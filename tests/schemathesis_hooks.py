@@ -7,8 +7,13 @@ instead; inline map objects are left as generated (they exercise the map validat
 """
 
 import os
+import re
 
 import schemathesis
+
+# server/schema.rs MAP_NAME_PATTERN: a name that breaks it is left as generated, so that a
+# request meant to be refused (a negative case) still is.
+MAP_NAME = re.compile(r"[a-z0-9_-]{1,64}")
 
 SHIPPED_MAPS = ["office", "hallway", "maze", "warehouse"]
 
@@ -18,7 +23,7 @@ def map_body(ctx, body):
     op = ctx.operation
     if op is None or op.method.upper() != "POST" or op.path != "/api/matches":
         return body
-    if isinstance(body, dict) and isinstance(body.get("map"), str):
+    if isinstance(body, dict) and isinstance(body.get("map"), str) and MAP_NAME.fullmatch(body["map"]):
         # The generated name picks the map, so the choice stays reproducible from the seed.
         name = body["map"]
         body["map"] = SHIPPED_MAPS[sum(map(ord, name)) % len(SHIPPED_MAPS)]
