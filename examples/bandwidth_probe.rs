@@ -16,7 +16,9 @@
 //! page's `__lasertag.rxBytes` counts), the snapshots per second and the mean snapshot size,
 //! and for compact clients how many snapshots came as deltas.
 
-use std::net::SocketAddr;
+#[path = "../tests/common/in_process.rs"]
+mod in_process;
+
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
@@ -68,16 +70,7 @@ async fn run(args: Args) -> Result<(), String> {
     if !(10..=600).contains(&args.seconds) {
         return Err(format!("--seconds {} must be in 10..=600", args.seconds));
     }
-    let maps =
-        lasertag::maps::MapStore::load_dir(&args.maps).map_err(|e| format!("loading maps: {e}"))?;
-    let registry = lasertag::game::Registry::with_config(maps, lasertag::config::Config::default());
-    let app = lasertag::http::app(registry, PathBuf::from("web"))
-        .into_make_service_with_connect_info::<SocketAddr>();
-    let listener = tokio::net::TcpListener::bind("127.0.0.1:0")
-        .await
-        .map_err(|e| e.to_string())?;
-    let addr = listener.local_addr().map_err(|e| e.to_string())?;
-    tokio::spawn(async move { axum::serve(listener, app).await });
+    let addr = in_process::start(&args.maps).await?;
 
     let http = reqwest::Client::new();
     let base = format!("http://{addr}");

@@ -21,6 +21,9 @@
 #[path = "../tests/common/netem.rs"]
 mod netem;
 
+#[path = "../tests/common/in_process.rs"]
+mod in_process;
+
 use std::collections::VecDeque;
 use std::net::SocketAddr;
 use std::path::PathBuf;
@@ -73,16 +76,7 @@ async fn run(args: Args) -> Result<(), String> {
     if let Some(d) = args.distances.iter().find(|d| !(1.0..=5.5).contains(*d)) {
         return Err(format!("--distances: {d} must be in 1..=5.5"));
     }
-    let maps =
-        lasertag::maps::MapStore::load_dir(&args.maps).map_err(|e| format!("loading maps: {e}"))?;
-    let registry = lasertag::game::Registry::with_config(maps, lasertag::config::Config::default());
-    let app = lasertag::http::app(registry, PathBuf::from("web"))
-        .into_make_service_with_connect_info::<SocketAddr>();
-    let listener = tokio::net::TcpListener::bind("127.0.0.1:0")
-        .await
-        .map_err(|e| e.to_string())?;
-    let server = listener.local_addr().map_err(|e| e.to_string())?;
-    tokio::spawn(async move { axum::serve(listener, app).await });
+    let server = in_process::start(&args.maps).await?;
     let net = netem::Netem::start(
         server,
         netem::Conditions {

@@ -26,6 +26,9 @@ mod cdp;
 #[path = "../tests/common/netem.rs"]
 mod netem;
 
+#[path = "../tests/common/in_process.rs"]
+mod in_process;
+
 use std::path::PathBuf;
 use std::time::Duration;
 
@@ -93,16 +96,7 @@ async fn run(args: Args) -> Result<(), String> {
     if !(1..=500).contains(&args.trials) {
         return Err(format!("--trials {} must be in 1..=500", args.trials));
     }
-    let maps =
-        lasertag::maps::MapStore::load_dir(&args.maps).map_err(|e| format!("loading maps: {e}"))?;
-    let registry = lasertag::game::Registry::with_config(maps, lasertag::config::Config::default());
-    let app = lasertag::http::app(registry, PathBuf::from("web"))
-        .into_make_service_with_connect_info::<std::net::SocketAddr>();
-    let listener = tokio::net::TcpListener::bind("127.0.0.1:0")
-        .await
-        .map_err(|e| e.to_string())?;
-    let server = listener.local_addr().map_err(|e| e.to_string())?;
-    tokio::spawn(async move { axum::serve(listener, app).await });
+    let server = in_process::start(&args.maps).await?;
 
     let mut conditions: Vec<(u64, f64)> = if args.rtt_ms.is_empty() {
         vec![(0, 0.0), (150, 0.0), (300, 0.0), (150, args.loss)]

@@ -1,0 +1,20 @@
+//! The server in this process, on 127.0.0.1 and an ephemeral port, without a showcase: what
+//! the measurement programs in `examples/` run against (each includes this file by path).
+
+use std::net::SocketAddr;
+use std::path::{Path, PathBuf};
+
+/// Serves the maps of `maps` and the page of `web/` with the default settings; the address.
+pub async fn start(maps: &Path) -> Result<SocketAddr, String> {
+    let maps =
+        lasertag::maps::MapStore::load_dir(maps).map_err(|e| format!("loading maps: {e}"))?;
+    let registry = lasertag::game::Registry::with_config(maps, lasertag::config::Config::default());
+    let app = lasertag::http::app(registry, PathBuf::from("web"))
+        .into_make_service_with_connect_info::<SocketAddr>();
+    let listener = tokio::net::TcpListener::bind("127.0.0.1:0")
+        .await
+        .map_err(|e| e.to_string())?;
+    let addr = listener.local_addr().map_err(|e| e.to_string())?;
+    tokio::spawn(async move { axum::serve(listener, app).await });
+    Ok(addr)
+}
