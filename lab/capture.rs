@@ -6,6 +6,11 @@
 //! a summary with median, mean and its 95% confidence interval, a Mann–Whitney U test of
 //! the difference, and one SVG per setting: the fraction of runs that have tagged the
 //! opponent by each time.
+//!
+//! Every tick until the tag it also measures how close the team's belief is to the truth
+//! (GOSPA, [`crate::tracking`]): `capture_gospa.csv` per run, the means in the summary, and
+//! the mean over the runs still going at each second (`capture_gospa_time.csv`, one SVG per
+//! map and bot).
 
 use crate::error::LabError;
 use std::path::Path;
@@ -13,6 +18,7 @@ use std::sync::Arc;
 
 use crate::plot::{self, Series};
 use crate::run_all;
+use crate::tracking::{self, Parts, Track};
 use lasertag_core::bots::BotKind;
 use lasertag_core::planner::PlannerKind;
 use lasertag_core::sim::TICK_HZ;
@@ -23,6 +29,8 @@ use lasertag_core::world::{MatchStatus, Side, World};
 #[derive(Debug, Clone)]
 pub struct CaptureConfig {
     pub runs: usize,
+    /// Opponents per match (1, as in the paper, unless asked); a run ends when all are tagged.
+    pub opponents: usize,
     pub seed: u64,
     pub time_limit_s: u64,
     /// Weights of the coordinated planner (the defaults unless tuning).
@@ -53,17 +61,18 @@ fn planner_name(p: PlannerKind) -> &'static str {
     p.name()
 }
 
-/// Seconds until the opponent was tagged, or `None` if it was not within the time limit.
+/// Seconds until the opponents were tagged (`None` if not within the time limit), and
+/// the belief's GOSPA at every tick while the match ran.
 fn one_run(
     arena: Arc<Arena>,
     s: Setting,
     seed: u64,
     cfg: &CaptureConfig,
-) -> Result<Option<f64>, LabError> {
+) -> Result<(Option<f64>, Track), LabError> {
     let limit_s = cfg.time_limit_s;
     let config = MatchConfig {
         robots: 2,
-        opponents: 1,
+        opponents: cfg.opponents,
         opponent_bot: s.bot,
         planner: s.planner,
         placement: Placement::Random,
@@ -75,10 +84,32 @@ fn one_run(
         ..MatchConfig::default()
     };
     let mut world = World::new(arena, config)?;
+    let mut track = Track::default();
     while world.status == MatchStatus::Running {
         world.step();
+        // Not the tick that ends the match: with the opponent tagged there is nothing to
+        // track, and its zero would flatter every run by a tick.
+        if world.status == MatchStatus::Running {
+            track.push(&world);
+        }
     }
-    Ok((world.winner == Some(Side::Robots)).then(|| world.time_s()))
+    let time = (world.winner == Some(Side::Robots)).then(|| world.time_s());
+    Ok((time, track.finish()))
+}
+
+/// Runs still going at a second below which a curve of their mean stops: a mean over a
+/// handful of long runs says more about those runs than about the planner.
+const CURVE_MIN_RUNS: f64 = 0.1;
+
+/// Each second's mean GOSPA over the runs still going, while at least [`CURVE_MIN_RUNS`] of
+/// the runs (and at least one) are.
+fn gospa_curve(tracks: &[Track]) -> Vec<(Parts, usize)> {
+    let runs: Vec<&Track> = tracks.iter().collect();
+    let least = ((tracks.len() as f64 * CURVE_MIN_RUNS).ceil() as usize).max(1);
+    tracking::mean_by_second(&runs, false)
+        .into_iter()
+        .take_while(|(_, n)| *n >= least)
+        .collect()
 }
 
 /// Median, mean and the 95% confidence interval of the mean (normal approximation), with
@@ -188,15 +219,31 @@ pub fn run(
             cfg,
         )
     });
-    let results: Vec<Option<f64>> = results.into_iter().collect::<Result<_, _>>()?;
+    let results: Vec<(Option<f64>, Track)> = results.into_iter().collect::<Result<_, _>>()?;
+    let (results, tracks): (Vec<Option<f64>>, Vec<Track>) = results.into_iter().unzip();
     let limit = cfg.time_limit_s as f64;
     let mut csv = String::from("map,bot,planner,seed,captured,time_s\n");
-    let mut summary = String::from(
-        "map,bot,planner,runs,captured,median_s,mean_s,mean_ci95_low_s,mean_ci95_high_s,median_ratio_vs_baseline,mann_whitney_p\n",
+    let mut summary = format!(
+        "map,bot,planner,runs,captured,median_s,mean_s,mean_ci95_low_s,mean_ci95_high_s,median_ratio_vs_baseline,mann_whitney_p,{},mean_gospa_ci95_m\n",
+        tracking::csv_header("mean_")
     );
     let mut table = format!(
-        "{:<10} {:<7} {:<12} {:>8} {:>8} {:>8} {:>16} {:>6} {:>9}\n",
-        "map", "bot", "planner", "captured", "median", "mean", "95% CI of mean", "ratio", "p"
+        "{:<10} {:<7} {:<12} {:>8} {:>8} {:>8} {:>16} {:>6} {:>9} {:>7}\n",
+        "map",
+        "bot",
+        "planner",
+        "captured",
+        "median",
+        "mean",
+        "95% CI of mean",
+        "ratio",
+        "p",
+        "GOSPA"
+    );
+    let mut gospa_csv = format!("map,bot,planner,seed,{}\n", tracking::csv_header("mean_"));
+    let mut gospa_time = format!(
+        "map,bot,planner,time_s,runs_going,{}\n",
+        tracking::csv_header("mean_")
     );
     for (k, s) in settings.iter().enumerate() {
         let times = &results[k * cfg.runs..(k + 1) * cfg.runs];
@@ -209,6 +256,16 @@ pub fn run(
                 cfg.seed + i as u64,
                 t.is_some(),
                 t.map_or(String::new(), |v| format!("{v:.2}"))
+            ));
+        }
+        for (i, t) in tracks[k * cfg.runs..(k + 1) * cfg.runs].iter().enumerate() {
+            gospa_csv.push_str(&format!(
+                "{},{},{},{},{}\n",
+                maps[s.map].0,
+                bot_name(s.bot),
+                planner_name(s.planner),
+                cfg.seed + i as u64,
+                t.mean.csv()
             ));
         }
     }
@@ -224,26 +281,35 @@ pub fn run(
                 let k = idx(p);
                 results[k * cfg.runs..(k + 1) * cfg.runs].to_vec()
             };
+            let tracks_of = |p: PlannerKind| {
+                let k = idx(p);
+                &tracks[k * cfg.runs..(k + 1) * cfg.runs]
+            };
             let base = times_of(PlannerKind::Baseline);
             let (base_median, ..) = stats(&base, limit);
             let as_values =
                 |t: &[Option<f64>]| t.iter().map(|v| v.unwrap_or(limit)).collect::<Vec<_>>();
             let mut series = Vec::new();
+            let mut gospa_series = Vec::new();
             for &p in &planners {
+                let run_means: Vec<f64> = tracks_of(p).iter().map(|t| t.mean.gospa).collect();
+                let (_, gospa_ci) = mean_ci(&run_means);
+                let gospa = Parts::mean(tracks_of(p).iter().map(|t| t.mean));
                 let times = times_of(p);
                 let (median, mean, lo, hi) = stats(&times, limit);
                 let captured = times.iter().filter(|t| t.is_some()).count();
                 let ratio = median / base_median;
                 let pv = mann_whitney_p(&as_values(&times), &as_values(&base));
                 summary.push_str(&format!(
-                    "{},{},{},{},{captured},{median:.2},{mean:.2},{lo:.2},{hi:.2},{ratio:.3},{pv:.3e}\n",
+                    "{},{},{},{},{captured},{median:.2},{mean:.2},{lo:.2},{hi:.2},{ratio:.3},{pv:.3e},{},{gospa_ci:.4}\n",
                     map_name,
                     bot_name(bot),
                     planner_name(p),
-                    cfg.runs
+                    cfg.runs,
+                    gospa.csv()
                 ));
                 table.push_str(&format!(
-                    "{:<10} {:<7} {:<12} {:>4}/{:<3} {:>7.1}s {:>7.1}s {:>16} {:>6.2} {:>9.2e}\n",
+                    "{:<10} {:<7} {:<12} {:>4}/{:<3} {:>7.1}s {:>7.1}s {:>16} {:>6.2} {:>9.2e} {:>6.2}m\n",
                     map_name,
                     bot_name(bot),
                     planner_name(p),
@@ -253,8 +319,25 @@ pub fn run(
                     mean,
                     format!("[{lo:.1}, {hi:.1}] s"),
                     ratio,
-                    pv
+                    pv,
+                    gospa.gospa
                 ));
+                let curve = gospa_curve(tracks_of(p));
+                for (t, (parts, n)) in curve.iter().enumerate() {
+                    gospa_time.push_str(&format!(
+                        "{},{},{},{t},{n},{}\n",
+                        map_name,
+                        bot_name(bot),
+                        planner_name(p),
+                        parts.csv()
+                    ));
+                }
+                let points = curve
+                    .iter()
+                    .enumerate()
+                    .map(|(t, (parts, _))| (t as f64, parts.gospa))
+                    .collect();
+                gospa_series.push((planner_name(p), points));
                 // Fraction of runs that have tagged the opponent by each second.
                 let mut done: Vec<f64> = times.iter().flatten().copied().collect();
                 done.sort_by(f64::total_cmp);
@@ -279,8 +362,31 @@ pub fn run(
                     cfg.runs
                 ),
                 "time (s)",
-                "fraction of runs with the opponent tagged",
+                &if cfg.opponents == 1 {
+                    "fraction of runs with the opponent tagged".to_string()
+                } else {
+                    format!(
+                        "fraction of runs with all {} opponents tagged",
+                        cfg.opponents
+                    )
+                },
                 &series,
+            )?;
+            let gospa_series: Vec<Series> = gospa_series
+                .into_iter()
+                .map(|(name, points)| Series { name, points })
+                .collect();
+            plot::lines(
+                &out.join(format!("capture_gospa_{}_{}.svg", map_name, bot_name(bot))),
+                &format!(
+                    "Belief against truth while hunting: {} vs {} bot ({} runs)",
+                    map_name,
+                    bot_name(bot),
+                    cfg.runs
+                ),
+                "time (s)",
+                "mean GOSPA of runs still going (m; c = 2 m, p = 2)",
+                &gospa_series,
             )?;
         }
     }
@@ -290,6 +396,8 @@ pub fn run(
     };
     write("capture.csv", &csv)?;
     write("capture_summary.csv", &summary)?;
+    write("capture_gospa.csv", &gospa_csv)?;
+    write("capture_gospa_time.csv", &gospa_time)?;
     Ok(table)
 }
 

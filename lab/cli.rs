@@ -50,6 +50,9 @@ pub enum Experiment {
         /// Time limit of each run in seconds (runs that reach it count as not captured).
         #[arg(long, default_value_t = 300)]
         time_limit: u64,
+        /// Opponents per match (1..=16); a run is a capture when all of them are tagged.
+        #[arg(long, default_value_t = 1)]
+        opponents: usize,
         /// Maps to run on.
         #[arg(long, value_delimiter = ',', default_value = "office,warehouse")]
         on: Vec<String>,
@@ -192,6 +195,7 @@ pub fn run(e: Experiment, load: LoadMaps) -> Result<(), LabError> {
             runs,
             seed,
             time_limit,
+            opponents,
             on,
             maps,
             out,
@@ -204,6 +208,11 @@ pub fn run(e: Experiment, load: LoadMaps) -> Result<(), LabError> {
                 return Err(LabError::Arguments(
                     "--runs and --time-limit must be at least 1".into(),
                 ));
+            }
+            if !(1..=16).contains(&opponents) {
+                return Err(LabError::Arguments(format!(
+                    "--opponents {opponents}: must be in 1..=16"
+                )));
             }
             let chosen = chosen_maps(load, &maps, &on)?;
             let mut coordination = lasertag_core::planner::coordinated::Settings::default();
@@ -227,6 +236,7 @@ pub fn run(e: Experiment, load: LoadMaps) -> Result<(), LabError> {
                 .map_err(|e| LabError::Arguments(format!("--radio-loss: {}", e.message)))?;
             let cfg = crate::capture::CaptureConfig {
                 runs,
+                opponents,
                 seed,
                 time_limit_s: time_limit,
                 coordination,
@@ -236,8 +246,9 @@ pub fn run(e: Experiment, load: LoadMaps) -> Result<(), LabError> {
             let table = crate::capture::run(&chosen, &cfg, &out)?;
             print!("{table}");
             println!(
-                "ratio: median capture time / baseline's; p: two-sided Mann–Whitney U against baseline\n\
-                 wrote {0}/capture.csv, {0}/capture_summary.csv and {0}/capture_<map>_<bot>.svg",
+                "ratio: median capture time / baseline's; p: two-sided Mann–Whitney U against baseline;\n\
+                 GOSPA: the belief against the truth until the tag (c = 2 m, p = 2), mean over runs of each run's mean\n\
+                 wrote {0}/capture.csv, {0}/capture_summary.csv, {0}/capture_gospa{{,_time}}.csv, {0}/capture_<map>_<bot>.svg and {0}/capture_gospa_<map>_<bot>.svg",
                 out.display()
             );
             Ok(())
@@ -401,16 +412,26 @@ pub fn run(e: Experiment, load: LoadMaps) -> Result<(), LabError> {
                 kl_cutoff,
             };
             let r = crate::filters::run(arena, &cfg, &out)?;
+            let parts = |g: &crate::tracking::Parts, ci: f64| {
+                format!(
+                    "GOSPA {:.2} ± {ci:.2} m (localisation {:.2} m, missed {:.2}, false {:.2})",
+                    g.gospa, g.localisation, g.missed, g.false_targets
+                )
+            };
             println!(
-                "with merging: mean active filters peaks at {:.2}, ends at {:.2}\n\
-                 without merging: peaks at {:.2}, ends at {:.2} ({} s of play)\n\
-                 wrote {}/filters.csv and {}/filters.svg",
+                "with merging: mean active filters peaks at {:.2}, ends at {:.2}; {}\n\
+                 without merging: peaks at {:.2}, ends at {:.2}; {} ({} s of play)\n\
+                 GOSPA: the belief against the truth (c = 2 m, p = 2), mean over runs of each run's mean ± the half-width of its 95% CI",
                 r.with_merge_max_mean,
                 r.with_merge_final_mean,
+                parts(&r.with_merge_gospa, r.with_merge_gospa_ci95),
                 r.without_merge_max_mean,
                 r.without_merge_final_mean,
+                parts(&r.without_merge_gospa, r.without_merge_gospa_ci95),
                 r.seconds,
-                out.display(),
+            );
+            println!(
+                "wrote {0}/filters.csv, {0}/filters.svg, {0}/filters_gospa{{,_runs}}.csv and {0}/filters_gospa.svg",
                 out.display()
             );
             Ok(())

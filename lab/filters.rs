@@ -7,6 +7,9 @@
 //! along the whole hall (in the observer's view for x ∈ [7, 23]), and park out of sight in
 //! the storage area on the right. Departure and parking orders are chosen so nobody walks
 //! through someone else's spot.
+//!
+//! Every tick it also measures how close the belief is to the truth (GOSPA, see
+//! [`crate::tracking`]): fewer filters are only better if they still say where people are.
 
 use crate::error::LabError;
 use std::path::Path;
@@ -18,6 +21,7 @@ use rand_chacha::ChaCha8Rng;
 
 use crate::plot::{self, Series};
 use crate::run_all;
+use crate::tracking::{self, Parts, Track};
 use lasertag_core::planner::PlannerKind;
 use lasertag_core::sim::TICK_HZ;
 use lasertag_core::sim::arena::Arena;
@@ -75,13 +79,14 @@ fn spots(arena: &Arena, x0: f32, x1: f32) -> Vec<Point2<f32>> {
     out
 }
 
-/// One run: the number of active (untagged) filters, sampled once per simulated second.
+/// One run: the number of active (untagged) filters, sampled once per simulated second,
+/// and the belief's GOSPA, measured every tick.
 pub fn one_run(
     arena: Arc<Arena>,
     cfg: &FiltersConfig,
     merge: bool,
     run: usize,
-) -> Result<Vec<u32>, LabError> {
+) -> Result<(Vec<u32>, Track), LabError> {
     let n = cfg.opponents;
     // Starts: top rows leave first (nobody walks up through a waiting spot).
     let mut starts = spots(&arena, 0.6, 8.2);
@@ -124,6 +129,7 @@ pub fn one_run(
     let mut walking: Option<usize> = None;
     let mut done_at: Option<u64> = None;
     let mut samples = Vec::new();
+    let mut track = Track::default();
     loop {
         if walking.is_none() && next < n && world.tick >= depart_at {
             let (s, p) = (starts[next], parks[next]);
@@ -164,12 +170,13 @@ pub fn one_run(
                     .count() as u32,
             );
         }
+        track.push(&world);
         if done_at.is_some_and(|t| world.tick >= t) || world.tick > 3_600 * TICK_HZ as u64 {
             break;
         }
         world.step();
     }
-    Ok(samples)
+    Ok((samples, track.finish()))
 }
 
 /// Mean over runs of each second's count; shorter runs hold their last value.
@@ -194,17 +201,25 @@ pub struct FiltersResult {
     pub without_merge_final_mean: f64,
     pub without_merge_max_mean: f64,
     pub seconds: usize,
+    /// GOSPA and its parts, each run's mean over its ticks averaged over runs, and the
+    /// half-width of the 95% confidence interval of that mean GOSPA.
+    pub with_merge_gospa: Parts,
+    pub without_merge_gospa: Parts,
+    pub with_merge_gospa_ci95: f64,
+    pub without_merge_gospa_ci95: f64,
 }
 
-/// Runs the experiment and writes `filters.csv` and `filters.svg` into `out`.
+/// Runs the experiment and writes `filters.csv`, `filters.svg`, `filters_gospa.csv` and
+/// `filters_gospa.svg` into `out`.
 pub fn run(arena: Arc<Arena>, cfg: &FiltersConfig, out: &Path) -> Result<FiltersResult, LabError> {
     crate::error::create_dir_all(out)?;
     let jobs = 2 * cfg.runs;
     let results = run_all("filters (merge, no merge)", jobs, |i| {
         one_run(arena.clone(), cfg, i < cfg.runs, i % cfg.runs)
     });
-    let results: Vec<Vec<u32>> = results.into_iter().collect::<Result<_, _>>()?;
-    let (merged, unmerged) = results.split_at(cfg.runs);
+    let results: Vec<(Vec<u32>, Track)> = results.into_iter().collect::<Result<_, _>>()?;
+    let (counts, tracks): (Vec<Vec<u32>>, Vec<Track>) = results.into_iter().unzip();
+    let (merged, unmerged) = counts.split_at(cfg.runs);
     let with = mean_curve(merged);
     let without = mean_curve(unmerged);
     let len = with.len().max(without.len());
@@ -235,11 +250,81 @@ pub fn run(arena: Arc<Arena>, cfg: &FiltersConfig, out: &Path) -> Result<Filters
             },
         ],
     )?;
+    let (tracked_with, tracked_without) = tracks.split_at(cfg.runs);
+    write_gospa(out, cfg, tracked_with, tracked_without)?;
+    let ci = |runs: &[Track]| {
+        let means: Vec<f64> = runs.iter().map(|t| t.mean.gospa).collect();
+        crate::capture::mean_ci(&means).1
+    };
     Ok(FiltersResult {
+        with_merge_gospa_ci95: ci(tracked_with),
+        without_merge_gospa_ci95: ci(tracked_without),
+        with_merge_gospa: Parts::mean(tracked_with.iter().map(|t| t.mean)),
+        without_merge_gospa: Parts::mean(tracked_without.iter().map(|t| t.mean)),
         with_merge_max_mean: with.iter().copied().fold(0.0, f64::max),
         with_merge_final_mean: at(&with, len.saturating_sub(1)),
         without_merge_final_mean: at(&without, len.saturating_sub(1)),
         without_merge_max_mean: without.iter().copied().fold(0.0, f64::max),
         seconds: len,
     })
+}
+
+/// `filters_gospa.csv` (each second's GOSPA and parts, mean over runs, with and without
+/// merging; a finished run holds its last second, as the filter counts do),
+/// `filters_gospa_runs.csv` (each run's mean) and `filters_gospa.svg`.
+fn write_gospa(
+    out: &Path,
+    cfg: &FiltersConfig,
+    with: &[Track],
+    without: &[Track],
+) -> Result<(), LabError> {
+    let mut runs_csv = format!("merging,seed,{}\n", tracking::csv_header("mean_"));
+    for (merging, runs) in [(true, with), (false, without)] {
+        for (i, t) in runs.iter().enumerate() {
+            let seed = cfg.seed + i as u64;
+            runs_csv.push_str(&format!("{merging},{seed},{}\n", t.mean.csv()));
+        }
+    }
+    crate::error::write(&out.join("filters_gospa_runs.csv"), runs_csv)?;
+    let curve = |runs: &[Track]| {
+        let runs: Vec<&Track> = runs.iter().collect();
+        tracking::mean_by_second(&runs, true)
+    };
+    let (with, without) = (curve(with), curve(without));
+    let len = with.len().max(without.len());
+    let at =
+        |c: &[(Parts, usize)], t: usize| c.get(t).or(c.last()).map_or_else(Parts::default, |p| p.0);
+    let mut csv = format!(
+        "time_s,{},{}\n",
+        tracking::csv_header("with_merging_"),
+        tracking::csv_header("without_merging_")
+    );
+    for t in 0..len {
+        csv.push_str(&format!(
+            "{t},{},{}\n",
+            at(&with, t).csv(),
+            at(&without, t).csv()
+        ));
+    }
+    crate::error::write(&out.join("filters_gospa.csv"), csv)?;
+    let points = |c: &[(Parts, usize)]| (0..len).map(|t| (t as f64, at(c, t).gospa)).collect();
+    plot::lines(
+        &out.join("filters_gospa.svg"),
+        &format!(
+            "Belief against truth, {} opponents passing a watched door ({} runs each)",
+            cfg.opponents, cfg.runs
+        ),
+        "time (s)",
+        "mean GOSPA (m; c = 2 m, p = 2)",
+        &[
+            Series {
+                name: "with merging",
+                points: points(&with),
+            },
+            Series {
+                name: "without merging",
+                points: points(&without),
+            },
+        ],
+    )
 }

@@ -9,6 +9,7 @@
 //!   and without a teammate's hypotheses and the tracker's prediction.
 //! - [`uncertainty`]: uncertainty-aware motion on and off, for robots that
 //!   localise from landmarks alone.
+//! - [`tracking`]: how close the belief is to the truth (GOSPA), for `filters` and `capture`.
 
 pub mod capture;
 pub mod cli;
@@ -17,6 +18,7 @@ pub mod filters;
 pub mod localisation;
 pub mod plot;
 pub mod reacquire;
+pub mod tracking;
 pub mod uncertainty;
 
 use std::sync::Mutex;

@@ -18,6 +18,28 @@ fi
 cargo clippy --locked --workspace --all-targets -- -D warnings
 cargo test --locked --workspace --all-targets
 
+# The Python research environment (python/, docs/research.md): its pytest suite, which starts
+# its own servers from the debug binary (`cargo test` builds it for the integration tests;
+# built here only if it is missing), in a venv of its own with the versions
+# python/constraints.txt pins (PyPI).
+[ -x target/debug/lasertag ] || cargo build --locked --bin lasertag
+PY_DIR=target/python-env
+if [ ! -x "$PY_DIR/venv/bin/pip" ]; then
+  rm -rf "$PY_DIR/venv"
+  python3 -m venv "$PY_DIR/venv" >/dev/null 2>&1 || rm -rf "$PY_DIR/venv"
+fi
+if [ -x "$PY_DIR/venv/bin/pip" ]; then
+  "$PY_DIR/venv/bin/pip" install -q --disable-pip-version-check -c python/constraints.txt ./python pytest
+  # The package's own version does not change with its code: reinstall it every run.
+  "$PY_DIR/venv/bin/pip" install -q --disable-pip-version-check --no-deps --force-reinstall ./python
+  LASERTAG_BIN=target/debug/lasertag "$PY_DIR/venv/bin/python" -m pytest python/tests
+else
+  # A Python without venv (Debian's python3 without python3-venv): install into a folder.
+  rm -rf "$PY_DIR/pkgs"
+  python3 -m pip install -q --disable-pip-version-check -c python/constraints.txt --target "$PY_DIR/pkgs" ./python pytest
+  LASERTAG_BIN=target/debug/lasertag PYTHONPATH="$PWD/$PY_DIR/pkgs" python3 -m pytest python/tests
+fi
+
 # API conformance: schemathesis (from PyPI, pinned) against the real server's OpenAPI
 # document, every operation, every check (exceptions and reasons in tests/schemathesis.toml).
 # Any failure (a 5xx, a response off its schema, ...) fails the run.

@@ -1,4 +1,5 @@
-//! Role merging: grid histograms and the symmetric KL divergence between them.
+//! Role merging: grid histograms and the symmetric KL divergence between them, and the
+//! merged cloud, a mixture of the two weighted by the opponents each role stands for.
 //!
 //! A coarse grid (`grid_cell` metres) covers the arena; only cells with free space count.
 //! A role's histogram is its particle weights summed per cell, Laplace-smoothed (one pseudo
@@ -77,34 +78,47 @@ pub fn symmetric_kl(p: &[f32], q: &[f32]) -> f32 {
     p.iter().zip(q).map(|(a, b)| (a - b) * (a / b).ln()).sum()
 }
 
-/// Replaces `keep`'s cloud by the average of the two distributions: both are resampled to
-/// equal weights, then the merged cloud takes every other particle from each.
+/// Replaces `keep`'s cloud by the mixture of the two distributions, each weighted by the
+/// opponents its role stands for: the merged role stands for `a + b` opponents, `a` of them
+/// drawn from `keep`'s cloud and `b` from `other`'s, so `a / (a + b)` of the merged cloud is
+/// `keep`'s (the paper's "average" is the case a = b). Each share is drawn from its cloud by
+/// systematic resampling with the same `offset`, so both come out equally weighted.
 pub fn average_into(keep: &mut Role, other: &Role, offset: f32) {
     let n = keep.particles.len();
-    let mut a = keep.clone();
-    let mut b = other.clone();
-    crate::tracker::low_variance_resample(&mut a, offset);
-    crate::tracker::low_variance_resample(&mut b, offset);
-    let pick = |k: usize| {
-        if k.is_multiple_of(2) {
-            (&a, k)
-        } else {
-            (&b, k % b.particles.len())
+    let (a, b) = (keep.count as usize, other.count as usize);
+    // Half and half only if neither count says anything (untagged roles have at least one).
+    let from_keep = (n * a + (a + b) / 2).checked_div(a + b).unwrap_or(n / 2);
+    let mut particles = Vec::with_capacity(n);
+    let mut steps = Vec::with_capacity(n);
+    for (role, m) in [(&*keep, from_keep), (other, n - from_keep)] {
+        for i in systematic(&role.weights, m, offset) {
+            particles.push(role.particles[i]);
+            steps.push(role.steps[i]);
         }
-    };
-    keep.particles = (0..n)
-        .map(|k| {
-            let (r, i) = pick(k);
-            r.particles[i]
-        })
-        .collect();
-    keep.steps = (0..n)
-        .map(|k| {
-            let (r, i) = pick(k);
-            r.steps[i]
-        })
-        .collect();
+    }
+    keep.particles = particles;
+    keep.steps = steps;
     keep.weights = vec![1.0 / n as f32; n];
+}
+
+/// `m` indices drawn from `weights` by systematic (low-variance) resampling, `offset` in
+/// [0, 1): one draw at each of `(offset + k) / m` of the cumulative weight.
+fn systematic(weights: &[f32], m: usize, offset: f32) -> Vec<usize> {
+    let mut out = Vec::with_capacity(m);
+    let Some(&first) = weights.first() else {
+        return out;
+    };
+    let step = weights.iter().sum::<f32>() / m as f32;
+    let (mut c, mut i) = (first, 0);
+    for k in 0..m {
+        let u = (offset + k as f32) * step;
+        while u > c && i + 1 < weights.len() {
+            i += 1;
+            c += weights[i];
+        }
+        out.push(i);
+    }
+    out
 }
 
 #[cfg(test)]
@@ -118,5 +132,12 @@ mod tests {
         assert!(symmetric_kl(&p, &p).abs() < 1e-7);
         let d = symmetric_kl(&p, &q);
         assert!(d > 0.0 && (d - symmetric_kl(&q, &p)).abs() < 1e-6);
+    }
+
+    #[test]
+    fn systematic_resampling_draws_in_proportion_to_weight() {
+        let picks = systematic(&[0.5, 0.0, 0.25, 0.25], 8, 0.5);
+        assert_eq!(picks, vec![0, 0, 0, 0, 2, 2, 3, 3]);
+        assert!(systematic(&[], 4, 0.5).is_empty());
     }
 }

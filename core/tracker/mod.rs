@@ -16,15 +16,23 @@
 //! 3. negative information — every particle that a robot's scan would have seen (in its field
 //!    of view, nearer than the beam at its bearing reports) is down-weighted by the
 //!    probability of a missed detection;
-//! 4. positive information — each detection goes to the role of maximum likelihood; a role
-//!    standing for several opponents first splits off a copy for one;
+//! 4. positive information — each detection goes to the role of maximum likelihood (a role
+//!    standing for k opponents is k times as likely to have made it as its cloud alone says);
+//!    a role standing for several opponents first splits off a copy for one;
 //! 5. normalise, recover roles whose every particle became impossible, resample when the
 //!    effective sample size is low;
 //! 6. every `merge_interval` ticks, merge roles whose grid histograms are closer than
-//!    `kl_cutoff` in symmetric KL divergence (see [`merge`]).
+//!    `kl_cutoff` in symmetric KL divergence (see [`merge`]); the merged cloud mixes the two
+//!    in proportion to the opponents each stands for.
 //!
 //! Pure and deterministic: all randomness comes from the tracker's own ChaCha stream.
+//!
+//! How good the belief is, measured against the truth by those who may see it (the lab, the
+//! spectators' state): [`gospa`], the metric, and [`estimate`], a belief's point estimates.
+//! The tracker itself never calls them.
 
+pub mod estimate;
+pub mod gospa;
 mod merge;
 mod observe;
 mod resample;

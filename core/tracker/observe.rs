@@ -111,7 +111,12 @@ pub(super) fn fast_atan2(y: f32, x: f32) -> f32 {
 }
 
 impl Tracker {
-    /// Log-likelihood-ish score of `z` under role `r`, for association.
+    /// Log-likelihood-ish score of `z` under role `r`, for association. A role standing for
+    /// `count` opponents explains a detection `count` times as well as its cloud alone: each
+    /// of them is distributed as the cloud and any one may have made it, so the chance that
+    /// one of them stands at `z` is `count` times the cloud's density there. Without the
+    /// factor a role of several unseen opponents loses their detections to a role of one
+    /// whose cloud is a little denser there, and that role's opponent is dragged away.
     fn association(&self, r: &Role, z: Point2<f32>) -> f32 {
         let inv = 1.0 / (2.0 * ASSOCIATION_SIGMA * ASSOCIATION_SIGMA);
         let mut sum = 0.0f32;
@@ -124,7 +129,7 @@ impl Tracker {
             }
         }
         if sum > 1e-30 {
-            sum.ln()
+            sum.ln() + (r.count.max(1) as f32).ln()
         } else {
             // No particle near: rank by the nearest particle (always below any real likelihood).
             -1e6 - nearest
@@ -201,8 +206,9 @@ impl Tracker {
         }
     }
 
-    /// The untagged role with the most weight inside a tag cone from `pose`, and the weighted
-    /// mean of that weight (or a point straight ahead when no role has any there).
+    /// The untagged role with the most opponents expected inside a tag cone from `pose` (its
+    /// weight there times its count, as in [`Tracker::association`]), and the weighted mean
+    /// of that weight (or a point straight ahead when no role has any there).
     fn most_weight_in_cone(
         &self,
         pose: Pose,
@@ -227,7 +233,7 @@ impl Tracker {
                 } else {
                     ahead
                 };
-                (w, i, z)
+                (w * r.count as f32, i, z)
             })
             .max_by(|a, b| a.0.total_cmp(&b.0).then(b.1.cmp(&a.1)))
             .map(|(_, i, z)| (i, z))

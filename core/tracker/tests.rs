@@ -280,3 +280,112 @@ fn fast_atan2_matches_atan2() {
         );
     }
 }
+
+/// `n` particles, the first `near` of them at `at` and the rest at `elsewhere`.
+fn two_spots(near: usize, at: Point2<f32>, elsewhere: Point2<f32>) -> Vec<Point2<f32>> {
+    (0..1000)
+        .map(|i| if i < near { at } else { elsewhere })
+        .collect()
+}
+
+fn still() -> Settings {
+    Settings {
+        predict: false,
+        ..Settings::default()
+    }
+}
+
+/// A role standing for three opponents explains a detection three times as well as its
+/// cloud alone: any of the three may have made it. Here the role of one has 30% of its
+/// weight at the detection and the role of three 20% (60% for three opponents): the
+/// detection belongs to the role of three, which splits one off for it.
+#[test]
+fn association_weighs_a_role_by_the_opponents_it_stands_for() {
+    let a = open_room();
+    let mut t = Tracker::with_roles(&a, still(), &[1, 3], ChaCha8Rng::seed_from_u64(4));
+    let (z, far) = (Point2::new(6.0, 3.0), Point2::new(10.0, 1.0));
+    t.roles[0].reset(two_spots(300, z, far));
+    t.roles[1].reset(two_spots(200, z, far));
+    let seen = [Detection {
+        range: 5.0,
+        bearing: 0.0,
+    }];
+    let s = Sighting {
+        pose: Pose::new(1.0, 3.0, 0.0),
+        scan: &[],
+        detections: &seen,
+        tagged: false,
+        age_ticks: 0,
+    };
+    let events = t.update(&a, laser(), &[s]);
+    assert_eq!(events, vec![TrackerEvent::Split { role: 2, from: 1 }]);
+    assert_eq!(t.roles[1].count, 2);
+}
+
+/// The same for a hit whose target the laser did not detect: the opponent taken out is
+/// most likely from the role with the most opponents expected in the tag cone (count ×
+/// weight there), the role of three with 20% of its weight there rather than the role of
+/// one with 30%.
+#[test]
+fn a_hit_without_a_detection_takes_the_opponent_from_the_role_most_expected_there() {
+    let a = open_room();
+    let mut t = Tracker::with_roles(&a, still(), &[1, 3], ChaCha8Rng::seed_from_u64(4));
+    let (ahead, far) = (Point2::new(3.0, 3.0), Point2::new(10.0, 1.0));
+    t.roles[0].reset(two_spots(300, ahead, far));
+    t.roles[1].reset(two_spots(200, ahead, far));
+    let s = Sighting {
+        pose: Pose::new(1.0, 3.0, 0.0),
+        scan: &[],
+        detections: &[],
+        tagged: true,
+        age_ticks: 0,
+    };
+    t.update(&a, laser(), &[s]);
+    let untagged: Vec<(u64, u32)> = t
+        .roles
+        .iter()
+        .filter(|r| !r.tagged)
+        .map(|r| (r.id, r.count))
+        .collect();
+    assert_eq!(untagged, vec![(0, 1), (1, 2)]);
+}
+
+/// Merging a role of three opponents with a role of one gives a cloud three quarters of
+/// which is the first's: the merged role stands for four draws, three of them from the
+/// first cloud. Either way round.
+#[test]
+fn a_merge_weighs_each_cloud_by_the_opponents_it_stands_for() {
+    let a = open_room();
+    let merging = Settings {
+        merge_interval: 1,
+        kl_cutoff: 1e5, // whatever the clouds, merge them
+        ..still()
+    };
+    let (west, east) = (Point2::new(3.0, 3.0), Point2::new(9.0, 3.0));
+    for (counts, west_share) in [([3, 1], 0.75), ([1, 3], 0.25)] {
+        let mut t = Tracker::with_roles(&a, merging.clone(), &counts, ChaCha8Rng::seed_from_u64(4));
+        t.roles[0].reset(vec![west; 1000]);
+        t.roles[1].reset(vec![east; 1000]);
+        let events = t.update(&a, laser(), &[]);
+        assert_eq!(
+            events,
+            vec![TrackerEvent::Merge {
+                role: 0,
+                from: 1,
+                count: 4
+            }]
+        );
+        let r = &t.roles[0];
+        let west_weight: f32 = r
+            .particles
+            .iter()
+            .zip(&r.weights)
+            .filter(|(p, _)| p.x < 6.0)
+            .map(|(_, w)| w)
+            .sum();
+        assert!(
+            (west_weight - west_share).abs() < 0.01,
+            "counts {counts:?}: {west_weight} of the weight in the west"
+        );
+    }
+}

@@ -9,6 +9,10 @@
 //! The belief is thinned for display here: each role's cloud is resampled (systematic
 //! resampling, no randomness) down to a few hundred points in all, quantised to centimetres,
 //! and rebuilt only every [`BELIEF_EVERY`] ticks.
+//!
+//! Every frame also measures the team's belief against the truth ([`TrackingFrame`], GOSPA). It
+//! is computed here, where the truth is shown anyway, and never in the core's tick: it reads
+//! the world and changes nothing in the match.
 
 use std::sync::Arc;
 
@@ -20,6 +24,9 @@ use lasertag_core::localise::Localiser;
 use lasertag_core::sim::Pose;
 use lasertag_core::sim::arena::Arena;
 use lasertag_core::sim::sensors::Detection;
+use lasertag_core::tracker::Role;
+use lasertag_core::tracker::estimate::tracking_quality;
+use lasertag_core::tracker::gospa::{Gospa, Params};
 use lasertag_core::world::{ControlKind, EventKind};
 use lasertag_core::world::{MatchStatus, Side, World};
 
@@ -120,6 +127,32 @@ pub struct BeliefView {
     pub roles: Vec<RoleView>,
 }
 
+/// How close the team's (merged) belief is to the truth at one tick: GOSPA between its
+/// untagged roles' point estimates and the opponents still in the arena, with the cut-off
+/// and order it was computed with (see `tracker::gospa` and docs/tracker.md).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TrackingFrame {
+    pub gospa: Gospa,
+    pub params: Params,
+}
+
+impl TrackingFrame {
+    /// The measurement for `roles` (the team's merged belief) in `world`.
+    pub fn of(world: &World, roles: &[Role]) -> TrackingFrame {
+        let truth: Vec<Point2<f32>> = world
+            .opponents
+            .iter()
+            .filter(|o| !o.tagged)
+            .map(|o| o.pose.pos)
+            .collect();
+        let params = Params::default();
+        TrackingFrame {
+            gospa: tracking_quality(roles, &truth, params),
+            params,
+        }
+    }
+}
+
 /// Everything about one tick that any viewer may be shown.
 #[derive(Debug)]
 pub struct Frame {
@@ -132,6 +165,8 @@ pub struct Frame {
     pub opponents: Vec<OpponentFrame>,
     /// Present on belief ticks (every [`BELIEF_EVERY`] ticks and on the last one).
     pub belief: Option<Arc<BeliefView>>,
+    /// The belief measured against the truth, every tick.
+    pub tracking: TrackingFrame,
     /// Events logged since the previous frame, oldest first.
     pub events: Vec<EventDto>,
     /// The `seq` of the last event before this frame's (0 for none).
@@ -164,6 +199,7 @@ impl Frame {
                 .count() as u32;
         let events: Vec<EventDto> = new_events.iter().map(crate::protocol::event).collect();
         let last_seq = events.last().map_or(since_seq, |e| e.seq);
+        let roles = world.team.merged_belief();
         Frame {
             tick: world.tick,
             time_s: world.time_s(),
@@ -207,7 +243,8 @@ impl Frame {
                     }
                 })
                 .collect(),
-            belief: with_belief.then(|| Arc::new(belief_view(world))),
+            belief: with_belief.then(|| Arc::new(belief_view_of(world.tick, &roles))),
+            tracking: TrackingFrame::of(world, &roles),
             events,
             since_seq,
             last_seq,
@@ -284,11 +321,15 @@ pub struct Visible {
 
 /// The team's (merged) belief, thinned for display (see the module docs).
 pub fn belief_view(world: &World) -> BeliefView {
-    let roles = world.team.merged_belief();
+    belief_view_of(world.tick, &world.team.merged_belief())
+}
+
+/// The thinned view of `roles`, the team's merged belief at `tick`.
+fn belief_view_of(tick: u64, roles: &[Role]) -> BeliefView {
     let live = roles.iter().filter(|r| !r.tagged).count().max(1);
     let per_role = (BELIEF_BUDGET / live).max(BELIEF_MIN_PER_ROLE);
     BeliefView {
-        tick: world.tick,
+        tick,
         roles: roles
             .iter()
             .map(|r| {

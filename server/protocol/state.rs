@@ -2,7 +2,7 @@
 //! robot team's belief and the event log, converted from the core's types with coordinates rounded to the
 //! millimetre.
 
-use super::frame::Frame;
+use super::frame::{Frame, TrackingFrame};
 use super::*;
 
 /// What the shell knows about a match besides its world.
@@ -218,6 +218,41 @@ pub struct MatchState {
     pub notes: Vec<String>,
     pub robots: Vec<RobotState>,
     pub opponents: Vec<OpponentState>,
+    pub tracking: Tracking,
+}
+
+/// How close the robot team's belief is to the truth at this tick: GOSPA (α = 2) between
+/// the points its untagged roles put opponents at (a role for k opponents gives k points)
+/// and the opponents still in the arena, with
+/// `gospa^p = localisation^p + c^p/2 · (missed + false)`. See docs/tracker.md.
+#[derive(Debug, Clone, Serialize, ToSchema)]
+pub struct Tracking {
+    /// The GOSPA distance, metres: 0 when every estimate is on its opponent.
+    pub gospa: f64,
+    /// The assigned pairs' part, `(Σ d^p)^(1/p)` over pairs nearer than `c`, metres.
+    pub localisation: f64,
+    /// Opponents matched to no estimate within `c`.
+    pub missed: u32,
+    /// Estimates matched to no opponent within `c`.
+    #[serde(rename = "false")]
+    pub false_targets: u32,
+    /// Cut-off, metres.
+    pub c: f64,
+    /// Order.
+    pub p: f64,
+}
+
+impl From<TrackingFrame> for Tracking {
+    fn from(t: TrackingFrame) -> Self {
+        Tracking {
+            gospa: mm(t.gospa.distance),
+            localisation: mm(t.gospa.localisation),
+            missed: t.gospa.missed as u32,
+            false_targets: t.gospa.false_targets as u32,
+            c: t.params.c as f64,
+            p: t.params.p as f64,
+        }
+    }
 }
 
 /// The ground truth of `frame` (the latest one for those who may see it live, an older
@@ -271,6 +306,7 @@ pub fn state(frame: &Frame, meta: &MatchMeta, config: &MatchConfig) -> MatchStat
                 control: o.control.into(),
             })
             .collect(),
+        tracking: frame.tracking.into(),
     }
 }
 

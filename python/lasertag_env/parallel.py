@@ -1,0 +1,479 @@
+"""The PettingZoo ``ParallelEnv``: every robot of a lasertag team is an agent.
+
+Each environment step is one ``POST /api/matches/{id}/act``: every robot's command goes in,
+the match advances ``ticks_per_step`` ticks, and every robot's observation and the
+ticks' events come back. ``reset`` deletes the episode's match and creates a fresh one
+with the episode's seed; a match is a pure function of (map, settings, seed, inputs by
+tick), so the same seed and the same actions give the same episode, bit for bit.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from typing import Any
+
+import numpy as np
+from gymnasium import spaces
+from pettingzoo import ParallelEnv
+
+from .client import Client, ServerError, error_message, loads
+from .observation import ObservationLayout
+from .render import Renderer
+from .server import LocalServer
+
+__all__ = ["LasertagParallelEnv", "parallel_env", "DEFAULT_REWARDS"]
+
+TICK_HZ = 20
+
+DEFAULT_REWARDS = {
+    # Each tag the robot makes (an opponent eliminated by its shot).
+    "tag": 1.0,
+    # Each tag any robot of the team makes, given to every robot (0: no shared credit).
+    "team_tag": 0.0,
+    # Per simulated tick (20 per second): a small cost of time, so sooner is better.
+    "tick": -0.001,
+}
+
+# Fields of POST /api/matches the environment sets itself.
+_OWN_FIELDS = {"map", "robots", "opponents", "opponent_bot", "planner", "clock", "seed"}
+_MAX_SEED = 2**63 - 1
+
+
+class LasertagParallelEnv(ParallelEnv):
+    """Robots ``r0 … r{n-1}`` of a lasertag match, driven through the HTTP API.
+
+    See :func:`parallel_env` for the arguments, and docs/research.md for the spaces,
+    rewards and episode ends.
+    """
+
+    metadata = {
+        "name": "lasertag_v0",
+        "render_modes": ["rgb_array"],
+        "render_fps": TICK_HZ,
+        "is_parallelizable": True,
+    }
+
+    def __init__(
+        self,
+        server: str | LocalServer | None = None,
+        map: str | dict = "office",
+        robots: int = 2,
+        opponents: int = 1,
+        seed: int = 0,
+        opponent_bot: str = "wander",
+        max_steps: int | None = 1200,
+        ticks_per_step: int = 1,
+        render_mode: str | None = None,
+        admin_token: str | None = None,
+        time_limit_s: float | None = None,
+        placement: str | None = None,
+        detections: int | None = None,
+        rewards: dict | None = None,
+        match_settings: dict | None = None,
+        team_tracker: bool = False,
+        pixels_per_metre: float = 20.0,
+    ):
+        _check_int("robots", robots, 1, 8)
+        _check_int("opponents", opponents, 1, 32)
+        _check_int("ticks_per_step", ticks_per_step, 1, 100_000)
+        _check_seed(seed)
+        if max_steps is not None:
+            _check_int("max_steps", max_steps, 1, None)
+        if detections is not None:
+            _check_int("detections", detections, 0, None)
+        if render_mode not in (None, *self.metadata["render_modes"]):
+            raise ValueError(
+                f"render_mode {render_mode!r}: the modes are {self.metadata['render_modes']} (or None)"
+            )
+        unknown = set(rewards or {}) - set(DEFAULT_REWARDS)
+        if unknown:
+            raise ValueError(
+                f"rewards: unknown weight(s) {sorted(unknown)}; the weights are {sorted(DEFAULT_REWARDS)}"
+            )
+        clash = set(match_settings or {}) & _OWN_FIELDS
+        if clash:
+            raise ValueError(
+                f"match_settings: {sorted(clash)} are arguments of the environment, not settings"
+            )
+        if not isinstance(map, (str, dict)):
+            raise TypeError(f"map must be a map name or a map object, not {type(map).__name__}")
+
+        self.render_mode = render_mode
+        self.max_steps = max_steps
+        self.ticks_per_step = ticks_per_step
+        self.rewards = {**DEFAULT_REWARDS, **(rewards or {})}
+        self._owned_server: LocalServer | None = None
+        self._client: Client | None = None
+        self._closed = False
+        self.match_id: str | None = None
+        self.agents: list[str] = []
+
+        # The server: a URL, a shared LocalServer, or one of our own.
+        if server is None:
+            self._owned_server = LocalServer()
+            url, token = self._owned_server.url, self._owned_server.admin_token
+        elif isinstance(server, LocalServer):
+            url, token = server.url, server.admin_token
+        elif isinstance(server, str):
+            url = server
+            token = admin_token if admin_token is not None else os.environ.get("LASERTAG_ADMIN_TOKEN")
+        else:
+            raise TypeError("server must be None, a URL such as 'http://127.0.0.1:8080' or a LocalServer")
+        try:
+            self._client = Client(url, token)
+            self._check_server()
+            if isinstance(map, str):
+                self.map_def = self._fetch_map(map)
+            else:
+                self.map_def = map
+        except BaseException:
+            self.close()
+            raise
+
+        self._create = {
+            "map": map,
+            "robots": robots,
+            "opponents": opponents,
+            "opponent_bot": opponent_bot,
+            "planner": "api",
+            "clock": "manual",
+        }
+        if time_limit_s is not None:
+            self._create["time_limit_s"] = time_limit_s
+        if placement is not None:
+            self._create["placement"] = placement
+        if not team_tracker:
+            # The team's tracker runs on the server whoever drives the robots, but the API
+            # robots' observations never read it (only the belief endpoint and spectators
+            # do; the tests check the observations are the same): at its minimum a tick
+            # costs about a third less (docs/research.md, "Speed").
+            self._create["tracker"] = {"particles_per_role": 10}
+        self._create.update(match_settings or {})
+
+        self.possible_agents = [f"r{i}" for i in range(robots)]
+        self.layout = ObservationLayout(
+            robots, opponents if detections is None else detections,
+            self.map_def["width"], self.map_def["height"],
+        )
+        self._obs_spaces = {a: self.layout.space() for a in self.possible_agents}
+        # forward and turn are fractions of the top speed and turn rate (counter-clockwise
+        # positive); tag fires when above 0.5.
+        self._act_spaces = {
+            a: spaces.Box(
+                np.array([-1.0, -1.0, 0.0], dtype=np.float32),
+                np.array([1.0, 1.0, 1.0], dtype=np.float32),
+                dtype=np.float32,
+            )
+            for a in self.possible_agents
+        }
+        self._seed_rng = np.random.default_rng(seed)
+        self._first_seed: int | None = seed
+        self._owner: str | None = None
+        self._act_path = ""
+        self.tick = 0
+        self.steps = 0
+        self.last_events: list[dict] = []
+        self.episode_seed: int | None = None
+        self._renderer: Renderer | None = None
+        self._ppm = pixels_per_metre
+
+    # -- spaces ------------------------------------------------------------------------
+
+    # The same space object every time for an agent (PettingZoo's API test checks it, and
+    # seeding a space must stick), one per agent so that each samples its own stream.
+    def observation_space(self, agent: str) -> spaces.Box:
+        try:
+            return self._obs_spaces[agent]
+        except KeyError:
+            raise KeyError(f"no agent {agent!r}; the agents are {self.possible_agents}") from None
+
+    def action_space(self, agent: str) -> spaces.Box:
+        try:
+            return self._act_spaces[agent]
+        except KeyError:
+            raise KeyError(f"no agent {agent!r}; the agents are {self.possible_agents}") from None
+
+    # -- episodes ----------------------------------------------------------------------
+
+    def reset(self, seed: int | None = None, options: dict | None = None):
+        """Deletes the episode's match and creates a fresh one.
+
+        ``seed`` seeds the match; without it the first reset uses the constructor's seed and
+        later ones draw a seed from a generator seeded by the last seed given, so a
+        sequence of unseeded resets is reproducible too. ``options`` is not used.
+        """
+        self._check_open()
+        if seed is not None:
+            _check_seed(seed)
+            self._seed_rng = np.random.default_rng(seed)
+            match_seed = int(seed)
+        elif self._first_seed is not None:
+            match_seed = self._first_seed
+        else:
+            match_seed = int(self._seed_rng.integers(0, 2**31))
+        self._first_seed = None
+        self._delete_match()
+        try:
+            summary = self._client.call("POST", "/api/matches", {**self._create, "seed": match_seed})
+        except ServerError as e:
+            if e.status in (400, 404):
+                raise ValueError(f"the server refused the match: {e.message}") from None
+            raise
+        self.match_id = summary["id"]
+        # The admin token, when there is one, goes with every request: the owner token
+        # would do for changing the match, but only the admin token lifts the per-address
+        # request rate (100 a second by default) that would otherwise cap the steps.
+        self._owner = self._client.token or summary["owner_token"]
+        self._act_path = f"/api/matches/{self.match_id}/act"
+        self.episode_seed = match_seed
+        self.tick = summary["tick"]
+        self._limit_ticks = max(1.0, summary["time_limit_s"] * summary["tick_hz"])
+        self.steps = 0
+        self.last_events = []
+        self.agents = list(self.possible_agents)
+        observations, infos = {}, {}
+        for i, agent in enumerate(self.possible_agents):
+            raw = self._client.call(
+                "GET", f"/api/matches/{self.match_id}/robots/{agent}/observation", token=self._owner
+            )
+            observations[agent] = self.layout.encode(raw, i, 0.0)
+            infos[agent] = {"tick": raw["tick"], "observation": raw}
+        return observations, infos
+
+    def step(self, actions: dict[str, Any]):
+        """Applies every robot's action (a robot left out stands still), advances the
+        match ``ticks_per_step`` ticks and returns PettingZoo's five dictionaries."""
+        if not self.agents:
+            raise RuntimeError("the episode has ended (or never began): call reset()")
+        resp = self._client.raw("POST", self._act_path, self._act_body(actions), self._owner)
+        if resp.status != 200:
+            message = error_message(resp.body)
+            if resp.status == 404:
+                raise RuntimeError(
+                    f"match {self.match_id} is gone from the server ({message}); call reset()"
+                )
+            raise ServerError("POST", self._act_path, resp.status, message)
+        answer = loads(resp.body)
+        tick = answer["tick"]
+        ticks = tick - self.tick
+        self.tick = tick
+        self.steps += 1
+        events = answer["events"]
+        self.last_events = events
+
+        base = self.rewards["tick"] * ticks
+        rewards = dict.fromkeys(self.possible_agents, base)
+        tags = dict.fromkeys(self.possible_agents, 0)
+        finish = None
+        for e in events:
+            kind = e["kind"]
+            if kind == "tag":
+                by = e["by"]
+                if by in tags:
+                    tags[by] += 1
+                    rewards[by] += self.rewards["tag"]
+                if self.rewards["team_tag"]:
+                    for a in rewards:
+                        rewards[a] += self.rewards["team_tag"]
+            elif kind == "finished":
+                finish = e
+
+        finished = answer["status"] == "finished"
+        won = finished and answer["winner"] == "robots"
+        out_of_steps = self.max_steps is not None and self.steps >= self.max_steps
+        truncate = (finished and not won) or (out_of_steps and not won)
+        # How much of the episode is gone, for value estimates near the cut-off: steps of
+        # max_steps, or without it the match's time of its limit.
+        if self.max_steps is None:
+            frac = min(tick / self._limit_ticks, 1.0)
+        else:
+            frac = min(self.steps / self.max_steps, 1.0)
+
+        encode = self.layout.encode
+        raw_obs = answer["observations"]
+        observations, infos = {}, {}
+        for i, agent in enumerate(self.possible_agents):
+            raw = raw_obs[agent]
+            observations[agent] = encode(raw, i, frac)
+            info = {"tick": tick, "observation": raw, "tags": tags[agent]}
+            if finished:
+                info["winner"] = answer["winner"]
+                info["reason"] = finish["reason"] if finish else None
+            infos[agent] = info
+        terminations = dict.fromkeys(self.possible_agents, won)
+        truncations = dict.fromkeys(self.possible_agents, truncate)
+        if won or truncate:
+            self.agents = []
+        return observations, rewards, terminations, truncations, infos
+
+    def _act_body(self, actions: dict[str, Any]) -> bytes:
+        # Built as text: a few formatted floats are much cheaper than json.dumps over numpy
+        # values, and repr(float) round-trips, so the server applies exactly the float32
+        # the policy chose (it reads f64 and keeps f32).
+        parts = []
+        for agent in self.possible_agents:
+            a = actions.get(agent)
+            if a is None:
+                parts.append(f'"{agent}":{{"forward":0,"turn":0,"tag":false}}')
+                continue
+            try:
+                forward, turn, tag = _unpack(a)
+            except (TypeError, ValueError):
+                raise ValueError(
+                    f"action of {agent}: {a!r} is not three numbers (forward, turn, tag)"
+                ) from None
+            parts.append(
+                f'"{agent}":{{"forward":{forward!r},"turn":{turn!r},'
+                f'"tag":{"true" if tag > 0.5 else "false"}}}'
+            )
+        return ('{"commands":{' + ",".join(parts) + '},"ticks":%d}' % self.ticks_per_step).encode()
+
+    # -- rendering, state and closing ------------------------------------------------------
+
+    def truth(self) -> dict:
+        """The match's ground-truth state (``GET /api/matches/{id}``): every pose, who is
+        tagged or frozen. For rendering and analysis; not part of any observation."""
+        self._check_open()
+        if self.match_id is None:
+            raise RuntimeError("no match yet: call reset()")
+        return self._client.call("GET", f"/api/matches/{self.match_id}", token=self._owner)
+
+    def render(self):
+        """With ``render_mode="rgb_array"``, an (H, W, 3) uint8 frame of the match's truth
+        at the current tick (20 pixels per metre by default)."""
+        if self.render_mode is None:
+            import gymnasium
+
+            gymnasium.logger.warn("render() without a render_mode; pass render_mode='rgb_array'")
+            return None
+        if self._renderer is None:
+            self._renderer = Renderer(self.map_def, self._ppm)
+        if self.match_id is None:
+            return self._renderer.background.copy()
+        return self._renderer.frame(self.truth())
+
+    def close(self) -> None:
+        """Deletes the match, closes the connection and stops a server the environment
+        started; idempotent."""
+        if self._closed:
+            return
+        self._closed = True
+        try:
+            if self._client is not None:
+                self._delete_match()
+        except (OSError, ServerError):
+            pass  # a server that is already gone has nothing left to delete
+        finally:
+            if self._client is not None:
+                self._client.close()
+            if self._owned_server is not None:
+                self._owned_server.close()
+            self.agents = []
+
+    def __del__(self):  # pragma: no cover - depends on the garbage collector
+        try:
+            self.close()
+        except Exception:
+            pass
+
+    # -- helpers -------------------------------------------------------------------------
+
+    def _check_open(self) -> None:
+        if self._closed:
+            raise RuntimeError("the environment is closed")
+
+    def _delete_match(self) -> None:
+        if self.match_id is None:
+            return
+        mid, self.match_id = self.match_id, None
+        try:
+            self._client.call("DELETE", f"/api/matches/{mid}", token=self._owner)
+        except ServerError as e:
+            if e.status != 404:  # removed already (finished and past its grace)
+                raise
+
+    def _check_server(self) -> None:
+        try:
+            doc = self._client.call("GET", "/api/openapi.json")
+        except ConnectionRefusedError:
+            raise ConnectionRefusedError(f"no lasertag server at {self._client.url}") from None
+        if "/api/matches/{id}/act" not in doc.get("paths", {}):
+            raise RuntimeError(
+                f"the server at {self._client.url} has no POST /api/matches/{{id}}/act: it is "
+                "older than this package; rebuild it (cargo build --release)"
+            )
+
+    def _fetch_map(self, name: str) -> dict:
+        try:
+            return self._client.call("GET", f"/api/maps/{name}")
+        except ServerError as e:
+            if e.status != 404:
+                raise
+            names = [m["name"] for m in self._client.call("GET", "/api/maps")]
+            raise ValueError(f"unknown map {name!r}; the server has {names}") from None
+
+
+def _unpack(a) -> tuple[float, float, float]:
+    # tolist() turns a numpy vector into Python floats in one call (float32 values are
+    # exact as float64, so the server gets the policy's numbers unchanged).
+    forward, turn, tag = a.tolist() if isinstance(a, np.ndarray) else a
+    forward, turn, tag = float(forward), float(turn), float(tag)
+    # Out-of-range values are clipped rather than refused (policies' outputs often stray);
+    # NaN, which would make the server refuse the whole step, stands for 0.
+    forward = 0.0 if math.isnan(forward) else min(1.0, max(-1.0, forward))
+    turn = 0.0 if math.isnan(turn) else min(1.0, max(-1.0, turn))
+    return forward, turn, tag
+
+
+def _check_int(name: str, value, lo: int, hi: int | None) -> None:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        raise TypeError(f"{name} must be an integer, not {value!r}")
+    if value < lo or (hi is not None and value > hi):
+        bound = f"in {lo}..={hi}" if hi is not None else f"at least {lo}"
+        raise ValueError(f"{name}: {value} must be {bound}")
+
+
+def _check_seed(seed) -> None:
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)):
+        raise TypeError(f"seed must be a non-negative integer, not {seed!r}")
+    if not 0 <= seed <= _MAX_SEED:
+        raise ValueError(f"seed: {seed} must be in 0..=2**63-1")
+
+
+def parallel_env(
+    server: str | LocalServer | None = None,
+    map: str | dict = "office",
+    robots: int = 2,
+    opponents: int = 1,
+    seed: int = 0,
+    opponent_bot: str = "wander",
+    max_steps: int | None = 1200,
+    ticks_per_step: int = 1,
+    render_mode: str | None = None,
+    **kwargs,
+) -> LasertagParallelEnv:
+    """A PettingZoo ParallelEnv whose agents are the robots of a lasertag match.
+
+    - ``server``: None starts a local ``lasertag serve`` (stopped by ``close()``); a URL
+      uses a running server (``admin_token=``, default $LASERTAG_ADMIN_TOKEN, lifts its
+      per-address limits); a :class:`LocalServer` is shared and left running.
+    - ``map``: a map name on the server, or an inline map object (docs/map-format.md).
+    - ``robots`` (1..=8) agents ``r0 …``; ``opponents`` (1..=32) bots of kind
+      ``opponent_bot`` (``wander``, ``evade``, ``idle``).
+    - ``seed``: the first episode's match seed (see ``reset``).
+    - ``max_steps``: steps before truncation (None: only the match's time limit,
+      ``time_limit_s``, 300 s by default); ``ticks_per_step`` ticks (1/20 s each) per step.
+    - ``render_mode``: None or ``"rgb_array"``.
+    - keywords: ``admin_token``, ``time_limit_s``, ``placement`` (``"spawns"`` or
+      ``"random"``), ``detections`` (slots in the observation, default ``opponents``),
+      ``rewards`` (weights, see ``DEFAULT_REWARDS``), ``match_settings`` (further fields of
+      ``POST /api/matches``: ``localisation``, ``tracker``, ``radio``, …),
+      ``team_tracker`` (True: the server's team tracker at its default size rather than
+      its minimum; the observations are the same), ``pixels_per_metre`` (rendering).
+    """
+    return LasertagParallelEnv(
+        server=server, map=map, robots=robots, opponents=opponents, seed=seed,
+        opponent_bot=opponent_bot, max_steps=max_steps, ticks_per_step=ticks_per_step,
+        render_mode=render_mode, **kwargs,
+    )
