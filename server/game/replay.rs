@@ -146,6 +146,49 @@ impl Replay {
     }
 }
 
+/// A replay played forward one tick at a time (the replay WebSocket): each tick costs one
+/// step, where [`Replay::world_at`] would start again from a keyframe.
+#[derive(Debug, Clone)]
+pub struct Cursor {
+    world: World,
+    /// The first input not applied yet.
+    next: usize,
+}
+
+impl Cursor {
+    /// The world at the cursor's tick (after every input applied at it).
+    pub fn world(&self) -> &World {
+        &self.world
+    }
+}
+
+impl Replay {
+    /// A cursor at the end of `tick` (as [`Replay::world_at`] gives it).
+    pub fn cursor(&self, tick: u64) -> Result<Cursor, ReplayError> {
+        let world = self.world_at(tick)?;
+        let next = self.inputs.partition_point(|(t, _)| *t <= world.tick);
+        Ok(Cursor { world, next })
+    }
+
+    /// Moves `cursor` one tick on; false (and nothing changes) at the match's last tick.
+    pub fn advance(&self, cursor: &mut Cursor) -> bool {
+        let world = &mut cursor.world;
+        if world.tick >= self.last_tick || world.status == MatchStatus::Finished {
+            return false;
+        }
+        world.step();
+        while let Some((t, input)) = self.inputs.get(cursor.next)
+            && *t <= world.tick
+        {
+            if *t == world.tick {
+                let _ = world.apply(input);
+            }
+            cursor.next += 1;
+        }
+        true
+    }
+}
+
 /// Finished matches kept for replay by default.
 pub const HISTORY_CAPACITY: usize = 1000;
 /// Replays whose keyframes are kept (the most recently opened): the rest are re-simulated
@@ -213,5 +256,70 @@ impl History {
             .and_then(|b| r.iter().rev().position(|x| x.meta.id == b).map(|i| i + 1))
             .unwrap_or(0);
         newest_first.skip(start).take(limit).cloned().collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::maps::MapStore;
+    use crate::protocol::Clock;
+    use lasertag_core::world::{ControlKind, HumanInput};
+
+    /// A two-minute office match with a person's keys changing now and then.
+    fn recorded() -> Replay {
+        let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+        let maps = MapStore::load_dir(&root.join("maps")).expect("shipped maps");
+        let arena = maps.get("office").expect("office").arena.clone();
+        let config = MatchConfig {
+            opponent_control: ControlKind::Human,
+            seed: 3,
+            ..MatchConfig::default()
+        };
+        let mut world = World::new(arena.clone(), config.clone()).expect("world");
+        let mut inputs = Vec::new();
+        for t in 0..400u64 {
+            if t.is_multiple_of(37) {
+                let input = WorldInput::Keys {
+                    slot: 0,
+                    input: HumanInput {
+                        forward: if t.is_multiple_of(74) { 1.0 } else { -0.5 },
+                        turn: 0.3,
+                        ..HumanInput::default()
+                    },
+                };
+                world.apply(&input).expect("keys");
+                inputs.push((world.tick, input));
+            }
+            world.step();
+        }
+        let meta = MatchMeta {
+            id: "m".into(),
+            map: "office".into(),
+            clock: Clock::Manual,
+            players: 0,
+            spectators: 0,
+            free_slots: 0,
+            bots_joinable: false,
+            spectator_delay_ticks: 0,
+        };
+        Replay::of(&world, meta, arena, config, inputs, SystemTime::now())
+    }
+
+    #[test]
+    fn a_cursor_played_forward_meets_every_seek() {
+        let replay = recorded();
+        let mut cursor = replay.cursor(100).expect("cursor");
+        let mut steps = 0;
+        while replay.advance(&mut cursor) {
+            steps += 1;
+            let tick = cursor.world().tick;
+            if tick.is_multiple_of(23) || tick == replay.last_tick {
+                let seek = replay.world_at(tick).expect("seek");
+                assert_eq!(seek.digest(), cursor.world().digest(), "tick {tick}");
+            }
+        }
+        assert_eq!(steps, replay.last_tick - 100);
+        assert!(!replay.advance(&mut cursor));
     }
 }
