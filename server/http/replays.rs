@@ -29,7 +29,8 @@ fn listed(r: &Replay) -> ReplayListed {
     }
 }
 
-fn replay(state: &AppState, id: &str) -> Result<Arc<Replay>, ApiError> {
+/// The replay `id`, or a 404 naming it. Async: a replay may have to be loaded first.
+pub(crate) async fn find(state: &AppState, id: &str) -> Result<Arc<Replay>, ApiError> {
     state.registry.history.get(id).ok_or_else(|| {
         ApiError::not_found(format!(
             "no replay {id} (matches are replayable once they have ended)"
@@ -106,7 +107,7 @@ pub async fn detail(
     State(state): State<AppState>,
     Path(id): Path<String>,
 ) -> Result<Json<ReplayDetail>, ApiError> {
-    let r = replay(&state, &id)?;
+    let r = find(&state, &id).await?;
     let last = r.last_tick;
     let world = world_at(&state, r.clone(), last).await?;
     Ok(Json(ReplayDetail {
@@ -124,7 +125,7 @@ pub async fn state_at(
     Path(id): Path<String>,
     Query(query): Query<HashMap<String, String>>,
 ) -> Result<Json<MatchState>, ApiError> {
-    let r = replay(&state, &id)?;
+    let r = find(&state, &id).await?;
     let tick = tick(&query, &r)?;
     let world = world_at(&state, r.clone(), tick).await?;
     let frame = Frame::build(&world, &[], 0, 0, true);
@@ -140,7 +141,7 @@ pub async fn belief_at(
     Path(id): Path<String>,
     Query(query): Query<HashMap<String, String>>,
 ) -> Result<Json<Belief>, ApiError> {
-    let r = replay(&state, &id)?;
+    let r = find(&state, &id).await?;
     let tick = tick(&query, &r)?;
     let robot = match query.get("robot") {
         None => None,
