@@ -21,3 +21,4 @@ pub mod maps;
 pub mod metrics;
 pub mod protocol;
 pub mod schema;
+pub mod store;

@@ -60,6 +60,8 @@ struct ServeArgs {
     #[arg(long, env = "LASERTAG_NO_SHOWCASE")]
     no_showcase: bool,
     #[command(flatten)]
+    history: lasertag::store::StoreArgs,
+    #[command(flatten)]
     config: lasertag::config::Config,
 }
 
@@ -188,7 +190,11 @@ async fn serve(args: ServeArgs) -> Result<(), String> {
     let maps = MapStore::load_dir(&args.maps).map_err(|e| format!("loading maps: {e}"))?;
     tracing::info!(maps = maps.len(), dir = %args.maps.display(), "maps loaded");
     tracing::info!(config = ?args.config, "settings");
-    let registry = Registry::with_config(maps, args.config);
+    let store = lasertag::store::Store::open(&args.history.data_dir, args.history.retention())
+        .map_err(|e| format!("opening the history: {e}"))?;
+    tracing::info!(dir = %args.history.data_dir.display(), "history opened");
+    let history = lasertag::game::replay::History::with_store(store);
+    let registry = Registry::with_history(maps, args.config, history);
     if !args.no_showcase {
         tokio::spawn(lasertag::game::showcase::keep_running(registry.clone()));
     }
@@ -229,6 +235,18 @@ async fn serve(args: ServeArgs) -> Result<(), String> {
         served
     })
     .await;
+    // Every match has ended and sent its end to the history: wait for the writer to commit.
+    let flushed = {
+        let registry = registry.clone();
+        tokio::task::spawn_blocking(move || match registry.history.store() {
+            Some(store) => store.flush(Duration::from_millis(800)),
+            None => Ok(()),
+        })
+        .await
+    };
+    if !matches!(flushed, Ok(Ok(()))) {
+        tracing::warn!("the history's last writes may be lost");
+    }
     match drained {
         Ok(r) => {
             tracing::info!("shut down cleanly");

@@ -398,7 +398,7 @@ impl CreateMatch {
     }
 }
 
-fn planner_kind(p: Planner) -> PlannerKind {
+pub(crate) fn planner_kind(p: Planner) -> PlannerKind {
     match p {
         Planner::Coordinated => PlannerKind::Coordinated,
         Planner::Baseline => PlannerKind::Baseline,
@@ -412,7 +412,7 @@ pub fn planner_name(p: PlannerKind) -> &'static str {
     p.name()
 }
 
-fn planner_dto(p: PlannerKind) -> Planner {
+pub(crate) fn planner_dto(p: PlannerKind) -> Planner {
     match p {
         PlannerKind::Coordinated => Planner::Coordinated,
         PlannerKind::Baseline => Planner::Baseline,

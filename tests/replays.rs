@@ -4,7 +4,7 @@
 
 mod common;
 
-use common::{TestServer, assert_error, duel_map};
+use common::{TestServer, assert_error, duel_map, temp_dir};
 use rand::{RngExt, SeedableRng};
 use serde_json::{Value, json};
 
@@ -36,6 +36,12 @@ async fn play(
 
 async fn end(s: &TestServer, id: &str) {
     assert_eq!(s.delete(&format!("/api/matches/{id}")).await.status, 204);
+}
+
+/// The same server restarted: a new one on `dir`, once the old one's store has everything.
+async fn restart(old: &TestServer, dir: &std::path::Path) -> TestServer {
+    old.flush_history();
+    TestServer::start_stored(dir).await
 }
 
 async fn check_replay(s: &TestServer, id: &str, states: &[Value], beliefs: &[(u64, Value)]) {
@@ -70,7 +76,8 @@ async fn check_replay(s: &TestServer, id: &str, states: &[Value], beliefs: &[(u6
 
 #[tokio::test]
 async fn a_replay_shows_what_the_live_match_showed_at_every_tick() {
-    let s = TestServer::start().await;
+    let dir = temp_dir("replays-live");
+    let s = TestServer::start_stored(&dir).await;
 
     // Bots against the coordinated planner.
     let bots = s
@@ -79,9 +86,9 @@ async fn a_replay_shows_what_the_live_match_showed_at_every_tick() {
             "opponent_bot": "evade", "seed": 3}),
         )
         .await;
-    let (states, beliefs) = play(&s, &bots, 300, async |_| {}).await;
+    let (bot_states, bot_beliefs) = play(&s, &bots, 300, async |_| {}).await;
     end(&s, &bots).await;
-    check_replay(&s, &bots, &states, &beliefs).await;
+    check_replay(&s, &bots, &bot_states, &bot_beliefs).await;
 
     // Robots driven from outside, and API-driven opponents, with random commands.
     let api = s
@@ -117,11 +124,18 @@ async fn a_replay_shows_what_the_live_match_showed_at_every_tick() {
     .await;
     end(&s, &api).await;
     check_replay(&s, &api, &states, &beliefs).await;
+
+    // After a restart both come from the database alone.
+    let s = restart(&s, &dir).await;
+    assert!(s.registry.history.get(&api).is_none(), "not in memory");
+    check_replay(&s, &bots, &bot_states, &bot_beliefs).await;
+    check_replay(&s, &api, &states, &beliefs).await;
 }
 
 #[tokio::test]
 async fn a_replay_follows_a_player_over_the_websocket() {
-    let s = TestServer::start().await;
+    let dir = temp_dir("replays-player");
+    let s = TestServer::start_stored(&dir).await;
     let id = s
         .create_match(
             json!({"map": "office", "robots": 1, "opponents": 2, "clock": "manual",
@@ -164,6 +178,27 @@ async fn a_replay_follows_a_player_over_the_websocket() {
         .expect("listed");
     assert_eq!(row["players"], json!(["ada"]));
     assert_eq!(row["reason"], "stopped");
+
+    let s = restart(&s, &dir).await;
+    check_replay(&s, &id, &states, &beliefs).await;
+    // Deleted by its owner: the opponents won, with ada still in it.
+    let ada = s.get("/api/players/ada").await;
+    assert_eq!(ada.status, 200, "{}", ada.body);
+    assert_eq!(
+        (ada.body["matches"].as_u64(), ada.body["wins"].as_u64()),
+        (Some(1), Some(1))
+    );
+    assert_eq!(ada.body["recent"][0]["id"], id.as_str());
+    let board = s.get("/api/leaderboard?by=survival").await;
+    assert_eq!(board.body["players"][0]["name"], "ada", "{}", board.body);
+    assert!(
+        board.body["players"][0]["longest_survival_s"]
+            .as_f64()
+            .unwrap()
+            > 0.0
+    );
+    assert_error(&s.get("/api/players/nobody").await, 404, "nobody");
+    assert_error(&s.get("/api/leaderboard?by=luck").await, 400, "by");
 }
 
 #[tokio::test]

@@ -72,7 +72,7 @@ LASERTAG_ADDR="127.0.0.1:$PORT" LASERTAG_NO_SHOWCASE=true LASERTAG_ADMIN_TOKEN="
   LASERTAG_MAX_MAPS=100000 LASERTAG_MAX_MAPS_PER_ADDRESS=100000 LASERTAG_MAX_HOLDS_PER_ADDRESS=100000 \
   LASERTAG_CLIENT_BUDGET_SHARE=1 \
   LASERTAG_FINISHED_GRACE_S=5 RUST_LOG=warn \
-  target/debug/lasertag serve > target/schemathesis/server.log 2>&1 &
+  target/debug/lasertag serve --data-dir "$(mktemp -d)" > target/schemathesis/server.log 2>&1 &
 SERVER_PID=$!
 trap 'kill "$SERVER_PID" 2>/dev/null || true' EXIT
 # Bounded: 40 examples per operation and phase keep the run to a few minutes. A fixed seed

@@ -28,6 +28,7 @@ const SERVER_FLOORS: &[&str] = &[
     "maps",
     "protocol",
     "admission",
+    "store",
     "game",
     "http",
 ];

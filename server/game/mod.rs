@@ -221,9 +221,15 @@ impl Registry {
     }
 
     pub fn with_config(maps: MapStore, config: Config) -> Arc<Registry> {
+        Registry::with_history(maps, config, replay::History::default())
+    }
+
+    /// A registry whose finished matches go to `history` (a store on disk, or memory).
+    pub fn with_history(maps: MapStore, config: Config, history: replay::History) -> Arc<Registry> {
         Arc::new(Registry {
             maps: RwLock::new(maps),
             config,
+            history: Arc::new(history),
             ..Registry::default()
         })
     }

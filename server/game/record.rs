@@ -27,11 +27,34 @@ impl Recording {
         &self.inputs
     }
 
-    /// The inputs the store does not hold yet; they count as stored from now on.
-    pub fn take_unstored(&mut self) -> &[(u64, WorldInput)] {
-        let from = self.stored;
-        self.stored = self.inputs.len();
-        &self.inputs[from..]
+    /// The inputs the store does not hold yet.
+    pub fn unstored(&self) -> &[(u64, WorldInput)] {
+        &self.inputs[self.stored..]
+    }
+
+    /// The first `n` of [`Recording::unstored`] are in the store now.
+    pub fn mark_stored(&mut self, n: usize) {
+        self.stored = (self.stored + n).min(self.inputs.len());
+    }
+
+    /// Everyone who took a seat so far, in the order they first did.
+    pub fn names(&self) -> Vec<String> {
+        let mut names: Vec<String> = Vec::new();
+        for (_, input) in &self.inputs {
+            if let WorldInput::Seat { name, .. } = input
+                && !names.contains(name)
+            {
+                names.push(name.clone());
+            }
+        }
+        names
+    }
+
+    /// Whether any of the unstored inputs seats someone.
+    pub fn seats_unstored(&self) -> bool {
+        self.unstored()
+            .iter()
+            .any(|(_, i)| matches!(i, WorldInput::Seat { .. }))
     }
 }
 

@@ -15,9 +15,11 @@ use std::sync::{Arc, Mutex};
 use std::time::SystemTime;
 
 use lasertag_core::sim::arena::Arena;
-use lasertag_core::world::{MatchConfig, MatchStatus, SetupError, World, WorldInput};
+use lasertag_core::world::{MatchConfig, MatchStatus, SetupError, Side, World, WorldInput};
 
 use crate::protocol::MatchMeta;
+use crate::store::codec::StoredSettings;
+use crate::store::{Listed, Store, StoreError, Write};
 
 /// Keyframes kept per replay: about 300 KB each for an office match, so at most tens of MB.
 pub const MAX_KEYFRAMES: u64 = 120;
@@ -38,6 +40,9 @@ pub struct Replay {
     pub ended_at: SystemTime,
     /// Why it ended (from its `finished` event).
     pub reason: Option<lasertag_core::world::FinishReason>,
+    /// False for a match the server was killed in the middle of: it replays up to the last
+    /// tick the store had.
+    pub complete: bool,
     arena: Arc<Arena>,
     config: MatchConfig,
     inputs: Arc<[(u64, WorldInput)]>,
@@ -45,6 +50,11 @@ pub struct Replay {
     /// Worlds at multiples of `spacing`, in tick order (the start is always first).
     keyframes: Mutex<Vec<World>>,
 }
+
+/// A stored match that cannot be replayed (a damaged or foreign database).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("the stored match cannot be replayed: {0}")]
+pub struct LoadError(String);
 
 /// Why a tick of a replay could not be shown.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -91,12 +101,60 @@ impl Replay {
             started_at,
             ended_at: SystemTime::now(),
             reason,
+            complete: true,
             arena,
             config,
             inputs: inputs.into(),
             spacing: MIN_KEYFRAME_SPACING.max(last_tick.div_ceil(MAX_KEYFRAMES)),
             keyframes: Mutex::new(Vec::new()),
         }
+    }
+
+    /// A replay read back from the store.
+    pub fn from_stored(stored: crate::store::Stored) -> Result<Replay, LoadError> {
+        let settings: StoredSettings = serde_json::from_str(&stored.settings)
+            .map_err(|e| LoadError(format!("settings: {e}")))?;
+        let config = settings.config().map_err(|e| LoadError(e.to_string()))?;
+        let def =
+            crate::maps::parse(&stored.map_document).map_err(|e| LoadError(format!("map: {e}")))?;
+        let arena = Arc::new(Arena::new(def));
+        let mut inputs = Vec::new();
+        for chunk in &stored.chunks {
+            inputs.extend(
+                crate::store::codec::decode_inputs(chunk).map_err(|e| LoadError(e.to_string()))?,
+            );
+        }
+        let l = stored.listed;
+        let at =
+            |ms: i64| SystemTime::UNIX_EPOCH + std::time::Duration::from_millis(ms.max(0) as u64);
+        Ok(Replay {
+            meta: MatchMeta {
+                id: l.id,
+                map: l.map,
+                clock: settings.clock,
+                players: 0,
+                spectators: 0,
+                free_slots: 0,
+                bots_joinable: settings.bots_joinable,
+                spectator_delay_ticks: settings.spectator_delay_ticks,
+            },
+            last_tick: l.ticks,
+            winner: match l.winner.as_deref() {
+                Some("robots") => Some(Side::Robots),
+                Some("opponents") => Some(Side::Opponents),
+                _ => None,
+            },
+            players: l.players,
+            started_at: at(l.started_at_ms),
+            ended_at: at(l.ended_at_ms.unwrap_or(l.started_at_ms)),
+            reason: l.reason.as_deref().and_then(crate::store::codec::reason_of),
+            complete: l.complete,
+            spacing: MIN_KEYFRAME_SPACING.max(l.ticks.div_ceil(MAX_KEYFRAMES)),
+            arena,
+            config,
+            inputs: inputs.into(),
+            keyframes: Mutex::new(Vec::new()),
+        })
     }
 
     /// The match's settings and map.
@@ -189,18 +247,22 @@ impl Replay {
     }
 }
 
-/// Finished matches kept for replay by default.
+/// Finished matches kept in memory for replay by a server without a store.
 pub const HISTORY_CAPACITY: usize = 1000;
+/// Finished matches kept in memory beside a store (the rest are loaded when opened).
+const CACHED_WITH_STORE: usize = 32;
 /// Replays whose keyframes are kept (the most recently opened): the rest are re-simulated
 /// when opened again, so memory stays bounded whatever people open.
 const OPEN_REPLAYS: usize = 4;
 
-/// The finished matches a server keeps for replay, newest last, at most `capacity`.
+/// The finished matches a server keeps for replay: the newest in memory, all of them in the
+/// store when it has one.
 #[derive(Debug)]
 pub struct History {
     replays: Mutex<VecDeque<Arc<Replay>>>,
     capacity: usize,
     opened: Mutex<VecDeque<Arc<Replay>>>,
+    store: Option<Store>,
 }
 
 impl Default for History {
@@ -210,11 +272,34 @@ impl Default for History {
 }
 
 impl History {
+    /// A history in memory only, of at most `capacity` matches.
     pub fn new(capacity: usize) -> History {
         History {
             replays: Mutex::new(VecDeque::new()),
             capacity,
             opened: Mutex::new(VecDeque::new()),
+            store: None,
+        }
+    }
+
+    /// A history kept in `store`.
+    pub fn with_store(store: Store) -> History {
+        History {
+            store: Some(store),
+            ..History::new(CACHED_WITH_STORE)
+        }
+    }
+
+    pub fn store(&self) -> Option<&Store> {
+        self.store.as_ref()
+    }
+
+    /// Hands `w` to the store (nothing to do without one); gives it back when the store's
+    /// queue is full, for the caller to try again later.
+    pub fn record(&self, w: Write) -> Result<(), Box<Write>> {
+        match &self.store {
+            Some(store) => store.send(w),
+            None => Ok(()),
         }
     }
 
@@ -234,28 +319,87 @@ impl History {
         }
     }
 
-    /// Keeps `replay`, forgetting the oldest past the capacity.
-    pub fn keep(&self, replay: Replay) {
+    /// Keeps `replay` in memory, forgetting the oldest past the capacity (the store, if
+    /// any, has it from the match's own writes).
+    pub fn keep(&self, replay: Replay) -> Arc<Replay> {
+        let replay = Arc::new(replay);
         let mut r = self.replays.lock().unwrap_or_else(|e| e.into_inner());
-        r.push_back(Arc::new(replay));
+        r.retain(|x| x.meta.id != replay.meta.id);
+        r.push_back(replay.clone());
         while r.len() > self.capacity {
             r.pop_front();
         }
+        replay
     }
 
+    /// The replay `id` if it is in memory.
     pub fn get(&self, id: &str) -> Option<Arc<Replay>> {
         let r = self.replays.lock().unwrap_or_else(|e| e.into_inner());
         r.iter().find(|x| x.meta.id == id).cloned()
     }
 
-    /// Newest first: at most `limit`, those older than `before` when given.
-    pub fn list(&self, limit: usize, before: Option<&str>) -> Vec<Arc<Replay>> {
+    /// The replay `id`, from memory or else the store. Blocking (a database read and the
+    /// map's arena to build).
+    pub fn load(&self, id: &str) -> Result<Option<Arc<Replay>>, HistoryError> {
+        if let Some(r) = self.get(id) {
+            return Ok(Some(r));
+        }
+        let Some(store) = &self.store else {
+            return Ok(None);
+        };
+        let Some(stored) = store.read(|b| b.load(id))? else {
+            return Ok(None);
+        };
+        Ok(Some(self.keep(Replay::from_stored(stored)?)))
+    }
+
+    /// Ended matches, newest first: at most `limit`, those before `before` when given.
+    /// Blocking with a store.
+    pub fn list(&self, limit: usize, before: Option<&str>) -> Result<Vec<Listed>, HistoryError> {
+        if let Some(store) = &self.store {
+            return Ok(store.read(|b| b.list(limit, before))?);
+        }
         let r = self.replays.lock().unwrap_or_else(|e| e.into_inner());
-        let newest_first = r.iter().rev();
         let start = before
             .and_then(|b| r.iter().rev().position(|x| x.meta.id == b).map(|i| i + 1))
             .unwrap_or(0);
-        newest_first.skip(start).take(limit).cloned().collect()
+        Ok(r.iter()
+            .rev()
+            .skip(start)
+            .take(limit)
+            .map(|x| x.listed())
+            .collect())
+    }
+}
+
+/// Why the history could not answer.
+#[derive(Debug, Clone, thiserror::Error)]
+pub enum HistoryError {
+    #[error(transparent)]
+    Store(#[from] StoreError),
+    #[error(transparent)]
+    Load(#[from] LoadError),
+}
+
+impl Replay {
+    /// This replay as lists show it.
+    pub fn listed(&self) -> Listed {
+        Listed {
+            id: self.meta.id.clone(),
+            map: self.meta.map.clone(),
+            started_at_ms: crate::store::unix_ms(self.started_at),
+            ended_at_ms: Some(crate::store::unix_ms(self.ended_at)),
+            ticks: self.last_tick,
+            winner: self.winner.map(|w| match w {
+                Side::Robots => "robots".to_string(),
+                Side::Opponents => "opponents".to_string(),
+            }),
+            reason: self
+                .reason
+                .map(|r| crate::protocol::finish_reason(r).to_string()),
+            complete: self.complete,
+            players: self.players.clone(),
+        }
     }
 }
 

@@ -9,6 +9,7 @@ mod error;
 mod handlers;
 pub mod limits;
 mod openapi;
+mod players;
 mod replays;
 mod robots;
 mod serve;
@@ -86,6 +87,8 @@ pub fn app(registry: Arc<Registry>, web_dir: PathBuf) -> Router {
         .route("/replays/{id}", get(replays::detail))
         .route("/replays/{id}/state", get(replays::state_at))
         .route("/replays/{id}/belief", get(replays::belief_at))
+        .route("/players/{name}", get(players::player))
+        .route("/leaderboard", get(players::leaderboard))
         .route("/matches/{id}/stats", get(handlers::stats))
         .fallback(not_found)
         .method_not_allowed_fallback(method_not_allowed);

@@ -35,6 +35,8 @@ use crate::protocol::*;
         crate::http::replays::detail,
         crate::http::replays::state_at,
         crate::http::replays::belief_at,
+        crate::http::players::player,
+        crate::http::players::leaderboard,
         handlers::join,
         handlers::stats,
         crate::http::metrics,
@@ -67,6 +69,9 @@ use crate::protocol::*;
         robots::TeammateDto,
         replays::ReplayListed,
         replays::ReplayDetail,
+        replays::PlayerTotals,
+        replays::PlayerDetail,
+        replays::Leaderboard,
         JoinRequest,
         Joined,
         MatchStats

@@ -7,35 +7,60 @@ use std::sync::Arc;
 use axum::Json;
 use axum::extract::{Path, Query, State};
 
-use crate::game::replay::Replay;
+use crate::game::replay::{HistoryError, Replay};
 use crate::http::admit::off_workers;
 use crate::http::{ApiError, AppState};
 use crate::protocol::frame::Frame;
-use crate::protocol::replays::{ReplayDetail, ReplayListed, unix};
-use crate::protocol::{self, Belief, ErrorBody, MatchState};
+use crate::protocol::replays::{ReplayDetail, ReplayListed};
+use crate::protocol::{self, Belief, ErrorBody, MatchState, Winner};
+use crate::store::Listed;
 use lasertag_core::sim::AgentId;
 
-fn listed(r: &Replay) -> ReplayListed {
+pub(crate) fn listed(l: &Listed) -> ReplayListed {
+    let secs = |ms: i64| ms as f64 / 1000.0;
     ReplayListed {
-        id: r.meta.id.clone(),
-        map: r.meta.map.clone(),
-        started_at: unix(r.started_at),
-        ended_at: unix(r.ended_at),
-        ticks: r.last_tick,
-        winner: protocol::winner(r.winner),
-        reason: r.reason.map(protocol::finish_reason),
-        complete: true,
-        players: r.players.clone(),
+        id: l.id.clone(),
+        map: l.map.clone(),
+        started_at: secs(l.started_at_ms),
+        ended_at: secs(l.ended_at_ms.unwrap_or(l.started_at_ms)),
+        ticks: l.ticks,
+        winner: match l.winner.as_deref() {
+            Some("robots") => Some(Winner::Robots),
+            Some("opponents") => Some(Winner::Opponents),
+            _ => None,
+        },
+        reason: l.reason.clone(),
+        complete: l.complete,
+        players: l.players.clone(),
     }
 }
 
-/// The replay `id`, or a 404 naming it. Async: a replay may have to be loaded first.
+/// The replay `id`, or a 404 naming it. Loading one from the store is blocking work.
 pub(crate) async fn find(state: &AppState, id: &str) -> Result<Arc<Replay>, ApiError> {
-    state.registry.history.get(id).ok_or_else(|| {
+    let history = state.registry.history.clone();
+    let found = match history.get(id) {
+        Some(r) => Some(r),
+        None => {
+            let key = id.to_string();
+            off_workers(state, "loading the replay", move || history.load(&key))
+                .await?
+                .map_err(history_error)?
+        }
+    };
+    found.ok_or_else(|| {
         ApiError::not_found(format!(
             "no replay {id} (matches are replayable once they have ended)"
         ))
     })
+}
+
+/// A store that failed is the server's fault, not the request's.
+pub(crate) fn history_error(e: HistoryError) -> ApiError {
+    tracing::error!("history: {e}");
+    ApiError::new(
+        axum::http::StatusCode::INTERNAL_SERVER_ERROR,
+        format!("the history could not be read: {e}"),
+    )
 }
 
 /// `?name=` as an integer in `0..=max`, or `default` when absent.
@@ -96,9 +121,14 @@ pub async fn list(
         ));
     }
     let limit = limit as usize;
-    let before = query.get("before").map(String::as_str);
-    let replays = state.registry.history.list(limit, before);
-    Ok(Json(replays.iter().map(|r| listed(r)).collect()))
+    let before = query.get("before").cloned();
+    let history = state.registry.history.clone();
+    let replays = off_workers(&state, "listing the history", move || {
+        history.list(limit, before.as_deref())
+    })
+    .await?
+    .map_err(history_error)?;
+    Ok(Json(replays.iter().map(listed).collect()))
 }
 
 #[utoipa::path(get, path = "/api/replays/{id}", params(("id" = String, Path)),
@@ -111,7 +141,7 @@ pub async fn detail(
     let last = r.last_tick;
     let world = world_at(&state, r.clone(), last).await?;
     Ok(Json(ReplayDetail {
-        listed: listed(&r),
+        listed: listed(&r.listed()),
         settings: protocol::summary(&world, &r.meta),
         events: world.events().iter().map(protocol::event).collect(),
     }))

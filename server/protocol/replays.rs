@@ -1,8 +1,6 @@
 //! The shapes of history and replays: a finished match in the list, and one replay's
 //! summary with its settings and events.
 
-use std::time::{SystemTime, UNIX_EPOCH};
-
 use serde::Serialize;
 use utoipa::ToSchema;
 
@@ -21,7 +19,7 @@ pub struct ReplayListed {
     pub winner: Option<Winner>,
     /// Why it ended: `all_tagged`, `time_limit`, `stopped`, `server_shutdown`, `abandoned`
     /// or `overloaded`.
-    pub reason: Option<&'static str>,
+    pub reason: Option<String>,
     /// Whether the recording reaches the end (false for a match cut short by a crash).
     pub complete: bool,
     /// Names of the people who played.
@@ -38,8 +36,33 @@ pub struct ReplayDetail {
     pub events: Vec<EventDto>,
 }
 
-/// Unix time in seconds, to the millisecond.
-pub fn unix(t: SystemTime) -> f64 {
-    t.duration_since(UNIX_EPOCH)
-        .map_or(0.0, |d| (d.as_secs_f64() * 1000.0).round() / 1000.0)
+/// A player name's totals, as the leaderboard and `GET /api/players/{name}` show them.
+#[derive(Debug, Clone, Serialize, ToSchema)]
+pub struct PlayerTotals {
+    pub name: String,
+    /// Ended matches they played.
+    pub matches: u64,
+    /// Matches the opponents won with them still in it.
+    pub wins: u64,
+    /// Robots they tagged.
+    pub tags: u64,
+    /// Their longest stay in a match without being tagged, seconds.
+    pub longest_survival_s: f64,
+}
+
+/// `GET /api/players/{name}`: the totals and the latest matches of that name.
+#[derive(Debug, Clone, Serialize, ToSchema)]
+pub struct PlayerDetail {
+    #[serde(flatten)]
+    pub totals: PlayerTotals,
+    /// Their latest ended matches, newest first (at most 20).
+    pub recent: Vec<ReplayListed>,
+}
+
+/// `GET /api/leaderboard`.
+#[derive(Debug, Clone, Serialize, ToSchema)]
+pub struct Leaderboard {
+    /// What it ranks by: `wins`, `tags`, `survival` or `matches`.
+    pub by: &'static str,
+    pub players: Vec<PlayerTotals>,
 }

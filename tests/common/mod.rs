@@ -30,6 +30,16 @@ pub fn shipped_map_count() -> usize {
         .len()
 }
 
+/// A new, empty directory under the system's temporary one, named for `what`.
+pub fn temp_dir(what: &str) -> std::path::PathBuf {
+    static NEXT: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+    let n = NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    let dir = std::env::temp_dir().join(format!("lasertag-{what}-{}-{n}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).expect("a temporary directory");
+    dir
+}
+
 pub struct TestServer {
     pub addr: SocketAddr,
     pub client: reqwest::Client,
@@ -69,9 +79,37 @@ impl TestServer {
     /// Like [`TestServer::start`], with other settings (e.g. a short reconnect grace, tiny
     /// limits).
     pub async fn start_with(config: Config) -> TestServer {
+        TestServer::start_with_history(config, lasertag::game::replay::History::default()).await
+    }
+
+    /// A server whose history is the store in `dir` (made by [`temp_dir`]); a second one on
+    /// the same `dir` is the first restarted.
+    pub async fn start_stored(dir: &Path) -> TestServer {
+        let retention = lasertag::store::Retention {
+            max_matches: 10_000,
+            max_bytes: 1 << 30,
+        };
+        let store = lasertag::store::Store::open(dir, retention).expect("the store opens");
+        let history = lasertag::game::replay::History::with_store(store);
+        TestServer::start_with_history(test_config(), history).await
+    }
+
+    /// Waits until the store has everything this server's matches sent it.
+    pub fn flush_history(&self) {
+        if let Some(store) = self.registry.history.store() {
+            store
+                .flush(std::time::Duration::from_secs(10))
+                .expect("the store flushes");
+        }
+    }
+
+    pub async fn start_with_history(
+        config: Config,
+        history: lasertag::game::replay::History,
+    ) -> TestServer {
         let root = Path::new(env!("CARGO_MANIFEST_DIR"));
         let maps = MapStore::load_dir(&root.join("maps")).expect("shipped maps load");
-        let registry = Registry::with_config(maps, config);
+        let registry = Registry::with_history(maps, config, history);
         let app = lasertag::http::app(registry.clone(), root.join("web"));
         let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
         let addr = listener.local_addr().unwrap();

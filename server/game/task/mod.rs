@@ -6,7 +6,8 @@
 //! player has to come back (a freed slot a person took from a bot goes back to the bot).
 //!
 //! The people at the match and their inputs are in `seats.rs`; robots driven from outside
-//! (orders, observations, environment steps) in `robots.rs`.
+//! (orders, observations, environment steps) in `robots.rs`; what goes to the history (the
+//! store and replays) in `history.rs`.
 //!
 //! Long file: one match task's loop, its messages and its clean-up rules share the
 //! task's state.
@@ -17,6 +18,7 @@ use std::time::{Duration, Instant};
 
 use tokio::sync::{mpsc, oneshot, watch};
 
+mod history;
 mod robots;
 mod seats;
 use seats::Player;
@@ -143,6 +145,7 @@ pub fn spawn_match(
     let mut task = MatchTask {
         recording: Recording::default(),
         archived: false,
+        store: history::StoreProgress::default(),
         started_at: std::time::SystemTime::now(),
         players: (0..world.opponents.len()).map(|_| None).collect(),
         finished_at: None,
@@ -167,6 +170,8 @@ pub fn spawn_match(
         overrun_count: 0,
     };
     task.publish_summary();
+    // The store hears of the match at once: a crash in its first second still leaves it.
+    task.store_flush(true);
     handle.spawn(task.run(rx).instrument(span));
     (tx, hub)
 }
@@ -198,6 +203,8 @@ struct MatchTask {
     recording: Recording,
     /// Whether the finished match went to the history already.
     archived: bool,
+    /// What the store has of the match.
+    store: history::StoreProgress,
     started_at: std::time::SystemTime,
     /// When the world was first seen finished (for the clean-up grace).
     finished_at: Option<Instant>,
@@ -315,6 +322,8 @@ impl MatchTask {
                 }
                 _ = housekeeping.tick() => {
                     let why = self.housekeeping();
+                    self.archive();
+                    self.store_flush(false);
                     self.publish_summary();
                     if let Some(why) = why {
                         self.settings.metrics.matches_removed.with_label_values(&[why]).inc();
@@ -325,24 +334,8 @@ impl MatchTask {
                 }
             }
         }
+        self.archive();
         tracing::info!(tick = self.world.tick, "match ended");
-    }
-
-    /// Hands a finished match to the history, once.
-    fn archive(&mut self) {
-        if self.archived || self.world.status != MatchStatus::Finished {
-            return;
-        }
-        self.archived = true;
-        let replay = crate::game::replay::Replay::of(
-            &self.world,
-            self.meta.clone(),
-            self.world.arena.clone(),
-            self.world.config.clone(),
-            self.recording.inputs().to_vec(),
-            self.started_at,
-        );
-        self.settings.history.keep(replay);
     }
 
     /// Applies a change from outside to the world and records it (see `game::record`).

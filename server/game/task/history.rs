@@ -1,0 +1,126 @@
+//! How a match task feeds the history: the match's start, its inputs about once a second,
+//! and its end, handed to the store's writer without ever waiting on it (a full queue
+//! means trying again at the next flush), and the finished match kept for replay.
+
+use std::time::{Duration, Instant, SystemTime};
+
+use super::MatchTask;
+use crate::game::replay::Replay;
+use crate::store::codec::StoredSettings;
+use crate::store::{Ended, Write, results, unix_ms};
+use lasertag_core::world::MatchStatus;
+
+/// How often a running match's inputs go to the store: what a crash may lose.
+pub(super) const FLUSH_EVERY: Duration = Duration::from_secs(1);
+
+/// Where a match stands with the store.
+#[derive(Debug)]
+pub(super) struct StoreProgress {
+    /// The store has the match's start.
+    begun: bool,
+    last_flush: Instant,
+}
+
+impl Default for StoreProgress {
+    fn default() -> Self {
+        StoreProgress {
+            begun: false,
+            last_flush: Instant::now(),
+        }
+    }
+}
+
+impl MatchTask {
+    /// Sends the match's start, unless the store has it.
+    fn store_begin(&mut self) -> bool {
+        if self.store.begun {
+            return true;
+        }
+        let settings = StoredSettings::of(
+            &self.world.config,
+            self.meta.clock,
+            self.meta.bots_joinable,
+            self.meta.spectator_delay_ticks,
+        );
+        let begin = Write::Begin {
+            id: self.meta.id.clone(),
+            arena: self.world.arena.clone(),
+            settings: Box::new(settings),
+            started_at: self.started_at,
+        };
+        self.store.begun = self.settings.history.record(begin).is_ok();
+        self.store.begun
+    }
+
+    /// Sends the inputs since the last flush and the tick reached, when a flush is due (or
+    /// `now` is set).
+    pub(super) fn store_flush(&mut self, force: bool) {
+        if !force && self.store.last_flush.elapsed() < FLUSH_EVERY {
+            return;
+        }
+        self.store.last_flush = Instant::now();
+        if !self.store_begin() {
+            return;
+        }
+        let inputs = self.recording.unstored().to_vec();
+        let names = self
+            .recording
+            .seats_unstored()
+            .then(|| self.recording.names());
+        let n = inputs.len();
+        let append = Write::Append {
+            id: self.meta.id.clone(),
+            inputs,
+            names,
+            tick: self.world.tick,
+        };
+        if self.settings.history.record(append).is_ok() {
+            self.recording.mark_stored(n);
+        } else {
+            tracing::warn!("the history's queue is full: this match's inputs wait a second");
+        }
+    }
+
+    /// Hands a finished match to the history, once: the last inputs and how it ended to
+    /// the store, the replay to memory.
+    pub(super) fn archive(&mut self) {
+        if self.archived || self.world.status != MatchStatus::Finished {
+            return;
+        }
+        self.archived = true;
+        self.store_flush(true);
+        let replay = Replay::of(
+            &self.world,
+            self.meta.clone(),
+            self.world.arena.clone(),
+            self.world.config.clone(),
+            self.recording.inputs().to_vec(),
+            self.started_at,
+        );
+        let listed = replay.listed();
+        let ended = Ended {
+            ended_at: unix_ms(SystemTime::now()),
+            ticks: self.world.tick,
+            winner: self.world.winner.map(|w| match w {
+                lasertag_core::world::Side::Robots => "robots",
+                lasertag_core::world::Side::Opponents => "opponents",
+            }),
+            reason: replay.reason.map(crate::protocol::finish_reason),
+            players: results::of(&self.world),
+        };
+        debug_assert_eq!(listed.ticks, ended.ticks);
+        if self.store.begun
+            && self
+                .settings
+                .history
+                .record(Write::Finish {
+                    id: self.meta.id.clone(),
+                    ended,
+                })
+                .is_err()
+        {
+            tracing::warn!("the history's queue is full: the match stays incomplete there");
+        }
+        self.settings.history.keep(replay);
+    }
+}

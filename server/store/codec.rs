@@ -1,0 +1,517 @@
+//! How a match is written down for the store: its settings ([`StoredSettings`]: everything
+//! [`MatchConfig`] holds that a match can differ in, plus the shell's clock and delay) and
+//! its inputs ([`encode_inputs`]: JSON lines, one input a line, deflated in chunks).
+//!
+//! The core has no serde on purpose, so these shapes live here, beside the one place that
+//! reads them back. Settings groups go through their declared fields (`settings::Group`),
+//! the same as requests do, and the fields a request cannot set are derived the way a
+//! request derives them (`localise::Settings::for_odometry`): a stored match rebuilds the
+//! very config it ran with, which the tests check field for field.
+
+use std::io::{Read, Write};
+
+use flate2::Compression;
+use flate2::read::DeflateDecoder;
+use flate2::write::DeflateEncoder;
+use lasertag_core::bots::BotKind;
+use lasertag_core::settings::{Group, Value};
+use lasertag_core::sim::Odometry;
+use lasertag_core::world::{
+    FinishReason, HumanInput, MatchConfig, OpponentOrder, Placement, RobotOrder, WorldInput,
+};
+use lasertag_core::{localise, planner, radio, tracker};
+use nalgebra::Point2;
+use serde::{Deserialize, Serialize};
+use serde_json::{Map, Value as Json};
+
+use crate::protocol::{self, Clock, OpponentBot, OpponentControl, Planner};
+
+/// A stored match that cannot be read back.
+#[derive(Debug, thiserror::Error)]
+pub enum CodecError {
+    #[error("stored settings: {0}")]
+    Settings(String),
+    #[error("stored inputs: {0}")]
+    Inputs(String),
+}
+
+/// The version of [`StoredSettings`] this build writes and reads.
+const SETTINGS_VERSION: u32 = 1;
+
+/// Everything that defines a match besides its map, as the store keeps it.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct StoredSettings {
+    v: u32,
+    robots: usize,
+    opponents: usize,
+    opponent_control: OpponentControl,
+    opponent_bot: OpponentBot,
+    planner: Planner,
+    seed: u64,
+    time_limit_ticks: u64,
+    placement: StoredPlacement,
+    localisation: bool,
+    tracker: Map<String, Json>,
+    coordination: Map<String, Json>,
+    radio: Map<String, Json>,
+    odometry: Map<String, Json>,
+    localiser: Map<String, Json>,
+    pub clock: Clock,
+    pub bots_joinable: bool,
+    pub spectator_delay_ticks: u64,
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+enum StoredPlacement {
+    Spawns,
+    Random,
+    Given {
+        robots: Vec<[f32; 3]>,
+        opponents: Vec<[f32; 2]>,
+    },
+}
+
+/// A settings group as a JSON object of every declared field.
+fn group_out<G: Group>(g: &G) -> Map<String, Json> {
+    G::FIELDS
+        .iter()
+        .filter_map(|f| {
+            let v = match g.get(f.name)? {
+                Value::Integer(i) => Json::from(i),
+                Value::Number(x) => Json::from(x),
+                Value::Bool(b) => Json::from(b),
+            };
+            Some((f.name.to_string(), v))
+        })
+        .collect()
+}
+
+/// `base` with the fields of `m` set, each checked as a request's would be.
+fn group_in<G: Group>(mut base: G, m: &Map<String, Json>) -> Result<G, CodecError> {
+    for (name, v) in m {
+        let value = match v {
+            Json::Bool(b) => Value::Bool(*b),
+            Json::Number(n) => match n.as_i64() {
+                Some(i)
+                    if G::field(name)
+                        .is_some_and(|f| f.kind == lasertag_core::settings::Kind::Integer) =>
+                {
+                    Value::Integer(i)
+                }
+                _ => Value::Number(n.as_f64().unwrap_or(f64::NAN)),
+            },
+            other => {
+                return Err(CodecError::Settings(format!(
+                    "{}.{name}: {other} is not a setting",
+                    G::NAME
+                )));
+            }
+        };
+        base.set(name, value)
+            .map_err(|e| CodecError::Settings(e.within(G::NAME).to_string()))?;
+    }
+    Ok(base)
+}
+
+impl StoredSettings {
+    /// `config` as stored, with the shell's clock and spectator delay.
+    pub fn of(
+        config: &MatchConfig,
+        clock: Clock,
+        bots_joinable: bool,
+        spectator_delay_ticks: u64,
+    ) -> StoredSettings {
+        StoredSettings {
+            v: SETTINGS_VERSION,
+            robots: config.robots,
+            opponents: config.opponents,
+            opponent_control: config.opponent_control.into(),
+            opponent_bot: match config.opponent_bot {
+                BotKind::Wander => OpponentBot::Wander,
+                BotKind::Evade => OpponentBot::Evade,
+                BotKind::Idle => OpponentBot::Idle,
+            },
+            planner: protocol::planner_dto(config.planner),
+            seed: config.seed,
+            time_limit_ticks: config.time_limit_ticks,
+            placement: match &config.placement {
+                Placement::Spawns => StoredPlacement::Spawns,
+                Placement::Random => StoredPlacement::Random,
+                Placement::Given { robots, opponents } => StoredPlacement::Given {
+                    robots: robots.clone(),
+                    opponents: opponents.clone(),
+                },
+            },
+            localisation: config.localisation,
+            tracker: group_out(&config.tracker),
+            coordination: group_out(&config.coordination),
+            radio: group_out(&config.radio),
+            odometry: group_out(&config.physics.odometry),
+            localiser: group_out(&config.localiser),
+            clock,
+            bots_joinable,
+            spectator_delay_ticks,
+        }
+    }
+
+    /// The config the match ran with.
+    pub fn config(&self) -> Result<MatchConfig, CodecError> {
+        if self.v != SETTINGS_VERSION {
+            return Err(CodecError::Settings(format!(
+                "version {} (this server reads {SETTINGS_VERSION})",
+                self.v
+            )));
+        }
+        let base = MatchConfig::default();
+        let physics = lasertag_core::sim::Physics {
+            odometry: group_in(Odometry::default(), &self.odometry)?,
+            ..base.physics
+        };
+        let localiser = group_in(localise::Settings::for_odometry(&physics), &self.localiser)?;
+        Ok(MatchConfig {
+            robots: self.robots,
+            opponents: self.opponents,
+            opponent_control: self.opponent_control.into(),
+            opponent_bot: match self.opponent_bot {
+                OpponentBot::Wander => BotKind::Wander,
+                OpponentBot::Evade => BotKind::Evade,
+                OpponentBot::Idle => BotKind::Idle,
+            },
+            planner: protocol::planner_kind(self.planner),
+            seed: self.seed,
+            time_limit_ticks: self.time_limit_ticks,
+            placement: match &self.placement {
+                StoredPlacement::Spawns => Placement::Spawns,
+                StoredPlacement::Random => Placement::Random,
+                StoredPlacement::Given { robots, opponents } => Placement::Given {
+                    robots: robots.clone(),
+                    opponents: opponents.clone(),
+                },
+            },
+            physics,
+            tracker: group_in(tracker::Settings::default(), &self.tracker)?,
+            coordination: group_in(
+                planner::coordinated::Settings::default(),
+                &self.coordination,
+            )?,
+            localisation: self.localisation,
+            localiser,
+            radio: group_in(radio::Settings::default(), &self.radio)?,
+        })
+    }
+}
+
+/// One input as a line of the store.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(tag = "k", rename_all = "lowercase")]
+enum StoredInput {
+    /// A person's keys: forward, turn, trigger, the tick their screen showed.
+    Keys {
+        t: u64,
+        s: usize,
+        f: f32,
+        r: f32,
+        #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+        g: bool,
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        v: Option<u64>,
+    },
+    Opponent {
+        t: u64,
+        s: usize,
+        o: StoredOrder,
+    },
+    Robot {
+        t: u64,
+        r: usize,
+        o: StoredOrder,
+    },
+    Seat {
+        t: u64,
+        s: usize,
+        name: String,
+    },
+    Unseat {
+        t: u64,
+        s: usize,
+        name: String,
+    },
+    End {
+        t: u64,
+        reason: String,
+    },
+}
+
+/// An opponent's or a robot's order.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+enum StoredOrder {
+    Drive { f: f32, r: f32, g: bool },
+    Waypoints(Vec<[f32; 2]>),
+    Stop,
+    Tag,
+}
+
+fn points(p: &[Point2<f32>]) -> Vec<[f32; 2]> {
+    p.iter().map(|p| [p.x, p.y]).collect()
+}
+
+fn unpoints(p: &[[f32; 2]]) -> Vec<Point2<f32>> {
+    p.iter().map(|p| Point2::new(p[0], p[1])).collect()
+}
+
+pub fn reason_of(name: &str) -> Option<FinishReason> {
+    [
+        FinishReason::AllTagged,
+        FinishReason::TimeLimit,
+        FinishReason::Stopped,
+        FinishReason::ServerShutdown,
+        FinishReason::Abandoned,
+        FinishReason::Overloaded,
+    ]
+    .into_iter()
+    .find(|r| protocol::finish_reason(*r) == name)
+}
+
+impl StoredInput {
+    fn of(tick: u64, input: &WorldInput) -> StoredInput {
+        let t = tick;
+        match input {
+            WorldInput::Keys { slot, input } => StoredInput::Keys {
+                t,
+                s: *slot,
+                f: input.forward,
+                r: input.turn,
+                g: input.tag,
+                v: input.seen_tick,
+            },
+            WorldInput::Opponent { slot, order } => StoredInput::Opponent {
+                t,
+                s: *slot,
+                o: match order {
+                    OpponentOrder::Waypoints(p) => StoredOrder::Waypoints(points(p)),
+                    OpponentOrder::Stop => StoredOrder::Stop,
+                    OpponentOrder::Tag => StoredOrder::Tag,
+                },
+            },
+            WorldInput::Robot { robot, order } => StoredInput::Robot {
+                t,
+                r: *robot,
+                o: match order {
+                    RobotOrder::Drive { forward, turn, tag } => StoredOrder::Drive {
+                        f: *forward,
+                        r: *turn,
+                        g: *tag,
+                    },
+                    RobotOrder::Waypoints(p) => StoredOrder::Waypoints(points(p)),
+                    RobotOrder::Stop => StoredOrder::Stop,
+                },
+            },
+            WorldInput::Seat { slot, name } => StoredInput::Seat {
+                t,
+                s: *slot,
+                name: name.clone(),
+            },
+            WorldInput::Unseat { slot, name } => StoredInput::Unseat {
+                t,
+                s: *slot,
+                name: name.clone(),
+            },
+            WorldInput::End(reason) => StoredInput::End {
+                t,
+                reason: protocol::finish_reason(*reason).to_string(),
+            },
+        }
+    }
+
+    fn input(self) -> Result<(u64, WorldInput), String> {
+        Ok(match self {
+            StoredInput::Keys { t, s, f, r, g, v } => (
+                t,
+                WorldInput::Keys {
+                    slot: s,
+                    input: HumanInput {
+                        forward: f,
+                        turn: r,
+                        tag: g,
+                        seen_tick: v,
+                    },
+                },
+            ),
+            StoredInput::Opponent { t, s, o } => {
+                let order = match o {
+                    StoredOrder::Waypoints(p) => OpponentOrder::Waypoints(unpoints(&p)),
+                    StoredOrder::Stop => OpponentOrder::Stop,
+                    StoredOrder::Tag => OpponentOrder::Tag,
+                    StoredOrder::Drive { .. } => return Err("an opponent cannot drive".into()),
+                };
+                (t, WorldInput::Opponent { slot: s, order })
+            }
+            StoredInput::Robot { t, r, o } => {
+                let order = match o {
+                    StoredOrder::Drive { f, r, g } => RobotOrder::Drive {
+                        forward: f,
+                        turn: r,
+                        tag: g,
+                    },
+                    StoredOrder::Waypoints(p) => RobotOrder::Waypoints(unpoints(&p)),
+                    StoredOrder::Stop => RobotOrder::Stop,
+                    StoredOrder::Tag => return Err("a robot's tag is a drive order".into()),
+                };
+                (t, WorldInput::Robot { robot: r, order })
+            }
+            StoredInput::Seat { t, s, name } => (t, WorldInput::Seat { slot: s, name }),
+            StoredInput::Unseat { t, s, name } => (t, WorldInput::Unseat { slot: s, name }),
+            StoredInput::End { t, reason } => (
+                t,
+                WorldInput::End(
+                    reason_of(&reason).ok_or_else(|| format!("no finish reason {reason:?}"))?,
+                ),
+            ),
+        })
+    }
+}
+
+/// `inputs` as a deflated chunk of JSON lines.
+pub fn encode_inputs(inputs: &[(u64, WorldInput)]) -> Vec<u8> {
+    let mut out = DeflateEncoder::new(Vec::new(), Compression::fast());
+    for (tick, input) in inputs {
+        // Writing to memory and serialising plain data cannot fail.
+        let _ = serde_json::to_writer(&mut out, &StoredInput::of(*tick, input));
+        let _ = out.write_all(b"\n");
+    }
+    out.finish().unwrap_or_default()
+}
+
+/// The inputs of one chunk written by [`encode_inputs`].
+pub fn decode_inputs(chunk: &[u8]) -> Result<Vec<(u64, WorldInput)>, CodecError> {
+    let mut text = String::new();
+    DeflateDecoder::new(chunk)
+        .read_to_string(&mut text)
+        .map_err(|e| CodecError::Inputs(format!("not a deflated chunk: {e}")))?;
+    text.lines()
+        .enumerate()
+        .map(|(i, line)| {
+            serde_json::from_str::<StoredInput>(line)
+                .map_err(|e| e.to_string())
+                .and_then(StoredInput::input)
+                .map_err(|e| CodecError::Inputs(format!("line {}: {e}", i + 1)))
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use lasertag_core::world::ControlKind;
+
+    fn round_trip(config: &MatchConfig) {
+        let stored = StoredSettings::of(config, Clock::Manual, true, 600);
+        let text = serde_json::to_string(&stored).expect("json");
+        let back: StoredSettings = serde_json::from_str(&text).expect("parse");
+        let again = back.config().expect("config");
+        // MatchConfig has no PartialEq; Debug prints every float exactly.
+        assert_eq!(format!("{config:?}"), format!("{again:?}"));
+        assert_eq!(
+            (back.clock, back.bots_joinable, back.spectator_delay_ticks),
+            (Clock::Manual, true, 600)
+        );
+    }
+
+    #[test]
+    fn settings_come_back_field_for_field() {
+        round_trip(&MatchConfig::default());
+        let mut config = MatchConfig {
+            robots: 3,
+            opponents: 4,
+            opponent_control: ControlKind::Api,
+            opponent_bot: BotKind::Evade,
+            planner: lasertag_core::planner::PlannerKind::Api,
+            seed: u64::MAX,
+            time_limit_ticks: 1234,
+            placement: Placement::Given {
+                robots: vec![[1.5, 2.25, 0.1]],
+                opponents: vec![[3.0, 4.125]],
+            },
+            localisation: false,
+            ..MatchConfig::default()
+        };
+        config.radio.loss = 0.2;
+        config.radio.latency_ticks = 3;
+        config.tracker.particles_per_role = 321;
+        config.physics.odometry.distance = 0.1;
+        config.localiser = localise::Settings {
+            beams: 12,
+            ..localise::Settings::for_odometry(&config.physics)
+        };
+        config.coordination.travel_weight = 0.0123;
+        round_trip(&config);
+    }
+
+    #[test]
+    fn inputs_come_back_in_order() {
+        let inputs = vec![
+            (
+                0,
+                WorldInput::Seat {
+                    slot: 1,
+                    name: "ålice \"x\"".into(),
+                },
+            ),
+            (
+                3,
+                WorldInput::Keys {
+                    slot: 1,
+                    input: HumanInput {
+                        forward: 1.0,
+                        turn: -0.3,
+                        tag: true,
+                        seen_tick: Some(2),
+                    },
+                },
+            ),
+            (
+                4,
+                WorldInput::Opponent {
+                    slot: 0,
+                    order: OpponentOrder::Waypoints(vec![Point2::new(1.0, 2.5)]),
+                },
+            ),
+            (
+                4,
+                WorldInput::Robot {
+                    robot: 1,
+                    order: RobotOrder::Drive {
+                        forward: 0.5,
+                        turn: 0.25,
+                        tag: false,
+                    },
+                },
+            ),
+            (
+                9,
+                WorldInput::Robot {
+                    robot: 0,
+                    order: RobotOrder::Stop,
+                },
+            ),
+            (
+                12,
+                WorldInput::Unseat {
+                    slot: 1,
+                    name: "ålice \"x\"".into(),
+                },
+            ),
+            (20, WorldInput::End(FinishReason::Stopped)),
+        ];
+        let chunk = encode_inputs(&inputs);
+        assert_eq!(decode_inputs(&chunk).expect("decode"), inputs);
+        assert!(decode_inputs(b"nonsense").is_err());
+        assert!(
+            decode_inputs(&encode_inputs(&[]))
+                .expect("empty")
+                .is_empty()
+        );
+    }
+}

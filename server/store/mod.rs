@@ -1,0 +1,292 @@
+//! The history of matches on disk: every match's map, settings and inputs (enough to replay
+//! it, `game::replay`), how it ended, and who played it; lists, loads and player statistics
+//! read back.
+//!
+//! Writes never wait: a match task hands [`Write`]s to a bounded channel
+//! ([`Store::send`], which refuses rather than blocks when the channel is full) and one
+//! writer thread commits them in batches, a transaction a batch. Reads run on the caller's
+//! thread (callers are off the async workers) through a connection of their own.
+//!
+//! The database sits behind [`Backend`], a narrow trait: SQLite ([`sqlite`]) is the default,
+//! embedded and bundled; a server database for a fleet implements the same few operations.
+
+pub mod codec;
+pub mod results;
+pub mod sqlite;
+
+use std::path::{Path, PathBuf};
+use std::sync::mpsc::{Receiver, SyncSender, TrySendError};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, SystemTime};
+
+use lasertag_core::sim::arena::Arena;
+use lasertag_core::world::WorldInput;
+
+use codec::StoredSettings;
+pub use results::PlayerResult;
+
+/// Writes the channel holds before [`Store::send`] refuses (a second of a thousand busy
+/// matches).
+const WRITE_QUEUE: usize = 4096;
+/// Most writes committed in one transaction.
+const BATCH: usize = 512;
+
+/// What went wrong with the store.
+#[derive(Debug, Clone, thiserror::Error)]
+pub enum StoreError {
+    #[error("data directory {path}: {message}")]
+    Io { path: String, message: String },
+    #[error("database: {0}")]
+    Database(String),
+    #[error("the database's schema is version {found}, newer than this server's {known}")]
+    NewerSchema { found: usize, known: usize },
+    #[error("no stored match {0}")]
+    Unknown(String),
+    #[error(transparent)]
+    Codec(#[from] std::sync::Arc<codec::CodecError>),
+    #[error("the store is closed")]
+    Closed,
+}
+
+impl From<codec::CodecError> for StoreError {
+    fn from(e: codec::CodecError) -> Self {
+        StoreError::Codec(Arc::new(e))
+    }
+}
+
+/// The `serve` command's history flags.
+#[derive(Debug, Clone, clap::Args)]
+pub struct StoreArgs {
+    /// Directory of the history database (`lasertag.db`), created if missing.
+    #[arg(long, env = "LASERTAG_DATA", default_value = "data")]
+    pub data_dir: PathBuf,
+    /// Ended matches the history keeps; the oldest go first.
+    #[arg(long, env = "LASERTAG_KEEP_MATCHES", default_value_t = 10_000,
+          value_parser = clap::value_parser!(u64).range(1..))]
+    pub keep_matches: u64,
+    /// Megabytes of recorded matches the history keeps; the oldest go first.
+    #[arg(long, env = "LASERTAG_KEEP_MB", default_value_t = 1024,
+          value_parser = clap::value_parser!(u64).range(1..))]
+    pub keep_mb: u64,
+}
+
+impl StoreArgs {
+    pub fn retention(&self) -> Retention {
+        Retention {
+            max_matches: self.keep_matches,
+            max_bytes: self.keep_mb.saturating_mul(1 << 20),
+        }
+    }
+}
+
+/// How much the store keeps: the oldest ended matches go first past either limit.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Retention {
+    pub max_matches: u64,
+    pub max_bytes: u64,
+}
+
+/// One change to the history, from a match task.
+#[derive(Debug)]
+pub enum Write {
+    /// A match started.
+    Begin {
+        id: String,
+        arena: Arc<Arena>,
+        settings: Box<StoredSettings>,
+        started_at: SystemTime,
+    },
+    /// Inputs applied since the last append, and the tick the match has reached.
+    Append {
+        id: String,
+        inputs: Vec<(u64, WorldInput)>,
+        /// Everyone who has played it so far, when that changed.
+        names: Option<Vec<String>>,
+        tick: u64,
+    },
+    /// The match ended (after its last append).
+    Finish { id: String, ended: Ended },
+    /// Answers once everything before it is committed.
+    Flush(std::sync::mpsc::Sender<()>),
+}
+
+/// How a match ended.
+#[derive(Debug, Clone)]
+pub struct Ended {
+    /// Unix milliseconds.
+    pub ended_at: i64,
+    pub ticks: u64,
+    pub winner: Option<&'static str>,
+    pub reason: Option<&'static str>,
+    pub players: Vec<PlayerResult>,
+}
+
+/// An ended match as lists show it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Listed {
+    pub id: String,
+    pub map: String,
+    pub started_at_ms: i64,
+    pub ended_at_ms: Option<i64>,
+    pub ticks: u64,
+    pub winner: Option<String>,
+    pub reason: Option<String>,
+    /// False for a match the server was killed in the middle of.
+    pub complete: bool,
+    pub players: Vec<String>,
+}
+
+/// An ended match, whole: enough to replay it.
+#[derive(Debug, Clone)]
+pub struct Stored {
+    pub listed: Listed,
+    /// JSON of [`StoredSettings`].
+    pub settings: String,
+    /// The map as a map file (docs/map-format.md).
+    pub map_document: String,
+    /// Deflated chunks of inputs ([`codec::decode_inputs`]), in order.
+    pub chunks: Vec<Vec<u8>>,
+}
+
+/// A player name's totals over the stored matches.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PlayerStats {
+    pub name: String,
+    pub matches: u64,
+    pub wins: u64,
+    /// Robots this name tagged.
+    pub tags: u64,
+    pub longest_survival_ticks: u64,
+}
+
+/// What a leaderboard ranks by.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum LeaderOrder {
+    Wins,
+    Tags,
+    Survival,
+    Matches,
+}
+
+/// The operations a database must offer the store.
+pub trait Backend: Send {
+    /// Commits `batch` in one transaction.
+    fn write(&mut self, batch: &[Write]) -> Result<(), StoreError>;
+    fn list(&mut self, limit: usize, before: Option<&str>) -> Result<Vec<Listed>, StoreError>;
+    fn load(&mut self, id: &str) -> Result<Option<Stored>, StoreError>;
+    fn player(&mut self, name: &str) -> Result<Option<PlayerStats>, StoreError>;
+    fn played(&mut self, name: &str, limit: usize) -> Result<Vec<Listed>, StoreError>;
+    fn leaders(&mut self, order: LeaderOrder, limit: usize)
+    -> Result<Vec<PlayerStats>, StoreError>;
+    /// (ended matches, their bytes).
+    fn totals(&mut self) -> Result<(u64, u64), StoreError>;
+}
+
+/// The history on disk: a writer thread and a connection for reads.
+pub struct Store {
+    writes: SyncSender<Write>,
+    reader: Mutex<Box<dyn Backend>>,
+    dir: PathBuf,
+}
+
+impl std::fmt::Debug for Store {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Store")
+            .field("dir", &self.dir)
+            .finish_non_exhaustive()
+    }
+}
+
+impl Store {
+    /// Opens the SQLite history in `dir` (created if missing). Matches a previous process
+    /// left running are marked incomplete.
+    pub fn open(dir: &Path, retention: Retention) -> Result<Store, StoreError> {
+        let writer = sqlite::Sqlite::open(dir, retention)?;
+        let interrupted = sqlite::close_interrupted(writer.connection())?;
+        if interrupted > 0 {
+            tracing::warn!(
+                interrupted,
+                "matches the last run left unfinished are kept as incomplete"
+            );
+        }
+        let reader = sqlite::Sqlite::reader(dir, retention)?;
+        Ok(Store::with(Box::new(writer), Box::new(reader), dir))
+    }
+
+    /// A store over any backend: `writer` for the writer thread, `reader` for reads.
+    pub fn with(writer: Box<dyn Backend>, reader: Box<dyn Backend>, dir: &Path) -> Store {
+        let (tx, rx) = std::sync::mpsc::sync_channel(WRITE_QUEUE);
+        let spawned = std::thread::Builder::new()
+            .name("store".into())
+            .spawn(move || write_loop(writer, rx));
+        if let Err(e) = spawned {
+            // The channel's receiver is gone with the closure: every send says Closed.
+            tracing::error!("no store writer thread: {e}");
+        }
+        Store {
+            writes: tx,
+            reader: Mutex::new(reader),
+            dir: dir.to_path_buf(),
+        }
+    }
+
+    /// Queues `w` for the writer; refuses (giving it back) when the queue is full.
+    pub fn send(&self, w: Write) -> Result<(), Box<Write>> {
+        self.writes.try_send(w).map_err(|e| match e {
+            TrySendError::Full(w) | TrySendError::Disconnected(w) => Box::new(w),
+        })
+    }
+
+    /// Waits (blocking, at most `timeout`) until everything sent so far is committed.
+    pub fn flush(&self, timeout: Duration) -> Result<(), StoreError> {
+        let (tx, rx) = std::sync::mpsc::channel();
+        self.writes
+            .send(Write::Flush(tx))
+            .map_err(|_| StoreError::Closed)?;
+        rx.recv_timeout(timeout).map_err(|_| StoreError::Closed)
+    }
+
+    /// Runs `f` on the read connection (blocking).
+    pub fn read<T>(
+        &self,
+        f: impl FnOnce(&mut dyn Backend) -> Result<T, StoreError>,
+    ) -> Result<T, StoreError> {
+        let mut reader = self.reader.lock().unwrap_or_else(|e| e.into_inner());
+        f(reader.as_mut())
+    }
+
+    /// The size of the database files now (bytes).
+    pub fn file_bytes(&self) -> u64 {
+        ["lasertag.db", "lasertag.db-wal"]
+            .iter()
+            .filter_map(|f| std::fs::metadata(self.dir.join(f)).ok())
+            .map(|m| m.len())
+            .sum()
+    }
+}
+
+fn write_loop(mut backend: Box<dyn Backend>, rx: Receiver<Write>) {
+    while let Ok(first) = rx.recv() {
+        let mut batch = vec![first];
+        while batch.len() < BATCH {
+            match rx.try_recv() {
+                Ok(w) => batch.push(w),
+                Err(_) => break,
+            }
+        }
+        if let Err(e) = backend.write(&batch) {
+            tracing::error!("the history could not store {} writes: {e}", batch.len());
+        }
+        for w in batch {
+            if let Write::Flush(done) = w {
+                let _ = done.send(());
+            }
+        }
+    }
+}
+
+/// Unix milliseconds of `t`.
+pub fn unix_ms(t: SystemTime) -> i64 {
+    t.duration_since(SystemTime::UNIX_EPOCH)
+        .map_or(0, |d| d.as_millis() as i64)
+}

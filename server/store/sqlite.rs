@@ -1,0 +1,666 @@
+//! The SQLite database behind the store: its schema and migrations, and every statement.
+//!
+//! One file, `lasertag.db`, in WAL mode: the writer thread commits while readers read, and a
+//! killed process loses nothing it committed. `PRAGMA user_version` is the schema's version;
+//! [`migrate`] brings an older file up to date in one transaction per step. The statements
+//! are plain SQL of the common kind, so that a server database can stand in behind the same
+//! [`Backend`](super::Backend) for a fleet.
+
+use std::path::Path;
+
+use rusqlite::{Connection, OptionalExtension, params};
+
+use super::{Ended, LeaderOrder, Listed, PlayerStats, StoreError, Stored};
+
+/// The schema, one migration a step: step i takes `user_version` i to i + 1.
+const MIGRATIONS: &[&str] = &[
+    // 1: matches, their inputs in chunks, their maps (deduplicated), who played them.
+    "CREATE TABLE maps (
+        hash TEXT PRIMARY KEY,
+        name TEXT NOT NULL,
+        document TEXT NOT NULL
+    );
+    CREATE TABLE matches (
+        seq INTEGER PRIMARY KEY AUTOINCREMENT,
+        id TEXT NOT NULL UNIQUE,
+        map TEXT NOT NULL,
+        map_hash TEXT NOT NULL REFERENCES maps(hash),
+        settings TEXT NOT NULL,
+        started_at INTEGER NOT NULL,
+        updated_at INTEGER NOT NULL,
+        ended_at INTEGER,
+        ticks INTEGER NOT NULL DEFAULT 0,
+        winner TEXT,
+        reason TEXT,
+        complete INTEGER NOT NULL DEFAULT 0,
+        names TEXT NOT NULL DEFAULT '[]',
+        bytes INTEGER NOT NULL DEFAULT 0
+    );
+    CREATE INDEX matches_ended ON matches(ended_at);
+    CREATE TABLE inputs (
+        seq INTEGER NOT NULL REFERENCES matches(seq) ON DELETE CASCADE,
+        chunk BLOB NOT NULL
+    );
+    CREATE INDEX inputs_by_match ON inputs(seq);
+    CREATE TABLE players (
+        seq INTEGER NOT NULL REFERENCES matches(seq) ON DELETE CASCADE,
+        name TEXT NOT NULL,
+        tags INTEGER NOT NULL,
+        survived_ticks INTEGER NOT NULL,
+        won INTEGER NOT NULL
+    );
+    CREATE INDEX players_by_name ON players(name);",
+];
+
+/// The schema version this build writes.
+pub const SCHEMA_VERSION: usize = MIGRATIONS.len();
+
+fn db(e: rusqlite::Error) -> StoreError {
+    StoreError::Database(e.to_string())
+}
+
+/// Opens (creating) the database in `dir` and brings its schema up to date.
+pub fn open(dir: &Path) -> Result<Connection, StoreError> {
+    std::fs::create_dir_all(dir).map_err(|e| StoreError::Io {
+        path: dir.display().to_string(),
+        message: e.to_string(),
+    })?;
+    let path = dir.join("lasertag.db");
+    let mut conn = Connection::open(&path).map_err(db)?;
+    // auto_vacuum only takes on a new file (before the first table): evicted matches then
+    // give their pages back to the file system (`incremental_vacuum`), so retention bounds
+    // the file, not only its contents.
+    conn.execute_batch(
+        "PRAGMA auto_vacuum = INCREMENTAL;
+         PRAGMA journal_mode = WAL;
+         PRAGMA synchronous = NORMAL;
+         PRAGMA foreign_keys = ON;
+         PRAGMA busy_timeout = 5000;",
+    )
+    .map_err(db)?;
+    migrate(&mut conn)?;
+    Ok(conn)
+}
+
+/// Opens a second connection to an opened database, for reading beside the writer.
+pub fn open_reader(dir: &Path) -> Result<Connection, StoreError> {
+    let conn = Connection::open(dir.join("lasertag.db")).map_err(db)?;
+    conn.execute_batch("PRAGMA foreign_keys = ON; PRAGMA busy_timeout = 5000;")
+        .map_err(db)?;
+    Ok(conn)
+}
+
+fn migrate(conn: &mut Connection) -> Result<(), StoreError> {
+    let version: usize = conn
+        .query_row("PRAGMA user_version", [], |r| r.get(0))
+        .map_err(db)?;
+    if version > SCHEMA_VERSION {
+        return Err(StoreError::NewerSchema {
+            found: version,
+            known: SCHEMA_VERSION,
+        });
+    }
+    for (step, sql) in MIGRATIONS.iter().enumerate().skip(version) {
+        let tx = conn.transaction().map_err(db)?;
+        tx.execute_batch(sql).map_err(db)?;
+        tx.pragma_update(None, "user_version", step + 1)
+            .map_err(db)?;
+        tx.commit().map_err(db)?;
+    }
+    Ok(())
+}
+
+/// Matches a previous process left running are over: each becomes incomplete, ending at its
+/// last stored tick. Answers how many.
+pub fn close_interrupted(conn: &Connection) -> Result<usize, StoreError> {
+    conn.execute(
+        "UPDATE matches SET ended_at = updated_at, complete = 0 WHERE ended_at IS NULL",
+        [],
+    )
+    .map_err(db)
+}
+
+pub fn begin(
+    conn: &Connection,
+    id: &str,
+    map: &str,
+    map_hash: &str,
+    map_document: &str,
+    settings: &str,
+    started_at: i64,
+) -> Result<(), StoreError> {
+    conn.execute(
+        "INSERT OR IGNORE INTO maps (hash, name, document) VALUES (?1, ?2, ?3)",
+        params![map_hash, map, map_document],
+    )
+    .map_err(db)?;
+    conn.execute(
+        "INSERT INTO matches (id, map, map_hash, settings, started_at, updated_at, bytes)
+         VALUES (?1, ?2, ?3, ?4, ?5, ?5, ?6)",
+        params![
+            id,
+            map,
+            map_hash,
+            settings,
+            started_at,
+            settings.len() as i64
+        ],
+    )
+    .map_err(db)?;
+    Ok(())
+}
+
+/// Adds a chunk of inputs (if any) and moves the match's last tick on.
+pub fn append(
+    conn: &Connection,
+    id: &str,
+    chunk: Option<&[u8]>,
+    names: Option<&str>,
+    tick: u64,
+    now: i64,
+) -> Result<(), StoreError> {
+    let seq: Option<i64> = conn
+        .query_row("SELECT seq FROM matches WHERE id = ?1", [id], |r| r.get(0))
+        .optional()
+        .map_err(db)?;
+    let Some(seq) = seq else {
+        return Err(StoreError::Unknown(id.to_string()));
+    };
+    let bytes = chunk.map_or(0, |c| c.len() as i64);
+    if let Some(chunk) = chunk {
+        conn.execute(
+            "INSERT INTO inputs (seq, chunk) VALUES (?1, ?2)",
+            params![seq, chunk],
+        )
+        .map_err(db)?;
+    }
+    conn.execute(
+        "UPDATE matches SET ticks = ?2, updated_at = ?3, bytes = bytes + ?4,
+                names = COALESCE(?5, names) WHERE seq = ?1",
+        params![seq, tick as i64, now, bytes, names],
+    )
+    .map_err(db)?;
+    Ok(())
+}
+
+pub fn finish(conn: &Connection, id: &str, ended: &Ended) -> Result<(), StoreError> {
+    let seq: i64 = conn
+        .query_row("SELECT seq FROM matches WHERE id = ?1", [id], |r| r.get(0))
+        .map_err(db)?;
+    conn.execute(
+        "UPDATE matches SET ended_at = ?2, ticks = ?3, winner = ?4, reason = ?5, complete = 1
+         WHERE seq = ?1",
+        params![
+            seq,
+            ended.ended_at,
+            ended.ticks as i64,
+            ended.winner,
+            ended.reason
+        ],
+    )
+    .map_err(db)?;
+    for p in &ended.players {
+        conn.execute(
+            "INSERT INTO players (seq, name, tags, survived_ticks, won) VALUES (?1, ?2, ?3, ?4, ?5)",
+            params![seq, p.name, p.tags, p.survived_ticks as i64, p.won],
+        )
+        .map_err(db)?;
+    }
+    Ok(())
+}
+
+const LISTED: &str = "SELECT id, map, started_at, ended_at, ticks, winner, reason, complete, names
+                      FROM matches";
+
+fn listed(r: &rusqlite::Row) -> rusqlite::Result<Listed> {
+    let names: String = r.get(8)?;
+    Ok(Listed {
+        id: r.get(0)?,
+        map: r.get(1)?,
+        started_at_ms: r.get(2)?,
+        ended_at_ms: r.get(3)?,
+        ticks: r.get::<_, i64>(4)? as u64,
+        winner: r.get(5)?,
+        reason: r.get(6)?,
+        complete: r.get(7)?,
+        players: serde_json::from_str(&names).unwrap_or_default(),
+    })
+}
+
+/// Ended matches, newest first: at most `limit`, started before `before` when given.
+pub fn list(
+    conn: &Connection,
+    limit: usize,
+    before: Option<&str>,
+) -> Result<Vec<Listed>, StoreError> {
+    let mut stmt = conn
+        .prepare_cached(&format!(
+            "{LISTED} WHERE ended_at IS NOT NULL
+               AND seq < COALESCE((SELECT seq FROM matches WHERE id = ?1), 9223372036854775807)
+             ORDER BY seq DESC LIMIT ?2"
+        ))
+        .map_err(db)?;
+    let rows = stmt
+        .query_map(params![before, limit as i64], listed)
+        .map_err(db)?;
+    rows.collect::<Result<_, _>>().map_err(db)
+}
+
+/// One ended match, whole.
+pub fn load(conn: &Connection, id: &str) -> Result<Option<Stored>, StoreError> {
+    let row = conn
+        .query_row(
+            "SELECT id, map, started_at, ended_at, ticks, winner, reason, complete, names,
+                    settings, (SELECT document FROM maps WHERE hash = map_hash), seq
+             FROM matches WHERE id = ?1 AND ended_at IS NOT NULL",
+            [id],
+            |r| {
+                Ok((
+                    listed(r)?,
+                    r.get::<_, String>(9)?,
+                    r.get::<_, String>(10)?,
+                    r.get::<_, i64>(11)?,
+                ))
+            },
+        )
+        .optional()
+        .map_err(db)?;
+    let Some((listed, settings, map_document, seq)) = row else {
+        return Ok(None);
+    };
+    let mut stmt = conn
+        .prepare_cached("SELECT chunk FROM inputs WHERE seq = ?1 ORDER BY rowid")
+        .map_err(db)?;
+    let chunks = stmt
+        .query_map([seq], |r| r.get::<_, Vec<u8>>(0))
+        .map_err(db)?
+        .collect::<Result<Vec<_>, _>>()
+        .map_err(db)?;
+    Ok(Some(Stored {
+        listed,
+        settings,
+        map_document,
+        chunks,
+    }))
+}
+
+/// What the store holds: ended matches and their bytes (settings and inputs).
+pub fn totals(conn: &Connection) -> Result<(u64, u64), StoreError> {
+    conn.query_row(
+        "SELECT COUNT(*), COALESCE(SUM(bytes), 0) FROM matches WHERE ended_at IS NOT NULL",
+        [],
+        |r| Ok((r.get::<_, i64>(0)? as u64, r.get::<_, i64>(1)? as u64)),
+    )
+    .map_err(db)
+}
+
+/// Deletes the oldest ended matches until at most `max_matches` and `max_bytes` remain, and
+/// the maps no match uses any more. Answers how many matches went.
+pub fn evict(conn: &Connection, max_matches: u64, max_bytes: u64) -> Result<u64, StoreError> {
+    let (mut count, mut bytes) = totals(conn)?;
+    let mut evicted = 0;
+    while count > max_matches || bytes > max_bytes {
+        let oldest: Option<(i64, i64)> = conn
+            .query_row(
+                "SELECT seq, bytes FROM matches WHERE ended_at IS NOT NULL ORDER BY seq LIMIT 1",
+                [],
+                |r| Ok((r.get(0)?, r.get(1)?)),
+            )
+            .optional()
+            .map_err(db)?;
+        let Some((seq, b)) = oldest else { break };
+        conn.execute("DELETE FROM matches WHERE seq = ?1", [seq])
+            .map_err(db)?;
+        count -= 1;
+        bytes = bytes.saturating_sub(b as u64);
+        evicted += 1;
+    }
+    if evicted > 0 {
+        conn.execute(
+            "DELETE FROM maps WHERE hash NOT IN (SELECT map_hash FROM matches)",
+            [],
+        )
+        .map_err(db)?;
+    }
+    Ok(evicted)
+}
+
+/// Gives the pages of deleted rows back to the file system (outside a transaction).
+pub fn vacuum(conn: &Connection) -> Result<(), StoreError> {
+    conn.execute_batch("PRAGMA incremental_vacuum;").map_err(db)
+}
+
+const STATS: &str = "SELECT name, COUNT(*), SUM(won), SUM(tags), MAX(survived_ticks) FROM players";
+
+fn stats(r: &rusqlite::Row) -> rusqlite::Result<PlayerStats> {
+    Ok(PlayerStats {
+        name: r.get(0)?,
+        matches: r.get::<_, i64>(1)? as u64,
+        wins: r.get::<_, i64>(2)? as u64,
+        tags: r.get::<_, i64>(3)? as u64,
+        longest_survival_ticks: r.get::<_, i64>(4)? as u64,
+    })
+}
+
+/// The totals of everyone named `name`.
+pub fn player(conn: &Connection, name: &str) -> Result<Option<PlayerStats>, StoreError> {
+    conn.query_row(
+        &format!("{STATS} WHERE name = ?1 GROUP BY name"),
+        [name],
+        stats,
+    )
+    .optional()
+    .map_err(db)
+}
+
+/// The ended matches `name` played, newest first.
+pub fn played(conn: &Connection, name: &str, limit: usize) -> Result<Vec<Listed>, StoreError> {
+    let mut stmt = conn
+        .prepare_cached(&format!(
+            "{LISTED} WHERE seq IN (SELECT seq FROM players WHERE name = ?1)
+             ORDER BY seq DESC LIMIT ?2"
+        ))
+        .map_err(db)?;
+    let rows = stmt
+        .query_map(params![name, limit as i64], listed)
+        .map_err(db)?;
+    rows.collect::<Result<_, _>>().map_err(db)
+}
+
+/// The best `limit` names by `order`.
+pub fn leaders(
+    conn: &Connection,
+    order: LeaderOrder,
+    limit: usize,
+) -> Result<Vec<PlayerStats>, StoreError> {
+    let by = match order {
+        LeaderOrder::Wins => "SUM(won) DESC, COUNT(*) ASC",
+        LeaderOrder::Tags => "SUM(tags) DESC, COUNT(*) ASC",
+        LeaderOrder::Survival => "MAX(survived_ticks) DESC",
+        LeaderOrder::Matches => "COUNT(*) DESC",
+    };
+    let mut stmt = conn
+        .prepare_cached(&format!(
+            "{STATS} GROUP BY name ORDER BY {by}, name LIMIT ?1"
+        ))
+        .map_err(db)?;
+    let rows = stmt.query_map([limit as i64], stats).map_err(db)?;
+    rows.collect::<Result<_, _>>().map_err(db)
+}
+
+/// The SQLite [`Backend`](super::Backend).
+pub struct Sqlite {
+    conn: Connection,
+    retention: super::Retention,
+}
+
+impl Sqlite {
+    /// The writer's connection: creates and migrates the database.
+    pub fn open(dir: &Path, retention: super::Retention) -> Result<Sqlite, StoreError> {
+        Ok(Sqlite {
+            conn: open(dir)?,
+            retention,
+        })
+    }
+
+    /// A reader's connection to a database [`Sqlite::open`] made.
+    pub fn reader(dir: &Path, retention: super::Retention) -> Result<Sqlite, StoreError> {
+        Ok(Sqlite {
+            conn: open_reader(dir)?,
+            retention,
+        })
+    }
+
+    pub fn connection(&self) -> &Connection {
+        &self.conn
+    }
+}
+
+/// A map document's key: equal documents are stored once.
+fn hash(document: &str) -> String {
+    use std::hash::{Hash, Hasher};
+    let mut h = std::collections::hash_map::DefaultHasher::new();
+    document.hash(&mut h);
+    format!("{:016x}-{}", h.finish(), document.len())
+}
+
+impl super::Backend for Sqlite {
+    fn write(&mut self, batch: &[super::Write]) -> Result<(), StoreError> {
+        use super::Write;
+        let now = super::unix_ms(std::time::SystemTime::now());
+        let tx = self.conn.transaction().map_err(db)?;
+        let mut finished = false;
+        for w in batch {
+            // One write that fails (a match whose start was never stored) costs only itself:
+            // SQLite undoes the failed statement, not the transaction.
+            let done = match w {
+                Write::Begin {
+                    id,
+                    arena,
+                    settings,
+                    started_at,
+                } => {
+                    let document = crate::maps::import::to_json(&crate::maps::to_file(&arena.def));
+                    serde_json::to_string(settings)
+                        .map_err(|e| StoreError::Database(e.to_string()))
+                        .and_then(|settings| {
+                            begin(
+                                &tx,
+                                id,
+                                &arena.def.name,
+                                &hash(&document),
+                                &document,
+                                &settings,
+                                super::unix_ms(*started_at),
+                            )
+                        })
+                }
+                Write::Append {
+                    id,
+                    inputs,
+                    names,
+                    tick,
+                } => {
+                    let chunk = (!inputs.is_empty()).then(|| super::codec::encode_inputs(inputs));
+                    let names = names
+                        .as_ref()
+                        .map(|n| serde_json::to_string(n).unwrap_or_else(|_| "[]".into()));
+                    append(&tx, id, chunk.as_deref(), names.as_deref(), *tick, now)
+                }
+                Write::Finish { id, ended } => {
+                    finished = true;
+                    finish(&tx, id, ended)
+                }
+                Write::Flush(_) => Ok(()),
+            };
+            if let Err(e) = done {
+                tracing::warn!("history: {e}");
+            }
+        }
+        let evicted = if finished {
+            evict(&tx, self.retention.max_matches, self.retention.max_bytes)?
+        } else {
+            0
+        };
+        tx.commit().map_err(db)?;
+        if evicted > 0 {
+            vacuum(&self.conn)?;
+        }
+        Ok(())
+    }
+
+    fn list(&mut self, limit: usize, before: Option<&str>) -> Result<Vec<Listed>, StoreError> {
+        list(&self.conn, limit, before)
+    }
+
+    fn load(&mut self, id: &str) -> Result<Option<Stored>, StoreError> {
+        load(&self.conn, id)
+    }
+
+    fn player(&mut self, name: &str) -> Result<Option<PlayerStats>, StoreError> {
+        player(&self.conn, name)
+    }
+
+    fn played(&mut self, name: &str, limit: usize) -> Result<Vec<Listed>, StoreError> {
+        played(&self.conn, name, limit)
+    }
+
+    fn leaders(
+        &mut self,
+        order: LeaderOrder,
+        limit: usize,
+    ) -> Result<Vec<PlayerStats>, StoreError> {
+        leaders(&self.conn, order, limit)
+    }
+
+    fn totals(&mut self) -> Result<(u64, u64), StoreError> {
+        totals(&self.conn)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::codec::StoredSettings;
+    use super::super::{Backend, Ended, PlayerResult, Retention, Write};
+    use super::*;
+    use crate::protocol::Clock;
+    use lasertag_core::world::{HumanInput, MatchConfig, WorldInput};
+
+    fn dir(what: &str) -> std::path::PathBuf {
+        let d = std::env::temp_dir().join(format!("lasertag-sqlite-{what}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&d);
+        d
+    }
+
+    /// Match `id` whole: begun, an append of `n` inputs, ended with `name` playing.
+    fn a_match(id: &str, n: usize, name: &str, won: bool) -> Vec<Write> {
+        let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+        let maps = crate::maps::MapStore::load_dir(&root.join("maps")).expect("maps");
+        let arena = maps.get("office").expect("office").arena.clone();
+        let keys = WorldInput::Keys {
+            slot: 0,
+            input: HumanInput {
+                forward: 1.0,
+                ..HumanInput::default()
+            },
+        };
+        vec![
+            Write::Begin {
+                id: id.into(),
+                arena,
+                settings: Box::new(StoredSettings::of(
+                    &MatchConfig::default(),
+                    Clock::Realtime,
+                    false,
+                    0,
+                )),
+                started_at: std::time::SystemTime::now(),
+            },
+            Write::Append {
+                id: id.into(),
+                inputs: (0..n as u64).map(|t| (t, keys.clone())).collect(),
+                names: Some(vec![name.into()]),
+                tick: n as u64,
+            },
+            Write::Finish {
+                id: id.into(),
+                ended: Ended {
+                    ended_at: 1,
+                    ticks: n as u64,
+                    winner: Some(if won { "opponents" } else { "robots" }),
+                    reason: Some("time_limit"),
+                    players: vec![PlayerResult {
+                        name: name.into(),
+                        tags: 2,
+                        survived_ticks: n as u64,
+                        won,
+                    }],
+                },
+            },
+        ]
+    }
+
+    #[test]
+    fn retention_keeps_the_newest_and_statistics_add_up() {
+        let d = dir("retention");
+        let retention = Retention {
+            max_matches: 3,
+            max_bytes: 1 << 30,
+        };
+        let mut db = Sqlite::open(&d, retention).expect("open");
+        for i in 0..5 {
+            db.write(&a_match(
+                &format!("m{i}"),
+                10 + i,
+                if i % 2 == 0 { "ada" } else { "bob" },
+                i != 1,
+            ))
+            .expect("write");
+        }
+        let listed: Vec<String> = db
+            .list(10, None)
+            .expect("list")
+            .into_iter()
+            .map(|l| l.id)
+            .collect();
+        assert_eq!(listed, ["m4", "m3", "m2"]);
+        let older: Vec<String> = db
+            .list(10, Some("m3"))
+            .expect("list")
+            .into_iter()
+            .map(|l| l.id)
+            .collect();
+        assert_eq!(older, ["m2"]);
+        let stored = db.load("m2").expect("load").expect("m2 is there");
+        let inputs: usize = stored
+            .chunks
+            .iter()
+            .map(|c| super::super::codec::decode_inputs(c).expect("decode").len())
+            .sum();
+        assert_eq!(inputs, 12);
+        assert!(db.load("m0").expect("load").is_none(), "evicted");
+        let ada = db.player("ada").expect("stats").expect("ada");
+        assert_eq!(
+            (ada.matches, ada.wins, ada.tags, ada.longest_survival_ticks),
+            (2, 2, 4, 14)
+        );
+        let by_wins = db.leaders(LeaderOrder::Wins, 10).expect("leaders");
+        assert_eq!(by_wins[0].name, "ada");
+        // A byte limit evicts too.
+        let mut db = Sqlite::open(
+            &d,
+            Retention {
+                max_matches: 100,
+                max_bytes: 1,
+            },
+        )
+        .expect("reopen");
+        db.write(&a_match("m5", 5, "cy", true)).expect("write");
+        assert!(db.list(10, None).expect("list").len() <= 1);
+        let _ = std::fs::remove_dir_all(&d);
+    }
+
+    #[test]
+    fn a_newer_schema_is_refused_and_an_unfinished_match_becomes_incomplete() {
+        let d = dir("schema");
+        let retention = Retention {
+            max_matches: 10,
+            max_bytes: 1 << 30,
+        };
+        let mut db = Sqlite::open(&d, retention).expect("open");
+        let mut writes = a_match("cut", 7, "ada", false);
+        writes.pop();
+        db.write(&writes).expect("write");
+        assert!(db.list(10, None).expect("list").is_empty(), "still running");
+        assert_eq!(close_interrupted(db.connection()).expect("close"), 1);
+        let cut = db.list(10, None).expect("list");
+        assert_eq!((cut[0].complete, cut[0].ticks), (false, 7));
+        assert_eq!(cut[0].players, ["ada"]);
+        db.connection()
+            .pragma_update(None, "user_version", SCHEMA_VERSION + 1)
+            .expect("pragma");
+        drop(db);
+        assert!(matches!(open(&d), Err(StoreError::NewerSchema { .. })));
+        let _ = std::fs::remove_dir_all(&d);
+    }
+}

@@ -1,0 +1,138 @@
+//! The history survives the process: a server killed with SIGKILL in the middle of a match
+//! restarts with every earlier replay intact, and the interrupted match listed as incomplete
+//! and replayable up to where the store last heard of it.
+
+#![cfg(unix)]
+
+mod common;
+#[path = "common/process.rs"]
+mod process;
+
+use std::time::Duration;
+
+use process::Server;
+use serde_json::{Value, json};
+
+/// A manual match on the server at `base`: (id, owner token).
+async fn create(client: &reqwest::Client, s: &Server, seed: u64) -> (String, String) {
+    let r: Value = client
+        .post(s.url("/api/matches"))
+        .json(
+            &json!({"map": "office", "robots": 2, "opponents": 2, "clock": "manual",
+            "opponent_bot": "evade", "seed": seed}),
+        )
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
+    (
+        r["id"].as_str().unwrap().to_string(),
+        r["owner_token"].as_str().unwrap().to_string(),
+    )
+}
+
+/// Steps `ticks` and answers the state after them.
+async fn step(client: &reqwest::Client, s: &Server, id: &str, token: &str, ticks: u64) -> Value {
+    let r = client
+        .post(s.url(&format!("/api/matches/{id}/step")))
+        .bearer_auth(token)
+        .json(&json!({"ticks": ticks}))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 200);
+    r.json().await.unwrap()
+}
+
+async fn get(client: &reqwest::Client, s: &Server, path: &str) -> (u16, Value) {
+    let r = client.get(s.url(path)).send().await.unwrap();
+    (r.status().as_u16(), r.json().await.unwrap_or(Value::Null))
+}
+
+#[tokio::test]
+async fn a_killed_server_keeps_its_history_and_the_match_it_was_playing() {
+    let dir = common::temp_dir("killed");
+    let data = dir.display().to_string();
+    let args = ["--no-showcase", "--data-dir", data.as_str()];
+    let client = reqwest::Client::new();
+    let mut s = Server::start(&args);
+
+    // A match that ends before the kill.
+    let (done, token) = create(&client, &s, 1).await;
+    let mut done_states = Vec::new();
+    for _ in 0..3 {
+        done_states.push(step(&client, &s, &done, &token, 100).await);
+    }
+    let r = client
+        .delete(s.url(&format!("/api/matches/{done}")))
+        .bearer_auth(&token)
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 204);
+
+    // One that is in the middle of play when the process dies.
+    let (cut, token) = create(&client, &s, 2).await;
+    let mut cut_states = Vec::new();
+    for _ in 0..3 {
+        cut_states.push(step(&client, &s, &cut, &token, 100).await);
+    }
+    // The match task sends its inputs and tick to the store about once a second.
+    tokio::time::sleep(Duration::from_secs(3)).await;
+    step(&client, &s, &cut, &token, 50).await;
+    s.child.kill().expect("SIGKILL");
+    s.child.wait().expect("the server dies");
+
+    let s = Server::start(&args);
+    let (status, listed) = get(&client, &s, "/api/replays").await;
+    assert_eq!(status, 200);
+    let row = |id: &str| {
+        listed
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|r| r["id"] == id)
+            .cloned()
+            .unwrap_or_else(|| panic!("{id} listed in {listed}"))
+    };
+    assert_eq!(row(&done)["complete"], true);
+    assert_eq!(row(&done)["reason"], "stopped");
+    let cut_row = row(&cut);
+    assert_eq!(cut_row["complete"], false, "{cut_row}");
+    assert_eq!(cut_row["winner"], Value::Null);
+    let last = cut_row["ticks"].as_u64().unwrap();
+    assert!((300..=350).contains(&last), "stored up to tick {last}");
+
+    for (id, states) in [(&done, &done_states), (&cut, &cut_states)] {
+        for live in states {
+            let tick = live["tick"].as_u64().unwrap();
+            let (status, replayed) =
+                get(&client, &s, &format!("/api/replays/{id}/state?tick={tick}")).await;
+            assert_eq!(status, 200, "{replayed}");
+            // A match deleted at its last tick read "running" live then; its end is an
+            // input applied after that read.
+            let (mut replayed, mut live) = (replayed, live.clone());
+            for v in [&mut replayed, &mut live] {
+                v["status"] = Value::Null;
+                v["winner"] = Value::Null;
+            }
+            assert_eq!(replayed, live, "{id} at tick {tick}");
+        }
+    }
+    let (status, _) = get(
+        &client,
+        &s,
+        &format!("/api/replays/{cut}/state?tick={last}"),
+    )
+    .await;
+    assert_eq!(status, 200);
+    let (status, _) = get(
+        &client,
+        &s,
+        &format!("/api/replays/{cut}/state?tick={}", last + 1),
+    )
+    .await;
+    assert_eq!(status, 404);
+}
