@@ -30,12 +30,16 @@ WORKDIR /app
 COPY --from=build /usr/local/bin/lasertag /usr/local/bin/lasertag
 COPY maps maps
 COPY web web
+# The history database (SQLite) lives in a volume, owned by the user that writes it.
+RUN mkdir /app/data && chown lasertag:lasertag /app/data
+VOLUME /app/data
 USER lasertag
 EXPOSE 8080
 # Listen on every interface inside the container; publish the port with `-p`.
 ENV LASERTAG_ADDR=0.0.0.0:8080 \
     LASERTAG_MAPS=/app/maps \
-    LASERTAG_WEB=/app/web
+    LASERTAG_WEB=/app/web \
+    LASERTAG_DATA=/app/data
 HEALTHCHECK --interval=30s --timeout=5s --start-period=10s --retries=3 \
   CMD ["lasertag", "healthcheck"]
 # SIGTERM (docker stop) shuts down gracefully: clients get `finished` and a close within 5 s.

@@ -60,6 +60,13 @@ struct Args {
     /// Directory of map files.
     #[arg(long, default_value = "maps")]
     maps: PathBuf,
+    /// The history's data directory (default: a new one under the system's temporary
+    /// directory, removed at the end).
+    #[arg(long)]
+    data_dir: Option<PathBuf>,
+    /// Megabytes of recorded matches the history keeps.
+    #[arg(long, default_value_t = 1024)]
+    keep_mb: u64,
 }
 
 /// The shipped maps the matches rotate over.
@@ -426,7 +433,20 @@ async fn run(args: Args) -> Result<bool, String> {
         request_burst: 1e6,
         ..lasertag::config::Config::default()
     };
-    let registry = lasertag::game::Registry::with_config(maps, config);
+    let temporary = args.data_dir.is_none();
+    let data_dir = args.data_dir.clone().unwrap_or_else(|| {
+        std::env::temp_dir().join(format!("lasertag-soak-{}", std::process::id()))
+    });
+    let store = lasertag::store::Store::open(
+        &data_dir,
+        lasertag::store::Retention {
+            max_matches: 1_000_000,
+            max_bytes: args.keep_mb << 20,
+        },
+    )
+    .map_err(|e| e.to_string())?;
+    let history = lasertag::game::replay::History::with_store(store);
+    let registry = lasertag::game::Registry::with_history(maps, config, history);
     let app = lasertag::http::app(registry.clone(), PathBuf::from("web"))
         .into_make_service_with_connect_info::<SocketAddr>();
     let listener = tokio::net::TcpListener::bind("127.0.0.1:0")
@@ -627,6 +647,18 @@ async fn run(args: Args) -> Result<bool, String> {
         println!("    {n:>8} × error {kind:?}");
     }
     println!("  matches          {replaced} ended and were replaced");
+    if let Some(store) = registry.history.store() {
+        let _ = store.flush(Duration::from_secs(10));
+        let (kept, bytes) = store.read(|b| b.totals()).unwrap_or_default();
+        println!(
+            "  history          {kept} matches stored, {:.2} MB of recordings, database files {:.2} MB",
+            bytes as f64 / 1e6,
+            store.file_bytes() as f64 / 1e6
+        );
+    }
+    if temporary {
+        let _ = std::fs::remove_dir_all(&data_dir);
+    }
     if stalls.is_empty() && unanswered == 0 {
         println!("  stalls           none: every running match advanced in every interval");
         Ok(true)

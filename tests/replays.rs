@@ -198,6 +198,44 @@ async fn a_replay_follows_a_player_over_the_websocket() {
             > 0.0
     );
     assert_error(&s.get("/api/players/nobody").await, 404, "nobody");
+
+    // The export: a line every tenth tick, each the replay's state and belief then.
+    let text = s
+        .client
+        .get(s.url(&format!("/api/replays/{id}/export?every=10&belief=true")))
+        .send()
+        .await
+        .unwrap()
+        .text()
+        .await
+        .unwrap();
+    let lines: Vec<Value> = text
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    let last = states.last().unwrap()["tick"].as_u64().unwrap();
+    assert_eq!(lines.len() as u64, last / 10 + 1, "{text:.300}");
+    for line in lines.iter().step_by(4) {
+        let tick = line["tick"].as_u64().unwrap();
+        let state = s.get(&format!("/api/replays/{id}/state?tick={tick}")).await;
+        assert_eq!(line["state"], state.body, "tick {tick}");
+        let belief = s
+            .get(&format!("/api/replays/{id}/belief?tick={tick}"))
+            .await;
+        assert_eq!(line["belief"], belief.body, "tick {tick}");
+    }
+    assert_error(
+        &s.get(&format!("/api/replays/{id}/export?from=5&to=2"))
+            .await,
+        400,
+        "from",
+    );
+    assert_error(
+        &s.get(&format!("/api/replays/{id}/export?belief=maybe"))
+            .await,
+        400,
+        "belief",
+    );
     assert_error(&s.get("/api/leaderboard?by=luck").await, 400, "by");
 }
 

@@ -171,16 +171,7 @@ impl Replay {
                 last: self.last_tick,
             });
         }
-        let mut keyframes = self.keyframes.lock().unwrap_or_else(|e| e.into_inner());
-        if keyframes.is_empty() {
-            keyframes.push(World::new(self.arena.clone(), self.config.clone())?);
-        }
-        let mut world = keyframes
-            .iter()
-            .rev()
-            .find(|w| w.tick <= tick)
-            .cloned()
-            .unwrap_or_else(|| keyframes[0].clone());
+        let mut world = self.nearest(tick)?;
         let mut next = self.inputs.partition_point(|(t, _)| *t < world.tick);
         // A keyframe holds the world before the inputs of its tick.
         loop {
@@ -194,13 +185,38 @@ impl Replay {
                 break;
             }
             world.step();
-            if world.tick % self.spacing == 0
-                && keyframes.last().is_some_and(|k| k.tick < world.tick)
-            {
-                keyframes.push(world.clone());
+            if world.tick.is_multiple_of(self.spacing) {
+                self.keep_keyframe(&world);
             }
         }
         Ok(world)
+    }
+
+    /// A copy of the latest keyframe at or before `tick` (the start when there is none).
+    /// The lock is held only for the copy: seeks and [`Replay::prepare`] re-simulate side
+    /// by side.
+    fn nearest(&self, tick: u64) -> Result<World, ReplayError> {
+        let mut keyframes = self.keyframes.lock().unwrap_or_else(|e| e.into_inner());
+        if keyframes.is_empty() {
+            keyframes.push(World::new(self.arena.clone(), self.config.clone())?);
+        }
+        let i = keyframes.partition_point(|w| w.tick <= tick).max(1);
+        Ok(keyframes[i - 1].clone())
+    }
+
+    /// Keeps a copy of `world` as a keyframe, in tick order, unless one is there already.
+    fn keep_keyframe(&self, world: &World) {
+        let mut keyframes = self.keyframes.lock().unwrap_or_else(|e| e.into_inner());
+        if let Err(i) = keyframes.binary_search_by_key(&world.tick, |w| w.tick) {
+            keyframes.insert(i, world.clone());
+        }
+    }
+
+    /// Re-simulates the whole match once, keeping every keyframe: after it any seek is at
+    /// most a spacing of re-simulation. Blocking (a whole match); the history runs it in
+    /// the background when a replay is first opened.
+    pub fn prepare(&self) {
+        let _ = self.world_at(self.last_tick);
     }
 }
 
@@ -307,6 +323,9 @@ impl History {
     /// longest ago past [`OPEN_REPLAYS`] drops its own.
     pub fn opened(&self, replay: &Arc<Replay>) {
         let mut o = self.opened.lock().unwrap_or_else(|e| e.into_inner());
+        if !o.iter().any(|r| Arc::ptr_eq(r, replay)) {
+            prepare_in_background(replay.clone());
+        }
         o.retain(|r| !Arc::ptr_eq(r, replay));
         o.push_back(replay.clone());
         while o.len() > OPEN_REPLAYS {
@@ -370,6 +389,24 @@ impl History {
             .map(|x| x.listed())
             .collect())
     }
+}
+
+/// Fills in `replay`'s keyframes on a blocking thread, so that the seeks after its first
+/// opening are short wherever they land. One at a time: a replay opened while another is
+/// being prepared re-simulates only as its seeks go (still correct, slower at first).
+fn prepare_in_background(replay: Arc<Replay>) {
+    static PREPARING: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+    use std::sync::atomic::Ordering;
+    let Ok(runtime) = tokio::runtime::Handle::try_current() else {
+        return;
+    };
+    if PREPARING.swap(true, Ordering::AcqRel) {
+        return;
+    }
+    runtime.spawn_blocking(move || {
+        replay.prepare();
+        PREPARING.store(false, Ordering::Release);
+    });
 }
 
 /// Why the history could not answer.

@@ -6,6 +6,7 @@ mod admit;
 mod auth;
 mod body;
 mod error;
+mod export;
 mod handlers;
 pub mod limits;
 mod openapi;
@@ -87,6 +88,7 @@ pub fn app(registry: Arc<Registry>, web_dir: PathBuf) -> Router {
         .route("/replays/{id}", get(replays::detail))
         .route("/replays/{id}/state", get(replays::state_at))
         .route("/replays/{id}/belief", get(replays::belief_at))
+        .route("/replays/{id}/export", get(export::export))
         .route("/players/{name}", get(players::player))
         .route("/leaderboard", get(players::leaderboard))
         .route("/matches/{id}/stats", get(handlers::stats))

@@ -35,6 +35,7 @@ use crate::protocol::*;
         crate::http::replays::detail,
         crate::http::replays::state_at,
         crate::http::replays::belief_at,
+        crate::http::export::export,
         crate::http::players::player,
         crate::http::players::leaderboard,
         handlers::join,

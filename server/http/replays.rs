@@ -64,7 +64,7 @@ pub(crate) fn history_error(e: HistoryError) -> ApiError {
 }
 
 /// `?name=` as an integer in `0..=max`, or `default` when absent.
-fn number(
+pub(crate) fn number(
     query: &HashMap<String, String>,
     name: &str,
     max: u64,

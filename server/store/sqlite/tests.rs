@@ -1,0 +1,146 @@
+//! The SQLite backend against a real file: retention, listing, loading, statistics, the
+//! schema's version and matches left running.
+
+use super::super::codec::StoredSettings;
+use super::super::{Backend, Ended, PlayerResult, Retention, Write};
+use super::*;
+use crate::protocol::Clock;
+use lasertag_core::world::{HumanInput, MatchConfig, WorldInput};
+
+fn dir(what: &str) -> std::path::PathBuf {
+    let d = std::env::temp_dir().join(format!("lasertag-sqlite-{what}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    d
+}
+
+/// Match `id` whole: begun, an append of `n` inputs, ended with `name` playing.
+fn a_match(id: &str, n: usize, name: &str, won: bool) -> Vec<Write> {
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+    let maps = crate::maps::MapStore::load_dir(&root.join("maps")).expect("maps");
+    let arena = maps.get("office").expect("office").arena.clone();
+    let keys = WorldInput::Keys {
+        slot: 0,
+        input: HumanInput {
+            forward: 1.0,
+            ..HumanInput::default()
+        },
+    };
+    vec![
+        Write::Begin {
+            id: id.into(),
+            arena,
+            settings: Box::new(StoredSettings::of(
+                &MatchConfig::default(),
+                Clock::Realtime,
+                false,
+                0,
+            )),
+            started_at: std::time::SystemTime::now(),
+        },
+        Write::Append {
+            id: id.into(),
+            inputs: (0..n as u64).map(|t| (t, keys.clone())).collect(),
+            names: Some(vec![name.into()]),
+            tick: n as u64,
+        },
+        Write::Finish {
+            id: id.into(),
+            ended: Ended {
+                ended_at: 1,
+                ticks: n as u64,
+                winner: Some(if won { "opponents" } else { "robots" }),
+                reason: Some("time_limit"),
+                players: vec![PlayerResult {
+                    name: name.into(),
+                    tags: 2,
+                    survived_ticks: n as u64,
+                    won,
+                }],
+            },
+        },
+    ]
+}
+
+#[test]
+fn retention_keeps_the_newest_and_statistics_add_up() {
+    let d = dir("retention");
+    let retention = Retention {
+        max_matches: 3,
+        max_bytes: 1 << 30,
+    };
+    let mut db = Sqlite::open(&d, retention).expect("open");
+    for i in 0..5 {
+        db.write(&a_match(
+            &format!("m{i}"),
+            10 + i,
+            if i % 2 == 0 { "ada" } else { "bob" },
+            i != 1,
+        ))
+        .expect("write");
+    }
+    let listed: Vec<String> = db
+        .list(10, None)
+        .expect("list")
+        .into_iter()
+        .map(|l| l.id)
+        .collect();
+    assert_eq!(listed, ["m4", "m3", "m2"]);
+    let older: Vec<String> = db
+        .list(10, Some("m3"))
+        .expect("list")
+        .into_iter()
+        .map(|l| l.id)
+        .collect();
+    assert_eq!(older, ["m2"]);
+    let stored = db.load("m2").expect("load").expect("m2 is there");
+    let inputs: usize = stored
+        .chunks
+        .iter()
+        .map(|c| super::super::codec::decode_inputs(c).expect("decode").len())
+        .sum();
+    assert_eq!(inputs, 12);
+    assert!(db.load("m0").expect("load").is_none(), "evicted");
+    let ada = db.player("ada").expect("stats").expect("ada");
+    assert_eq!(
+        (ada.matches, ada.wins, ada.tags, ada.longest_survival_ticks),
+        (2, 2, 4, 14)
+    );
+    let by_wins = db.leaders(LeaderOrder::Wins, 10).expect("leaders");
+    assert_eq!(by_wins[0].name, "ada");
+    // A byte limit evicts too.
+    let mut db = Sqlite::open(
+        &d,
+        Retention {
+            max_matches: 100,
+            max_bytes: 1,
+        },
+    )
+    .expect("reopen");
+    db.write(&a_match("m5", 5, "cy", true)).expect("write");
+    assert!(db.list(10, None).expect("list").len() <= 1);
+    let _ = std::fs::remove_dir_all(&d);
+}
+
+#[test]
+fn a_newer_schema_is_refused_and_an_unfinished_match_becomes_incomplete() {
+    let d = dir("schema");
+    let retention = Retention {
+        max_matches: 10,
+        max_bytes: 1 << 30,
+    };
+    let mut db = Sqlite::open(&d, retention).expect("open");
+    let mut writes = a_match("cut", 7, "ada", false);
+    writes.pop();
+    db.write(&writes).expect("write");
+    assert!(db.list(10, None).expect("list").is_empty(), "still running");
+    assert_eq!(close_interrupted(db.connection()).expect("close"), 1);
+    let cut = db.list(10, None).expect("list");
+    assert_eq!((cut[0].complete, cut[0].ticks), (false, 7));
+    assert_eq!(cut[0].players, ["ada"]);
+    db.connection()
+        .pragma_update(None, "user_version", SCHEMA_VERSION + 1)
+        .expect("pragma");
+    drop(db);
+    assert!(matches!(open(&d), Err(StoreError::NewerSchema { .. })));
+    let _ = std::fs::remove_dir_all(&d);
+}
