@@ -10,6 +10,7 @@
 
 pub mod compact;
 pub mod frame;
+pub mod replay_ws;
 pub mod replays;
 pub mod robots;
 pub mod settings;

@@ -1,6 +1,7 @@
 //! The web client in headless Chromium against a real server: spectate the showcase and check
-//! the canvas's pixels; play with the keyboard; tag a robot; get tagged and see the end; and
-//! play through a proxy with a slow network's round trip.
+//! the canvas's pixels; play with the keyboard; tag a robot; get tagged and see the end; play
+//! through a proxy with a slow network's round trip; and watch finished matches again: the
+//! history, the replay viewer's timeline (the belief drawn follows it), the player's view.
 //!
 //! Needs Chromium (`bash tests/run.sh` installs Debian's package when it is missing). With
 //! `LASERTAG_SCREENSHOTS=<dir>` set, the test also saves its screenshots there (that is how
@@ -209,7 +210,7 @@ async fn play_and_spectate_in_headless_chromium() {
     // the player standing still and tags it (within seconds: the corridor behind it is the
     // nearest unseen space). A random (baseline) searcher made this depend on the seed.
     // Should a robot ever tag the empty slot before the page has joined, try another seed.
-    let mut ended = false;
+    let mut ended = None;
     for seed in [4, 7, 0, 2] {
         let id = s
             .create_match(json!({"map": "office", "robots": 1, "opponents": 1,
@@ -234,10 +235,10 @@ async fn play_and_spectate_in_headless_chromium() {
         )
         .await;
         assert_eq!(state(&s, &id).await["winner"], "robots");
-        ended = true;
+        ended = Some(id);
         break;
     }
-    assert!(ended, "no seed let the page join before the robot's tag");
+    let ended = ended.expect("no seed let the page join before the robot's tag");
     let title = b
         .eval("document.getElementById('end-title').textContent")
         .await;
@@ -250,6 +251,14 @@ async fn play_and_spectate_in_headless_chromium() {
         .await;
     assert!(text.as_str().unwrap().contains("tagged"), "{text}");
     save(&mut b, "screenshot-end.png").await;
+    // The end screen opens the replay from the player's own view (tried again while the
+    // match becomes a replay).
+    b.eval("document.getElementById('end-watch').click()").await;
+    b.wait_for(
+        &format!("__lasertag.page === 'replay' && __lasertag.replayId === '{ended}' && __lasertag.view === 'o0' && __lasertag.snapView === 'player' && __lasertag.drawn"),
+        20,
+    )
+    .await;
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -299,4 +308,218 @@ async fn over_a_slow_network_a_key_moves_the_players_disc_at_once() {
         worst.as_f64().unwrap() < 0.05,
         "corrections up to {worst} m"
     );
+}
+
+/// Counts the belief's pixels (the role colours, as in [`PIXELS`]) in each cell of a 12 × 8
+/// grid over the canvas: where the belief is drawn, not only how much of it.
+const BELIEF_GRID: &str = r#"(() => {
+  const c = document.getElementById('arena');
+  const d = c.getContext('2d').getImageData(0, 0, c.width, c.height).data;
+  const hex = (h) => [1, 3, 5].map((i) => parseInt(h.slice(i, i + 2), 16));
+  const floor = hex('#161c25');
+  const near = (r, g, b, t, tol) => Math.abs(r - t[0]) + Math.abs(g - t[1]) + Math.abs(b - t[2]) <= tol;
+  const palette = ['#ffb000', '#00e0ff', '#ff5fd2', '#7dff6b', '#b48cff', '#ff8a3d', '#3de0c0', '#fff06a']
+    .map(hex).flatMap((p) => [0.4, 0.55, 0.75].map((a) => p.map((v, i) => a * v + (1 - a) * floor[i])));
+  const grid = new Array(96).fill(0);
+  for (let y = 0; y < c.height; y += 2) {
+    for (let x = 0; x < c.width; x += 2) {
+      const i = (y * c.width + x) * 4;
+      if (palette.some((p) => near(d[i], d[i + 1], d[i + 2], p, 24))) {
+        grid[Math.floor((y * 8) / c.height) * 12 + Math.floor((x * 12) / c.width)]++;
+      }
+    }
+  }
+  return grid;
+})()"#;
+
+/// Moves the replay's timeline to `tick` as a person dragging it would (the range input's
+/// `input` event), and waits for that tick's snapshot to be drawn.
+async fn scrub(b: &mut Browser, tick: u64) -> Vec<f64> {
+    b.eval(&format!(
+        "(() => {{ const t = document.getElementById('replay-timeline'); t.value = '{tick}'; t.dispatchEvent(new Event('input', {{bubbles: true}})); }})()"
+    ))
+    .await;
+    b.wait_for(&format!("__lasertag.lastTick === {tick}"), 10)
+        .await;
+    // A few frames, so the canvas shows it.
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    let grid = b.eval(BELIEF_GRID).await;
+    grid.as_array()
+        .expect("a grid")
+        .iter()
+        .map(|v| v.as_f64().unwrap_or(0.0))
+        .collect()
+}
+
+/// A manual match stepped to its end (or stopped after `ticks`); its id once it is a replay.
+async fn finished(s: &TestServer, request: Value, ticks: u64, player: Option<&str>) -> String {
+    let id = s.create_match(request).await;
+    if let Some(name) = player {
+        s.join(&id, name).await;
+    }
+    let end = s.step(&id, ticks).await;
+    if end["status"] != "finished" {
+        assert_eq!(s.delete(&format!("/api/matches/{id}")).await.status, 204);
+    }
+    for _ in 0..50 {
+        if s.get(&format!("/api/replays/{id}")).await.status == 200 {
+            return id;
+        }
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+    panic!("{id} never became a replay");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn history_and_replays_in_headless_chromium() {
+    let s = TestServer::start().await;
+    // A few finished matches for the history: one stopped, one held out to the time limit,
+    // one with a person standing still, and bots hunted down (the one replayed below).
+    finished(
+        &s,
+        json!({"map": "warehouse", "robots": 3, "opponents": 2, "clock": "manual", "seed": 2}),
+        100,
+        None,
+    )
+    .await;
+    finished(
+        &s,
+        json!({"map": "hallway", "robots": 1, "opponents": 2, "clock": "manual",
+            "planner": "idle", "time_limit_s": 15, "seed": 4}),
+        400,
+        None,
+    )
+    .await;
+    finished(
+        &s,
+        json!({"map": "maze", "robots": 2, "opponents": 1, "clock": "manual",
+            "opponent_control": "human", "time_limit_s": 60, "seed": 1}),
+        1200,
+        Some("ada"),
+    )
+    .await;
+    let id = finished(
+        &s,
+        json!({"map": "office", "robots": 2, "opponents": 3, "clock": "manual",
+            "opponent_bot": "evade", "time_limit_s": 30, "seed": 3}),
+        600,
+        None,
+    )
+    .await;
+    let mut b = Browser::launch().await;
+    let base = format!("http://{}", s.addr);
+
+    // The history lists them, newest first, and opens each one's replay.
+    b.navigate(&format!("{base}/")).await;
+    b.wait_for("__lasertag.page === 'lobby'", 20).await;
+    b.eval("document.getElementById('lobby-history').click()")
+        .await;
+    let rows = b
+        .wait_for(
+            "__lasertag.page === 'history' && __lasertag.historyRows",
+            10,
+        )
+        .await;
+    assert_eq!(rows, json!(4));
+    let first = b
+        .eval("document.querySelector('#history-table tbody tr').dataset.id")
+        .await;
+    assert_eq!(first, json!(id));
+    let names = b
+        .eval("document.getElementById('history-table').textContent")
+        .await;
+    assert!(names.as_str().unwrap().contains("ada"), "{names}");
+    save(&mut b, "screenshot-history.png").await;
+    b.eval("document.querySelector('#history-table tbody tr button.watch').click()")
+        .await;
+
+    // The replay plays from the start, with the match's events on its timeline.
+    b.wait_for(
+        &format!("__lasertag.page === 'replay' && __lasertag.replayId === '{id}' && __lasertag.playing === true && __lasertag.snapshots > 5 && __lasertag.drawn"),
+        20,
+    )
+    .await;
+    assert!(b.eval("__lasertag.markers").await.as_u64() > Some(0));
+    let drawn = b.eval("__lasertag.drawn").await;
+    assert_eq!(drawn["robots"], 2, "{drawn}");
+    assert!(drawn["particles"].as_u64() > Some(50), "{drawn}");
+    b.eval("document.getElementById('replay-play').click()")
+        .await;
+    b.wait_for("__lasertag.playing === false", 5).await;
+
+    // Scrubbed, the belief drawn is that tick's: everywhere unseen at the start, on the
+    // opponents the robots have found later.
+    let start = scrub(&mut b, 0).await;
+    let later = scrub(&mut b, 260).await;
+    let total = |g: &[f64]| g.iter().sum::<f64>();
+    assert!(
+        total(&start) > 100.0 && total(&later) > 20.0,
+        "{start:?} {later:?}"
+    );
+    let moved: f64 = start
+        .iter()
+        .zip(&later)
+        .map(|(a, b)| (a / total(&start) - b / total(&later)).abs())
+        .sum();
+    assert!(
+        moved > 0.3,
+        "the belief drawn did not follow the timeline: {moved}"
+    );
+    // And back: the same tick draws the same belief.
+    let again = scrub(&mut b, 0).await;
+    assert_eq!(again, start);
+    scrub(&mut b, 178).await;
+    b.eval("document.querySelector('#replay-speeds [data-speed=\"2\"]').click()")
+        .await;
+    b.wait_for("__lasertag.speed === 2", 5).await;
+    save(&mut b, "screenshot-replay.png").await;
+    // B hides the belief, as in the game.
+    b.tap("KeyB", Duration::from_millis(50)).await;
+    b.wait_for(
+        "__lasertag.belief === false && __lasertag.drawn.particles === 0",
+        5,
+    )
+    .await;
+
+    // A player's view: fogged, and a switch to everyone's.
+    let listed = s.get("/api/replays").await.body;
+    assert_eq!(listed[1]["map"], "maze", "{listed}");
+    let maze = listed[1]["id"].as_str().expect("an id").to_string();
+    b.navigate(&format!("{base}/#/replay/{maze}?as=o0")).await;
+    b.wait_for(
+        &format!("__lasertag.replayId === '{maze}' && __lasertag.view === 'o0' && __lasertag.snapView === 'player' && __lasertag.drawn"),
+        20,
+    )
+    .await;
+    let label = b
+        .eval("document.getElementById('replay-view').textContent")
+        .await;
+    assert_eq!(label, json!("full view"));
+    b.eval("document.getElementById('replay-view').click()")
+        .await;
+    b.wait_for(
+        "__lasertag.view === 'full' && __lasertag.snapView === 'spectator' && location.hash.endsWith('view=full')",
+        10,
+    )
+    .await;
+
+    // The leaderboard says plainly when there are no statistics (yet).
+    b.navigate(&format!("{base}/#/leaderboard")).await;
+    let board = b
+        .wait_for(
+            "__lasertag.page === 'leaderboard' && __lasertag.leaderboard !== null && [__lasertag.leaderboard]",
+            10,
+        )
+        .await;
+    let board = board[0].clone();
+    if board == json!("none") {
+        let text = b
+            .eval("document.getElementById('leaderboard-body').textContent")
+            .await;
+        assert!(
+            text.as_str().unwrap().contains("No statistics yet"),
+            "{text}"
+        );
+    }
+    assert_ne!(board, json!("error"));
 }

@@ -1,7 +1,11 @@
-// The page: a lobby (#/), and a match to watch (#/watch/<id>) or play (#/play/<id>).
+// The page: a lobby (#/), and a match to watch (#/watch/<id>) or play (#/play/<id>); past
+// matches (#/history), a replay (#/replay/<id>, `?as=o0` for that player's view) and the
+// leaderboard (#/leaderboard, #/player/<name>).
 // Plain ES modules, no build step, nothing fetched from anywhere but this server.
 
 import { Game, debug } from "./game.js";
+import { Replay } from "./replay.js";
+import { showHistory, showLeaderboard, showPlayer } from "./pages.js";
 
 const $ = (id) => document.getElementById(id);
 let game = null;
@@ -152,7 +156,36 @@ async function replay(g) {
 async function route() {
   if (game) { game.stop(); game = null; }
   clearInterval(lobbyTimer);
-  const [, page, id] = location.hash.split("/");
+  const [hashPath, hashQuery] = location.hash.split("?");
+  const params = new URLSearchParams(hashQuery || "");
+  const [, page, id] = hashPath.split("/");
+  for (const p of ["history", "leaderboard"]) $(p).hidden = true;
+  // The arena page serves both live matches and replays: each shows its own controls.
+  const replaying = page === "replay" && Boolean(id);
+  $("game").classList.toggle("replaying", replaying);
+  $("replay-bar").hidden = !replaying;
+  $("controls").hidden = replaying;
+  const back = document.querySelector("#game .back");
+  back.href = replaying ? "#/history" : "#/";
+  back.textContent = replaying ? "← past matches" : "← lobby";
+  if (replaying) {
+    $("lobby").hidden = true;
+    $("game").hidden = false;
+    game = new Replay({ id: decodeURIComponent(id), as: params.get("as"), full: params.get("view") === "full" });
+    return;
+  }
+  if (page === "history" || page === "leaderboard" || (page === "player" && id)) {
+    $("lobby").hidden = true;
+    $("game").hidden = true;
+    if (page === "history") {
+      $("history").hidden = false;
+      showHistory(params.get("before"));
+    } else {
+      $("leaderboard").hidden = false;
+      if (page === "player") showPlayer(decodeURIComponent(id)); else showLeaderboard(params.get("by"));
+    }
+    return;
+  }
   if ((page === "watch" || page === "play") && id) {
     $("lobby").hidden = true;
     $("game").hidden = false;

@@ -70,6 +70,7 @@ export class Game {
     window.addEventListener("blur", this.onBlur);
     $("end-lobby").onclick = () => this.onLobby();
     $("end-replay").onclick = () => this.onReplay(this);
+    $("end-watch").hidden = true;
     this.connect();
     this.pingTimer = setInterval(() => this.send({ type: "ping", t: performance.now() }), 1000);
     this.inputTimer = setInterval(() => this.inputTicks(performance.now()), 10);
@@ -299,6 +300,10 @@ export class Game {
     if (this.role === "player" && f.winner) {
       you = f.winner === "opponents" ? " — you win!" : " — you lose.";
     }
+    // The replay from this player's own view: how the robots found it (see replay.js).
+    const watch = $("end-watch");
+    watch.hidden = this.role !== "player" || !this.you;
+    watch.onclick = () => (location.hash = `#/replay/${encodeURIComponent(this.matchId)}?as=${this.you}`);
     $("end-title").textContent = won + you;
     $("end-text").textContent = why[0].toUpperCase() + why.slice(1) + ".";
     $("end").hidden = false;

@@ -11,6 +11,7 @@ mod handlers;
 pub mod limits;
 mod openapi;
 mod players;
+mod replay_ws;
 mod replays;
 mod robots;
 mod serve;
@@ -98,6 +99,7 @@ pub fn app(registry: Arc<Registry>, web_dir: PathBuf) -> Router {
     Router::new()
         .nest("/api", api)
         .route("/ws/matches/{id}", get(ws::upgrade))
+        .route("/ws/replays/{id}", get(replay_ws::upgrade))
         .route("/metrics", get(metrics))
         .fallback_service(static_files)
         // Bodies are read (and limited) by `JsonBody`; this layer is the outer guard so a huge

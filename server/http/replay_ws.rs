@@ -1,0 +1,597 @@
+//! `GET /ws/replays/{id}`: a finished match played back over a WebSocket, with play, pause,
+//! seek and speed.
+//!
+//! A connection holds a [`Cursor`] into the replay and moves it forward one tick per step
+//! (`speed × 20` ticks a second; above 1× each snapshot covers several ticks, so a page gets
+//! at most 20 a second), or jumps with a seek. Stepping and seeking re-simulate the match,
+//! which is blocking work: each runs on the bounded blocking pool (`admit::off_workers`),
+//! the cursor moved into the job and back. A slow pool makes playback slower, never a burst.
+//!
+//! What is sent is what the live sockets sent: the spectators' snapshot (or, with `?as=o0`,
+//! what that person's own socket showed: only what its opponent had in line of sight) and
+//! the events of the ticks played, so a page draws a replay with the renderer it draws a
+//! match with. Messages are size-capped, rate-limited and parsed strictly as on the live
+//! socket; seeks past [`SEEKS_PER_S`] are coalesced (only the latest waiting one is shown).
+
+use std::collections::HashMap;
+use std::sync::Arc;
+use std::time::Duration;
+
+use axum::extract::ws::{CloseFrame, Message, Utf8Bytes, WebSocket, WebSocketUpgrade};
+use axum::extract::{Path, Query, State};
+use axum::http::StatusCode;
+use axum::response::Response;
+use tokio::time::Instant;
+use tracing::Instrument;
+
+use crate::game::ConnectionGuard;
+use crate::game::replay::{Cursor, Replay};
+use crate::http::admit::off_workers;
+use crate::http::limits::{AddressConnection, Bucket, ClientIp};
+use crate::http::replays::find;
+use crate::http::ws::{SEND_TIMEOUT, STRIKE_RECOVERY_S, STRIKES};
+use crate::http::{ApiError, AppState};
+use crate::metrics::{ClientGuard, Refusal};
+use crate::protocol::frame::BELIEF_EVERY;
+use crate::protocol::replay_ws::{self as rwire, ReplayControl, ReplayLimits, ReplayWelcome};
+use crate::protocol::ws as wire;
+use frames::{Show, Shown, seats, show};
+use lasertag_core::sim::{AgentId, TICK_HZ};
+
+mod frames;
+
+/// Seeks carried out per second at most; a scrubbing page sends more, and only the latest
+/// waiting one matters.
+pub const SEEKS_PER_S: f64 = 10.0;
+/// Snapshots per second at most: above 1× a step covers several ticks.
+const STEPS_PER_S: f64 = TICK_HZ as f64;
+
+/// Close codes (RFC 6455): policy violation, message too big, going away, internal error.
+const POLICY: u16 = 1008;
+const TOO_BIG: u16 = 1009;
+const GOING_AWAY: u16 = 1001;
+const INTERNAL: u16 = 1011;
+/// How long a closing connection waits for the client's close reply.
+const CLOSE_DRAIN: Duration = Duration::from_secs(1);
+
+/// Checks everything a refusal can name before the upgrade (the replay, the query, the
+/// address's open sockets), then serves the connection in its own task.
+pub async fn upgrade(
+    State(state): State<AppState>,
+    Path(id): Path<String>,
+    Query(query): Query<HashMap<String, String>>,
+    ClientIp(ip): ClientIp,
+    ws: Result<WebSocketUpgrade, axum::extract::ws::rejection::WebSocketUpgradeRejection>,
+) -> Result<Response, ApiError> {
+    let registry = &state.registry;
+    let cfg = &registry.config;
+    if registry.shutdown.is_cancelled() {
+        return Err(ApiError::new(
+            StatusCode::SERVICE_UNAVAILABLE,
+            "the server is shutting down",
+        ));
+    }
+    if let Some(k) = query
+        .keys()
+        .find(|k| !matches!(k.as_str(), "tick" | "speed" | "as" | "format"))
+    {
+        return Err(ApiError::bad_request(format!(
+            "{k}: unknown query parameter (tick, speed, as, format)"
+        )));
+    }
+    let replay = find(&state, &id).await?;
+    let options = Options::of(&query, &replay)?;
+    let ws = ws.map_err(|e| ApiError::bad_request(format!("not a WebSocket upgrade: {e}")))?;
+    let Some(address) = state
+        .limits
+        .open_connection(ip, cfg.max_connections_per_address)
+    else {
+        registry.metrics.refuse(Refusal::ConnectionsPerAddress);
+        return Err(ApiError::new(
+            StatusCode::TOO_MANY_REQUESTS,
+            format!(
+                "too many connections from {ip}: at most {} WebSockets open at once per address",
+                cfg.max_connections_per_address
+            ),
+        ));
+    };
+    let span = tracing::info_span!("replay_ws", replay_id = %id, %ip);
+    let hard = cfg.hard_message_bytes();
+    Ok(ws
+        .max_message_size(hard)
+        .max_frame_size(hard)
+        .on_upgrade(move |socket| {
+            async move {
+                tracing::debug!("connected");
+                let guards = Guards {
+                    _address: address,
+                    _open: state.registry.connection(),
+                    _client: state.registry.metrics.client("replay"),
+                };
+                Viewer::new(socket, state, replay, options, guards)
+                    .run()
+                    .await;
+                tracing::debug!("disconnected");
+            }
+            .instrument(span)
+        }))
+}
+
+/// What the query asked for, checked before the upgrade.
+struct Options {
+    tick: u64,
+    speed: f64,
+    /// The opponent slot whose view is shown, or everything.
+    view: Option<usize>,
+    compact: bool,
+}
+
+impl Options {
+    /// Errors as the REST endpoints give them: 400 for what is not a value, 404 for a tick
+    /// or an opponent the replay does not have.
+    fn of(query: &HashMap<String, String>, replay: &Replay) -> Result<Options, ApiError> {
+        let tick = match query.get("tick") {
+            None => 0,
+            Some(v) => v.parse::<u64>().map_err(|_| {
+                ApiError::bad_request(format!("tick: {v:?} is not an integer in 0..={}", u64::MAX))
+            })?,
+        };
+        if tick > replay.last_tick {
+            return Err(ApiError::not_found(format!(
+                "tick: the replay has ticks 0 to {}, not {tick}",
+                replay.last_tick
+            )));
+        }
+        let speed = match query.get("speed") {
+            None => 1.0,
+            Some(v) => {
+                let n = v
+                    .parse::<f64>()
+                    .map_err(|_| ApiError::bad_request(format!("speed: {v:?} is not a number")))?;
+                rwire::check_speed("speed", n)?
+            }
+        };
+        let view = match query.get("as") {
+            None => None,
+            Some(v) => match v.parse::<AgentId>() {
+                Ok(AgentId::Opponent(i)) if i < replay.config().opponents => Some(i),
+                Ok(AgentId::Opponent(_)) => {
+                    return Err(ApiError::not_found(format!(
+                        "as: no opponent {v} in this match (o0 to o{})",
+                        replay.config().opponents.saturating_sub(1)
+                    )));
+                }
+                _ => {
+                    return Err(ApiError::bad_request(format!(
+                        "as: {v:?} is not an opponent id (o0, o1, …)"
+                    )));
+                }
+            },
+        };
+        let compact = match query.get("format").map(String::as_str) {
+            None | Some("json") => false,
+            Some("compact") => true,
+            Some(other) => {
+                return Err(ApiError::bad_request(format!(
+                    "format: {other:?} is not a snapshot format (json or compact)"
+                )));
+            }
+        };
+        Ok(Options {
+            tick,
+            speed,
+            view,
+            compact,
+        })
+    }
+}
+
+/// Counts a connection holds until it ends: per address, open (for shutdown), per role.
+struct Guards {
+    _address: AddressConnection,
+    _open: ConnectionGuard,
+    _client: ClientGuard,
+}
+
+/// Why a connection ends: the client left, or close with this code and reason.
+enum End {
+    Gone,
+    Close(u16, String),
+}
+
+/// Time between two steps at `speed`, and ticks per step.
+fn pace(speed: f64) -> (Duration, f64) {
+    let per_tick = 1.0 / (TICK_HZ as f64 * speed);
+    let period = per_tick.max(1.0 / STEPS_PER_S);
+    (Duration::from_secs_f64(period), period / per_tick)
+}
+
+/// One replay connection: its cursor, what it plays and how fast, and its limits.
+struct Viewer {
+    socket: WebSocket,
+    state: AppState,
+    replay: Arc<Replay>,
+    options: Options,
+    /// Taken while a job moves it.
+    cursor: Option<Cursor>,
+    tick: u64,
+    playing: bool,
+    speed: f64,
+    belief: bool,
+    belief_at: Option<u64>,
+    last_seq: u64,
+    /// Ticks owed by past steps' fractions (speeds that are not whole numbers).
+    carry: f64,
+    next_step: Instant,
+    pending_seek: Option<u64>,
+    next_seek: Instant,
+    messages: Bucket,
+    strikes: Bucket,
+    _guards: Guards,
+}
+
+impl Viewer {
+    fn new(
+        socket: WebSocket,
+        state: AppState,
+        replay: Arc<Replay>,
+        options: Options,
+        guards: Guards,
+    ) -> Viewer {
+        let cfg = &state.registry.config;
+        let now = Instant::now();
+        Viewer {
+            messages: Bucket::new(cfg.message_burst, cfg.messages_per_s),
+            strikes: Bucket::new(STRIKES, 1.0 / STRIKE_RECOVERY_S),
+            socket,
+            cursor: None,
+            tick: options.tick,
+            playing: options.tick < replay.last_tick,
+            speed: options.speed,
+            // As on the live socket: spectators start with the belief, players without.
+            belief: options.view.is_none(),
+            belief_at: None,
+            last_seq: 0,
+            carry: 0.0,
+            next_step: now,
+            pending_seek: None,
+            next_seek: now,
+            state,
+            replay,
+            options,
+            _guards: guards,
+        }
+    }
+
+    async fn run(mut self) {
+        if let Err(End::Close(code, reason)) = self.serve().await {
+            let close = Message::Close(Some(CloseFrame {
+                code,
+                reason: Utf8Bytes::from(truncate(&reason, 120)),
+            }));
+            if let Ok(Ok(())) = tokio::time::timeout(SEND_TIMEOUT, self.socket.send(close)).await {
+                // Read what the client still sends until its close, so the socket is not
+                // reset under the close frame.
+                let drain = async {
+                    while let Some(Ok(m)) = self.socket.recv().await {
+                        if matches!(m, Message::Close(_)) {
+                            break;
+                        }
+                    }
+                };
+                let _ = tokio::time::timeout(CLOSE_DRAIN, drain).await;
+            }
+        }
+    }
+
+    async fn send(&mut self, message: Message) -> Result<(), End> {
+        match tokio::time::timeout(SEND_TIMEOUT, self.socket.send(message)).await {
+            Ok(Ok(())) => Ok(()),
+            _ => Err(End::Gone),
+        }
+    }
+
+    async fn text(&mut self, text: Utf8Bytes) -> Result<(), End> {
+        self.send(Message::Text(text)).await
+    }
+
+    fn show_options(&self, fresh: bool, events: bool) -> Show {
+        Show {
+            view: self.options.view,
+            compact: self.options.compact,
+            belief: self.belief,
+            belief_at: self.belief_at,
+            fresh,
+            events_after: events.then_some(self.last_seq),
+        }
+    }
+
+    /// Moves the cursor `steps` ticks on (from a new one at `seek`, or from the one held)
+    /// off the async workers, then sends what it shows there.
+    async fn job(&mut self, seek: Option<u64>, steps: u64, show_how: Show) -> Result<Shown, End> {
+        let replay = self.replay.clone();
+        let held = self.cursor.take();
+        let current = self.tick;
+        let work = move || {
+            let mut cursor = match (seek, held) {
+                (None, Some(c)) => c,
+                // No cursor held (only after a job that failed): start again where it was.
+                (Some(_), _) | (None, None) => replay
+                    .cursor(seek.unwrap_or(current))
+                    .map_err(|e| e.to_string())?,
+            };
+            for _ in 0..steps {
+                if !replay.advance(&mut cursor) {
+                    break;
+                }
+            }
+            let shown = show(&replay, cursor.world(), show_how);
+            Ok::<_, String>((cursor, shown))
+        };
+        let (cursor, shown) = blocking(self.state.clone(), work).await?;
+        self.cursor = Some(cursor);
+        self.tick = shown.tick;
+        self.last_seq = shown.last_seq;
+        self.belief_at = shown.belief_at;
+        let bytes: usize = shown
+            .messages
+            .iter()
+            .map(|m| match m {
+                Message::Text(t) => t.len(),
+                Message::Binary(b) => b.len(),
+                _ => 0,
+            })
+            .sum();
+        self.state
+            .registry
+            .metrics
+            .snapshot_bytes
+            .with_label_values(&["replay"])
+            .inc_by(bytes as u64);
+        for m in shown.messages.iter().cloned() {
+            self.send(m).await?;
+        }
+        Ok(shown)
+    }
+
+    async fn status(&mut self) -> Result<(), End> {
+        let tick = self.pending_seek.unwrap_or(self.tick);
+        self.text(rwire::status(tick, self.playing, self.speed))
+            .await
+    }
+
+    async fn serve(&mut self) -> Result<(), End> {
+        self.state.registry.history.opened(&self.replay);
+        // The first cursor: the whole match is re-simulated once if nobody watched it lately.
+        let first = self.show_options(true, false);
+        let replay = self.replay.clone();
+        let start = self.options.tick;
+        let (cursor, welcome) = blocking(self.state.clone(), move || {
+            let cursor = replay.cursor(start).map_err(|e| e.to_string())?;
+            let w = cursor.world();
+            let map = crate::maps::to_file(&w.arena.def);
+            let kinematics = wire::Kinematics::of(&w.config.physics);
+            let time_limit_s = w.config.time_limit_ticks as f64 / TICK_HZ as f64;
+            let seated = seats(w);
+            Ok::<_, String>((cursor, (map, kinematics, time_limit_s, seated)))
+        })
+        .await?;
+        let (map, kinematics, time_limit_s, seated) = welcome;
+        let cfg = self.state.registry.config.clone();
+        let you = self.options.view.map(|i| AgentId::Opponent(i).to_string());
+        let welcome = ReplayWelcome {
+            kind: "replay",
+            id: &self.replay.meta.id,
+            map,
+            ticks: self.replay.last_tick,
+            tick: start,
+            tick_hz: TICK_HZ,
+            time_limit_s,
+            speed: self.speed,
+            playing: self.playing,
+            view: you.clone().unwrap_or_else(|| "full".into()),
+            role: if you.is_some() { "player" } else { "spectator" },
+            name: self
+                .options
+                .view
+                .and_then(|i| seated.get(i).cloned().flatten())
+                .map(|s| s.name.to_string()),
+            you,
+            belief_every: BELIEF_EVERY,
+            belief: self.belief,
+            kinematics,
+            protocol: 2,
+            format: if self.options.compact {
+                "compact"
+            } else {
+                "json"
+            },
+            limits: ReplayLimits {
+                max_message_bytes: cfg.max_message_bytes,
+                messages_per_s: cfg.messages_per_s,
+                burst: cfg.message_burst,
+                seeks_per_s: SEEKS_PER_S,
+            },
+        };
+        self.text(rwire::welcome(&welcome)).await?;
+        self.cursor = Some(cursor);
+        self.job(None, 0, first).await?;
+        self.next_step = Instant::now() + pace(self.speed).0;
+        let shutdown = self.state.registry.shutdown.clone();
+        loop {
+            tokio::select! {
+                biased;
+                _ = shutdown.cancelled() => {
+                    return Err(going_away());
+                }
+                msg = self.socket.recv() => match msg {
+                    None | Some(Ok(Message::Close(_))) => return Err(End::Gone),
+                    Some(Err(e)) => {
+                        let text = e.to_string();
+                        return Err(if text.contains("too long") || text.contains("Space limit") || text.contains("capacity") {
+                            self.state.registry.metrics.refuse(Refusal::MessageTooLarge);
+                            End::Close(TOO_BIG, format!("message over {} bytes", cfg.hard_message_bytes()))
+                        } else {
+                            End::Gone
+                        });
+                    }
+                    Some(Ok(Message::Text(text))) => self.on_text(text.as_str()).await?,
+                    Some(Ok(Message::Binary(b))) => {
+                        let why = format!("binary message of {} bytes: send JSON text", b.len());
+                        self.strike(Refusal::MessageInvalid, &why).await?;
+                    }
+                    Some(Ok(_)) => {} // pings are answered by the socket itself
+                },
+                _ = tokio::time::sleep_until(self.next_seek), if self.pending_seek.is_some() => {
+                    self.seek().await?;
+                }
+                _ = tokio::time::sleep_until(self.next_step), if self.playing && self.pending_seek.is_none() => {
+                    self.step().await?;
+                }
+            }
+        }
+    }
+
+    /// Shows the latest seek asked for.
+    async fn seek(&mut self) -> Result<(), End> {
+        let Some(tick) = self.pending_seek.take() else {
+            return Ok(());
+        };
+        self.state.registry.history.opened(&self.replay);
+        self.next_seek = Instant::now() + Duration::from_secs_f64(1.0 / SEEKS_PER_S);
+        let how = self.show_options(true, false);
+        let shown = self.job(Some(tick), 0, how).await?;
+        self.carry = 0.0;
+        self.next_step = Instant::now() + pace(self.speed).0;
+        if self.playing && shown.at_end {
+            self.playing = false;
+            self.status().await?;
+        }
+        Ok(())
+    }
+
+    /// Plays the ticks due, and pauses at the end.
+    async fn step(&mut self) -> Result<(), End> {
+        let (period, ticks) = pace(self.speed);
+        self.carry += ticks;
+        let steps = self.carry.floor().max(1.0);
+        self.carry = (self.carry - steps).max(0.0);
+        let how = self.show_options(false, true);
+        let shown = self.job(None, steps as u64, how).await?;
+        // Never a burst to catch up: a slow pool plays slower.
+        let now = Instant::now();
+        self.next_step = (self.next_step + period).max(now);
+        if shown.at_end {
+            self.playing = false;
+            self.status().await?;
+        }
+        Ok(())
+    }
+
+    /// A bad message: an `error` now, a close when it happens too often.
+    async fn strike(&mut self, refusal: Refusal, why: &str) -> Result<(), End> {
+        self.state.registry.metrics.refuse(refusal);
+        if self.strikes.take().is_err() {
+            return Err(End::Close(
+                POLICY,
+                format!("too many bad messages; last: {why}"),
+            ));
+        }
+        self.text(rwire::error(why)).await
+    }
+
+    async fn on_text(&mut self, text: &str) -> Result<(), End> {
+        let cfg = &self.state.registry.config;
+        let (max, per_s, burst) = (cfg.max_message_bytes, cfg.messages_per_s, cfg.message_burst);
+        if text.len() > max {
+            let why = format!(
+                "message of {} bytes is over the {max}-byte limit",
+                text.len()
+            );
+            return self.strike(Refusal::MessageTooLarge, &why).await;
+        }
+        if self.messages.take().is_err() {
+            let why =
+                format!("rate limit: at most {per_s} messages per second (bursts of {burst})");
+            return self.strike(Refusal::MessageRate, &why).await;
+        }
+        let control = match ReplayControl::parse(text) {
+            Ok(c) => c,
+            Err(e) => return self.strike(Refusal::MessageInvalid, &e.to_string()).await,
+        };
+        let last = self.replay.last_tick;
+        match control {
+            ReplayControl::Ping { t } => self.text(wire::pong(t)).await,
+            ReplayControl::Play => {
+                if !self.playing && self.pending_seek.is_none() && self.tick >= last {
+                    // Play at the end starts again, as a video player does.
+                    self.pending_seek = Some(0);
+                }
+                self.playing = true;
+                self.next_step = Instant::now() + pace(self.speed).0;
+                self.status().await
+            }
+            ReplayControl::Pause => {
+                self.playing = false;
+                self.status().await
+            }
+            ReplayControl::Speed { speed } => {
+                self.speed = speed;
+                self.carry = 0.0;
+                self.next_step = self.next_step.min(Instant::now() + pace(speed).0);
+                self.status().await
+            }
+            ReplayControl::Seek { tick } if tick > last => {
+                let why = format!("tick: {tick} is past the replay's last tick, {last}");
+                self.strike(Refusal::MessageInvalid, &why).await
+            }
+            ReplayControl::Seek { tick } => {
+                // Coalesced: a later seek replaces one not shown yet.
+                self.pending_seek = Some(tick);
+                Ok(())
+            }
+            ReplayControl::Belief { on } => {
+                let was = self.belief;
+                self.belief = on;
+                if on && !was && !self.playing && self.pending_seek.is_none() {
+                    // Paused: show this tick's belief now rather than at the next step.
+                    let how = self.show_options(true, false);
+                    self.job(None, 0, how).await?;
+                }
+                Ok(())
+            }
+        }
+    }
+}
+
+/// Runs `work` on the blocking pool. A connection does not wait for it past the server's
+/// shutdown (a first re-simulation of a long match takes seconds, and shutdown waits for
+/// every connection to close).
+async fn blocking<T: Send + 'static>(
+    state: AppState,
+    work: impl FnOnce() -> Result<T, String> + Send + 'static,
+) -> Result<T, End> {
+    let shutdown = state.registry.shutdown.clone();
+    tokio::select! {
+        done = off_workers(&state, "replaying the match", work) => done
+            .map_err(|e| End::Close(INTERNAL, e.message))?
+            .map_err(|e| End::Close(INTERNAL, e)),
+        _ = shutdown.cancelled() => Err(going_away()),
+    }
+}
+
+fn going_away() -> End {
+    End::Close(GOING_AWAY, "the server is shutting down".into())
+}
+
+fn truncate(s: &str, max: usize) -> String {
+    // Close reasons must fit a control frame (123 bytes).
+    let mut out = String::new();
+    for c in s.chars() {
+        if out.len() + c.len_utf8() > max {
+            break;
+        }
+        out.push(c);
+    }
+    out
+}

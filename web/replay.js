@@ -1,0 +1,433 @@
+// A finished match played back (#/replay/<id>; `?as=o0` for that player's own view): the
+// replay socket (/ws/replays/<id>, docs/api.md), the arena drawn by render.js exactly as a
+// live match is, and the controls: play and pause, the speed, a timeline marked with the
+// match's events, the robots' belief (B) and, from a player's view, a switch to everyone's.
+
+import { segments, visibility, castRay, angleDiff } from "./geometry.js";
+import { draw, fit, roleColor } from "./render.js";
+import { CompactDecoder } from "./compact.js";
+
+const $ = (id) => document.getElementById(id);
+const debug = (window.__lasertag = window.__lasertag || {});
+
+export const SPEEDS = [0.25, 0.5, 1, 2, 4, 8];
+/** The server carries out at most this many seeks a second (it says so in its first
+ * message); a page scrubbing faster sends the latest position at that pace. */
+const SEEK_MS = 100;
+/** The events the timeline marks, and how each is described. */
+const MARKED = {
+  tag: (e) => `${e.by} tagged ${e.target}`,
+  robot_tagged: (e) => `${e.by} froze ${e.target}`,
+  role_split: (e) => `belief: role ${e.role} split from ${e.from}`,
+  role_merge: (e) => `belief: role ${e.from} merged into ${e.role}`,
+};
+
+function fmtTime(s) {
+  s = Math.max(0, Math.floor(s));
+  return `${Math.floor(s / 60)}:${String(s % 60).padStart(2, "0")}`;
+}
+
+const sleep = (ms) => new Promise((r) => setTimeout(r, ms));
+
+export class Replay {
+  /** `as`: the opponent whose view to show (or null); `full`: start with everyone's view
+   * all the same (the switch goes back to the player's). */
+  constructor({ id, as, full }) {
+    this.id = id;
+    this.as = as || null;
+    this.fogged = Boolean(this.as) && !full;
+    this.canvas = $("arena");
+    this.ctx = this.canvas.getContext("2d");
+    this.latest = null;
+    this.prev = null;
+    this.belief = null;
+    this.beliefOn = !this.fogged;
+    this.beliefChosen = false;
+    this.beams = [];
+    this.names = {};
+    this.speed = 1;
+    this.playing = true;
+    this.ticks = 0;
+    this.lastSeek = 0;
+    this.retries = 0;
+    Object.assign(debug, {
+      page: "replay", replayId: id, view: this.fogged ? this.as : "full", connected: false,
+      snapshots: 0, lastTick: null, drawn: null, feed: [], playing: null, speed: null,
+      belief: this.beliefOn, ticks: null, markers: 0, errors: [],
+    });
+    $("feed").replaceChildren();
+    $("legend").replaceChildren();
+    $("end").hidden = true;
+    $("hud-ping").textContent = "";
+    $("hud-score").textContent = "";
+    $("hud-timer").textContent = "";
+    $("hud-match").textContent = "replay";
+    $("hud-status").textContent = "loading the replay…";
+    this.controls();
+    this.onKey = (e) => this.key(e);
+    window.addEventListener("keydown", this.onKey);
+    const loop = (t) => { if (!this.stopped) { this.frame(t); requestAnimationFrame(loop); } };
+    requestAnimationFrame(loop);
+    this.load();
+  }
+
+  stop() {
+    this.stopped = true;
+    clearTimeout(this.seekTimer);
+    window.removeEventListener("keydown", this.onKey);
+    if (this.ws) { this.ws.onclose = null; this.ws.close(1000, "left"); }
+  }
+
+  /** The replay's summary and events (for the timeline), then the socket. A match that has
+   * just ended may take a moment to become a replay: a 404 is tried again a few times. */
+  async load() {
+    for (let attempt = 0; ; attempt++) {
+      let r;
+      try {
+        r = await fetch(`/api/replays/${encodeURIComponent(this.id)}`);
+      } catch (e) {
+        $("hud-status").textContent = `cannot reach the server: ${e.message}`;
+        return;
+      }
+      if (this.stopped) return;
+      if (r.ok) { this.detail = await r.json(); break; }
+      if (r.status !== 404 || attempt >= 12) {
+        const body = await r.json().catch(() => ({}));
+        $("hud-status").textContent = body.error || `no replay ${this.id}`;
+        debug.errors.push(body.error || String(r.status));
+        return;
+      }
+      $("hud-status").textContent = "waiting for the replay…";
+      await sleep(500);
+      if (this.stopped) return;
+    }
+    for (const p of this.detail.events || []) {
+      if (p.kind === "player_joined") this.names[p.opponent] = p.name;
+    }
+    this.markers();
+    this.connect(0);
+  }
+
+  connect(tick) {
+    const proto = location.protocol === "https:" ? "wss" : "ws";
+    const q = new URLSearchParams({ format: "compact", tick: String(tick), speed: String(this.speed) });
+    if (this.fogged) q.set("as", this.as);
+    const ws = new WebSocket(`${proto}://${location.host}/ws/replays/${encodeURIComponent(this.id)}?${q}`);
+    ws.binaryType = "arraybuffer";
+    this.decoder = new CompactDecoder();
+    this.ws = ws;
+    ws.onopen = () => { debug.connected = true; this.retries = 0; };
+    ws.onmessage = (m) => {
+      let msg;
+      try {
+        msg = typeof m.data === "string" ? JSON.parse(m.data) : this.decoder.decode(m.data);
+      } catch (e) {
+        debug.errors.push(String(e));
+        return;
+      }
+      this.message(msg);
+    };
+    ws.onclose = (e) => {
+      debug.connected = false;
+      if (this.stopped) return;
+      if (e.code === 1001) { $("hud-status").textContent = "the server is shutting down"; return; }
+      if (this.retries++ < 5) {
+        $("hud-status").textContent = "connection lost — reconnecting…";
+        setTimeout(() => { if (!this.stopped) this.connect(this.latest ? this.latest.tick : 0); }, 1000);
+      } else {
+        $("hud-status").textContent = "connection lost";
+      }
+    };
+  }
+
+  send(obj) {
+    if (this.ws && this.ws.readyState === WebSocket.OPEN) this.ws.send(JSON.stringify(obj));
+  }
+
+  message(msg) {
+    switch (msg.type) {
+      case "replay": return this.welcome(msg);
+      case "snapshot": return this.snapshot(msg);
+      case "event": return this.event(msg);
+      case "replay_status": return this.status(msg);
+      case "error":
+        debug.errors.push(msg.message || msg.error);
+        console.warn("server:", msg.message || msg.error);
+        return;
+    }
+  }
+
+  welcome(w) {
+    this.map = w.map;
+    this.segs = segments(w.map);
+    this.ticks = w.ticks;
+    this.tickHz = w.tick_hz;
+    this.you = w.you;
+    if (w.you && w.name) this.names[w.you] = w.name;
+    if (!this.beliefChosen) this.beliefOn = w.belief;
+    if (w.belief !== this.beliefOn) this.send({ type: "belief", on: this.beliefOn });
+    // A reconnection (or a switch of view) carries on as the page was: paused stays paused.
+    if (this.resume === false && w.playing) {
+      this.send({ type: "pause" });
+      this.send({ type: "seek", tick: w.tick });
+    }
+    this.resume = undefined;
+    const tl = $("replay-timeline");
+    tl.max = String(w.ticks);
+    const who = this.as ? this.names[this.as] || this.as : null;
+    $("hud-match").textContent = `${w.map.name} · replay · ${this.fogged ? `as ${who} saw it` : "full view"}`;
+    $("hud-status").textContent = "";
+    const view = $("replay-view");
+    view.hidden = !this.as;
+    view.textContent = this.fogged ? "full view" : `${who}'s view`;
+    view.title = this.fogged ? "show everything: true positions, scans and belief" : `show only what ${who} saw`;
+    Object.assign(debug, { ticks: w.ticks, view: w.view, belief: this.beliefOn });
+    this.status({ tick: w.tick, playing: w.playing, speed: w.speed });
+  }
+
+  status(s) {
+    this.playing = s.playing;
+    this.speed = s.speed;
+    debug.playing = s.playing;
+    debug.speed = s.speed;
+    const atEnd = !s.playing && s.tick >= this.ticks && this.ticks > 0;
+    const play = $("replay-play");
+    play.textContent = s.playing ? "❚❚" : atEnd ? "↻" : "▶";
+    play.title = s.playing ? "pause (Space)" : atEnd ? "play again from the start (Space)" : "play (Space)";
+    for (const b of $("replay-speeds").children) b.classList.toggle("on", Number(b.dataset.speed) === s.speed);
+    $("hud-status").textContent = atEnd ? this.outcome() : "";
+  }
+
+  /** How the match ended, for the status line at the end of the replay. */
+  outcome() {
+    const d = this.detail || {};
+    const who = d.winner === "robots" ? "the robots won" : d.winner === "opponents" ? "the opponents won" : "nobody won";
+    const why = d.reason ? ` (${d.reason.replace("_", " ")})` : "";
+    return `end of the match: ${who}${why}`;
+  }
+
+  snapshot(s) {
+    const now = performance.now();
+    const last = this.latest;
+    // Played forward: move from the last snapshot to this one. A seek jumps.
+    const forward = last && s.tick > last.tick && s.tick - last.tick <= 16;
+    this.prev = forward ? last : null;
+    this.latest = s;
+    this.arrived = now;
+    this.span = Math.max(50, 50 / this.speed);
+    if (!forward) {
+      this.beams = [];
+      $("feed").replaceChildren();
+    }
+    if (s.belief) this.belief = s.belief;
+    for (const o of s.opponents) if (o.name) this.names[o.id] = o.name;
+    debug.snapshots++;
+    debug.lastTick = s.tick;
+    debug.snapView = s.view;
+    const tl = $("replay-timeline");
+    if (!this.dragging) tl.value = String(s.tick);
+    this.clock(s.tick);
+    const sc = s.score;
+    $("hud-score").textContent = `robots tagged ${sc.tags}/${sc.opponents} opponents · opponents tagged robots ${sc.robot_tags}×`;
+    this.legend();
+  }
+
+  clock(tick) {
+    const hz = this.tickHz || 20;
+    $("replay-time").textContent = `${fmtTime(tick / hz)} / ${fmtTime(this.ticks / hz)}`;
+    $("hud-timer").textContent = fmtTime(tick / hz);
+  }
+
+  who(id) {
+    return this.names[id] || id;
+  }
+
+  event(e) {
+    if (e.kind === "shot") return this.beam(e);
+    const text = {
+      tag: () => `${this.who(e.by)} tagged ${this.who(e.target)}`,
+      robot_tagged: () => `${this.who(e.by)} tagged ${e.target} (frozen 10 s)`,
+      role_split: () => `belief: role ${e.role} split from ${e.from}`,
+      role_merge: () => `belief: role ${e.from} merged into ${e.role} (${e.count})`,
+      player_joined: () => `${e.name} joined as ${e.opponent}`,
+      player_left: () => `${e.name} left`,
+      finished: () => (e.winner ? `match over: ${e.winner} win` : `match over: ${e.reason.replace("_", " ")}`),
+    }[e.kind];
+    if (!text) return;
+    const li = document.createElement("li");
+    li.className = e.kind.startsWith("role") ? "role" : e.kind;
+    li.textContent = text();
+    debug.feed.push({ kind: e.kind, text: li.textContent, seq: e.seq });
+    if (debug.feed.length > 50) debug.feed.shift();
+    const feed = $("feed");
+    feed.prepend(li);
+    while (feed.children.length > 8) feed.lastChild.remove();
+  }
+
+  beam(e) {
+    const snap = this.latest;
+    if (!snap) return;
+    const all = [...snap.robots, ...snap.opponents];
+    const from = all.find((a) => a.id === e.by);
+    if (!from) return; // out of the view's sight
+    const to = e.hit && all.find((a) => a.id === e.hit);
+    let x2, y2;
+    if (to) { x2 = to.x; y2 = to.y; } else {
+      const dx = Math.cos(from.theta), dy = Math.sin(from.theta);
+      const r = castRay(this.segs, from.x, from.y, dx, dy, 6);
+      x2 = from.x + dx * r; y2 = from.y + dy * r;
+    }
+    const color = e.by.startsWith("r") ? "#9fdcff" : "#ff6b8b";
+    this.beams.push({ x1: from.x, y1: from.y, x2, y2, t0: performance.now(), color });
+    if (this.beams.length > 20) this.beams.shift();
+  }
+
+  legend() {
+    const el = $("legend");
+    if (!this.beliefOn || !this.belief) { el.replaceChildren(); return; }
+    const rows = this.belief.roles.filter((r) => !r.tagged).map((r) => {
+      const div = document.createElement("div");
+      const dot = document.createElement("i");
+      dot.style.background = roleColor(r.id);
+      const trust = r.state ? ` · ${r.state} (${Number(r.confidence).toFixed(2)})` : "";
+      div.append(dot, `role ${r.id}: ${r.count} opponent${r.count === 1 ? "" : "s"}${trust}`);
+      return div;
+    });
+    const head = document.createElement("div");
+    head.textContent = "robots' belief (B)";
+    head.style.color = "#8b949e";
+    el.replaceChildren(head, ...rows);
+  }
+
+  /** The timeline's marks: tags, frozen robots, and the belief's splits and merges. */
+  markers() {
+    const el = $("replay-markers");
+    const ticks = this.detail.ticks || 1;
+    const marks = (this.detail.events || []).filter((e) => MARKED[e.kind]).map((e) => {
+      const m = document.createElement("button");
+      m.className = `marker ${e.kind}`;
+      m.style.left = `${(100 * e.tick) / ticks}%`;
+      m.title = `${fmtTime(e.tick / 20)} ${MARKED[e.kind](e)}`;
+      m.onclick = () => this.seek(e.tick, true);
+      return m;
+    });
+    el.replaceChildren(...marks);
+    debug.markers = marks.length;
+  }
+
+  controls() {
+    $("replay-play").onclick = () => this.toggle();
+    $("replay-speeds").replaceChildren(...SPEEDS.map((v) => {
+      const b = document.createElement("button");
+      b.className = "secondary";
+      b.dataset.speed = String(v);
+      b.textContent = `${v}×`;
+      b.onclick = () => this.send({ type: "speed", speed: v });
+      return b;
+    }));
+    const tl = $("replay-timeline");
+    tl.value = "0";
+    tl.oninput = () => { this.clock(Number(tl.value)); this.seek(Number(tl.value)); };
+    tl.onchange = () => this.seek(Number(tl.value), true);
+    tl.onpointerdown = () => { this.dragging = true; };
+    tl.onpointerup = () => { this.dragging = false; };
+    const belief = $("replay-belief");
+    belief.onclick = () => this.toggleBelief();
+    belief.classList.toggle("on", this.beliefOn);
+    $("replay-view").onclick = () => this.switchView();
+    // A clicked button keeps no focus: Space is play and pause, not "press it again".
+    $("replay-bar").onclick = (e) => { if (e.target.tagName === "BUTTON") e.target.blur(); };
+  }
+
+  toggle() {
+    this.send({ type: this.playing ? "pause" : "play" });
+  }
+
+  /** Seeks to `tick`: at once when `now` or when the last seek is old enough, otherwise the
+   * latest position goes when it is (the server would coalesce them anyway). */
+  seek(tick, now) {
+    this.pendingSeek = tick;
+    const wait = this.lastSeek + SEEK_MS - performance.now();
+    clearTimeout(this.seekTimer);
+    const go = () => {
+      this.lastSeek = performance.now();
+      this.send({ type: "seek", tick: this.pendingSeek });
+    };
+    if (now || wait <= 0) go(); else this.seekTimer = setTimeout(go, wait);
+  }
+
+  toggleBelief() {
+    this.beliefOn = !this.beliefOn;
+    this.beliefChosen = true;
+    debug.belief = this.beliefOn;
+    $("replay-belief").classList.toggle("on", this.beliefOn);
+    this.send({ type: "belief", on: this.beliefOn });
+    this.legend();
+  }
+
+  /** From the player's view to everyone's and back, at the same tick, playing or paused as
+   * it was. */
+  switchView() {
+    if (!this.as) return;
+    this.fogged = !this.fogged;
+    const hash = `#/replay/${encodeURIComponent(this.id)}?as=${this.as}${this.fogged ? "" : "&view=full"}`;
+    history.replaceState(null, "", hash);
+    this.resume = this.playing;
+    if (!this.beliefChosen) this.beliefOn = !this.fogged;
+    $("replay-belief").classList.toggle("on", this.beliefOn);
+    debug.view = this.fogged ? this.as : "full";
+    if (this.ws) { this.ws.onclose = null; this.ws.close(1000, "view"); }
+    this.latest = null;
+    this.prev = null;
+    this.belief = null;
+    this.connect(Number($("replay-timeline").value) || 0);
+  }
+
+  key(e) {
+    if (e.target && e.target.tagName === "INPUT" && e.target.type !== "range") return;
+    // The focused timeline moves itself with the arrows (and seeks through its input event).
+    if (e.target && e.target.type === "range" && e.code.startsWith("Arrow")) return;
+    if (e.repeat && e.code !== "ArrowLeft" && e.code !== "ArrowRight") return;
+    const tick = this.latest ? this.latest.tick : 0;
+    switch (e.code) {
+      case "KeyB": this.toggleBelief(); break;
+      case "Space": this.toggle(); break;
+      case "ArrowLeft": this.seek(Math.max(0, tick - (e.shiftKey ? 20 : 1))); break;
+      case "ArrowRight": this.seek(Math.min(this.ticks, tick + (e.shiftKey ? 20 : 1))); break;
+      default: return;
+    }
+    e.preventDefault();
+  }
+
+  /** Agents between the last two snapshots: one step behind, so motion is smooth at any
+   * speed (at 0.25× a snapshot comes every 200 ms). */
+  agents(now) {
+    const b = this.latest;
+    const a = this.prev;
+    if (!a) return { robots: b.robots, opponents: b.opponents };
+    const f = Math.min(1, (now - this.arrived) / this.span);
+    const move = (list0, list1) => list1.map((q) => {
+      const p = list0.find((x) => x.id === q.id);
+      if (!p || q.tagged) return q;
+      return { ...q, x: p.x + (q.x - p.x) * f, y: p.y + (q.y - p.y) * f, theta: p.theta + angleDiff(p.theta, q.theta) * f };
+    });
+    return { robots: move(a.robots, b.robots), opponents: move(a.opponents, b.opponents) };
+  }
+
+  frame(now) {
+    if (!this.map || !this.latest) return;
+    const v = fit(this.canvas, this.map);
+    const { robots, opponents } = this.agents(now);
+    let visible = null;
+    if (this.latest.view === "player") {
+      const me = opponents.find((o) => o.id === this.you);
+      if (me) visible = visibility(this.segs, me.x, me.y);
+    }
+    this.beams = this.beams.filter((b) => now - b.t0 < 450);
+    const counts = draw(this.ctx, v, {
+      map: this.map, segs: this.segs, you: this.latest.view === "player" ? this.you : null,
+      robots, opponents, visible, belief: this.beliefOn ? this.belief : null, beams: this.beams, now,
+    });
+    debug.drawn = counts;
+  }
+}
