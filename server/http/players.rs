@@ -62,7 +62,7 @@ pub async fn player(
 }
 
 #[utoipa::path(get, path = "/api/leaderboard",
-    params(("by" = Option<String>, Query, description = "wins (default), tags, survival or matches"),
+    params(("by" = Option<String>, Query, pattern = "^(wins|tags|survival|matches)$", description = "wins (default), tags, survival or matches"),
            ("limit" = Option<u64>, Query, minimum = 1, maximum = 100, description = "at most this many (20)")),
     responses((status = 200, body = Leaderboard), (status = 400, body = ErrorBody), (status = 404, body = ErrorBody)))]
 pub async fn leaderboard(
