@@ -250,6 +250,8 @@ def main():
     ap.add_argument("--team-tracker", action="store_true",
                     help="the server's team tracker at its default size (the environment's "
                          "default is its minimum)")
+    ap.add_argument("--json-scans", action="store_true",
+                    help="scans as JSON numbers (the environment's packed_scans=False)")
     ap.add_argument("--layers", action="store_true", help="time a step's layers (1 env)")
     ap.add_argument("--profile", type=int, default=0, metavar="STEPS",
                     help="cProfile the client over this many steps (1 env)")
@@ -262,7 +264,7 @@ def main():
                   ticks_per_step=args.ticks_per_step, max_steps=None,
                   # Long matches: the measurement is of steps, not of episode starts.
                   time_limit_s=3600, match_settings=args.match_settings,
-                  team_tracker=args.team_tracker)
+                  team_tracker=args.team_tracker, packed_scans=not args.json_scans)
     json_parser = "orjson" if loads is not json.loads else "json (stdlib)"
     report = {"machine": {"cpus": os.cpu_count(), "python": sys.version.split()[0],
                           "json": json_parser},

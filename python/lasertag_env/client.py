@@ -2,7 +2,10 @@
 
 An environment step is one request, so what a request costs on the client is what a step
 costs. Each request is written with one ``sendall`` (request line, headers and body
-together) and the answer is read by its ``Content-Length`` from a buffered socket.
+together) and the answer is read by its ``Content-Length`` into a buffer of the client's
+own: usually one ``recv`` an answer. The socket is a blocking one with the kernel's own
+send and receive time-outs (``SO_SNDTIMEO``, ``SO_RCVTIMEO``) where the platform has them:
+a Python socket time-out would add a ``poll`` before every send and every receive.
 
 Why not ``http.client``: it writes the header and the body in two system calls (two wake-ups
 of the server's reader per request) and parses every answer's headers with the ``email``
@@ -17,6 +20,8 @@ from __future__ import annotations
 import json
 import os
 import socket
+import struct
+import sys
 import time
 from typing import Any
 from urllib.parse import urlsplit
@@ -34,7 +39,13 @@ __all__ = ["Client", "ServerError", "ConnectionDropped", "loads"]
 # (10 s by default). Reconnecting before sending after a shorter pause means a request is
 # almost never written to a socket the server is about to close.
 _IDLE_RECONNECT_S = 5.0
-_MAX_LINE = 65536
+_MAX_HEAD = 65536
+_RECV = 65536
+
+# This process's id, kept by a fork hook rather than asked of the kernel every request.
+_pid = [os.getpid()]
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=lambda: _pid.__setitem__(0, os.getpid()))
 
 
 class ServerError(RuntimeError):
@@ -75,16 +86,20 @@ class Client:
         self.timeout = timeout
         self.token = token
         self._host_header = f"Host: {host}:{self.port}\r\n"
+        # Request heads (request line, host, token) by method, path and token: an
+        # environment sends the same one every step.
+        self._heads: dict[tuple, bytes] = {}
         self._sock: socket.socket | None = None
-        self._rfile = None
+        self._buf = bytearray()  # what was received and not yet read
         self._last = 0.0
-        self._pid = os.getpid()
+        self._pid = _pid[0]
 
     def _connect(self) -> None:
         now = time.monotonic()
-        if self._sock is not None and self._pid != os.getpid():
+        if self._sock is not None and self._pid != _pid[0]:
             # A forked child must not read answers meant for its parent on a shared socket.
-            self._sock = self._rfile = None
+            self._sock = None
+            self._buf = bytearray()
         if self._sock is not None and now - self._last > _IDLE_RECONNECT_S:
             self.close()
         if self._sock is None:
@@ -92,17 +107,16 @@ class Client:
             # Requests are small and answered before the next: waiting to coalesce them
             # (Nagle) would only add latency.
             sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+            _kernel_timeouts(sock, self.timeout)
             self._sock = sock
-            self._rfile = sock.makefile("rb")
-            self._pid = os.getpid()
+            self._buf = bytearray()
+            self._pid = _pid[0]
 
     def close(self) -> None:
-        if self._rfile is not None:
-            self._rfile.close()
-            self._rfile = None
         if self._sock is not None:
             self._sock.close()
             self._sock = None
+        self._buf = bytearray()
 
     def raw(self, method: str, path: str, body: bytes | None = None,
             token: str | None = None) -> Response:
@@ -114,14 +128,21 @@ class Client:
         ``act`` is never applied twice.
         """
         token = token or self.token
-        head = f"{method} {path} HTTP/1.1\r\n{self._host_header}"
-        if token:
-            head += f"Authorization: Bearer {token}\r\n"
+        head = self._heads.get((method, path, token))
+        if head is None:
+            text = f"{method} {path} HTTP/1.1\r\n{self._host_header}"
+            if token:
+                text += f"Authorization: Bearer {token}\r\n"
+            head = text.encode()
+            if len(self._heads) > 64:
+                self._heads.clear()
+            self._heads[(method, path, token)] = head
         if body is not None:
-            head += f"Content-Type: application/json\r\nContent-Length: {len(body)}\r\n\r\n"
-            request = head.encode() + body
+            request = b"%sContent-Type: application/json\r\nContent-Length: %d\r\n\r\n%s" % (
+                head, len(body), body,
+            )
         else:
-            request = (head + "\r\n").encode()
+            request = head + b"\r\n"
         dropped = refused = 0
         while True:
             self._connect()
@@ -158,26 +179,39 @@ class Client:
                 continue
             return resp
 
+    def _more(self) -> int:
+        """Receives what has arrived (waiting for something) into the buffer; 0 at the end
+        of the connection."""
+        try:
+            chunk = self._sock.recv(_RECV)
+        except BlockingIOError:  # SO_RCVTIMEO ran out
+            raise socket.timeout(f"{self.url} did not answer within {self.timeout} s") from None
+        self._buf += chunk
+        return len(chunk)
+
     def _read(self, method: str) -> Response:
-        f = self._rfile
+        buf = self._buf
         try:
-            line = f.readline(_MAX_LINE)
+            while (end := buf.find(b"\r\n\r\n")) < 0:
+                if len(buf) > _MAX_HEAD:
+                    raise ConnectionError(f"{self.url}: an answer's head is too long")
+                if not self._more():
+                    if buf:
+                        raise ConnectionError(f"{self.url} closed the connection mid-answer")
+                    raise ConnectionDropped(f"{self.url} closed the connection before answering")
         except ConnectionResetError as e:
+            if buf:
+                raise ConnectionError(f"{self.url} reset the connection mid-answer") from e
             raise ConnectionDropped(str(e)) from e
-        if not line:
-            raise ConnectionDropped(f"{self.url} closed the connection before answering")
+        lines = buf[:end].decode("latin-1").split("\r\n")
+        del buf[: end + 4]
         try:
-            status = int(line.split(None, 2)[1])
+            status = int(lines[0].split(None, 2)[1])
         except (IndexError, ValueError):
-            raise ConnectionError(f"{self.url}: not an HTTP answer: {line[:80]!r}") from None
+            raise ConnectionError(f"{self.url}: not an HTTP answer: {lines[0][:80]!r}") from None
         headers: dict[str, str] = {}
-        while True:
-            h = f.readline(_MAX_LINE)
-            if h in (b"\r\n", b"\n"):
-                break
-            if not h:
-                raise ConnectionError(f"{self.url} closed the connection mid-answer")
-            name, _, value = h.decode("latin-1").partition(":")
+        for h in lines[1:]:
+            name, _, value = h.partition(":")
             headers[name.strip().lower()] = value.strip()
         if method == "HEAD" or status in (204, 304) or 100 <= status < 200:
             return Response(status, headers, b"")
@@ -185,26 +219,47 @@ class Client:
             return Response(status, headers, self._read_chunked())
         length = headers.get("content-length")
         if length is None:
-            body = f.read()  # delimited by the end of the connection
+            while self._more():  # delimited by the end of the connection
+                pass
             headers["connection"] = "close"
+            n = len(buf)
         else:
             n = int(length)
-            body = f.read(n)
-            if len(body) != n:
-                raise ConnectionError(f"{self.url} closed the connection mid-answer")
+            while len(buf) < n:
+                if not self._more():
+                    raise ConnectionError(f"{self.url} closed the connection mid-answer")
+        body = bytes(buf[:n])
+        del buf[:n]
         return Response(status, headers, body)
 
+    def _line(self) -> bytes:
+        buf = self._buf
+        while (end := buf.find(b"\r\n")) < 0:
+            if len(buf) > _MAX_HEAD or not self._more():
+                raise ConnectionError(f"{self.url}: a broken chunked answer")
+        line = bytes(buf[:end])
+        del buf[: end + 2]
+        return line
+
+    def _exactly(self, n: int) -> bytes:
+        buf = self._buf
+        while len(buf) < n:
+            if not self._more():
+                raise ConnectionError(f"{self.url} closed the connection mid-answer")
+        data = bytes(buf[:n])
+        del buf[:n]
+        return data
+
     def _read_chunked(self) -> bytes:
-        f = self._rfile
         parts = []
         while True:
-            size = int(f.readline(_MAX_LINE).split(b";", 1)[0].strip() or b"0", 16)
+            size = int(self._line().split(b";", 1)[0].strip() or b"0", 16)
             if size == 0:
-                while f.readline(_MAX_LINE) not in (b"\r\n", b"\n", b""):
+                while self._line():
                     pass  # trailers
                 return b"".join(parts)
-            parts.append(f.read(size))
-            f.readline(_MAX_LINE)
+            parts.append(self._exactly(size))
+            self._line()
 
     def call(self, method: str, path: str, payload: Any = None,
              token: str | None = None) -> Any:
@@ -222,3 +277,18 @@ def error_message(data: bytes) -> str:
         return str(loads(data)["error"])
     except Exception:
         return data[:500].decode("utf-8", "replace")
+
+
+def _kernel_timeouts(sock: socket.socket, timeout: float) -> None:
+    """Makes ``sock`` blocking with the kernel's send and receive time-outs, where the
+    platform takes them as a ``struct timeval`` (Linux, the BSDs, macOS); elsewhere it
+    keeps Python's time-out."""
+    if not sys.platform.startswith(("linux", "darwin", "freebsd")):
+        return
+    try:
+        tv = struct.pack("ll", int(timeout), int((timeout % 1) * 1e6))
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVTIMEO, tv)
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDTIMEO, tv)
+    except (OSError, struct.error):
+        return
+    sock.settimeout(None)

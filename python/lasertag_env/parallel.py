@@ -9,7 +9,6 @@ tick), so the same seed and the same actions give the same episode, bit for bit.
 
 from __future__ import annotations
 
-import math
 import os
 from typing import Any
 
@@ -73,6 +72,7 @@ class LasertagParallelEnv(ParallelEnv):
         match_settings: dict | None = None,
         team_tracker: bool = False,
         pixels_per_metre: float = 20.0,
+        packed_scans: bool = True,
     ):
         _check_int("robots", robots, 1, 8)
         _check_int("opponents", opponents, 1, 32)
@@ -106,6 +106,7 @@ class LasertagParallelEnv(ParallelEnv):
         self._owned_server: LocalServer | None = None
         self._client: Client | None = None
         self._closed = False
+        self._packed_scans = bool(packed_scans)
         self.match_id: str | None = None
         self.agents: list[str] = []
 
@@ -171,6 +172,11 @@ class LasertagParallelEnv(ParallelEnv):
         self._first_seed: int | None = seed
         self._owner: str | None = None
         self._act_path = ""
+        # The end of every act body: ticks, and packed scans when the server offers them
+        # (see _check_server).
+        self._act_tail = '},"ticks":%d%s}' % (
+            ticks_per_step, ',"scans":"hex"' if self._packed_scans else ""
+        )
         self.tick = 0
         self.steps = 0
         self.last_events: list[dict] = []
@@ -290,12 +296,13 @@ class LasertagParallelEnv(ParallelEnv):
         else:
             frac = min(self.steps / self.max_steps, 1.0)
 
-        encode = self.layout.encode
         raw_obs = answer["observations"]
+        raws = [raw_obs[agent] for agent in self.possible_agents]
+        vectors = self.layout.encode_all(raws, frac)
         observations, infos = {}, {}
         for i, agent in enumerate(self.possible_agents):
-            raw = raw_obs[agent]
-            observations[agent] = encode(raw, i, frac)
+            raw = raws[i]
+            observations[agent] = vectors[i]
             info = {"tick": tick, "observation": raw, "tags": tags[agent]}
             if finished:
                 info["winner"] = answer["winner"]
@@ -327,7 +334,7 @@ class LasertagParallelEnv(ParallelEnv):
                 f'"{agent}":{{"forward":{forward!r},"turn":{turn!r},'
                 f'"tag":{"true" if tag > 0.5 else "false"}}}'
             )
-        return ('{"commands":{' + ",".join(parts) + '},"ticks":%d}' % self.ticks_per_step).encode()
+        return ('{"commands":{' + ",".join(parts) + self._act_tail).encode()
 
     # -- rendering, state and closing ------------------------------------------------------
 
@@ -403,6 +410,10 @@ class LasertagParallelEnv(ParallelEnv):
                 f"the server at {self._client.url} has no POST /api/matches/{{id}}/act: it is "
                 "older than this package; rebuild it (cargo build --release)"
             )
+        # Packed scans (millimetres in hex) are an opt-in of act that older servers lack;
+        # the observations are the same either way (observation.py).
+        act = doc.get("components", {}).get("schemas", {}).get("ActRequest", {})
+        self._packed_scans = self._packed_scans and "scans" in act.get("properties", {})
 
     def _fetch_map(self, name: str) -> dict:
         try:
@@ -420,9 +431,12 @@ def _unpack(a) -> tuple[float, float, float]:
     forward, turn, tag = a.tolist() if isinstance(a, np.ndarray) else a
     forward, turn, tag = float(forward), float(turn), float(tag)
     # Out-of-range values are clipped rather than refused (policies' outputs often stray);
-    # NaN, which would make the server refuse the whole step, stands for 0.
-    forward = 0.0 if math.isnan(forward) else min(1.0, max(-1.0, forward))
-    turn = 0.0 if math.isnan(turn) else min(1.0, max(-1.0, turn))
+    # NaN (no comparison holds), which would make the server refuse the whole step, stands
+    # for 0.
+    if not -1.0 <= forward <= 1.0:
+        forward = 1.0 if forward > 1.0 else -1.0 if forward < -1.0 else 0.0
+    if not -1.0 <= turn <= 1.0:
+        turn = 1.0 if turn > 1.0 else -1.0 if turn < -1.0 else 0.0
     return forward, turn, tag
 
 
@@ -470,7 +484,9 @@ def parallel_env(
       ``rewards`` (weights, see ``DEFAULT_REWARDS``), ``match_settings`` (further fields of
       ``POST /api/matches``: ``localisation``, ``tracker``, ``radio``, …),
       ``team_tracker`` (True: the server's team tracker at its default size rather than
-      its minimum; the observations are the same), ``pixels_per_metre`` (rendering).
+      its minimum; the observations are the same), ``pixels_per_metre`` (rendering),
+      ``packed_scans`` (False: the server writes the scans as JSON numbers rather than
+      hex; the observations are the same, bit for bit, and slower to get).
     """
     return LasertagParallelEnv(
         server=server, map=map, robots=robots, opponents=opponents, seed=seed,

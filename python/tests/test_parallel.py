@@ -82,6 +82,28 @@ def test_team_tracker_does_not_change_observations(make_env):
     assert trace == run_episode(full, 3, hunter)
 
 
+def test_packed_scans_change_nothing(make_env):
+    # The server's scans in hex (the default when it offers them) and as JSON numbers give
+    # the same vectors and the same raw observations in infos, bit for bit.
+    packed = make_env(max_steps=150)
+    numbers = make_env(max_steps=150, packed_scans=False)
+    assert packed._packed_scans and b'"scans":"hex"' in packed._act_body({})
+    assert not numbers._packed_scans and b"scans" not in numbers._act_body({})
+    for env in (packed, numbers):
+        env.reset(seed=3)
+    steps = 0
+    while packed.agents:
+        actions = {a: packed.action_space(a).sample() for a in packed.agents}
+        a = packed.step(actions)
+        b = numbers.step(actions)
+        for agent in packed.possible_agents:
+            assert a[0][agent].tobytes() == b[0][agent].tobytes()
+            assert a[4][agent]["observation"] == b[4][agent]["observation"]
+        assert a[1:4] == b[1:4]
+        steps += 1
+    assert steps == 150 and not numbers.agents
+
+
 def test_different_seeds_differ(make_env):
     env = make_env(max_steps=20, placement="random")
     t1 = run_episode(env, 1, hunter)

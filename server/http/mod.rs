@@ -83,7 +83,6 @@ pub fn app(registry: Arc<Registry>, web_dir: PathBuf) -> Router {
             "/matches/{id}/robots/{rid}/observation",
             get(robots::observation),
         )
-        .route("/matches/{id}/act", post(robots::act))
         .route("/matches/{id}/players", post(handlers::join))
         .route("/replays", get(replays::list))
         .route("/replays/{id}", get(replays::detail))
@@ -96,6 +95,16 @@ pub fn app(registry: Arc<Registry>, web_dir: PathBuf) -> Router {
         .fallback(not_found)
         .method_not_allowed_fallback(method_not_allowed);
     let static_files = ServeDir::new(web_dir).not_found_service(not_found.into_service());
+    // The environment step, a research client's hot path: the same body and request
+    // limits, but no compression (a few kilobytes, on loopback as a rule) and no trace span.
+    let act = Router::new()
+        .route("/api/matches/{id}/act", post(robots::act))
+        .method_not_allowed_fallback(method_not_allowed)
+        .layer(DefaultBodyLimit::max(max_body))
+        .layer(axum::middleware::from_fn_with_state(
+            state.clone(),
+            limits::rate_limit,
+        ));
     Router::new()
         .nest("/api", api)
         .route("/ws/matches/{id}", get(ws::upgrade))
@@ -112,6 +121,7 @@ pub fn app(registry: Arc<Registry>, web_dir: PathBuf) -> Router {
             limits::rate_limit,
         ))
         .layer(TraceLayer::new_for_http())
+        .merge(act)
         .with_state(state)
 }
 

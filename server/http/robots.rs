@@ -3,7 +3,8 @@
 
 use axum::Json;
 use axum::extract::{Path, State};
-use axum::http::StatusCode;
+use axum::http::{StatusCode, header};
+use axum::response::{IntoResponse, Response};
 
 use crate::game::Sight;
 use crate::http::auth::Bearer;
@@ -76,8 +77,20 @@ pub async fn act(
     bearer: Bearer,
     Path(id): Path<String>,
     JsonBody(body): JsonBody<ActRequest>,
-) -> Result<Json<ActResponse>, ApiError> {
+) -> Result<Response, ApiError> {
     let handle = owned(&state, &bearer, &id)?;
+    let scans = body.scans;
     let (orders, ticks) = body.orders()?;
-    Ok(Json(handle.act(orders, ticks).await?))
+    let mut answer = handle.act(orders, ticks).await?;
+    answer.encode_scans(scans);
+    // Written into a buffer of about the answer's size (axum's `Json` starts at 128 bytes
+    // and grows, copying, to the kilobyte or so an observation takes).
+    let mut body = Vec::with_capacity(512 + 1536 * answer.observations.len());
+    serde_json::to_writer(&mut body, &answer).map_err(|e| {
+        ApiError::new(
+            StatusCode::INTERNAL_SERVER_ERROR,
+            format!("writing the answer: {e}"),
+        )
+    })?;
+    Ok(([(header::CONTENT_TYPE, "application/json")], body).into_response())
 }

@@ -4,7 +4,10 @@
 //!
 //! An observation is built from `World::observation`, which has no access path to the
 //! referee's truth; numbers are rounded as in the state (a millimetre, a ten-thousandth of a
-//! radian) so that a client parses short JSON.
+//! radian) so that a client parses short JSON. An `act` may ask for its scans packed
+//! (`"scans": "hex"`): the same millimetres as little-endian `u16`s in one hexadecimal
+//! string per scan, which a client decodes in one call (writing and parsing 181 decimal
+//! numbers a robot is most of the answer's cost on both sides).
 
 use std::collections::BTreeMap;
 
@@ -112,6 +115,22 @@ pub struct ActRequest {
     #[serde(default = "one", deserialize_with = "schema::int")]
     #[schema(minimum = 1, maximum = 100_000)]
     pub ticks: i64,
+    /// How the answer writes each observation's `scan`: `numbers` (metres, the default) or
+    /// `hex` (see [`Scan::Hex`]).
+    #[serde(default)]
+    #[schema(inline)]
+    pub scans: ScanEncoding,
+}
+
+/// How an `act` answer writes the observations' scans.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Deserialize, ToSchema)]
+#[serde(rename_all = "lowercase")]
+pub enum ScanEncoding {
+    /// Ranges in metres, as numbers (the observation's usual shape).
+    #[default]
+    Numbers,
+    /// Each scan one string: see [`Scan::Hex`].
+    Hex,
 }
 
 fn one() -> i64 {
@@ -142,8 +161,10 @@ impl ActRequest {
 #[derive(Debug, Clone, Serialize, ToSchema)]
 pub struct Observation {
     pub tick: u64,
-    /// Laser ranges (m) across the field of view, right to left; empty while frozen.
-    pub scan: Vec<f64>,
+    /// Laser ranges (m) across the field of view, right to left; empty while frozen. With
+    /// `act`'s `"scans": "hex"`, one string (see [`Scan::Hex`]).
+    #[schema(schema_with = scan_schema)]
+    pub scan: Scan,
     /// Anonymous sightings of opponents, relative to the robot.
     pub detections: Vec<super::DetectionDto>,
     /// Landmarks recognised this tick (their ids are indices into the map's `landmarks`).
@@ -159,6 +180,62 @@ pub struct Observation {
     pub tag_ready: bool,
     /// What the radio delivered of each teammate.
     pub teammates: Vec<TeammateDto>,
+}
+
+/// A scan on the wire.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+#[serde(untagged)]
+pub enum Scan {
+    /// Ranges in metres, rounded to the millimetre.
+    Metres(Vec<f64>),
+    /// The same ranges in millimetres as little-endian unsigned 16-bit integers (saturating
+    /// at 65.535 m), their bytes in hexadecimal, 4 digits a beam (`"3412 mm"` is `"540d"`):
+    /// in Python, `numpy.frombuffer(bytes.fromhex(s), "<u2") / 1000.0` gives the numbers'
+    /// values, bit for bit.
+    Hex(String),
+}
+
+impl Scan {
+    /// The packed form of the same ranges.
+    pub fn pack(&self) -> Scan {
+        const DIGITS: &[u8; 16] = b"0123456789abcdef";
+        match self {
+            Scan::Metres(ranges) => {
+                let mut text = Vec::with_capacity(4 * ranges.len());
+                for r in ranges {
+                    // `r` is a whole number of millimetres already (see `mm`).
+                    let [lo, hi] = ((r * 1000.0).round().clamp(0.0, u16::MAX as f64) as u16)
+                        .to_le_bytes()
+                        .map(usize::from);
+                    text.extend_from_slice(&[
+                        DIGITS[lo >> 4],
+                        DIGITS[lo & 15],
+                        DIGITS[hi >> 4],
+                        DIGITS[hi & 15],
+                    ]);
+                }
+                // Hex digits are ASCII.
+                Scan::Hex(String::from_utf8(text).unwrap_or_default())
+            }
+            packed => packed.clone(),
+        }
+    }
+}
+
+fn scan_schema() -> utoipa::openapi::RefOr<utoipa::openapi::schema::Schema> {
+    use utoipa::openapi::schema::{ArrayBuilder, ObjectBuilder, OneOfBuilder, Type};
+    OneOfBuilder::new()
+        .item(ArrayBuilder::new().items(ObjectBuilder::new().schema_type(Type::Number)))
+        .item(
+            ObjectBuilder::new()
+                .schema_type(Type::String)
+                .pattern(Some("^([0-9a-f]{4})*$"))
+                .description(Some(
+                    "With `\"scans\": \"hex\"`: millimetres as little-endian u16, in hex.",
+                )),
+        )
+        .description(Some("Laser ranges (m), right to left; empty while frozen."))
+        .into()
 }
 
 #[derive(Debug, Clone, Serialize, ToSchema)]
@@ -190,7 +267,7 @@ fn pose(p: Pose) -> PoseDto {
 pub fn observation(o: &RobotObservation) -> Observation {
     Observation {
         tick: o.tick,
-        scan: o.scan.iter().map(|r| mm(*r)).collect(),
+        scan: Scan::Metres(o.scan.iter().map(|r| mm(*r)).collect()),
         detections: o
             .detections
             .iter()
@@ -239,6 +316,17 @@ pub struct ActResponse {
     pub events: Vec<EventDto>,
 }
 
+impl ActResponse {
+    /// Writes every observation's scan as `encoding` asks.
+    pub fn encode_scans(&mut self, encoding: ScanEncoding) {
+        if encoding == ScanEncoding::Hex {
+            for o in self.observations.values_mut() {
+                o.scan = o.scan.pack();
+            }
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -271,6 +359,18 @@ mod tests {
         assert_eq!(e.field, "body");
         let e = command(r#"{"speed": 1}"#).unwrap_err();
         assert!(e.message.contains("unknown field `speed`"), "{e:?}");
+    }
+
+    #[test]
+    fn a_packed_scan_is_the_same_millimetres_in_hex() {
+        // 3.412 m is 3412 mm = 0x0d54; 0.001 m is 1 mm; past 65.535 m saturates.
+        let packed = Scan::Metres(vec![3.412, 0.001, 70.0, 0.0]).pack();
+        assert_eq!(packed, Scan::Hex("540d0100ffff0000".to_owned()));
+        assert_eq!(Scan::Metres(vec![]).pack(), Scan::Hex(String::new()));
+        let act: ActRequest = super::super::parse(br#"{"scans": "hex"}"#).unwrap();
+        assert_eq!(act.scans, ScanEncoding::Hex);
+        let bad = super::super::parse::<ActRequest>(br#"{"scans": "base64"}"#).unwrap_err();
+        assert_eq!(bad.field, "scans");
     }
 
     #[test]

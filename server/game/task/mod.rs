@@ -1,7 +1,8 @@
 //! The task that owns one match's [`World`].
 //!
 //! Besides answering requests and ticking, the task publishes a [`Frame`] after every tick
-//! (and after anything else that changes what viewers see) on a `watch` channel, and keeps
+//! (a manual match nobody watches: when its state is asked for; see `publish_stepped`) and
+//! after anything else that changes what viewers see, on a `watch` channel, and keeps
 //! the people who play: their tokens, which connection is theirs, and how long a dropped
 //! player has to come back (a freed slot a person took from a bot goes back to the bot).
 //!
@@ -43,8 +44,11 @@ use lasertag_core::world::{MatchStatus, World};
 const OVERRUN_WINDOW: usize = 200;
 const OVERRUN_LIMIT: usize = 100;
 
-/// Ticks a manual step runs before it lets other requests in.
+/// Ticks a manual step runs before it publishes a frame and lets other requests in, and the
+/// time after which it lets them in sooner (it shares the runtime with the requests; see
+/// `spawn_match`).
 const STEP_CHUNK: u64 = 250;
+const STEP_SLICE: Duration = Duration::from_millis(2);
 /// Tick compute times kept for the stats percentiles.
 const TICK_WINDOW: usize = 4096;
 /// How often the task looks for players whose connection has gone.
@@ -52,6 +56,8 @@ const HOUSEKEEPING: Duration = Duration::from_millis(100);
 
 struct PendingStep {
     remaining: u64,
+    /// Ticks run since the last frame (one is published every `STEP_CHUNK`).
+    unpublished: u64,
     answer: StepAnswer,
 }
 
@@ -132,9 +138,15 @@ pub fn spawn_match(
         spectators: Arc::new(AtomicUsize::new(0)),
     };
     let span = tracing::info_span!("match", id = %meta.id);
-    let handle = match_runtime()
-        .cloned()
-        .unwrap_or_else(tokio::runtime::Handle::current);
+    // A manual-clock match computes only when asked, so it runs on the runtime of the
+    // requests that drive it: an `act` is then answered without waking a thread of another
+    // runtime (a long step yields every `STEP_SLICE`).
+    let handle = match meta.clock {
+        Clock::Manual => tokio::runtime::Handle::try_current().ok(),
+        Clock::Realtime => None,
+    }
+    .or_else(|| match_runtime().cloned())
+    .unwrap_or_else(tokio::runtime::Handle::current);
     let kind = protocol::planner_name(world.team.kind());
     let clock = match meta.clock {
         Clock::Realtime => "realtime",
@@ -163,6 +175,7 @@ pub fn spawn_match(
         robot_tags: 0,
         last_belief_tick: 0,
         frames_published: 1,
+        frame_stale: false,
         tick_us: Vec::with_capacity(TICK_WINDOW),
         tick_next: 0,
         late_ticks: 0,
@@ -176,8 +189,8 @@ pub fn spawn_match(
     (tx, hub)
 }
 
-/// The runtime match tasks run on: threads of their own, so that a tick is never queued
-/// behind the hundreds of connection tasks (serialising and sending snapshots) of the
+/// The runtime real-time match tasks run on: threads of their own, so that a tick is never
+/// queued behind the hundreds of connection tasks (serialising and sending snapshots) of the
 /// server's runtime. Ticks are short and rare, so these threads are mostly asleep and the OS
 /// wakes them promptly. `None` (then the current runtime is used) if it cannot be built.
 fn match_runtime() -> Option<&'static tokio::runtime::Handle> {
@@ -227,6 +240,8 @@ struct MatchTask {
     robot_tags: u32,
     last_belief_tick: u64,
     frames_published: u64,
+    /// Whether the world has changed since the last frame (see `publish_stepped`).
+    frame_stale: bool,
     /// Ring buffer of tick compute times (µs).
     tick_us: Vec<u32>,
     tick_next: usize,
@@ -270,7 +285,7 @@ impl MatchTask {
                     if !matches!(req, Request::Input { .. }) {
                         self.last_activity = Instant::now();
                     }
-                    let changes_seats = !matches!(req, Request::Input { .. } | Request::Summary(_) | Request::State { .. } | Request::Belief { .. } | Request::Events { .. } | Request::Stats(_) | Request::Observation { .. });
+                    let changes_seats = !matches!(req, Request::Input { .. } | Request::Summary(_) | Request::State { .. } | Request::Belief { .. } | Request::Events { .. } | Request::Stats(_) | Request::Observation { .. } | Request::Act { .. });
                     self.answer(req, realtime, &mut pending);
                     // Joins, seats and commands change what the lobby shows.
                     if changes_seats {
@@ -301,18 +316,30 @@ impl MatchTask {
                 }
                 _ = std::future::ready(()), if pending.is_some() => {
                     if let Some(mut step) = pending.take() {
-                        let n = step.remaining.min(STEP_CHUNK);
-                        for _ in 0..n {
+                        let n = step.remaining.min(STEP_CHUNK - step.unpublished);
+                        let slice = Instant::now();
+                        let mut done = 0;
+                        while done < n {
                             let t = Instant::now();
                             self.step();
                             self.record(t.elapsed());
-                            if self.world.status == MatchStatus::Finished {
+                            done += 1;
+                            let slice_over = slice.elapsed() >= STEP_SLICE;
+                            if self.world.status == MatchStatus::Finished || slice_over {
                                 break;
                             }
                         }
-                        self.publish();
-                        step.remaining -= n;
-                        if step.remaining == 0 || self.world.status == MatchStatus::Finished {
+                        step.remaining -= done;
+                        step.unpublished += done;
+                        let over = step.remaining == 0 || self.world.status == MatchStatus::Finished;
+                        if over || step.unpublished == STEP_CHUNK {
+                            self.publish_stepped();
+                            step.unpublished = 0;
+                        } else {
+                            // A request let in before the next slice sees the world now.
+                            self.frame_stale = true;
+                        }
+                        if over {
                             self.answer_step(step.answer);
                         } else {
                             pending = Some(step);
@@ -321,6 +348,7 @@ impl MatchTask {
                     }
                 }
                 _ = housekeeping.tick() => {
+                    self.refresh_frame();
                     let why = self.housekeeping();
                     self.archive();
                     self.store_flush(false);
@@ -378,6 +406,7 @@ impl MatchTask {
                 let _ = reply.send(protocol::summary(&self.world, &self.meta));
             }
             Request::State { sight, reply } => {
+                self.refresh_frame();
                 let _ = reply.send(self.state(sight));
             }
             Request::Belief {
@@ -429,6 +458,7 @@ impl MatchTask {
                 } else {
                     *pending = Some(PendingStep {
                         remaining: ticks,
+                        unpublished: 0,
                         answer: StepAnswer::State(reply),
                     });
                 }
@@ -533,6 +563,7 @@ impl MatchTask {
         self.robot_tags = frame.robot_tags;
         self.published_seq = frame.last_seq;
         self.frames_published += 1;
+        self.frame_stale = false;
         let frame = Arc::new(frame);
         // `send_replace` never fails nor waits, whoever (if anyone) is watching.
         self.frames.send_replace(frame.clone());

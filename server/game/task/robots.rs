@@ -1,13 +1,15 @@
 //! Robots driven from outside: orders, observations and environment steps, answered by the
 //! match task (the one place that mutates the world).
 
+use std::sync::atomic::Ordering;
+
 use tokio::sync::oneshot;
 
 use super::{MatchTask, PendingStep, StepAnswer};
 use crate::game::{MatchError, Sight};
 use crate::protocol::robots::{self, ActResponse, Observation};
 use lasertag_core::sim::AgentId;
-use lasertag_core::world::{InputError, RobotOrder, RobotOrderError, WorldInput};
+use lasertag_core::world::{InputError, MatchStatus, RobotOrder, RobotOrderError, WorldInput};
 
 impl MatchTask {
     /// Robot `robot`'s new order, from the next tick on.
@@ -73,14 +75,39 @@ impl MatchTask {
         let since = self.world.events().len() as u64;
         *pending = Some(PendingStep {
             remaining: ticks,
+            unpublished: 0,
             answer: StepAnswer::Act { since, reply },
         });
     }
 
+    /// After ticks of a manual step: publishes the frame when someone may be watching (a
+    /// spectator, a player, a held-back view) or the match has finished; otherwise only
+    /// notes that the last frame is behind. An environment stepping thousands of times a
+    /// second has nobody watching, and a frame costs about as much as an observation; the
+    /// state (`refresh_frame`) and housekeeping catch up.
+    pub(super) fn publish_stepped(&mut self) {
+        let watched = self.held.is_some()
+            || self.spectators.load(Ordering::Relaxed) > 0
+            || self.players.iter().any(Option::is_some);
+        if watched || self.world.status == MatchStatus::Finished {
+            self.publish();
+        } else {
+            self.frame_stale = true;
+        }
+    }
+
+    /// Publishes the frame of the world now if the last one is behind it.
+    pub(super) fn refresh_frame(&mut self) {
+        if self.frame_stale {
+            self.publish();
+        }
+    }
+
     /// Sends a finished manual step its answer.
-    pub(super) fn answer_step(&self, answer: StepAnswer) {
+    pub(super) fn answer_step(&mut self, answer: StepAnswer) {
         match answer {
             StepAnswer::State(reply) => {
+                self.refresh_frame();
                 let _ = reply.send(Ok(self.state(Sight::Live)));
             }
             StepAnswer::Act { since, reply } => {
