@@ -5,7 +5,8 @@
 //! - edge: [`maps`] (map files), [`schema`] (hand-written OpenAPI pieces and lenient number
 //!   parsing), [`protocol`] (every JSON shape of the API, and the frames a match publishes);
 //! - shell: [`game`] (one tokio task per match), [`http`] (the axum router), [`config`]
-//!   (limits), [`access`] (owners, their tokens, per-client keys), [`metrics`] (Prometheus), `main.rs` (CLI; its `experiment` command runs
+//!   (limits), [`access`] (owners, their tokens, per-client keys), [`metrics`] (Prometheus),
+//!   `agones` (with the `agones` feature: the Agones SDK lifecycle), `main.rs` (CLI; its `experiment` command runs
 //!   `lasertag-lab`).
 //!
 //! Invariants: a match is a pure function of (map, settings, seed, inputs by tick); robots'
@@ -14,6 +15,8 @@
 
 pub mod access;
 pub mod admission;
+#[cfg(feature = "agones")]
+pub mod agones;
 pub mod config;
 pub mod game;
 pub mod http;

@@ -208,6 +208,13 @@ async fn serve(args: ServeArgs) -> Result<(), String> {
         max_connections: registry.config.max_connections,
         header_read_timeout: registry.config.header_read_timeout,
     };
+    // Under Agones, Ready once listening; Health, the matches counter and Allocated after.
+    #[cfg(feature = "agones")]
+    let sidecar = lasertag::agones::Sidecar::from_env();
+    #[cfg(feature = "agones")]
+    if let Some(sidecar) = &sidecar {
+        tokio::spawn(lasertag::agones::run(registry.clone(), sidecar.clone()));
+    }
     let server = lasertag::http::serve(listener, app, limits, shutdown_signal(registry.clone()));
     tokio::pin!(server);
     // Before a signal only an accept loop that failed ends the server. After one, the server
@@ -246,6 +253,14 @@ async fn serve(args: ServeArgs) -> Result<(), String> {
     };
     if !matches!(flushed, Ok(Ok(()))) {
         tracing::warn!("the history's last writes may be lost");
+    }
+    // Drained: hand the game server back to Agones.
+    #[cfg(feature = "agones")]
+    if let Some(sidecar) = &sidecar {
+        match sidecar.shutdown().await {
+            Ok(()) => tracing::info!("Agones: shutdown"),
+            Err(e) => tracing::warn!(error = %e, "Agones: shutdown"),
+        }
     }
     match drained {
         Ok(r) => {

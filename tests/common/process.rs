@@ -24,11 +24,17 @@ impl Drop for Server {
 impl Server {
     /// `lasertag serve --addr 127.0.0.1:0` with `args` after it.
     pub fn start(args: &[&str]) -> Server {
+        Server::start_with_env(args, &[])
+    }
+
+    /// [`Server::start`] with `env` added to the child's environment.
+    pub fn start_with_env(args: &[&str], env: &[(&str, &str)]) -> Server {
         let root = env!("CARGO_MANIFEST_DIR");
         let mut child = Command::new(env!("CARGO_BIN_EXE_lasertag"))
             .current_dir(root)
             .args(["serve", "--addr", "127.0.0.1:0"])
             .args(args)
+            .envs(env.iter().copied())
             .env("RUST_LOG", "info")
             .env("NO_COLOR", "1")
             .stdout(Stdio::piped())
