@@ -16,8 +16,9 @@ use crate::error::LabError;
 use std::path::Path;
 use std::sync::Arc;
 
+use crate::part::Params;
 use crate::plot::{self, Series};
-use crate::run_all;
+use crate::study::{MapStamp, Study, group_from_params, group_to_params};
 use crate::tracking::{self, Parts, Track};
 use lasertag_core::bots::BotKind;
 use lasertag_core::planner::PlannerKind;
@@ -191,36 +192,96 @@ fn normal_cdf(z: f64) -> f64 {
     0.5 * (1.0 + if x >= 0.0 { erf } else { -erf })
 }
 
-/// Runs every setting on `maps` (name, arena) and writes the files into `out`. Returns the
-/// summary table as text.
-pub fn run(
-    maps: &[(String, Arc<Arena>)],
-    cfg: &CaptureConfig,
-    out: &Path,
-) -> Result<String, LabError> {
-    crate::error::create_dir_all(out)?;
-    let bots = [BotKind::Wander, BotKind::Evade];
-    let planners = [PlannerKind::Coordinated, PlannerKind::Baseline];
-    let mut settings = Vec::new();
-    for map in 0..maps.len() {
-        for &bot in &bots {
-            for &planner in &planners {
-                settings.push(Setting { map, bot, planner });
+const BOTS: [BotKind; 2] = [BotKind::Wander, BotKind::Evade];
+const PLANNERS: [PlannerKind; 2] = [PlannerKind::Coordinated, PlannerKind::Baseline];
+
+/// The study: the configuration and the maps it runs on, in order. Run `j` is setting
+/// `j / runs` (map, then bot, then planner) with seed `seed + j % runs`.
+#[derive(Debug, Clone)]
+pub struct Capture {
+    pub cfg: CaptureConfig,
+    pub maps: Vec<MapStamp>,
+}
+
+/// What one run measured: the capture time (`None`: not within the limit) and the GOSPA
+/// track until then.
+pub type Run = (Option<f64>, Track);
+
+impl Capture {
+    fn settings(&self) -> Vec<Setting> {
+        let mut settings = Vec::new();
+        for map in 0..self.maps.len() {
+            for bot in BOTS {
+                for planner in PLANNERS {
+                    settings.push(Setting { map, bot, planner });
+                }
             }
         }
+        settings
     }
-    let jobs = settings.len() * cfg.runs;
-    let results = run_all("capture runs", jobs, |j| {
-        let s = settings[j / cfg.runs];
-        one_run(
-            maps[s.map].1.clone(),
-            s,
-            cfg.seed + (j % cfg.runs) as u64,
-            cfg,
-        )
-    });
-    let results: Vec<(Option<f64>, Track)> = results.into_iter().collect::<Result<_, _>>()?;
-    let (results, tracks): (Vec<Option<f64>>, Vec<Track>) = results.into_iter().unzip();
+
+    /// Run `j` of the study; `arenas` are the study's maps, in its order.
+    pub fn run_one(&self, arenas: &[Arc<Arena>], j: usize) -> Result<Run, LabError> {
+        let cfg = &self.cfg;
+        let s = self.settings()[j / cfg.runs];
+        let arena = arenas.get(s.map).ok_or_else(|| {
+            LabError::Scenario(format!("run {j} is on map {}, which is not loaded", s.map))
+        })?;
+        one_run(arena.clone(), s, cfg.seed + (j % cfg.runs) as u64, cfg)
+    }
+}
+
+impl Study for Capture {
+    const NAME: &'static str = "capture";
+    const LABEL: &'static str = "capture runs";
+    type Run = Run;
+    /// The summary table.
+    type Report = String;
+
+    fn params(&self) -> Params {
+        let c = &self.cfg;
+        let mut p = Params::default();
+        p.set("runs", c.runs);
+        p.set("opponents", c.opponents);
+        p.set("seed", c.seed);
+        p.set("time_limit_s", c.time_limit_s);
+        p.set("localisation", c.localisation);
+        group_to_params(&c.coordination, "coordination", &mut p);
+        group_to_params(&c.radio, "radio", &mut p);
+        MapStamp::to_params(&self.maps, &mut p);
+        p
+    }
+
+    fn from_params(p: &Params) -> Result<Capture, String> {
+        Ok(Capture {
+            cfg: CaptureConfig {
+                runs: p.parse("runs")?,
+                opponents: p.parse("opponents")?,
+                seed: p.parse("seed")?,
+                time_limit_s: p.parse("time_limit_s")?,
+                localisation: p.parse("localisation")?,
+                coordination: group_from_params(p, "coordination")?,
+                radio: group_from_params(p, "radio")?,
+            },
+            maps: MapStamp::from_params(p)?,
+        })
+    }
+
+    fn runs(&self) -> usize {
+        self.settings().len() * self.cfg.runs
+    }
+
+    /// Writes the files into `out`; returns the summary table as text.
+    fn write(&self, runs: Vec<Run>, out: &Path) -> Result<String, LabError> {
+        write(self, runs, out)
+    }
+}
+
+fn write(study: &Capture, runs: Vec<Run>, out: &Path) -> Result<String, LabError> {
+    let cfg = &study.cfg;
+    let settings = study.settings();
+    let (bots, planners) = (BOTS, PLANNERS);
+    let (results, tracks): (Vec<Option<f64>>, Vec<Track>) = runs.into_iter().unzip();
     let limit = cfg.time_limit_s as f64;
     let mut csv = String::from("map,bot,planner,seed,captured,time_s\n");
     let mut summary = format!(
@@ -250,7 +311,7 @@ pub fn run(
         for (i, t) in times.iter().enumerate() {
             csv.push_str(&format!(
                 "{},{},{},{},{},{}\n",
-                maps[s.map].0,
+                study.maps[s.map].name,
                 bot_name(s.bot),
                 planner_name(s.planner),
                 cfg.seed + i as u64,
@@ -261,7 +322,7 @@ pub fn run(
         for (i, t) in tracks[k * cfg.runs..(k + 1) * cfg.runs].iter().enumerate() {
             gospa_csv.push_str(&format!(
                 "{},{},{},{},{}\n",
-                maps[s.map].0,
+                study.maps[s.map].name,
                 bot_name(s.bot),
                 planner_name(s.planner),
                 cfg.seed + i as u64,
@@ -269,7 +330,7 @@ pub fn run(
             ));
         }
     }
-    for (map, (map_name, _)) in maps.iter().enumerate() {
+    for (map, MapStamp { name: map_name, .. }) in study.maps.iter().enumerate() {
         for &bot in &bots {
             let idx = |p: PlannerKind| {
                 settings

@@ -1,14 +1,25 @@
 //! The `experiment` commands: their flags (clap), checks and printed tables. The `lasertag`
 //! binary mounts [`Experiment`] as `lasertag experiment …` and hands over a map loader, so
-//! this crate never reads JSON.
+//! this crate never reads JSON. Every experiment takes `--shard INDEX/COUNT`
+//! ([`ShardArgs`], declared once); `merge` joins the parts and prints what the unsharded
+//! command prints.
 
-use crate::error::LabError;
+use crate::error::{LabError, MergeError};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use clap::Subcommand;
 use lasertag_core::settings::{FieldType, Group, Value};
 use lasertag_core::sim::arena::Arena;
+
+use crate::capture::Capture;
+use crate::filters::Filters;
+use crate::localisation::Localisation;
+use crate::merge;
+use crate::reacquire::Reacquire;
+use crate::shard::ShardArgs;
+use crate::study::{self, MapStamp, Outcome, Study};
+use crate::uncertainty::Uncertainty;
 
 /// Reads every map of a directory into arenas (the binary's map loader).
 pub type LoadMaps = fn(&Path) -> Result<Vec<Arc<Arena>>, LabError>;
@@ -38,6 +49,8 @@ pub enum Experiment {
         /// Where to write filters.csv and filters.svg.
         #[arg(long, default_value = "out/filters")]
         out: PathBuf,
+        #[command(flatten)]
+        shard: ShardArgs,
     },
     /// Fig. 5: capture time of `coordinated` vs `baseline` on `office` and `warehouse`.
     Capture {
@@ -62,6 +75,8 @@ pub enum Experiment {
         /// Where to write the CSV files and plots.
         #[arg(long, default_value = "out/capture")]
         out: PathBuf,
+        #[command(flatten)]
+        shard: ShardArgs,
         /// Override a weight of the coordinated planner, e.g. `--set travel_weight=0.02`
         /// (repeatable; the names and ranges of the API's `coordination` object, listed in
         /// docs/settings.md).
@@ -99,6 +114,8 @@ pub enum Experiment {
         /// Where to write the CSV files and the plot.
         #[arg(long, default_value = "out/reacquire")]
         out: PathBuf,
+        #[command(flatten)]
+        shard: ShardArgs,
     },
     /// The robots' localisation error over time on every map: with landmarks,
     /// without them, and odometry alone.
@@ -122,6 +139,8 @@ pub enum Experiment {
         /// Where to write the CSV files and plots.
         #[arg(long, default_value = "out/localisation")]
         out: PathBuf,
+        #[command(flatten)]
+        shard: ShardArgs,
     },
     /// Uncertainty-aware motion on and off, for robots that localise from
     /// landmarks and odometry alone (Fabiani & Latombe's setting).
@@ -152,6 +171,19 @@ pub enum Experiment {
         maps: PathBuf,
         /// Where to write the CSV files and plots.
         #[arg(long, default_value = "out/uncertainty")]
+        out: PathBuf,
+        #[command(flatten)]
+        shard: ShardArgs,
+    },
+    /// Join the parts of a study run in shards (`--shard INDEX/COUNT`) into the CSV files
+    /// and plots one unsharded run writes, byte for byte.
+    Merge {
+        /// Part files, or directories of them (every `*.part` file in each), such as
+        /// `out/capture/parts`.
+        #[arg(required = true, value_name = "PARTS")]
+        parts: Vec<PathBuf>,
+        /// Where to write the CSV files and plots.
+        #[arg(long)]
         out: PathBuf,
     },
 }
@@ -188,6 +220,15 @@ fn one_map(load: LoadMaps, maps: &Path, name: &str) -> Result<Arc<Arena>, LabErr
         })
 }
 
+/// What an experiment command prints once its files are written.
+enum Report {
+    Capture(String),
+    Reacquire(Vec<crate::reacquire::Summary>),
+    Localisation(Vec<crate::localisation::Curve>),
+    Uncertainty(String),
+    Filters(crate::filters::FiltersResult),
+}
+
 /// Runs one experiment command, printing its table; `load` reads a directory of maps.
 pub fn run(e: Experiment, load: LoadMaps) -> Result<(), LabError> {
     match e {
@@ -203,6 +244,7 @@ pub fn run(e: Experiment, load: LoadMaps) -> Result<(), LabError> {
             localisation,
             radio_latency,
             radio_loss,
+            shard: ShardArgs { shard },
         } => {
             if runs == 0 || time_limit == 0 {
                 return Err(LabError::Arguments(
@@ -234,24 +276,21 @@ pub fn run(e: Experiment, load: LoadMaps) -> Result<(), LabError> {
             radio
                 .set("loss", radio_loss.to_value())
                 .map_err(|e| LabError::Arguments(format!("--radio-loss: {}", e.message)))?;
-            let cfg = crate::capture::CaptureConfig {
-                runs,
-                opponents,
-                seed,
-                time_limit_s: time_limit,
-                coordination,
-                localisation,
-                radio,
+            let arenas: Vec<Arc<Arena>> = chosen.into_iter().map(|(_, a)| a).collect();
+            let study = Capture {
+                cfg: crate::capture::CaptureConfig {
+                    runs,
+                    opponents,
+                    seed,
+                    time_limit_s: time_limit,
+                    coordination,
+                    localisation,
+                    radio,
+                },
+                maps: MapStamp::all(&arenas),
             };
-            let table = crate::capture::run(&chosen, &cfg, &out)?;
-            print!("{table}");
-            println!(
-                "ratio: median capture time / baseline's; p: two-sided Mann–Whitney U against baseline;\n\
-                 GOSPA: the belief against the truth until the tag (c = 2 m, p = 2), mean over runs of each run's mean\n\
-                 wrote {0}/capture.csv, {0}/capture_summary.csv, {0}/capture_gospa{{,_time}}.csv, {0}/capture_<map>_<bot>.svg and {0}/capture_gospa_<map>_<bot>.svg",
-                out.display()
-            );
-            Ok(())
+            let done = study::execute(&study, shard, &out, |j| study.run_one(&arenas, j))?;
+            finish(done, Report::Capture, &out)
         }
         Experiment::Reacquire {
             runs,
@@ -260,6 +299,7 @@ pub fn run(e: Experiment, load: LoadMaps) -> Result<(), LabError> {
             latency,
             maps,
             out,
+            shard: ShardArgs { shard },
         } => {
             if runs == 0 || limit == 0 {
                 return Err(LabError::Arguments(
@@ -273,35 +313,17 @@ pub fn run(e: Experiment, load: LoadMaps) -> Result<(), LabError> {
                 )));
             }
             let arena = one_map(load, &maps, "office")?;
-            let cfg = crate::reacquire::ReacquireConfig {
-                runs,
-                seed,
-                limit_s: limit,
-                latency_ticks: latency,
+            let study = Reacquire {
+                cfg: crate::reacquire::ReacquireConfig {
+                    runs,
+                    seed,
+                    limit_s: limit,
+                    latency_ticks: latency,
+                },
+                map: MapStamp::of(&arena.def),
             };
-            let summaries = crate::reacquire::run(arena, &cfg, &out)?;
-            println!(
-                "condition   shared  predicted  found    mean ± std (s)  median (s)  teammate saw"
-            );
-            for s in &summaries {
-                println!(
-                    "{:<11} {:<7} {:<10} {:>3}/{:<3} {:>7.2} ± {:<5.2} {:>10.2} {:>12.0}%",
-                    s.condition.name,
-                    s.condition.shared,
-                    s.condition.predicted,
-                    s.found,
-                    s.runs,
-                    s.mean_s,
-                    s.std_s,
-                    s.median_s,
-                    100.0 * s.teammate_saw
-                );
-            }
-            println!(
-                "wrote {0}/reacquire.csv, {0}/reacquire_summary.csv and {0}/reacquire.svg",
-                out.display()
-            );
-            Ok(())
+            let done = study::execute(&study, shard, &out, |j| study.run_one(&arena, j))?;
+            finish(done, Report::Reacquire, &out)
         }
         Experiment::Localisation {
             runs,
@@ -311,6 +333,7 @@ pub fn run(e: Experiment, load: LoadMaps) -> Result<(), LabError> {
             opponents,
             maps,
             out,
+            shard: ShardArgs { shard },
         } => {
             if runs == 0 || seconds == 0 || robots == 0 {
                 return Err(LabError::Arguments(
@@ -319,29 +342,19 @@ pub fn run(e: Experiment, load: LoadMaps) -> Result<(), LabError> {
             }
             let mut arenas = load(&maps)?;
             arenas.sort_by(|a, b| a.def.name.cmp(&b.def.name));
-            let cfg = crate::localisation::LocalisationConfig {
-                runs,
-                seed,
-                seconds,
-                robots,
-                opponents,
+            let study = Localisation {
+                cfg: crate::localisation::LocalisationConfig {
+                    runs,
+                    seed,
+                    seconds,
+                    robots,
+                    opponents,
+                },
+                maps: MapStamp::all(&arenas),
             };
-            let curves = crate::localisation::run(&arenas, &cfg, &out)?;
-            println!("map        variant        mean error (m)  worst (m)");
-            for c in &curves {
-                println!(
-                    "{:<10} {:<14} {:>14.4} {:>10.4}",
-                    c.map,
-                    c.variant.name(),
-                    c.mean,
-                    c.worst
-                );
-            }
-            println!(
-                "wrote {0}/localisation.csv, {0}/localisation_summary.csv and {0}/localisation_<map>.svg",
-                out.display()
-            );
-            Ok(())
+            let variants = crate::localisation::variants(&arenas);
+            let done = study::execute(&study, shard, &out, |j| study.run_one(&variants, j))?;
+            finish(done, Report::Localisation, &out)
         }
         Experiment::Uncertainty {
             runs,
@@ -353,6 +366,7 @@ pub fn run(e: Experiment, load: LoadMaps) -> Result<(), LabError> {
             on,
             maps,
             out,
+            shard: ShardArgs { shard },
         } => {
             if runs == 0 || time_limit == 0 || hunt_s == 0 {
                 return Err(LabError::Arguments(
@@ -371,21 +385,20 @@ pub fn run(e: Experiment, load: LoadMaps) -> Result<(), LabError> {
                 )));
             }
             let chosen = chosen_maps(load, &maps, &on)?;
-            let cfg = crate::uncertainty::UncertaintyConfig {
-                runs,
-                seed,
-                time_limit_s: time_limit,
-                beams,
-                odometry_scale,
-                hunt_s,
+            let arenas: Vec<Arc<Arena>> = chosen.into_iter().map(|(_, a)| a).collect();
+            let study = Uncertainty {
+                cfg: crate::uncertainty::UncertaintyConfig {
+                    runs,
+                    seed,
+                    time_limit_s: time_limit,
+                    beams,
+                    odometry_scale,
+                    hunt_s,
+                },
+                maps: MapStamp::all(&arenas),
             };
-            let table = crate::uncertainty::run(&chosen, &cfg, &out)?;
-            print!("{table}");
-            println!(
-                "wrote {0}/uncertainty_{{hunt,capture}}{{,_summary}}.csv, {0}/uncertainty_lost.svg and {0}/uncertainty_error_<map>.svg",
-                out.display()
-            );
-            Ok(())
+            let done = study::execute(&study, shard, &out, |j| study.run_one(&arenas, j))?;
+            finish(done, Report::Uncertainty, &out)
         }
         Experiment::Filters {
             runs,
@@ -395,6 +408,7 @@ pub fn run(e: Experiment, load: LoadMaps) -> Result<(), LabError> {
             seed,
             maps,
             out,
+            shard: ShardArgs { shard },
         } => {
             if runs == 0
                 || opponents == 0
@@ -404,14 +418,126 @@ pub fn run(e: Experiment, load: LoadMaps) -> Result<(), LabError> {
                 return Err(LabError::Arguments("--runs and --opponents must be at least 1, --particles at least 10, --kl-cutoff positive".into()));
             }
             let arena = one_map(load, &maps, "hallway")?;
-            let cfg = crate::filters::FiltersConfig {
-                runs,
-                opponents,
-                seed,
-                particles_per_role: particles,
-                kl_cutoff,
+            let study = Filters {
+                cfg: crate::filters::FiltersConfig {
+                    runs,
+                    opponents,
+                    seed,
+                    particles_per_role: particles,
+                    kl_cutoff,
+                },
+                map: MapStamp::of(&arena.def),
             };
-            let r = crate::filters::run(arena, &cfg, &out)?;
+            let done = study::execute(&study, shard, &out, |j| study.run_one(&arena, j))?;
+            finish(done, Report::Filters, &out)
+        }
+        Experiment::Merge { parts, out } => {
+            let parts = merge::read_parts(&parts)?;
+            let experiment = merge::check(&parts)?;
+            let report = match experiment {
+                Capture::NAME => Report::Capture(merge::join::<Capture>(&parts, &out)?),
+                Reacquire::NAME => Report::Reacquire(merge::join::<Reacquire>(&parts, &out)?),
+                Localisation::NAME => {
+                    Report::Localisation(merge::join::<Localisation>(&parts, &out)?)
+                }
+                Uncertainty::NAME => Report::Uncertainty(merge::join::<Uncertainty>(&parts, &out)?),
+                Filters::NAME => Report::Filters(merge::join::<Filters>(&parts, &out)?),
+                name => {
+                    return Err(MergeError::Unknown {
+                        path: parts.first().map(|p| p.path.clone()).unwrap_or_default(),
+                        name: name.to_string(),
+                    }
+                    .into());
+                }
+            };
+            print(&report, &out);
+            println!("merged {} parts", parts.len());
+            Ok(())
+        }
+    }
+}
+
+/// Prints what a command did: the study's tables, or which part a shard wrote.
+fn finish<R>(
+    done: Outcome<R>,
+    report: impl FnOnce(R) -> Report,
+    out: &Path,
+) -> Result<(), LabError> {
+    match done {
+        Outcome::Files(r) => print(&report(r), out),
+        Outcome::Part(w) => println!(
+            "shard {} ran {} of the study's {} runs and wrote {}\n\
+             once every shard has run: lasertag experiment merge {} --out {}",
+            w.shard,
+            w.runs,
+            w.study_runs,
+            w.path.display(),
+            out.join("parts").display(),
+            out.display()
+        ),
+    }
+    Ok(())
+}
+
+/// Prints a study's tables and the files it wrote into `out`.
+fn print(report: &Report, out: &Path) {
+    match report {
+        Report::Capture(table) => {
+            print!("{table}");
+            println!(
+                "ratio: median capture time / baseline's; p: two-sided Mann–Whitney U against baseline;\n\
+                 GOSPA: the belief against the truth until the tag (c = 2 m, p = 2), mean over runs of each run's mean\n\
+                 wrote {0}/capture.csv, {0}/capture_summary.csv, {0}/capture_gospa{{,_time}}.csv, {0}/capture_<map>_<bot>.svg and {0}/capture_gospa_<map>_<bot>.svg",
+                out.display()
+            );
+        }
+        Report::Reacquire(summaries) => {
+            println!(
+                "condition   shared  predicted  found    mean ± std (s)  median (s)  teammate saw"
+            );
+            for s in summaries {
+                println!(
+                    "{:<11} {:<7} {:<10} {:>3}/{:<3} {:>7.2} ± {:<5.2} {:>10.2} {:>12.0}%",
+                    s.condition.name,
+                    s.condition.shared,
+                    s.condition.predicted,
+                    s.found,
+                    s.runs,
+                    s.mean_s,
+                    s.std_s,
+                    s.median_s,
+                    100.0 * s.teammate_saw
+                );
+            }
+            println!(
+                "wrote {0}/reacquire.csv, {0}/reacquire_summary.csv and {0}/reacquire.svg",
+                out.display()
+            );
+        }
+        Report::Localisation(curves) => {
+            println!("map        variant        mean error (m)  worst (m)");
+            for c in curves {
+                println!(
+                    "{:<10} {:<14} {:>14.4} {:>10.4}",
+                    c.map,
+                    c.variant.name(),
+                    c.mean,
+                    c.worst
+                );
+            }
+            println!(
+                "wrote {0}/localisation.csv, {0}/localisation_summary.csv and {0}/localisation_<map>.svg",
+                out.display()
+            );
+        }
+        Report::Uncertainty(table) => {
+            print!("{table}");
+            println!(
+                "wrote {0}/uncertainty_{{hunt,capture}}{{,_summary}}.csv, {0}/uncertainty_lost.svg and {0}/uncertainty_error_<map>.svg",
+                out.display()
+            );
+        }
+        Report::Filters(r) => {
             let parts = |g: &crate::tracking::Parts, ci: f64| {
                 format!(
                     "GOSPA {:.2} ± {ci:.2} m (localisation {:.2} m, missed {:.2}, false {:.2})",
@@ -434,7 +560,6 @@ pub fn run(e: Experiment, load: LoadMaps) -> Result<(), LabError> {
                 "wrote {0}/filters.csv, {0}/filters.svg, {0}/filters_gospa{{,_runs}}.csv and {0}/filters_gospa.svg",
                 out.display()
             );
-            Ok(())
         }
     }
 }

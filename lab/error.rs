@@ -1,5 +1,5 @@
 //! What can stop an experiment: bad arguments, missing maps, a scenario the chosen map
-//! cannot hold, and the files it writes.
+//! cannot hold, the files it writes, and parts that do not merge.
 
 use std::path::{Path, PathBuf};
 
@@ -35,6 +35,71 @@ pub enum LabError {
     },
     #[error("plotting {}: {message}", path.display())]
     Plot { path: PathBuf, message: String },
+    /// A part file that is not one, or is damaged (`line` 0: the file as a whole).
+    #[error("{}:{line}: {message}", path.display())]
+    Part {
+        path: PathBuf,
+        line: usize,
+        message: String,
+    },
+    #[error(transparent)]
+    Merge(#[from] MergeError),
+}
+
+/// Parts that are each well-formed but do not make one study.
+#[derive(Debug, thiserror::Error)]
+pub enum MergeError {
+    #[error("no part files (*.{ext}) in {}", list(paths), ext = crate::part::EXTENSION)]
+    NoParts { paths: Vec<PathBuf> },
+    #[error("{} is a part of experiment `{other_name}`, {} of `{first_name}`: merge one study at a time", other.display(), first.display())]
+    Experiment {
+        first: PathBuf,
+        first_name: String,
+        other: PathBuf,
+        other_name: String,
+    },
+    #[error("{} and {} are parts of different studies: parameter `{key}` is {} in the first, {} in the second", first.display(), other.display(), shown(first_value), shown(other_value))]
+    Params {
+        first: PathBuf,
+        other: PathBuf,
+        key: String,
+        first_value: Option<String>,
+        other_value: Option<String>,
+    },
+    #[error("{} is a shard of {other_count}, {} of {first_count}: parts of different splits of a study", other.display(), first.display())]
+    Count {
+        first: PathBuf,
+        first_count: usize,
+        other: PathBuf,
+        other_count: usize,
+    },
+    #[error("shard {shard} twice: {} and {}", first.display(), other.display())]
+    Duplicate {
+        shard: crate::shard::Shard,
+        first: PathBuf,
+        other: PathBuf,
+    },
+    #[error("{} of {count} shards missing: {}; run them (`--shard INDEX/{count}`) and merge again", missing.len(), missing.iter().map(|i| format!("{i}/{count}")).collect::<Vec<_>>().join(", "))]
+    Missing { count: usize, missing: Vec<usize> },
+    #[error("{}: unknown experiment `{name}`", path.display())]
+    Unknown { path: PathBuf, name: String },
+    /// Parameters this lasertag cannot make a study of (another version wrote them).
+    #[error("{}: {message}", path.display())]
+    Study { path: PathBuf, message: String },
+}
+
+fn list(paths: &[PathBuf]) -> String {
+    paths
+        .iter()
+        .map(|p| p.display().to_string())
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+fn shown(value: &Option<String>) -> String {
+    value
+        .as_ref()
+        .map_or_else(|| "absent".to_string(), |v| format!("{v:?}"))
 }
 
 /// `std::fs::create_dir_all`, naming the directory when it fails.

@@ -19,8 +19,9 @@ use nalgebra::Point2;
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
+use crate::part::Params;
 use crate::plot::{self, Series};
-use crate::run_all;
+use crate::study::{MapStamp, Study};
 use crate::tracking::{self, Parts, Track};
 use lasertag_core::planner::PlannerKind;
 use lasertag_core::sim::TICK_HZ;
@@ -209,16 +210,71 @@ pub struct FiltersResult {
     pub without_merge_gospa_ci95: f64,
 }
 
-/// Runs the experiment and writes `filters.csv`, `filters.svg`, `filters_gospa.csv` and
-/// `filters_gospa.svg` into `out`.
-pub fn run(arena: Arc<Arena>, cfg: &FiltersConfig, out: &Path) -> Result<FiltersResult, LabError> {
-    crate::error::create_dir_all(out)?;
-    let jobs = 2 * cfg.runs;
-    let results = run_all("filters (merge, no merge)", jobs, |i| {
-        one_run(arena.clone(), cfg, i < cfg.runs, i % cfg.runs)
-    });
-    let results: Vec<(Vec<u32>, Track)> = results.into_iter().collect::<Result<_, _>>()?;
-    let (counts, tracks): (Vec<Vec<u32>>, Vec<Track>) = results.into_iter().unzip();
+/// The study: run `j` is with merging for `j < runs`, without it otherwise, with seed
+/// `seed + j % runs`, on `hallway`.
+#[derive(Debug, Clone)]
+pub struct Filters {
+    pub cfg: FiltersConfig,
+    pub map: MapStamp,
+}
+
+/// What one run measured: the active filters each second, and the GOSPA track.
+pub type Run = (Vec<u32>, Track);
+
+impl Filters {
+    /// Run `j` of the study on `arena` (hallway).
+    pub fn run_one(&self, arena: &Arc<Arena>, j: usize) -> Result<Run, LabError> {
+        let runs = self.cfg.runs;
+        one_run(arena.clone(), &self.cfg, j < runs, j % runs)
+    }
+}
+
+impl Study for Filters {
+    const NAME: &'static str = "filters";
+    const LABEL: &'static str = "filters (merge, no merge)";
+    type Run = Run;
+    type Report = FiltersResult;
+
+    fn params(&self) -> Params {
+        let c = &self.cfg;
+        let mut p = Params::default();
+        p.set("runs", c.runs);
+        p.set("opponents", c.opponents);
+        p.set("seed", c.seed);
+        p.set("particles_per_role", c.particles_per_role);
+        p.set("kl_cutoff", c.kl_cutoff);
+        MapStamp::to_params(std::slice::from_ref(&self.map), &mut p);
+        p
+    }
+
+    fn from_params(p: &Params) -> Result<Filters, String> {
+        let [map] = <[MapStamp; 1]>::try_from(MapStamp::from_params(p)?)
+            .map_err(|maps| format!("{} maps where the experiment runs on one", maps.len()))?;
+        Ok(Filters {
+            cfg: FiltersConfig {
+                runs: p.parse("runs")?,
+                opponents: p.parse("opponents")?,
+                seed: p.parse("seed")?,
+                particles_per_role: p.parse("particles_per_role")?,
+                kl_cutoff: p.parse("kl_cutoff")?,
+            },
+            map,
+        })
+    }
+
+    fn runs(&self) -> usize {
+        2 * self.cfg.runs
+    }
+
+    /// Writes `filters.csv`, `filters.svg`, `filters_gospa.csv`, `filters_gospa_runs.csv`
+    /// and `filters_gospa.svg` into `out`.
+    fn write(&self, runs: Vec<Run>, out: &Path) -> Result<FiltersResult, LabError> {
+        write(&self.cfg, runs, out)
+    }
+}
+
+fn write(cfg: &FiltersConfig, runs: Vec<Run>, out: &Path) -> Result<FiltersResult, LabError> {
+    let (counts, tracks): (Vec<Vec<u32>>, Vec<Track>) = runs.into_iter().unzip();
     let (merged, unmerged) = counts.split_at(cfg.runs);
     let with = mean_curve(merged);
     let without = mean_curve(unmerged);

@@ -10,14 +10,25 @@
 //! - [`uncertainty`]: uncertainty-aware motion on and off, for robots that
 //!   localise from landmarks alone.
 //! - [`tracking`]: how close the belief is to the truth (GOSPA), for `filters` and `capture`.
+//!
+//! Each experiment is a [`study::Study`]: a fixed list of runs, a record of what each
+//! measured, and the files made from all the records. That lets a study be split over
+//! machines ([`shard`]: `--shard INDEX/COUNT`, each shard writing a [`part`] of records,
+//! [`record`] their lossless text) and joined again ([`merge`]) into the very files one
+//! machine writes.
 
 pub mod capture;
 pub mod cli;
 pub mod error;
 pub mod filters;
 pub mod localisation;
+pub mod merge;
+pub mod part;
 pub mod plot;
 pub mod reacquire;
+pub mod record;
+pub mod shard;
+pub mod study;
 pub mod tracking;
 pub mod uncertainty;
 

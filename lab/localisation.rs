@@ -10,8 +10,9 @@ use crate::error::LabError;
 use std::path::Path;
 use std::sync::Arc;
 
+use crate::part::Params;
 use crate::plot::{self, Series};
-use crate::run_all;
+use crate::study::{MapStamp, Study};
 use lasertag_core::sim::TICK_HZ;
 use lasertag_core::sim::arena::{Arena, MapDef};
 use lasertag_core::world::MatchConfig;
@@ -108,15 +109,21 @@ pub fn one_run(
     Ok((per_second, worst))
 }
 
-/// Runs every map with and without its landmarks; writes `localisation.csv`,
-/// `localisation_summary.csv` and `localisation_<map>.svg` into `out`.
-pub fn run(
-    arenas: &[Arc<Arena>],
-    cfg: &LocalisationConfig,
-    out: &Path,
-) -> Result<Vec<Curve>, LabError> {
-    crate::error::create_dir_all(out)?;
-    let variants: Vec<(Arc<Arena>, Variant)> = arenas
+/// The study: every map in name order, each in every [`Variant`]; run `j` is map and
+/// variant `j / runs` with seed `seed + j % runs`.
+#[derive(Debug, Clone)]
+pub struct Localisation {
+    pub cfg: LocalisationConfig,
+    pub maps: Vec<MapStamp>,
+}
+
+/// What one run measured: the mean error each second, and the worst error.
+pub type Run = (Vec<f64>, f64);
+
+/// The arena each map's variants run on, in the study's order (map, then variant): the map
+/// itself, or for [`Variant::LaserOnly`] the map without its landmarks.
+pub fn variants(arenas: &[Arc<Arena>]) -> Vec<(Arc<Arena>, Variant)> {
+    arenas
         .iter()
         .flat_map(|a| {
             let bare = Arc::new(Arena::new(MapDef {
@@ -129,21 +136,76 @@ pub fn run(
                 (a.clone(), Variant::OdometryOnly),
             ]
         })
-        .collect();
-    let jobs = variants.len() * cfg.runs;
-    let results = run_all("localisation", jobs, |i| {
-        let (arena, variant) = &variants[i / cfg.runs];
+        .collect()
+}
+
+impl Localisation {
+    /// Run `j` of the study; `variants` is [`variants`] of the study's maps.
+    pub fn run_one(&self, variants: &[(Arc<Arena>, Variant)], j: usize) -> Result<Run, LabError> {
+        let cfg = &self.cfg;
+        let (arena, variant) = variants
+            .get(j / cfg.runs)
+            .ok_or_else(|| LabError::Scenario(format!("run {j} is past the maps loaded")))?;
         let localise = *variant != Variant::OdometryOnly;
         one_run(
             arena.clone(),
             cfg,
             localise,
-            cfg.seed + (i % cfg.runs) as u64,
+            cfg.seed + (j % cfg.runs) as u64,
         )
-    });
-    let results: Vec<(Vec<f64>, f64)> = results.into_iter().collect::<Result<_, _>>()?;
+    }
+}
+
+impl Study for Localisation {
+    const NAME: &'static str = "localisation";
+    const LABEL: &'static str = "localisation";
+    type Run = Run;
+    type Report = Vec<Curve>;
+
+    fn params(&self) -> Params {
+        let c = &self.cfg;
+        let mut p = Params::default();
+        p.set("runs", c.runs);
+        p.set("seed", c.seed);
+        p.set("seconds", c.seconds);
+        p.set("robots", c.robots);
+        p.set("opponents", c.opponents);
+        MapStamp::to_params(&self.maps, &mut p);
+        p
+    }
+
+    fn from_params(p: &Params) -> Result<Localisation, String> {
+        Ok(Localisation {
+            cfg: LocalisationConfig {
+                runs: p.parse("runs")?,
+                seed: p.parse("seed")?,
+                seconds: p.parse("seconds")?,
+                robots: p.parse("robots")?,
+                opponents: p.parse("opponents")?,
+            },
+            maps: MapStamp::from_params(p)?,
+        })
+    }
+
+    fn runs(&self) -> usize {
+        self.maps.len() * Variant::ALL.len() * self.cfg.runs
+    }
+
+    /// Writes `localisation.csv`, `localisation_summary.csv` and `localisation_<map>.svg`
+    /// into `out`.
+    fn write(&self, runs: Vec<Run>, out: &Path) -> Result<Vec<Curve>, LabError> {
+        write(self, runs, out)
+    }
+}
+
+fn write(study: &Localisation, results: Vec<Run>, out: &Path) -> Result<Vec<Curve>, LabError> {
+    let cfg = &study.cfg;
+    let variants = study
+        .maps
+        .iter()
+        .flat_map(|m| Variant::ALL.map(|v| (m.name.clone(), v)));
     let mut curves = Vec::new();
-    for (v, (arena, variant)) in variants.iter().enumerate() {
+    for (v, (map, variant)) in variants.enumerate() {
         let runs = &results[v * cfg.runs..(v + 1) * cfg.runs];
         let len = runs.iter().map(|r| r.0.len()).max().unwrap_or(0);
         let mean_per_second: Vec<f64> = (0..len)
@@ -155,8 +217,8 @@ pub fn run(
         let mean = mean_per_second.iter().sum::<f64>() / mean_per_second.len().max(1) as f64;
         let worst = runs.iter().map(|r| r.1).fold(0.0, f64::max);
         curves.push(Curve {
-            map: arena.def.name.clone(),
-            variant: *variant,
+            map,
+            variant,
             mean_per_second,
             mean,
             worst,

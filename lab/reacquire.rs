@@ -44,8 +44,10 @@ use nalgebra::Point2;
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
+use crate::part::Params;
 use crate::plot;
-use crate::run_all;
+use crate::record::{Fields, Line, Record};
+use crate::study::{MapStamp, Study};
 use lasertag_core::planner::PlannerKind;
 use lasertag_core::sim::arena::Arena;
 use lasertag_core::sim::{AGENT_RADIUS, Motion, Physics, Pose, TICK_HZ};
@@ -108,7 +110,7 @@ const DOORWAY_Y: f32 = 7.0;
 const ROOM: ([f32; 2], [f32; 2]) = ([8.7, 0.6], [15.4, 6.3]);
 
 /// One run's outcome.
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Outcome {
     /// Seconds from losing sight to seeing again; `None` if not within the limit.
     pub time_s: Option<f64>,
@@ -247,19 +249,85 @@ pub struct Summary {
     pub teammate_saw: f64,
 }
 
-/// Runs every condition on `arena` (office) and writes the files into `out`.
-pub fn run(arena: Arc<Arena>, cfg: &ReacquireConfig, out: &Path) -> Result<Vec<Summary>, LabError> {
-    crate::error::create_dir_all(out)?;
-    let jobs = CONDITIONS.len() * cfg.runs;
-    let results = run_all("reacquire runs", jobs, |j| {
-        one_run(
-            arena.clone(),
-            CONDITIONS[j / cfg.runs],
-            cfg.seed + (j % cfg.runs) as u64,
-            cfg,
-        )
-    });
-    let results: Vec<Outcome> = results.into_iter().collect::<Result<_, _>>()?;
+/// The study: run `j` is condition `j / runs` with seed `seed + j % runs`, on `office`.
+#[derive(Debug, Clone)]
+pub struct Reacquire {
+    pub cfg: ReacquireConfig,
+    pub map: MapStamp,
+}
+
+impl Record for Outcome {
+    fn write(&self, out: &mut Line) {
+        self.time_s.write(out);
+        self.teammate_saw.write(out);
+        self.end.write(out);
+    }
+    fn read(input: &mut Fields) -> Result<Outcome, String> {
+        Ok(Outcome {
+            time_s: Record::read(input)?,
+            teammate_saw: Record::read(input)?,
+            end: Record::read(input)?,
+        })
+    }
+}
+
+impl Reacquire {
+    /// Run `j` of the study on `arena` (office).
+    pub fn run_one(&self, arena: &Arc<Arena>, j: usize) -> Result<Outcome, LabError> {
+        let cfg = &self.cfg;
+        let c = CONDITIONS
+            .get(j / cfg.runs)
+            .ok_or_else(|| LabError::Scenario(format!("run {j} is past the conditions")))?;
+        one_run(arena.clone(), *c, cfg.seed + (j % cfg.runs) as u64, cfg)
+    }
+}
+
+impl Study for Reacquire {
+    const NAME: &'static str = "reacquire";
+    const LABEL: &'static str = "reacquire runs";
+    type Run = Outcome;
+    type Report = Vec<Summary>;
+
+    fn params(&self) -> Params {
+        let c = &self.cfg;
+        let mut p = Params::default();
+        p.set("runs", c.runs);
+        p.set("seed", c.seed);
+        p.set("limit_s", c.limit_s);
+        p.set("latency_ticks", c.latency_ticks);
+        MapStamp::to_params(std::slice::from_ref(&self.map), &mut p);
+        p
+    }
+
+    fn from_params(p: &Params) -> Result<Reacquire, String> {
+        let [map] = <[MapStamp; 1]>::try_from(MapStamp::from_params(p)?)
+            .map_err(|maps| format!("{} maps where the experiment runs on one", maps.len()))?;
+        Ok(Reacquire {
+            cfg: ReacquireConfig {
+                runs: p.parse("runs")?,
+                seed: p.parse("seed")?,
+                limit_s: p.parse("limit_s")?,
+                latency_ticks: p.parse("latency_ticks")?,
+            },
+            map,
+        })
+    }
+
+    fn runs(&self) -> usize {
+        CONDITIONS.len() * self.cfg.runs
+    }
+
+    /// Writes `reacquire.csv`, `reacquire_summary.csv` and `reacquire.svg` into `out`.
+    fn write(&self, runs: Vec<Outcome>, out: &Path) -> Result<Vec<Summary>, LabError> {
+        write(&self.cfg, runs, out)
+    }
+}
+
+fn write(
+    cfg: &ReacquireConfig,
+    results: Vec<Outcome>,
+    out: &Path,
+) -> Result<Vec<Summary>, LabError> {
     let limit = cfg.limit_s as f64;
     let mut csv = String::from("condition,seed,end_x,end_y,found,time_s,teammate_saw_share\n");
     let mut summary_csv = String::from(

@@ -5,9 +5,13 @@
 //!
 //! Reading the world changes nothing in it: a run with these measurements is the same match
 //! as one without.
+//!
+//! A finished [`Track`] is recorded ([`Record`]) as what the aggregates read: its mean and
+//! its seconds.
 
 use nalgebra::Point2;
 
+use crate::record::{Fields, Line, Record};
 use lasertag_core::sim::TICK_HZ;
 use lasertag_core::tracker::estimate::tracking_quality;
 use lasertag_core::tracker::gospa::{Gospa, Params};
@@ -84,6 +88,27 @@ impl From<Gospa> for Parts {
     }
 }
 
+impl Record for Parts {
+    fn write(&self, out: &mut Line) {
+        [
+            self.gospa,
+            self.localisation,
+            self.missed,
+            self.false_targets,
+        ]
+        .iter()
+        .for_each(|x| x.write(out));
+    }
+    fn read(input: &mut Fields) -> Result<Parts, String> {
+        Ok(Parts {
+            gospa: f64::read(input)?,
+            localisation: f64::read(input)?,
+            missed: f64::read(input)?,
+            false_targets: f64::read(input)?,
+        })
+    }
+}
+
 /// CSV header of [`Parts::csv`], each name prefixed.
 pub fn csv_header(prefix: &str) -> String {
     ["gospa_m", "localisation_m", "missed", "false"]
@@ -140,6 +165,28 @@ impl Track {
     }
 }
 
+/// A finished track: its mean, then its seconds. The running sums are not kept: nothing
+/// after [`Track::finish`] reads them. (Every field is named, so that a new one must be
+/// recorded here or said not to need it.)
+impl Record for Track {
+    fn write(&self, out: &mut Line) {
+        self.mean.write(out);
+        self.seconds.write(out);
+    }
+    fn read(input: &mut Fields) -> Result<Track, String> {
+        let mean = Parts::read(input)?;
+        let seconds = Vec::read(input)?;
+        Ok(Track {
+            seconds,
+            mean,
+            sum: Parts::default(),
+            ticks: 0,
+            second_sum: Parts::default(),
+            second_ticks: 0,
+        })
+    }
+}
+
 /// Mean over runs of each second. `hold`: a run that has ended counts with its last second
 /// (a run that goes on with nothing left to happen); otherwise only runs still going count.
 /// Returns each second's mean and how many runs it is over.
@@ -190,6 +237,14 @@ mod tests {
         let going = mean_by_second(&[&short, &long], false);
         assert_eq!(going, vec![(parts(2.0), 2), (parts(5.0), 1)]);
         assert!(mean_by_second(&[], true).is_empty());
+    }
+
+    #[test]
+    fn a_finished_track_reads_back_with_what_the_aggregates_read() {
+        let mut t = track(&[1.0 / 3.0, 2.5]);
+        t.mean = parts(0.1);
+        let back: Track = crate::record::from_line(&crate::record::to_line(&t)).unwrap();
+        assert_eq!((back.mean, back.seconds), (t.mean, t.seconds));
     }
 
     #[test]

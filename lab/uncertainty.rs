@@ -23,8 +23,10 @@ use std::path::Path;
 use std::sync::Arc;
 
 use crate::capture::{bot_name, mann_whitney_p, mean_ci, stats};
+use crate::part::Params;
 use crate::plot::{self, Bar, Series};
-use crate::run_all;
+use crate::record::{Fields, Line, Record};
+use crate::study::{MapStamp, Study};
 use lasertag_core::bots::BotKind;
 use lasertag_core::planner::PlannerKind;
 use lasertag_core::sim::TICK_HZ;
@@ -109,7 +111,7 @@ fn config(cfg: &UncertaintyConfig, bot: BotKind, variant: Variant, seed: u64) ->
 }
 
 /// What one hunt measured (tagging off, a fixed duration: the robots keep searching).
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct Hunt {
     /// Per second, the mean over robots and that second's ticks of the position error (m).
     pub error_per_second: Vec<f64>,
@@ -189,38 +191,157 @@ fn p_text(v: f64) -> String {
     }
 }
 
-/// Runs both variants on every map: captures against both bots, and hunts with tagging
-/// off. Writes `uncertainty_capture.csv`, `uncertainty_hunt.csv`, their summaries and plots
-/// into `out`; returns the summaries as a table.
-pub fn run(
-    maps: &[(String, Arc<Arena>)],
-    cfg: &UncertaintyConfig,
-    out: &Path,
-) -> Result<String, LabError> {
-    crate::error::create_dir_all(out)?;
-    let bots = [BotKind::Wander, BotKind::Evade];
-    let mut captures = Vec::new();
-    let mut hunts = Vec::new();
-    for map in 0..maps.len() {
-        for &variant in &Variant::ALL {
-            hunts.push((map, variant));
-            for &bot in &bots {
-                captures.push((map, bot, variant));
+const BOTS: [BotKind; 2] = [BotKind::Wander, BotKind::Evade];
+
+/// The study: on every map, both variants. Its runs are the hunts first (map, then variant;
+/// `runs` seeds each), then the captures (map, then variant, then bot); run `j` of each
+/// kind's list has seed `seed + j % runs`.
+#[derive(Debug, Clone)]
+pub struct Uncertainty {
+    pub cfg: UncertaintyConfig,
+    pub maps: Vec<MapStamp>,
+}
+
+/// What one run measured.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Run {
+    Hunt(Hunt),
+    /// The capture time; `None` at the time limit.
+    Capture(Option<f64>),
+}
+
+impl Record for Run {
+    fn write(&self, out: &mut Line) {
+        match self {
+            Run::Hunt(h) => {
+                out.field("hunt");
+                h.error_per_second.write(out);
+                for x in [h.mean_error_m, h.lost_share, h.uncertain_share] {
+                    x.write(out);
+                }
+            }
+            Run::Capture(t) => {
+                out.field("capture");
+                t.write(out);
             }
         }
     }
+    fn read(input: &mut Fields) -> Result<Run, String> {
+        let kind: String = input.next("hunt or capture")?;
+        match kind.as_str() {
+            "hunt" => Ok(Run::Hunt(Hunt {
+                error_per_second: Record::read(input)?,
+                mean_error_m: Record::read(input)?,
+                lost_share: Record::read(input)?,
+                uncertain_share: Record::read(input)?,
+            })),
+            "capture" => Ok(Run::Capture(Record::read(input)?)),
+            _ => Err(format!("{kind:?} is not hunt or capture")),
+        }
+    }
+}
+
+impl Uncertainty {
+    /// The hunts' (map, variant) and the captures' (map, bot, variant), in order.
+    #[allow(clippy::type_complexity)]
+    fn kinds(&self) -> (Vec<(usize, Variant)>, Vec<(usize, BotKind, Variant)>) {
+        let mut captures = Vec::new();
+        let mut hunts = Vec::new();
+        for map in 0..self.maps.len() {
+            for &variant in &Variant::ALL {
+                hunts.push((map, variant));
+                for bot in BOTS {
+                    captures.push((map, bot, variant));
+                }
+            }
+        }
+        (hunts, captures)
+    }
+
+    /// Run `j` of the study; `arenas` are the study's maps, in its order.
+    pub fn run_one(&self, arenas: &[Arc<Arena>], j: usize) -> Result<Run, LabError> {
+        let (cfg, runs) = (&self.cfg, self.cfg.runs);
+        let (hunts, captures) = self.kinds();
+        let arena = |map: usize| {
+            arenas.get(map).cloned().ok_or_else(|| {
+                LabError::Scenario(format!("run {j} is on map {map}, which is not loaded"))
+            })
+        };
+        let seed = cfg.seed + (j % runs) as u64;
+        if let Some(&(map, variant)) = hunts.get(j / runs) {
+            return hunt_run(arena(map)?, cfg, variant, seed).map(Run::Hunt);
+        }
+        let &(map, bot, variant) = captures
+            .get(j / runs - hunts.len())
+            .ok_or_else(|| LabError::Scenario(format!("run {j} is past the study's")))?;
+        capture_run(arena(map)?, cfg, bot, variant, seed).map(Run::Capture)
+    }
+}
+
+impl Study for Uncertainty {
+    const NAME: &'static str = "uncertainty";
+    const LABEL: &'static str = "uncertainty runs";
+    type Run = Run;
+    /// The summary tables.
+    type Report = String;
+
+    fn params(&self) -> Params {
+        let c = &self.cfg;
+        let mut p = Params::default();
+        p.set("runs", c.runs);
+        p.set("seed", c.seed);
+        p.set("time_limit_s", c.time_limit_s);
+        p.set("beams", c.beams);
+        p.set("odometry_scale", c.odometry_scale);
+        p.set("hunt_s", c.hunt_s);
+        MapStamp::to_params(&self.maps, &mut p);
+        p
+    }
+
+    fn from_params(p: &Params) -> Result<Uncertainty, String> {
+        Ok(Uncertainty {
+            cfg: UncertaintyConfig {
+                runs: p.parse("runs")?,
+                seed: p.parse("seed")?,
+                time_limit_s: p.parse("time_limit_s")?,
+                beams: p.parse("beams")?,
+                odometry_scale: p.parse("odometry_scale")?,
+                hunt_s: p.parse("hunt_s")?,
+            },
+            maps: MapStamp::from_params(p)?,
+        })
+    }
+
+    fn runs(&self) -> usize {
+        let (hunts, captures) = self.kinds();
+        (hunts.len() + captures.len()) * self.cfg.runs
+    }
+
+    /// Writes `uncertainty_capture.csv`, `uncertainty_hunt.csv`, their summaries and plots
+    /// into `out`; returns the summaries as a table.
+    fn write(&self, runs: Vec<Run>, out: &Path) -> Result<String, LabError> {
+        write(self, runs, out)
+    }
+}
+
+fn write(study: &Uncertainty, all: Vec<Run>, out: &Path) -> Result<String, LabError> {
+    let cfg = &study.cfg;
+    let (hunts, captures) = study.kinds();
+    let bots = BOTS;
     let runs = cfg.runs;
-    let seed = |j: usize| cfg.seed + (j % runs) as u64;
-    let hunted = run_all("uncertainty hunts", hunts.len() * runs, |j| {
-        let (map, variant) = hunts[j / runs];
-        hunt_run(maps[map].1.clone(), cfg, variant, seed(j))
-    });
-    let hunted: Vec<Hunt> = hunted.into_iter().collect::<Result<_, _>>()?;
-    let captured = run_all("uncertainty captures", captures.len() * runs, |j| {
-        let (map, bot, variant) = captures[j / runs];
-        capture_run(maps[map].1.clone(), cfg, bot, variant, seed(j))
-    });
-    let captured: Vec<Option<f64>> = captured.into_iter().collect::<Result<_, _>>()?;
+    let mut hunted = Vec::new();
+    let mut captured = Vec::new();
+    for (j, r) in all.into_iter().enumerate() {
+        match (j < hunts.len() * runs, r) {
+            (true, Run::Hunt(h)) => hunted.push(h),
+            (false, Run::Capture(t)) => captured.push(t),
+            _ => {
+                return Err(LabError::Scenario(format!(
+                    "run {j} is of the wrong kind (the hunts come first, then the captures)"
+                )));
+            }
+        }
+    }
     let limit = cfg.time_limit_s as f64;
 
     let mut hunt_csv = String::from("map,variant,seed,mean_error_m,lost_share,uncertain_share\n");
@@ -228,7 +349,7 @@ pub fn run(
         for (i, h) in hunted[k * runs..(k + 1) * runs].iter().enumerate() {
             hunt_csv.push_str(&format!(
                 "{},{},{},{:.4},{:.4},{:.4}\n",
-                maps[map].0,
+                study.maps[map].name,
                 variant.name(),
                 cfg.seed + i as u64,
                 h.mean_error_m,
@@ -242,7 +363,7 @@ pub fn run(
         for (i, t) in captured[k * runs..(k + 1) * runs].iter().enumerate() {
             capture_csv.push_str(&format!(
                 "{},{},{},{},{},{}\n",
-                maps[map].0,
+                study.maps[map].name,
                 bot_name(bot),
                 variant.name(),
                 cfg.seed + i as u64,
@@ -262,7 +383,7 @@ pub fn run(
     );
     let mut lost_bars = Vec::new();
     let mut labels = Vec::new();
-    for (map, (map_name, _)) in maps.iter().enumerate() {
+    for (map, MapStamp { name: map_name, .. }) in study.maps.iter().enumerate() {
         let of = |v: Variant| {
             let k = hunts.iter().position(|h| *h == (map, v)).unwrap_or(0);
             &hunted[k * runs..(k + 1) * runs]
@@ -360,7 +481,7 @@ pub fn run(
     let mut capture_summary = String::from(
         "map,bot,variant,runs,captured,median_s,mean_s,mean_ci95_low_s,mean_ci95_high_s,mann_whitney_p\n",
     );
-    for (map, (map_name, _)) in maps.iter().enumerate() {
+    for (map, MapStamp { name: map_name, .. }) in study.maps.iter().enumerate() {
         for &bot in &bots {
             let of = |v: Variant| {
                 let k = captures
