@@ -190,9 +190,9 @@ async fn serve(args: ServeArgs) -> Result<(), String> {
     let maps = MapStore::load_dir(&args.maps).map_err(|e| format!("loading maps: {e}"))?;
     tracing::info!(maps = maps.len(), dir = %args.maps.display(), "maps loaded");
     tracing::info!(config = ?args.config, "settings");
-    let store = lasertag::store::Store::open(&args.history.data_dir, args.history.retention())
+    let store = lasertag::store::Store::from_args(&args.history)
         .map_err(|e| format!("opening the history: {e}"))?;
-    tracing::info!(dir = %args.history.data_dir.display(), "history opened");
+    tracing::info!(at = %lasertag::store::Store::describe(&args.history), "history opened");
     let history = lasertag::game::replay::History::with_store(store);
     let registry = Registry::with_history(maps, args.config, history);
     if !args.no_showcase {

@@ -4,14 +4,23 @@
 # command and what CI runs.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-# The browser tests drive Debian's Chromium; install it when it is missing (CI runs as root on
-# a fresh machine; elsewhere sudo is used when available).
-if ! command -v chromium >/dev/null 2>&1 && [ -z "${LASERTAG_CHROMIUM:-}" ]; then
-  echo "tests/run.sh: installing chromium (Debian package) for the browser tests"
+# What the tests need from Debian, installed when missing (CI runs as root on a fresh
+# machine; elsewhere sudo is used when available): Chromium for the browser tests, Redis
+# for the fleet's directory (tests/fleet.rs), PostgreSQL's server for the shared history
+# (tests/store_postgres.rs). The tests start and stop their own servers.
+NEED=()
+if ! command -v chromium >/dev/null 2>&1 && [ -z "${LASERTAG_CHROMIUM:-}" ]; then NEED+=(chromium); fi
+if ! command -v redis-server >/dev/null 2>&1 && [ -z "${LASERTAG_REDIS_SERVER:-}" ]; then NEED+=(redis-server); fi
+if ! command -v initdb >/dev/null 2>&1 && ! ls /usr/lib/postgresql/*/bin/initdb >/dev/null 2>&1 \
+  && [ -z "${LASERTAG_PG_BIN:-}" ]; then NEED+=(postgresql); fi
+if [ "${#NEED[@]}" -gt 0 ]; then
+  echo "tests/run.sh: installing ${NEED[*]} (Debian packages) for the tests"
   SUDO=""
   if [ "$(id -u)" != 0 ] && command -v sudo >/dev/null 2>&1; then SUDO="sudo"; fi
   $SUDO apt-get update -qq
-  DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq chromium >/dev/null
+  # Whatever services the packages start themselves are not used: the tests run servers
+  # of their own on free ports.
+  DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq "${NEED[@]}" >/dev/null
 fi
 # Lints first (tests/tidy.rs checks formatting and the floors; clippy would wait on the build
 # directory that `cargo test` holds if the tidy test ran it).

@@ -8,14 +8,16 @@
 //! thread (callers are off the async workers) through a connection of their own.
 //!
 //! The database sits behind [`Backend`], a narrow trait: SQLite ([`sqlite`]) is the default,
-//! embedded and bundled; a server database for a fleet implements the same few operations.
+//! embedded and bundled; PostgreSQL ([`postgres`], `--database`) is the fleet's, one database
+//! that every server writes its own matches to and reads everyone's from.
 
 pub mod codec;
+pub mod postgres;
 pub mod results;
 pub mod sqlite;
 
 use std::path::{Path, PathBuf};
-use std::sync::mpsc::{Receiver, SyncSender, TrySendError};
+use std::sync::mpsc::{Receiver, RecvTimeoutError, SyncSender, TrySendError};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, SystemTime};
 
@@ -30,6 +32,8 @@ pub use results::PlayerResult;
 const WRITE_QUEUE: usize = 4096;
 /// Most writes committed in one transaction.
 const BATCH: usize = 512;
+/// How often the writer thread calls [`Backend::heartbeat`], busy or idle.
+pub const HEARTBEAT: Duration = Duration::from_secs(10);
 
 /// What went wrong with the store.
 #[derive(Debug, Clone, thiserror::Error)]
@@ -38,6 +42,12 @@ pub enum StoreError {
     Io { path: String, message: String },
     #[error("database: {0}")]
     Database(String),
+    #[error("--database: {0}")]
+    DatabaseUrl(String),
+    #[error("cannot connect to PostgreSQL at {target}: {message}")]
+    Connect { target: String, message: String },
+    #[error("a stored match is already called {0}")]
+    Duplicate(String),
     #[error("the database's schema is version {found}, newer than this server's {known}")]
     NewerSchema { found: usize, known: usize },
     #[error("no stored match {0}")]
@@ -60,6 +70,16 @@ pub struct StoreArgs {
     /// Directory of the history database (`lasertag.db`), created if missing.
     #[arg(long, env = "LASERTAG_DATA", default_value = "data")]
     pub data_dir: PathBuf,
+    /// A PostgreSQL database for the history instead of SQLite in `--data-dir`
+    /// (`postgres://user[:password]@host[:port]/database`): every server pointed at it lists
+    /// and replays every match. No TLS.
+    #[arg(
+        long,
+        env = "LASERTAG_DATABASE",
+        value_name = "URL",
+        hide_env_values = true
+    )]
+    pub database: Option<String>,
     /// Ended matches the history keeps; the oldest go first.
     #[arg(long, env = "LASERTAG_KEEP_MATCHES", default_value_t = 10_000,
           value_parser = clap::value_parser!(u64).range(1..))]
@@ -170,6 +190,15 @@ pub enum LeaderOrder {
 
 /// The operations a database must offer the store.
 pub trait Backend: Send {
+    /// Called by the writer thread every [`HEARTBEAT`]: a shared database hears that this
+    /// writer is alive, and closes the matches of writers it has not heard from.
+    fn heartbeat(&mut self) -> Result<(), StoreError> {
+        Ok(())
+    }
+    /// The database's size on disk, when the backend knows it (a server database).
+    fn database_bytes(&mut self) -> Result<Option<u64>, StoreError> {
+        Ok(None)
+    }
     /// Commits `batch` in one transaction.
     fn write(&mut self, batch: &[Write]) -> Result<(), StoreError>;
     fn list(&mut self, limit: usize, before: Option<&str>) -> Result<Vec<Listed>, StoreError>;
@@ -186,7 +215,8 @@ pub trait Backend: Send {
 pub struct Store {
     writes: SyncSender<Write>,
     reader: Mutex<Box<dyn Backend>>,
-    dir: PathBuf,
+    /// SQLite's directory (for [`Store::file_bytes`]); none for a server database.
+    dir: Option<PathBuf>,
 }
 
 impl std::fmt::Debug for Store {
@@ -198,6 +228,52 @@ impl std::fmt::Debug for Store {
 }
 
 impl Store {
+    /// The history the `serve` flags ask for: PostgreSQL with `--database`, else SQLite in
+    /// `--data-dir`.
+    pub fn from_args(args: &StoreArgs) -> Result<Store, StoreError> {
+        match &args.database {
+            Some(url) => Store::open_postgres(url, args.retention()),
+            None => Store::open(&args.data_dir, args.retention()),
+        }
+    }
+
+    /// Where [`Store::from_args`] keeps the history, for the log (no password).
+    pub fn describe(args: &StoreArgs) -> String {
+        match &args.database {
+            Some(url) => match postgres::parse(url) {
+                Ok((_, target)) => format!("PostgreSQL at {target}"),
+                Err(e) => e.to_string(),
+            },
+            None => format!("SQLite in {}", args.data_dir.display()),
+        }
+    }
+
+    /// Opens the history in the PostgreSQL database at `url`, migrating its schema. Matches
+    /// left running by a writer the database has not heard from in
+    /// [`postgres::STALE_AFTER`] are closed as incomplete; other servers' live ones are left
+    /// alone.
+    pub fn open_postgres(url: &str, retention: Retention) -> Result<Store, StoreError> {
+        // The client blocks on a runtime of its own: never on an async worker.
+        let (writer, reader, interrupted) = postgres::off_runtime(|| {
+            let mut writer = postgres::Postgres::open(url, retention)?;
+            let interrupted = writer.close_interrupted()?;
+            let reader = postgres::Postgres::reader(url, retention)?;
+            Ok::<_, StoreError>((writer, reader, interrupted))
+        })??;
+        tracing::info!(
+            writer = writer.writer_id().unwrap_or_default(),
+            database = writer.target(),
+            "history in PostgreSQL"
+        );
+        if interrupted > 0 {
+            tracing::warn!(
+                interrupted,
+                "matches left unfinished by servers gone silent are kept as incomplete"
+            );
+        }
+        Ok(Store::with(Box::new(writer), Box::new(reader), None))
+    }
+
     /// Opens the SQLite history in `dir` (created if missing). Matches a previous process
     /// left running are marked incomplete.
     pub fn open(dir: &Path, retention: Retention) -> Result<Store, StoreError> {
@@ -210,11 +286,16 @@ impl Store {
             );
         }
         let reader = sqlite::Sqlite::reader(dir, retention)?;
-        Ok(Store::with(Box::new(writer), Box::new(reader), dir))
+        Ok(Store::with(
+            Box::new(writer),
+            Box::new(reader),
+            Some(dir.to_path_buf()),
+        ))
     }
 
-    /// A store over any backend: `writer` for the writer thread, `reader` for reads.
-    pub fn with(writer: Box<dyn Backend>, reader: Box<dyn Backend>, dir: &Path) -> Store {
+    /// A store over any backend: `writer` for the writer thread, `reader` for reads; `dir`
+    /// is where the database's files are, if it has files of its own.
+    pub fn with(writer: Box<dyn Backend>, reader: Box<dyn Backend>, dir: Option<PathBuf>) -> Store {
         let (tx, rx) = std::sync::mpsc::sync_channel(WRITE_QUEUE);
         let spawned = std::thread::Builder::new()
             .name("store".into())
@@ -226,7 +307,7 @@ impl Store {
         Store {
             writes: tx,
             reader: Mutex::new(reader),
-            dir: dir.to_path_buf(),
+            dir,
         }
     }
 
@@ -255,34 +336,64 @@ impl Store {
         f(reader.as_mut())
     }
 
-    /// The size of the database files now (bytes).
+    /// The size of the database now (bytes): SQLite's files, or what a server database
+    /// reports (0 when it cannot be asked).
     pub fn file_bytes(&self) -> u64 {
-        ["lasertag.db", "lasertag.db-wal"]
-            .iter()
-            .filter_map(|f| std::fs::metadata(self.dir.join(f)).ok())
-            .map(|m| m.len())
-            .sum()
+        match &self.dir {
+            Some(dir) => ["lasertag.db", "lasertag.db-wal"]
+                .iter()
+                .filter_map(|f| std::fs::metadata(dir.join(f)).ok())
+                .map(|m| m.len())
+                .sum(),
+            None => self
+                .read(|b| b.database_bytes())
+                .ok()
+                .flatten()
+                .unwrap_or(0),
+        }
     }
 }
 
 fn write_loop(mut backend: Box<dyn Backend>, rx: Receiver<Write>) {
-    while let Ok(first) = rx.recv() {
-        let mut batch = vec![first];
-        while batch.len() < BATCH {
-            match rx.try_recv() {
-                Ok(w) => batch.push(w),
-                Err(_) => break,
+    let mut beat = std::time::Instant::now();
+    loop {
+        // A busy writer beats too: the heartbeat is due by the clock, not by idleness.
+        match rx.recv_timeout(HEARTBEAT.saturating_sub(beat.elapsed())) {
+            Ok(first) => {
+                let mut batch = vec![first];
+                while batch.len() < BATCH {
+                    match rx.try_recv() {
+                        Ok(w) => batch.push(w),
+                        Err(_) => break,
+                    }
+                }
+                if let Err(e) = backend.write(&batch) {
+                    tracing::error!("the history could not store {} writes: {e}", batch.len());
+                }
+                for w in batch {
+                    if let Write::Flush(done) = w {
+                        let _ = done.send(());
+                    }
+                }
             }
+            Err(RecvTimeoutError::Timeout) => {}
+            Err(RecvTimeoutError::Disconnected) => break,
         }
-        if let Err(e) = backend.write(&batch) {
-            tracing::error!("the history could not store {} writes: {e}", batch.len());
-        }
-        for w in batch {
-            if let Write::Flush(done) = w {
-                let _ = done.send(());
+        if beat.elapsed() >= HEARTBEAT {
+            beat = std::time::Instant::now();
+            if let Err(e) = backend.heartbeat() {
+                tracing::warn!("history heartbeat: {e}");
             }
         }
     }
+}
+
+/// A map document's key: equal documents are stored once.
+pub(crate) fn map_key(document: &str) -> String {
+    use std::hash::{Hash, Hasher};
+    let mut h = std::collections::hash_map::DefaultHasher::new();
+    document.hash(&mut h);
+    format!("{:016x}-{}", h.finish(), document.len())
 }
 
 /// Unix milliseconds of `t`.

@@ -416,14 +416,6 @@ impl Sqlite {
     }
 }
 
-/// A map document's key: equal documents are stored once.
-fn hash(document: &str) -> String {
-    use std::hash::{Hash, Hasher};
-    let mut h = std::collections::hash_map::DefaultHasher::new();
-    document.hash(&mut h);
-    format!("{:016x}-{}", h.finish(), document.len())
-}
-
 impl super::Backend for Sqlite {
     fn write(&mut self, batch: &[super::Write]) -> Result<(), StoreError> {
         use super::Write;
@@ -448,7 +440,7 @@ impl super::Backend for Sqlite {
                                 &tx,
                                 id,
                                 &arena.def.name,
-                                &hash(&document),
+                                &super::map_key(&document),
                                 &document,
                                 &settings,
                                 super::unix_ms(*started_at),

@@ -1,0 +1,233 @@
+//! PostgreSQL's side of the history's SQL: the schema, its migrations (under an advisory
+//! lock, so servers starting together migrate once) and every statement the backend runs,
+//! prepared once a connection.
+
+use ::postgres::{Client, Statement};
+
+use super::db;
+use crate::store::StoreError;
+
+/// The schema, one migration a step: step i takes version i to i + 1.
+const MIGRATIONS: &[&str] = &[
+    // 1: SQLite's tables with the writer of each match, and the writers' heartbeats.
+    "CREATE TABLE maps (
+        hash TEXT PRIMARY KEY,
+        name TEXT NOT NULL,
+        document TEXT NOT NULL
+    );
+    CREATE TABLE matches (
+        seq BIGINT GENERATED ALWAYS AS IDENTITY PRIMARY KEY,
+        id TEXT NOT NULL UNIQUE,
+        writer TEXT NOT NULL,
+        map TEXT NOT NULL,
+        map_hash TEXT NOT NULL REFERENCES maps(hash),
+        settings TEXT NOT NULL,
+        started_at BIGINT NOT NULL,
+        updated_at BIGINT NOT NULL,
+        ended_at BIGINT,
+        ticks BIGINT NOT NULL DEFAULT 0,
+        winner TEXT,
+        reason TEXT,
+        complete BOOLEAN NOT NULL DEFAULT FALSE,
+        names TEXT NOT NULL DEFAULT '[]',
+        bytes BIGINT NOT NULL DEFAULT 0
+    );
+    CREATE INDEX matches_ended ON matches(ended_at);
+    CREATE INDEX matches_map ON matches(map_hash);
+    CREATE INDEX matches_running ON matches(writer) WHERE ended_at IS NULL;
+    CREATE TABLE inputs (
+        n BIGINT GENERATED ALWAYS AS IDENTITY PRIMARY KEY,
+        seq BIGINT NOT NULL REFERENCES matches(seq) ON DELETE CASCADE,
+        chunk BYTEA NOT NULL
+    );
+    CREATE INDEX inputs_by_match ON inputs(seq, n);
+    CREATE TABLE players (
+        seq BIGINT NOT NULL REFERENCES matches(seq) ON DELETE CASCADE,
+        name TEXT NOT NULL,
+        tags BIGINT NOT NULL,
+        survived_ticks BIGINT NOT NULL,
+        won BOOLEAN NOT NULL
+    );
+    CREATE INDEX players_by_name ON players(name);
+    CREATE INDEX players_by_match ON players(seq);
+    CREATE TABLE writers (
+        id TEXT PRIMARY KEY,
+        started_at TIMESTAMPTZ NOT NULL DEFAULT now(),
+        seen_at TIMESTAMPTZ NOT NULL DEFAULT now()
+    );",
+];
+
+/// The schema version this build writes.
+pub const SCHEMA_VERSION: usize = MIGRATIONS.len();
+
+/// The advisory lock servers migrate under, one at a time ("lasertag" in ASCII).
+const MIGRATION_LOCK: i64 = 0x6c61_7365_7274_6167;
+
+/// Brings the schema up to date, one transaction a step, under [`MIGRATION_LOCK`].
+pub fn migrate(client: &mut Client) -> Result<(), StoreError> {
+    loop {
+        let mut tx = client.transaction().map_err(db)?;
+        tx.execute("SELECT pg_advisory_xact_lock($1)", &[&MIGRATION_LOCK])
+            .map_err(db)?;
+        tx.batch_execute("CREATE TABLE IF NOT EXISTS lasertag_schema (version INTEGER NOT NULL)")
+            .map_err(db)?;
+        let version: i32 = tx
+            .query_one("SELECT COALESCE(MAX(version), 0) FROM lasertag_schema", &[])
+            .and_then(|r| r.try_get(0))
+            .map_err(db)?;
+        let version = usize::try_from(version).unwrap_or(0);
+        if version > SCHEMA_VERSION {
+            return Err(StoreError::NewerSchema {
+                found: version,
+                known: SCHEMA_VERSION,
+            });
+        }
+        let Some(step) = MIGRATIONS.get(version) else {
+            return tx.commit().map_err(db);
+        };
+        tx.batch_execute(step).map_err(db)?;
+        let next = i32::try_from(version + 1).unwrap_or(i32::MAX);
+        tx.execute("DELETE FROM lasertag_schema", &[]).map_err(db)?;
+        tx.execute(
+            "INSERT INTO lasertag_schema (version) VALUES ($1)",
+            &[&next],
+        )
+        .map_err(db)?;
+        tx.commit().map_err(db)?;
+    }
+}
+
+const LISTED: &str = "SELECT id, map, started_at, ended_at, ticks, winner, reason, complete, names
+                      FROM matches";
+
+const STATS: &str = "SELECT name, COUNT(*), SUM(won::INT)::BIGINT, SUM(tags)::BIGINT,
+                            MAX(survived_ticks) FROM players";
+
+/// Every statement, prepared once a connection.
+pub(super) struct Statements {
+    pub(super) begin_map: Statement,
+    pub(super) begin_match: Statement,
+    pub(super) append: Statement,
+    pub(super) finish: Statement,
+    pub(super) add_players: Statement,
+    pub(super) evict: Statement,
+    pub(super) forget_maps: Statement,
+    pub(super) list: Statement,
+    pub(super) load: Statement,
+    pub(super) totals: Statement,
+    pub(super) player: Statement,
+    pub(super) played: Statement,
+    /// By [`LeaderOrder`]: wins, tags, survival, matches.
+    pub(super) leaders: [Statement; 4],
+    pub(super) beat: Statement,
+    pub(super) close_silent: Statement,
+    pub(super) forget_writers: Statement,
+}
+
+impl Statements {
+    pub(super) fn prepare(c: &mut Client) -> Result<Statements, ::postgres::Error> {
+        let leaders = |c: &mut Client, by: &str| {
+            // Ties by name in byte order, as SQLite orders them.
+            c.prepare(&format!(
+                "{STATS} GROUP BY name ORDER BY {by}, name COLLATE \"C\" LIMIT $1"
+            ))
+        };
+        Ok(Statements {
+            begin_map: c.prepare(
+                "INSERT INTO maps (hash, name, document) VALUES ($1, $2, $3)
+                 ON CONFLICT (hash) DO NOTHING",
+            )?,
+            begin_match: c.prepare(
+                "INSERT INTO matches (id, writer, map, map_hash, settings, started_at,
+                                      updated_at, bytes)
+                 VALUES ($1, $2, $3, $4, $5, $6, $6, $7) ON CONFLICT (id) DO NOTHING",
+            )?,
+            // One round trip: appends are most of the writes. A match a silent-writer sweep
+            // closed is open again once its writer speaks.
+            append: c.prepare(
+                "WITH m AS (
+                   UPDATE matches SET ticks = $3, updated_at = $4, bytes = bytes + $5,
+                          names = COALESCE($6, names),
+                          ended_at = CASE WHEN complete THEN ended_at END
+                   WHERE id = $1 AND writer = $2 RETURNING seq
+                 ), chunk AS (
+                   INSERT INTO inputs (seq, chunk) SELECT seq, $7::BYTEA FROM m
+                   WHERE $7::BYTEA IS NOT NULL
+                 )
+                 SELECT seq FROM m",
+            )?,
+            finish: c.prepare(
+                "UPDATE matches SET ended_at = $3, ticks = $4, winner = $5, reason = $6,
+                        complete = TRUE
+                 WHERE id = $1 AND writer = $2 RETURNING seq",
+            )?,
+            add_players: c.prepare(
+                "INSERT INTO players (seq, name, tags, survived_ticks, won)
+                 SELECT $1, * FROM UNNEST($2::TEXT[], $3::BIGINT[], $4::BIGINT[],
+                                          $5::BOOLEAN[])",
+            )?,
+            // The newest matches are kept while both their count and their bytes fit.
+            evict: c.prepare(
+                "DELETE FROM matches WHERE seq IN (
+                   SELECT seq FROM (
+                     SELECT seq, ROW_NUMBER() OVER w AS k, (SUM(bytes) OVER w)::BIGINT AS total
+                     FROM matches WHERE ended_at IS NOT NULL
+                     WINDOW w AS (ORDER BY seq DESC)
+                   ) ranked WHERE k > $1 OR total > $2)",
+            )?,
+            // A map another server is storing a match with right now is locked: skipped.
+            forget_maps: c.prepare(
+                "DELETE FROM maps WHERE hash IN (
+                   SELECT hash FROM maps m
+                   WHERE NOT EXISTS (SELECT 1 FROM matches WHERE map_hash = m.hash)
+                   FOR UPDATE SKIP LOCKED)",
+            )?,
+            list: c.prepare(&format!(
+                "{LISTED} WHERE ended_at IS NOT NULL
+                   AND seq < COALESCE((SELECT seq FROM matches WHERE id = $1),
+                                      9223372036854775807)
+                 ORDER BY seq DESC LIMIT $2"
+            ))?,
+            // The chunks come in the same statement: an eviction between two reads cannot
+            // leave a match without its inputs.
+            load: c.prepare(
+                "SELECT m.id, m.map, m.started_at, m.ended_at, m.ticks, m.winner, m.reason,
+                        m.complete, m.names, m.settings, maps.document,
+                        ARRAY(SELECT chunk FROM inputs WHERE inputs.seq = m.seq ORDER BY n)
+                 FROM matches m JOIN maps ON maps.hash = m.map_hash
+                 WHERE m.id = $1 AND m.ended_at IS NOT NULL",
+            )?,
+            totals: c.prepare(
+                "SELECT COUNT(*), COALESCE(SUM(bytes), 0)::BIGINT FROM matches
+                 WHERE ended_at IS NOT NULL",
+            )?,
+            player: c.prepare(&format!("{STATS} WHERE name = $1 GROUP BY name"))?,
+            played: c.prepare(&format!(
+                "{LISTED} WHERE seq IN (SELECT seq FROM players WHERE name = $1)
+                 ORDER BY seq DESC LIMIT $2"
+            ))?,
+            leaders: [
+                leaders(c, "SUM(won::INT) DESC, COUNT(*) ASC")?,
+                leaders(c, "SUM(tags) DESC, COUNT(*) ASC")?,
+                leaders(c, "MAX(survived_ticks) DESC")?,
+                leaders(c, "COUNT(*) DESC")?,
+            ],
+            beat: c.prepare(
+                "INSERT INTO writers (id) VALUES ($1)
+                 ON CONFLICT (id) DO UPDATE SET seen_at = now()",
+            )?,
+            close_silent: c.prepare(
+                "UPDATE matches SET ended_at = updated_at, complete = FALSE
+                 WHERE ended_at IS NULL AND writer <> $1
+                   AND NOT EXISTS (SELECT 1 FROM writers w WHERE w.id = matches.writer
+                                   AND w.seen_at > now() - make_interval(secs => $2))",
+            )?,
+            forget_writers: c.prepare(
+                "DELETE FROM writers w
+                 WHERE seen_at < now() - make_interval(secs => $1)
+                   AND NOT EXISTS (SELECT 1 FROM matches
+                                   WHERE writer = w.id AND ended_at IS NULL)",
+            )?,
+        })
+    }
+}

@@ -1,0 +1,164 @@
+//! A batch's writes as PostgreSQL statements: each [`Write`](crate::store::Write) encoded
+//! before the transaction begins, applied in it, and the eviction that follows a finish.
+
+use ::postgres::Transaction;
+
+use super::big;
+use super::schema::Statements;
+use crate::store::{Ended, Retention, StoreError};
+
+/// A write, encoded before its transaction begins.
+pub(super) enum Change<'a> {
+    Begin {
+        id: &'a str,
+        map: &'a str,
+        hash: String,
+        document: String,
+        settings: String,
+        started_at: i64,
+    },
+    Append {
+        id: &'a str,
+        chunk: Option<Vec<u8>>,
+        names: Option<String>,
+        tick: i64,
+    },
+    Finish {
+        id: &'a str,
+        ended: &'a Ended,
+    },
+}
+
+impl<'a> Change<'a> {
+    pub(super) fn of(w: &'a crate::store::Write) -> Option<Result<Change<'a>, StoreError>> {
+        use crate::store::Write;
+        Some(match w {
+            Write::Begin {
+                id,
+                arena,
+                settings,
+                started_at,
+            } => {
+                let document = crate::maps::import::to_json(&crate::maps::to_file(&arena.def));
+                serde_json::to_string(settings)
+                    .map_err(|e| StoreError::Database(e.to_string()))
+                    .map(|settings| Change::Begin {
+                        id,
+                        map: &arena.def.name,
+                        hash: crate::store::map_key(&document),
+                        document,
+                        settings,
+                        started_at: crate::store::unix_ms(*started_at),
+                    })
+            }
+            Write::Append {
+                id,
+                inputs,
+                names,
+                tick,
+            } => Ok(Change::Append {
+                id,
+                chunk: (!inputs.is_empty()).then(|| crate::store::codec::encode_inputs(inputs)),
+                names: names
+                    .as_ref()
+                    .map(|n| serde_json::to_string(n).unwrap_or_else(|_| "[]".into())),
+                tick: big(*tick),
+            }),
+            Write::Finish { id, ended } => Ok(Change::Finish { id, ended }),
+            Write::Flush(_) => return None,
+        })
+    }
+}
+
+/// Applies one change: `Err` when the database failed (the transaction is lost), `Ok(Err)`
+/// when the change was refused (a match not stored, or another writer's).
+pub(super) fn apply(
+    tx: &mut Transaction<'_>,
+    st: &Statements,
+    writer: &str,
+    change: &Change<'_>,
+    now: i64,
+) -> Result<Result<(), StoreError>, ::postgres::Error> {
+    match change {
+        Change::Begin {
+            id,
+            map,
+            hash,
+            document,
+            settings,
+            started_at,
+        } => {
+            tx.execute(&st.begin_map, &[hash, map, document])?;
+            let bytes = settings.len() as i64;
+            let added = tx.execute(
+                &st.begin_match,
+                &[id, &writer, map, hash, settings, started_at, &bytes],
+            )?;
+            Ok(if added == 0 {
+                Err(StoreError::Duplicate(id.to_string()))
+            } else {
+                Ok(())
+            })
+        }
+        Change::Append {
+            id,
+            chunk,
+            names,
+            tick,
+        } => {
+            let bytes = chunk.as_ref().map_or(0, |c| c.len() as i64);
+            let found =
+                tx.query_opt(&st.append, &[id, &writer, tick, &now, &bytes, names, chunk])?;
+            Ok(match found {
+                Some(_) => Ok(()),
+                None => Err(StoreError::Unknown(id.to_string())),
+            })
+        }
+        Change::Finish { id, ended } => {
+            let ticks = big(ended.ticks);
+            let Some(row) = tx.query_opt(
+                &st.finish,
+                &[
+                    id,
+                    &writer,
+                    &ended.ended_at,
+                    &ticks,
+                    &ended.winner,
+                    &ended.reason,
+                ],
+            )?
+            else {
+                return Ok(Err(StoreError::Unknown(id.to_string())));
+            };
+            let seq: i64 = row.try_get(0)?;
+            if !ended.players.is_empty() {
+                let p = &ended.players;
+                let names: Vec<&str> = p.iter().map(|p| p.name.as_str()).collect();
+                let tags: Vec<i64> = p.iter().map(|p| i64::from(p.tags)).collect();
+                let survived: Vec<i64> = p.iter().map(|p| big(p.survived_ticks)).collect();
+                let won: Vec<bool> = p.iter().map(|p| p.won).collect();
+                tx.execute(&st.add_players, &[&seq, &names, &tags, &survived, &won])?;
+            }
+            Ok(Ok(()))
+        }
+    }
+}
+
+/// Deletes the oldest ended matches past `retention`, and the maps no match uses any more,
+/// in a savepoint: an eviction that fails (two servers evicting at once) costs nothing else.
+pub(super) fn evict(
+    tx: &mut Transaction<'_>,
+    st: &Statements,
+    retention: Retention,
+) -> Result<u64, ::postgres::Error> {
+    let mut sp = tx.transaction()?;
+    let evicted = sp.execute(
+        &st.evict,
+        &[&big(retention.max_matches), &big(retention.max_bytes)],
+    )?;
+    if evicted > 0 {
+        sp.execute(&st.forget_maps, &[])?;
+    }
+    sp.commit()?;
+    Ok(evicted)
+}
