@@ -13,6 +13,14 @@ if ! command -v chromium >/dev/null 2>&1 && [ -z "${LASERTAG_CHROMIUM:-}" ]; the
   $SUDO apt-get update -qq
   DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq chromium >/dev/null
 fi
+# The fleet's tests (tests/fleet.rs) run a real Redis: install Debian's when it is missing.
+if ! command -v redis-server >/dev/null 2>&1 && [ -z "${LASERTAG_REDIS_SERVER:-}" ]; then
+  echo "tests/run.sh: installing redis-server (Debian package) for the fleet's tests"
+  SUDO=""
+  if [ "$(id -u)" != 0 ] && command -v sudo >/dev/null 2>&1; then SUDO="sudo"; fi
+  $SUDO apt-get update -qq
+  DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq redis-server >/dev/null
+fi
 # Lints first (tests/tidy.rs checks formatting and the floors; clippy would wait on the build
 # directory that `cargo test` holds if the tidy test ran it).
 cargo clippy --locked --workspace --all-targets -- -D warnings
