@@ -247,6 +247,8 @@ pub enum NoRoom {
         asked_ms: f64,
         budget_ms: f64,
     },
+    /// The server is draining before it shuts down.
+    Draining,
 }
 
 #[cfg(test)]

@@ -48,6 +48,7 @@ pub mod defaults {
         0.8 * 50.0 * cores as f64
     }
     pub const HEADER_READ_TIMEOUT: &str = "10";
+    pub const DRAIN: &str = "0";
 }
 
 /// A secret setting: shown as `"<redacted>"` by `Debug`, so logs of the config never carry it.
@@ -229,6 +230,13 @@ pub struct Config {
     #[arg(long, env = "LASERTAG_MAX_HOLDS_PER_ADDRESS", default_value_t = defaults::MAX_HOLDS_PER_ADDRESS,
           value_parser = clap::value_parser!(u64).range(1..).map(|v| v as usize))]
     pub max_holds_per_address: usize,
+    /// Seconds a server told to stop (SIGTERM, Ctrl-C) drains before it shuts down: it
+    /// takes no new matches, and its running matches go on until they end or the drain
+    /// does; then the rest end with reason `server_shutdown`. A second signal ends the
+    /// drain at once. 0: shut down at once.
+    #[arg(long = "drain-s", value_name = "SECONDS", env = "LASERTAG_DRAIN_S",
+          default_value = defaults::DRAIN, value_parser = seconds)]
+    pub drain: Duration,
 }
 
 impl Default for Config {
@@ -266,6 +274,7 @@ impl Default for Config {
             tick_overrun_ms: defaults::TICK_OVERRUN_MS,
             join_hold: secs(defaults::JOIN_HOLD),
             max_holds_per_address: defaults::MAX_HOLDS_PER_ADDRESS,
+            drain: secs(defaults::DRAIN),
         }
     }
 }

@@ -4,7 +4,8 @@
 //! keeps clocks, tasks, I/O and serialisation out of it):
 //! - edge: [`maps`] (map files), [`schema`] (hand-written OpenAPI pieces and lenient number
 //!   parsing), [`protocol`] (every JSON shape of the API, and the frames a match publishes);
-//! - shell: [`game`] (one tokio task per match), [`http`] (the axum router), [`config`]
+//! - shell: [`game`] (one tokio task per match), [`fleet`] (the directory of servers in
+//!   Redis, with `--fleet`), [`http`] (the axum router), [`config`]
 //!   (limits), [`access`] (owners, their tokens, per-client keys), [`metrics`] (Prometheus),
 //!   `agones` (with the `agones` feature: the Agones SDK lifecycle), `main.rs` (CLI; its `experiment` command runs
 //!   `lasertag-lab`).
@@ -18,6 +19,7 @@ pub mod admission;
 #[cfg(feature = "agones")]
 pub mod agones;
 pub mod config;
+pub mod fleet;
 pub mod game;
 pub mod http;
 pub mod maps;

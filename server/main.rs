@@ -8,6 +8,7 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use clap::{Parser, Subcommand};
+use lasertag::fleet::Fleet;
 use lasertag::game::Registry;
 use lasertag::maps::MapStore;
 
@@ -63,6 +64,8 @@ struct ServeArgs {
     history: lasertag::store::StoreArgs,
     #[command(flatten)]
     config: lasertag::config::Config,
+    #[command(flatten)]
+    fleet: lasertag::fleet::FleetArgs,
 }
 
 /// Every map of `dir`, for the experiments (which know no map files).
@@ -202,8 +205,18 @@ async fn serve(args: ServeArgs) -> Result<(), String> {
         .await
         .map_err(|e| format!("cannot listen on {}: {e}", args.addr))?;
     let local = listener.local_addr().map_err(|e| e.to_string())?;
+    // In a fleet, the directory task starts before the first request: it connects by
+    // itself, and a Redis that is down only leaves this node alone in its listing.
+    let fleet = args
+        .fleet
+        .settings(local)
+        .map_err(|e| e.to_string())?
+        .map(|(settings, client)| Fleet::start(settings, client, registry.clone()));
     tracing::info!("serving http://{local}");
-    let app = lasertag::http::app(registry.clone(), args.web);
+    let app = match &fleet {
+        Some(fleet) => lasertag::http::app_in_fleet(registry.clone(), args.web, fleet.clone()),
+        None => lasertag::http::app(registry.clone(), args.web),
+    };
     let limits = lasertag::http::ConnectionLimits {
         max_connections: registry.config.max_connections,
         header_read_timeout: registry.config.header_read_timeout,
@@ -230,9 +243,13 @@ async fn serve(args: ServeArgs) -> Result<(), String> {
             .unwrap_or(Ok(()))
             .map_err(|e| format!("server error: {e}"));
     }
+    let deadline = tokio::time::Instant::now() + SHUTDOWN_BUDGET;
+    // Every match has been told to end: leave the fleet's directory now, beside the rest
+    // of the shutdown, so that other lobbies drop this node's matches at their next read.
+    let leaving =
+        fleet.map(|fleet| tokio::spawn(async move { fleet.leave(Duration::from_secs(2)).await }));
     // The listener is closed and every match told to stop: wait for the HTTP requests in
     // flight and for the WebSockets to send `finished` and close, within the budget.
-    let deadline = tokio::time::Instant::now() + SHUTDOWN_BUDGET;
     let drained = tokio::time::timeout_at(deadline, async {
         let served = match served_early {
             Some(r) => r,
@@ -253,6 +270,9 @@ async fn serve(args: ServeArgs) -> Result<(), String> {
     };
     if !matches!(flushed, Ok(Ok(()))) {
         tracing::warn!("the history's last writes may be lost");
+    }
+    if let Some(leaving) = leaving {
+        let _ = tokio::time::timeout_at(deadline, leaving).await;
     }
     // Drained: hand the game server back to Agones.
     #[cfg(feature = "agones")]
@@ -276,26 +296,67 @@ async fn serve(args: ServeArgs) -> Result<(), String> {
     }
 }
 
-/// Resolves on Ctrl-C or SIGTERM, after telling every match and connection to stop.
+/// Resolves on Ctrl-C or SIGTERM, after the drain (`--drain-s`) and after telling every
+/// match and connection to stop.
 async fn shutdown_signal(registry: Arc<Registry>) {
-    let ctrl_c = async {
-        let _ = tokio::signal::ctrl_c().await;
-    };
-    #[cfg(unix)]
-    let terminate = async {
-        match tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate()) {
-            Ok(mut s) => {
-                s.recv().await;
+    let mut signals = StopSignals::new();
+    signals.next().await;
+    let drain = registry.config.drain;
+    // Marked draining at once (a fleet's directory hears of it now): no new match here.
+    registry.begin_drain();
+    if !drain.is_zero() && !registry.all_finished() {
+        tracing::info!(
+            ?drain,
+            "draining: no new matches; the running ones go on until they end or the drain does"
+        );
+        let all_ended = async {
+            while !registry.all_finished() {
+                tokio::time::sleep(Duration::from_millis(100)).await;
             }
-            Err(_) => std::future::pending::<()>().await,
+        };
+        tokio::select! {
+            () = all_ended => tracing::info!("drained: every match has ended"),
+            () = tokio::time::sleep(drain) => tracing::info!("the drain is over"),
+            () = signals.next() => tracing::info!("a second signal ends the drain"),
         }
-    };
-    #[cfg(not(unix))]
-    let terminate = std::future::pending::<()>();
-    tokio::select! {
-        _ = ctrl_c => {},
-        _ = terminate => {},
     }
     tracing::info!("shutting down");
     registry.begin_shutdown().await;
+}
+
+/// Ctrl-C and SIGTERM, as often as they come.
+struct StopSignals {
+    #[cfg(unix)]
+    terminate: Option<tokio::signal::unix::Signal>,
+}
+
+impl StopSignals {
+    fn new() -> StopSignals {
+        StopSignals {
+            #[cfg(unix)]
+            terminate: tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate())
+                .ok(),
+        }
+    }
+
+    async fn next(&mut self) {
+        let ctrl_c = async {
+            let _ = tokio::signal::ctrl_c().await;
+        };
+        #[cfg(unix)]
+        let terminate = async {
+            match &mut self.terminate {
+                Some(s) => {
+                    s.recv().await;
+                }
+                None => std::future::pending::<()>().await,
+            }
+        };
+        #[cfg(not(unix))]
+        let terminate = std::future::pending::<()>();
+        tokio::select! {
+            _ = ctrl_c => {},
+            _ = terminate => {},
+        }
+    }
 }

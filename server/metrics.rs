@@ -113,6 +113,12 @@ pub struct Metrics {
     pub late_ticks: IntCounter,
     /// Ticks whose computation took longer than `--tick-overrun-ms`.
     pub tick_overruns: IntCounter,
+    /// Round trips to the fleet's Redis (`--fleet`), answered or not.
+    pub fleet_round_trips: IntCounter,
+    /// Round trips to the fleet's Redis that failed (refused, timed out, cut).
+    pub fleet_errors: IntCounter,
+    /// Nodes in this node's view of the fleet, itself included (0 outside a fleet).
+    pub fleet_nodes: IntGauge,
 }
 
 /// Tick-scale buckets: 50 µs to 100 ms (a tick has 50 ms).
@@ -193,6 +199,21 @@ impl Metrics {
             "Real-time ticks that started over half a period late",
         )
         .expect("valid metric");
+        let fleet_round_trips = IntCounter::new(
+            "lasertag_fleet_redis_round_trips_total",
+            "Round trips to the fleet's Redis directory",
+        )
+        .expect("valid metric");
+        let fleet_errors = IntCounter::new(
+            "lasertag_fleet_redis_errors_total",
+            "Round trips to the fleet's Redis directory that failed",
+        )
+        .expect("valid metric");
+        let fleet_nodes = IntGauge::new(
+            "lasertag_fleet_nodes",
+            "Nodes in this node's view of the fleet, itself included",
+        )
+        .expect("valid metric");
         for c in [
             Box::new(matches.clone()) as Box<dyn prometheus::core::Collector>,
             Box::new(matches_removed.clone()),
@@ -204,6 +225,9 @@ impl Metrics {
             Box::new(refused.clone()),
             Box::new(late_ticks.clone()),
             Box::new(tick_overruns.clone()),
+            Box::new(fleet_round_trips.clone()),
+            Box::new(fleet_errors.clone()),
+            Box::new(fleet_nodes.clone()),
         ] {
             registry.register(c).expect("metric names are distinct");
         }
@@ -240,6 +264,9 @@ impl Metrics {
             refused,
             late_ticks,
             tick_overruns,
+            fleet_round_trips,
+            fleet_errors,
+            fleet_nodes,
         }
     }
 

@@ -9,6 +9,7 @@
 //! log) is in [`state`]; requests and the small shapes are here.
 
 pub mod compact;
+pub mod fleet;
 pub mod frame;
 pub mod replay_ws;
 pub mod replays;

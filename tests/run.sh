@@ -33,14 +33,17 @@ cargo test --locked --workspace --all-targets
 # python/constraints.txt pins (PyPI).
 [ -x target/debug/lasertag ] || cargo build --locked --bin lasertag
 PY_DIR=target/python-env
-if [ ! -x "$PY_DIR/venv/bin/pip" ]; then
+# A venv's scripts name its path in their first line: a build directory that was moved
+# (or copied from another checkout) keeps a venv whose `pip` cannot run. Ask its Python.
+VENV_PY="$PY_DIR/venv/bin/python"
+if ! "$VENV_PY" -m pip --version >/dev/null 2>&1; then
   rm -rf "$PY_DIR/venv"
   python3 -m venv "$PY_DIR/venv" >/dev/null 2>&1 || rm -rf "$PY_DIR/venv"
 fi
-if [ -x "$PY_DIR/venv/bin/pip" ]; then
-  "$PY_DIR/venv/bin/pip" install -q --disable-pip-version-check -c python/constraints.txt ./python pytest
+if "$VENV_PY" -m pip --version >/dev/null 2>&1; then
+  "$VENV_PY" -m pip install -q --disable-pip-version-check -c python/constraints.txt ./python pytest
   # The package's own version does not change with its code: reinstall it every run.
-  "$PY_DIR/venv/bin/pip" install -q --disable-pip-version-check --no-deps --force-reinstall ./python
+  "$VENV_PY" -m pip install -q --disable-pip-version-check --no-deps --force-reinstall ./python
   LASERTAG_BIN=target/debug/lasertag "$PY_DIR/venv/bin/python" -m pytest python/tests
 else
   # A Python without venv (Debian's python3 without python3-venv): install into a folder.

@@ -30,6 +30,7 @@ const SERVER_FLOORS: &[&str] = &[
     "admission",
     "store",
     "game",
+    "fleet",
     "agones",
     "http",
 ];

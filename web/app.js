@@ -1,7 +1,8 @@
 // The page: a lobby (#/), and a match to watch (#/watch/<id>) or play (#/play/<id>); past
 // matches (#/history), a replay (#/replay/<id>, `?as=o0` for that player's view) and the
 // leaderboard (#/leaderboard, #/player/<name>).
-// Plain ES modules, no build step, nothing fetched from anywhere but this server.
+// Plain ES modules, no build step, nothing fetched from anywhere but this server and, when it
+// runs in a fleet, the other nodes its listing names (a match is played on its own node).
 
 import { Game, debug } from "./game.js";
 import { Replay } from "./replay.js";
@@ -10,6 +11,9 @@ import { showHistory, showLeaderboard, showPlayer } from "./pages.js";
 const $ = (id) => document.getElementById(id);
 let game = null;
 let lobbyTimer = null;
+/** Match id → the URL of the node that hosts it ("" for this page's own server), from the
+ * listings (in a fleet every node lists every node's matches, each with its `node`). */
+const homes = new Map();
 
 function playerName() {
   const input = $("name");
@@ -22,8 +26,11 @@ function playerName() {
   return name;
 }
 
-async function api(method, path, body) {
-  const r = await fetch(path, {
+/** `path` on the node at `base` ("" for this server): the JSON answer, and the origin that
+ * gave it ("" for this server; a new match may be placed on another node, which the
+ * browser reaches by following the 307). */
+async function request(method, path, body, base = "") {
+  const r = await fetch(base + path, {
     method,
     headers: body ? { "content-type": "application/json" } : {},
     body: body ? JSON.stringify(body) : undefined,
@@ -31,15 +38,42 @@ async function api(method, path, body) {
   const text = await r.text();
   const data = text ? JSON.parse(text) : null;
   if (!r.ok) throw new Error(data && data.error ? data.error : `${r.status}`);
+  const origin = new URL(r.url, location.href).origin;
+  return { data, from: origin === location.origin ? "" : origin };
+}
+
+async function api(method, path, body, base = "") {
+  return (await request(method, path, body, base)).data;
+}
+
+/** Lists every match (the fleet's, in a fleet) and remembers where each is hosted. */
+async function listMatches() {
+  const matches = await api("GET", "/api/matches");
+  for (const m of matches) homes.set(m.id, m.node && !m.node.local ? m.node.url : "");
+  return matches;
+}
+
+/** Creates a match wherever the server places it, and remembers where that is. */
+async function createMatch(body) {
+  const { data, from } = await request("POST", "/api/matches", body);
+  homes.set(data.id, from);
   return data;
 }
 
+/** The node that hosts match `id` ("" for this server), looked up in the listing if need be. */
+async function homeOf(id) {
+  if (!homes.has(id)) {
+    try { await listMatches(); } catch { /* then this server: it answers 404 if it must */ }
+  }
+  return homes.get(id) || "";
+}
+
 /** Takes a slot of match `id` (once per tab) and returns the token. */
-async function tokenFor(id) {
+async function tokenFor(id, base) {
   const key = `lasertag.token.${id}`;
   let token = sessionStorage.getItem(key);
   if (!token) {
-    const joined = await api("POST", `/api/matches/${encodeURIComponent(id)}/players`, { name: playerName() });
+    const joined = await api("POST", `/api/matches/${encodeURIComponent(id)}/players`, { name: playerName() }, base);
     token = joined.token;
     sessionStorage.setItem(key, token);
   }
@@ -62,7 +96,7 @@ function button(text, onclick, cls) {
 async function refreshLobby() {
   let matches;
   try {
-    matches = await api("GET", "/api/matches");
+    matches = await listMatches();
   } catch (e) {
     $("matches").tBodies[0].innerHTML = `<tr><td colspan="8">cannot reach the server: ${e.message}</td></tr>`;
     return;
@@ -82,7 +116,10 @@ async function refreshLobby() {
     const tr = document.createElement("tr");
     tr.dataset.id = m.id;
     const left = m.status === "running" ? fmtTime(m.time_limit_s - m.time_s) : `${m.winner} won`;
-    const cells = [m.id.length > 16 ? m.id.slice(0, 16) + "…" : m.id, m.map, `${m.robots} · ${m.planner_active}`,
+    const short = m.id.length > 16 ? m.id.slice(0, 16) + "…" : m.id;
+    // In a fleet, the node that hosts it (the page plays it there).
+    const where = m.node ? ` · ${m.node.id}${m.node.draining ? " (closing)" : ""}` : "";
+    const cells = [short + where, m.map, `${m.robots} · ${m.planner_active}`,
       `${m.opponents_left}/${m.opponents} ${m.opponent_control}`, m.players, m.spectators, left];
     for (const c of cells) {
       const td = document.createElement("td");
@@ -120,7 +157,7 @@ async function create(e) {
   const f = new FormData($("create"));
   $("create-error").textContent = "";
   try {
-    const m = await api("POST", "/api/matches", {
+    const m = await createMatch({
       map: f.get("map"),
       robots: Number(f.get("robots")),
       opponents: Number(f.get("opponents")),
@@ -137,7 +174,7 @@ async function create(e) {
 
 /** Play again: the next showcase, or a new match like this one. */
 async function replay(g) {
-  const matches = await api("GET", "/api/matches");
+  const matches = await listMatches();
   if (g.matchId.startsWith("showcase-")) {
     const next = matches.find((m) => m.id.startsWith("showcase-") && m.status === "running" && m.free_slots > 0);
     location.hash = next ? `#/play/${next.id}` : "#/";
@@ -145,7 +182,7 @@ async function replay(g) {
   }
   const m = matches.find((x) => x.id === g.matchId);
   if (!m) { location.hash = "#/"; return; }
-  const fresh = await api("POST", "/api/matches", {
+  const fresh = await createMatch({
     map: m.map, robots: m.robots, opponents: m.opponents, planner: m.planner,
     opponent_control: m.opponent_control, opponent_bot: m.opponent_bot,
     bots_joinable: m.bots_joinable, time_limit_s: m.time_limit_s,
@@ -171,7 +208,10 @@ async function route() {
   if (replaying) {
     $("lobby").hidden = true;
     $("game").hidden = false;
-    game = new Replay({ id: decodeURIComponent(id), as: params.get("as"), full: params.get("view") === "full" });
+    game = new Replay({
+      id: decodeURIComponent(id), as: params.get("as"), full: params.get("view") === "full",
+      base: homes.get(decodeURIComponent(id)) || "",
+    });
     return;
   }
   if (page === "history" || page === "leaderboard" || (page === "player" && id)) {
@@ -189,10 +229,11 @@ async function route() {
   if ((page === "watch" || page === "play") && id) {
     $("lobby").hidden = true;
     $("game").hidden = false;
+    const base = await homeOf(decodeURIComponent(id));
     let token = null;
     if (page === "play") {
       try {
-        token = await tokenFor(decodeURIComponent(id));
+        token = await tokenFor(decodeURIComponent(id), base);
       } catch (e) {
         debug.joinError = e.message;
         location.hash = "#/";
@@ -201,7 +242,7 @@ async function route() {
       }
     }
     game = new Game({
-      matchId: decodeURIComponent(id), token,
+      matchId: decodeURIComponent(id), token, base,
       onLobby: () => (location.hash = "#/"),
       onReplay: (g) => replay(g).catch((e) => { $("end-text").textContent = e.message; }),
       onStaleToken: token ? () => {

@@ -22,15 +22,25 @@ const JITTER_WINDOW = 60;
 /** What tests read: counts of what was drawn, the feed, the end. */
 export const debug = (window.__lasertag = window.__lasertag || {});
 
+/** The WebSocket URL of `path` on the node at `base` (its URL in a fleet listing), or on the
+ * page's own server when `base` is empty. Browsers follow no redirect when opening a socket,
+ * so the page goes to the match's node itself. */
+export function socketUrl(base, path) {
+  const at = base ? new URL(base) : location;
+  return `${at.protocol === "https:" ? "wss" : "ws"}://${at.host}${path}`;
+}
+
 function fmtTime(s) {
   s = Math.max(0, Math.floor(s));
   return `${Math.floor(s / 60)}:${String(s % 60).padStart(2, "0")}`;
 }
 
 export class Game {
-  constructor({ matchId, token, onLobby, onReplay, onStaleToken }) {
+  constructor({ matchId, token, base = "", onLobby, onReplay, onStaleToken }) {
     this.matchId = matchId;
     this.token = token;
+    // The node that hosts the match, in a fleet ("" for this page's own server).
+    this.base = base;
     this.onLobby = onLobby;
     this.onReplay = onReplay;
     this.onStaleToken = onStaleToken;
@@ -56,7 +66,7 @@ export class Game {
     this.closedByUs = false;
     this.retries = 0;
     Object.assign(debug, {
-      page: "game", matchId, role: token ? "player" : "spectator", connected: false,
+      page: "game", matchId, base, role: token ? "player" : "spectator", connected: false,
       snapshots: 0, lastTick: null, drawn: null, feed: [], ended: null, ping: null, you: null,
       belief: this.beliefOn, errors: [],
     });
@@ -90,10 +100,9 @@ export class Game {
   }
 
   connect() {
-    const proto = location.protocol === "https:" ? "wss" : "ws";
     // Snapshots in the compact binary form (see compact.js); the rest stays JSON text.
     const q = `?format=compact${this.token ? `&token=${encodeURIComponent(this.token)}` : ""}`;
-    const ws = new WebSocket(`${proto}://${location.host}/ws/matches/${encodeURIComponent(this.matchId)}${q}`);
+    const ws = new WebSocket(socketUrl(this.base, `/ws/matches/${encodeURIComponent(this.matchId)}${q}`));
     ws.binaryType = "arraybuffer";
     this.decoder = new CompactDecoder();
     this.ws = ws;

@@ -6,6 +6,7 @@
 import { segments, visibility, castRay, angleDiff } from "./geometry.js";
 import { draw, fit, roleColor } from "./render.js";
 import { CompactDecoder } from "./compact.js";
+import { socketUrl } from "./game.js";
 
 const $ = (id) => document.getElementById(id);
 const debug = (window.__lasertag = window.__lasertag || {});
@@ -32,8 +33,10 @@ const sleep = (ms) => new Promise((r) => setTimeout(r, ms));
 export class Replay {
   /** `as`: the opponent whose view to show (or null); `full`: start with everyone's view
    * all the same (the switch goes back to the player's). */
-  constructor({ id, as, full }) {
+  constructor({ id, as, full, base = "" }) {
     this.id = id;
+    // The node that played the match, in a fleet ("" for this page's own server).
+    this.base = base;
     this.as = as || null;
     this.fogged = Boolean(this.as) && !full;
     this.canvas = $("arena");
@@ -84,7 +87,7 @@ export class Replay {
     for (let attempt = 0; ; attempt++) {
       let r;
       try {
-        r = await fetch(`/api/replays/${encodeURIComponent(this.id)}`);
+        r = await fetch(`${this.base}/api/replays/${encodeURIComponent(this.id)}`);
       } catch (e) {
         $("hud-status").textContent = `cannot reach the server: ${e.message}`;
         return;
@@ -109,10 +112,9 @@ export class Replay {
   }
 
   connect(tick) {
-    const proto = location.protocol === "https:" ? "wss" : "ws";
     const q = new URLSearchParams({ format: "compact", tick: String(tick), speed: String(this.speed) });
     if (this.fogged) q.set("as", this.as);
-    const ws = new WebSocket(`${proto}://${location.host}/ws/replays/${encodeURIComponent(this.id)}?${q}`);
+    const ws = new WebSocket(socketUrl(this.base, `/ws/replays/${encodeURIComponent(this.id)}?${q}`));
     ws.binaryType = "arraybuffer";
     this.decoder = new CompactDecoder();
     this.ws = ws;

@@ -197,6 +197,9 @@ pub struct Registry {
     pub metrics: Metrics,
     /// Cancelled when the server starts shutting down.
     pub shutdown: CancellationToken,
+    /// Cancelled when the server starts draining (before it shuts down): it takes no new
+    /// matches, and the running ones may finish (see [`Registry::begin_drain`]).
+    pub draining: CancellationToken,
     /// WebSocket connections open now (shutdown waits for it to reach 0).
     connections: watch::Sender<usize>,
     matches: Arc<Matches>,
@@ -260,6 +263,10 @@ impl Registry {
         let mut matches = self.matches.write().unwrap_or_else(|e| e.into_inner());
         self.room_in(&matches, owner.client)?;
         self.budget_in(&matches, price, owner.client)?;
+        // Last, under the lock: a drain that began while this match was built keeps it out.
+        if self.draining.is_cancelled() {
+            return Err(NoRoom::Draining);
+        }
         Ok(self.start_locked(&mut matches, world, meta, owner, price))
     }
 
@@ -346,6 +353,9 @@ impl Registry {
         client: Option<ClientKey>,
     ) -> Result<(), NoRoom> {
         use crate::metrics::Refusal;
+        if self.draining.is_cancelled() {
+            return Err(NoRoom::Draining);
+        }
         if matches.len() >= self.config.max_matches {
             self.metrics.refuse(Refusal::MatchesFull);
             return Err(NoRoom::Server(self.config.max_matches));
@@ -436,9 +446,24 @@ impl Registry {
         let _ = rx.wait_for(|n| *n == 0).await;
     }
 
-    /// Starts shutting down: cancels [`Registry::shutdown`] and ends every match with reason
-    /// `server_shutdown` (their connections send `finished` and close).
+    /// Starts draining: no new match is let in (the showcase starts no new round), while
+    /// the running ones go on and their clients keep playing and watching.
+    pub fn begin_drain(&self) {
+        self.draining.cancel();
+    }
+
+    /// Whether every match held has finished (nothing left for a drain to wait for).
+    pub fn all_finished(&self) -> bool {
+        self.all()
+            .iter()
+            .all(|h| h.hub.frames.borrow().status == lasertag_core::world::MatchStatus::Finished)
+    }
+
+    /// Starts shutting down: cancels [`Registry::shutdown`] (and [`Registry::draining`]) and
+    /// ends every match with reason `server_shutdown` (their connections send `finished`
+    /// and close).
     pub async fn begin_shutdown(&self) {
+        self.draining.cancel();
         self.shutdown.cancel();
         for h in self.all() {
             h.stop(FinishReason::ServerShutdown).await;

@@ -66,8 +66,8 @@ pub async fn keep_running(registry: Arc<Registry>) {
     };
     loop {
         tokio::time::sleep(Duration::from_secs(2)).await;
-        if registry.shutdown.is_cancelled() {
-            return; // no new showcase while the server stops
+        if registry.draining.is_cancelled() {
+            return; // no new showcase while the server drains or stops
         }
         let finished = match registry.get(&id) {
             // Finished as spectators see it: they watch the end before the next round.
@@ -77,6 +77,9 @@ pub async fn keep_running(registry: Arc<Registry>) {
         if finished {
             tokio::time::sleep(LINGER).await;
             registry.remove(&id).await;
+            if registry.draining.is_cancelled() {
+                return;
+            }
             round += 1;
             match start(&registry, round).await {
                 Some(new) => id = new,

@@ -113,5 +113,9 @@ pub fn no_room(why: NoRoom) -> ApiError {
                 "the server's tick budget of {budget_ms:.0} ms is taken ({held_ms:.1} ms admitted; this match needs {asked_ms:.1} ms); try again when matches have ended"
             ),
         ),
+        NoRoom::Draining => ApiError::new(
+            StatusCode::SERVICE_UNAVAILABLE,
+            "the server is shutting down and takes no new matches; its running matches go on until they end",
+        ),
     }
 }

@@ -18,6 +18,7 @@ use crate::http::limits::ClientIp;
 use crate::http::{ApiError, AppState};
 use crate::maps::{self, MapFile};
 use crate::metrics::Refusal;
+use crate::protocol::fleet::{Elsewhere, Listed, Place};
 use crate::protocol::{
     Belief, CreateMatch, ErrorBody, Events, Health, JoinRequest, Joined, MapCreated, MapInfo,
     MatchCreated, MatchMeta, MatchState, MatchStats, MatchSummary, OpponentCommand, StepRequest,
@@ -241,19 +242,30 @@ pub async fn delete_map(
     Ok(StatusCode::NO_CONTENT)
 }
 
-#[utoipa::path(get, path = "/api/matches", responses((status = 200, body = [MatchSummary])))]
-pub async fn list_matches(State(state): State<AppState>) -> Json<Vec<MatchSummary>> {
+#[utoipa::path(get, path = "/api/matches",
+    description = "This server's matches; in a fleet (`--fleet`), every node's, each with the `node` that hosts it.",
+    responses((status = 200, body = [MatchSummary])))]
+pub async fn list_matches(State(state): State<AppState>) -> Json<Vec<Listed>> {
     // Published summaries, not a question to each task: a match busy stepping thousands of
     // ticks must not hold up the lobby.
-    let all = state.registry.all();
-    Json(
-        all.iter()
-            .map(|h| MatchSummary::clone(&h.hub.summary.borrow()))
+    let local: Vec<MatchSummary> = state
+        .registry
+        .all()
+        .iter()
+        .map(|h| MatchSummary::clone(&h.hub.summary.borrow()))
+        .collect();
+    // Other nodes' from the fleet's last read of the directory: never a wait on Redis.
+    Json(match &state.fleet {
+        Some(fleet) => fleet.listing(local),
+        None => local
+            .into_iter()
+            .map(|s| Listed::Local(Box::new(s)))
             .collect(),
-    )
+    })
 }
 
 #[utoipa::path(post, path = "/api/matches", request_body = CreateMatch,
+    params(("place" = Option<Place>, Query, description = "in a fleet: `fleet` (the default) places the match on the least-loaded node with room, answering 307 when that is another node; `local` creates it here")),
     responses((status = 201, body = MatchCreated, links(
                   ("GetMatch" = (operation_id = "get_match", parameters(("id" = "$response.body#/id")))),
                   ("DeleteMatch" = (operation_id = "delete_match", parameters(("id" = "$response.body#/id")))),
@@ -263,14 +275,33 @@ pub async fn list_matches(State(state): State<AppState>) -> Json<Vec<MatchSummar
                   ("Command" = (operation_id = "command", parameters(("id" = "$response.body#/id")))),
                   ("Join" = (operation_id = "join", parameters(("id" = "$response.body#/id")))),
                   ("Stats" = (operation_id = "stats", parameters(("id" = "$response.body#/id")))))),
+              (status = 307, body = Elsewhere, description = "in a fleet: another node has more room; the same request to `Location` creates the match there"),
               (status = 400, body = ErrorBody), (status = 404, body = ErrorBody),
               (status = 413, body = ErrorBody), (status = 429, body = ErrorBody), (status = 503, body = ErrorBody)))]
 pub async fn create_match(
     State(state): State<AppState>,
     ClientIp(ip): ClientIp,
     bearer: Bearer,
+    Query(query): Query<HashMap<String, String>>,
     JsonBody(body): JsonBody<CreateMatch>,
-) -> Result<impl IntoResponse, ApiError> {
+) -> Result<axum::response::Response, ApiError> {
+    let place = match query.get("place") {
+        None => Place::Fleet,
+        Some(p) => Place::parse(p).ok_or_else(|| {
+            ApiError::bad_request(format!("place: {p:?} is not a placement (fleet or local)"))
+        })?,
+    };
+    // Placed before anything is checked or built: the node it goes to checks it.
+    if let Some(fleet) = &state.fleet
+        && place == Place::Fleet
+        && let crate::fleet::Placement::Remote(node) = fleet.place()
+    {
+        let message = format!("node {} has more room for a new match", node.id);
+        if let Some(moved) = crate::http::fleet::redirect(node, "/api/matches?place=local", message)
+        {
+            return Ok(moved);
+        }
+    }
     // The operator's matches count against no address's quota.
     let client = (!bearer.is_admin(&state)).then(|| ClientKey::of(ip));
     let req = body
@@ -372,14 +403,16 @@ pub async fn create_match(
         .try_start(world, meta, owner, price)
         .map_err(no_room)?;
     // Asked of the task so that fields it owns (free slots) are filled in.
-    let summary = handle.summary().await?;
+    let mut summary = handle.summary().await?;
+    summary.node = state.fleet.as_ref().map(|f| f.me());
     Ok((
         StatusCode::CREATED,
         Json(MatchCreated {
             summary,
             owner_token,
         }),
-    ))
+    )
+        .into_response())
 }
 
 /// Where a new match's map comes from.

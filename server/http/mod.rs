@@ -7,6 +7,7 @@ mod auth;
 mod body;
 mod error;
 mod export;
+mod fleet;
 mod handlers;
 pub mod limits;
 mod openapi;
@@ -30,6 +31,7 @@ use tower_http::compression::CompressionLayer;
 use tower_http::services::ServeDir;
 use tower_http::trace::TraceLayer;
 
+use crate::fleet::Fleet;
 use crate::game::Registry;
 pub use error::ApiError;
 pub use serve::{ConnectionLimits, serve};
@@ -41,6 +43,8 @@ pub struct AppState {
     pub limits: Arc<limits::AddressLimits>,
     /// Permits to build maps and worlds on the blocking pool: one per core.
     pub builders: Arc<tokio::sync::Semaphore>,
+    /// This node's part in a fleet (`--fleet`), if it is in one.
+    pub fleet: Option<Arc<Fleet>>,
 }
 
 /// The whole HTTP surface: the API under `/api`, WebSockets under `/ws`, metrics at
@@ -48,12 +52,25 @@ pub struct AppState {
 /// `config`. Serve it with `into_make_service_with_connect_info::<SocketAddr>()`: the
 /// per-address limits key on the peer's address.
 pub fn app(registry: Arc<Registry>, web_dir: PathBuf) -> Router {
+    router(registry, web_dir, None)
+}
+
+/// [`app`] for a node of a fleet: the listing shows every node's matches, a request for a
+/// match another node hosts is redirected there, a new match may be placed elsewhere, and
+/// the API answers cross-origin requests (see [`fleet`]).
+pub fn app_in_fleet(registry: Arc<Registry>, web_dir: PathBuf, fleet: Arc<Fleet>) -> Router {
+    router(registry, web_dir, Some(fleet))
+}
+
+fn router(registry: Arc<Registry>, web_dir: PathBuf, fleet: Option<Arc<Fleet>>) -> Router {
     let max_body = registry.config.max_body_bytes;
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let in_fleet = fleet.is_some();
     let state = AppState {
         registry,
         limits: Arc::default(),
         builders: Arc::new(tokio::sync::Semaphore::new(cores)),
+        fleet,
     };
     let api = Router::new()
         .route("/health", get(handlers::health))
@@ -96,16 +113,23 @@ pub fn app(registry: Arc<Registry>, web_dir: PathBuf) -> Router {
         .method_not_allowed_fallback(method_not_allowed);
     let static_files = ServeDir::new(web_dir).not_found_service(not_found.into_service());
     // The environment step, a research client's hot path: the same body and request
-    // limits, but no compression (a few kilobytes, on loopback as a rule) and no trace span.
-    let act = Router::new()
+    // limits (and, in a fleet, the redirect to the node that hosts the match), but no
+    // compression (a few kilobytes, on loopback as a rule) and no trace span.
+    let mut act = Router::new()
         .route("/api/matches/{id}/act", post(robots::act))
         .method_not_allowed_fallback(method_not_allowed)
-        .layer(DefaultBodyLimit::max(max_body))
-        .layer(axum::middleware::from_fn_with_state(
+        .layer(DefaultBodyLimit::max(max_body));
+    if in_fleet {
+        act = act.layer(axum::middleware::from_fn_with_state(
             state.clone(),
-            limits::rate_limit,
+            fleet::elsewhere,
         ));
-    Router::new()
+    }
+    let act = act.layer(axum::middleware::from_fn_with_state(
+        state.clone(),
+        limits::rate_limit,
+    ));
+    let mut router = Router::new()
         .nest("/api", api)
         .route("/ws/matches/{id}", get(ws::upgrade))
         .route("/ws/replays/{id}", get(replay_ws::upgrade))
@@ -113,16 +137,28 @@ pub fn app(registry: Arc<Registry>, web_dir: PathBuf) -> Router {
         .fallback_service(static_files)
         // Bodies are read (and limited) by `JsonBody`; this layer is the outer guard so a huge
         // upload is cut off even on routes that do not read bodies.
-        .layer(DefaultBodyLimit::max(max_body))
+        .layer(DefaultBodyLimit::max(max_body));
+    if in_fleet {
+        // Before the routes, so that a match held elsewhere never reaches their 404.
+        router = router.layer(axum::middleware::from_fn_with_state(
+            state.clone(),
+            fleet::elsewhere,
+        ));
+    }
+    router = router
         .layer(CompressionLayer::new())
         // Outside compression and the routes: a refused request costs almost nothing.
         .layer(axum::middleware::from_fn_with_state(
             state.clone(),
             limits::rate_limit,
-        ))
-        .layer(TraceLayer::new_for_http())
-        .merge(act)
-        .with_state(state)
+        ));
+    router = router.layer(TraceLayer::new_for_http()).merge(act);
+    if in_fleet {
+        // Outside everything that answers, so that redirects and refusals carry it too (a
+        // page reads neither without it).
+        router = router.layer(fleet::cors());
+    }
+    router.with_state(state)
 }
 
 /// `GET /metrics`: every metric family in the Prometheus text format (version 0.0.4).

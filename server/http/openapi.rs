@@ -75,7 +75,10 @@ use crate::protocol::*;
         replays::Leaderboard,
         JoinRequest,
         Joined,
-        MatchStats
+        MatchStats,
+        fleet::NodeRef,
+        fleet::Elsewhere,
+        fleet::Place
     )),
     modifiers(&OwnerToken)
 )]
@@ -116,10 +119,13 @@ pub fn json() -> serde_json::Value {
         .get_mut("paths")
         .and_then(|p| p.as_object_mut())
         .into_iter()
-        .flat_map(|paths| paths.values_mut())
-        .filter_map(|path| path.as_object_mut())
-        .flat_map(|path| path.values_mut());
-    for op in operations {
+        .flat_map(|paths| paths.iter_mut())
+        .filter_map(|(name, path)| Some((name.clone(), path.as_object_mut()?)))
+        .flat_map(|(name, path)| path.values_mut().map(move |op| (name.clone(), op)));
+    for (path, op) in operations {
+        if let Some(responses) = op.get_mut("responses").and_then(|r| r.as_object_mut()) {
+            redirect_in_fleet(&path, responses);
+        }
         let responses = op
             .get_mut("responses")
             .and_then(|r| r.as_object_mut())
@@ -146,6 +152,32 @@ pub fn json() -> serde_json::Value {
         }
     }
     doc
+}
+
+/// In a fleet every request for one match may be answered 307 (the match is on another
+/// node), as may `POST /api/matches` (another node has more room): one place says so for
+/// all of them, with the `Location` header.
+fn redirect_in_fleet(path: &str, responses: &mut serde_json::Map<String, serde_json::Value>) {
+    let for_one_match = path.starts_with("/api/matches/{id}");
+    if !for_one_match && !responses.contains_key("307") {
+        return;
+    }
+    let description = responses
+        .get("307")
+        .and_then(|r| r["description"].as_str())
+        .unwrap_or("in a fleet (`--fleet`): another node hosts the match; the same request to `Location` reaches it")
+        .to_owned();
+    responses.insert(
+        "307".into(),
+        serde_json::json!({
+            "description": description,
+            "headers": {"Location": {
+                "description": "the same request's URL on the node to ask",
+                "schema": {"type": "string"}
+            }},
+            "content": {"application/json": {"schema": {"$ref": "#/components/schemas/Elsewhere"}}}
+        }),
+    );
 }
 
 #[cfg(test)]

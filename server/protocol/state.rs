@@ -74,6 +74,10 @@ pub struct MatchSummary {
     /// everyone but its owner: `spectator_delay_s` as asked when people may play it, 0
     /// (live) when they may not.
     pub spectator_delay_s: f64,
+    /// The node that hosts the match, when the server runs in a fleet (`--fleet`); absent
+    /// otherwise. Its API and WebSocket are at `node.url`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub node: Option<super::fleet::NodeRef>,
 }
 
 /// Caveats about a match: settings that were accepted but do nothing as asked.
@@ -128,6 +132,7 @@ pub fn summary(world: &World, meta: &MatchMeta) -> MatchSummary {
         bots_joinable: meta.bots_joinable,
         notes: notes(&world.config),
         spectator_delay_s: meta.spectator_delay_ticks as f64 / TICK_HZ as f64,
+        node: None,
     }
 }
 

@@ -1,0 +1,450 @@
+//! The fleet (`--fleet`, docs/operations.md "Fleet"): a real `redis-server` and real
+//! `lasertag` processes on loopback.
+//!
+//! - One node's `GET /api/matches` lists every node's matches, each with the node that
+//!   hosts it; a request for a match another node hosts is answered 307 to that node; a new
+//!   match goes to the least-loaded node.
+//! - A node killed with SIGKILL leaves every listing within the bound the docs give
+//!   (`--fleet-ttl-s` + `--fleet-heartbeat-s`).
+//! - A node sent SIGTERM with `--drain-s` is listed as draining at once, takes no new
+//!   match, tells its players `finished` (`server_shutdown`) when the drain ends, leaves the
+//!   directory and exits 0.
+//! - In headless Chromium, the lobby of one node plays a match hosted on another.
+//!
+//! Needs `redis-server` (and Chromium for the last): `bash tests/run.sh` installs both when
+//! they are missing; without them these tests fail rather than pass unseen.
+
+#![cfg(unix)]
+
+#[path = "common/cdp.rs"]
+#[allow(dead_code)]
+mod cdp;
+mod common;
+#[path = "common/process.rs"]
+mod process;
+#[path = "common/redis_server.rs"]
+mod redis_server;
+
+use std::process::Command;
+use std::time::{Duration, Instant};
+
+use common::{Got, Ws};
+use process::Server;
+use redis_server::RedisServer;
+use serde_json::{Value, json};
+
+/// The timing the nodes run with: a dead node leaves the listings within their sum.
+const HEARTBEAT_S: f64 = 0.5;
+const TTL_S: f64 = 1.5;
+/// What a loaded 2-core machine may add to that bound: a late timer, a slow round trip.
+const SLACK: Duration = Duration::from_millis(1500);
+
+fn node(redis: &RedisServer, id: &str, extra: &[&str]) -> Server {
+    let data = common::temp_dir(&format!("fleet-{id}"));
+    let data = data.display().to_string();
+    let url = redis.url();
+    let (heartbeat, ttl) = (HEARTBEAT_S.to_string(), TTL_S.to_string());
+    let mut args = vec![
+        "--no-showcase",
+        "--data-dir",
+        &data,
+        "--fleet",
+        &url,
+        "--node-id",
+        id,
+        "--fleet-heartbeat-s",
+        &heartbeat,
+        "--fleet-ttl-s",
+        &ttl,
+    ];
+    args.extend_from_slice(extra);
+    Server::start(&args)
+}
+
+/// A client that does not follow redirects, to see them.
+fn no_redirects() -> reqwest::Client {
+    reqwest::Client::builder()
+        .redirect(reqwest::redirect::Policy::none())
+        .build()
+        .expect("a client")
+}
+
+async fn listing(client: &reqwest::Client, server: &Server) -> Vec<Value> {
+    let r = client
+        .get(server.url("/api/matches"))
+        .send()
+        .await
+        .expect("the listing answers");
+    assert_eq!(r.status(), 200);
+    r.json().await.expect("a JSON listing")
+}
+
+/// The ids a listing shows as hosted on `node`.
+fn hosted_on(listing: &[Value], node: &str) -> Vec<String> {
+    listing
+        .iter()
+        .filter(|m| m["node"]["id"] == node)
+        .map(|m| m["id"].as_str().unwrap_or_default().to_owned())
+        .collect()
+}
+
+/// `POST /api/matches?place=local` on `server`: the created match.
+async fn create_here(client: &reqwest::Client, server: &Server, body: Value) -> Value {
+    let r = client
+        .post(server.url("/api/matches?place=local"))
+        .json(&body)
+        .send()
+        .await
+        .expect("the server answers");
+    assert_eq!(r.status(), 201);
+    r.json().await.expect("JSON")
+}
+
+/// Polls `check` every 50 ms until it holds, failing after `secs`; returns when it held.
+async fn until<F, Fut>(secs: u64, what: &str, mut check: F) -> Instant
+where
+    F: FnMut() -> Fut,
+    Fut: std::future::Future<Output = bool>,
+{
+    let started = Instant::now();
+    loop {
+        if check().await {
+            return Instant::now();
+        }
+        assert!(
+            started.elapsed() < Duration::from_secs(secs),
+            "{what}: not within {secs} s"
+        );
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+}
+
+fn metric(text: &str, name: &str) -> Option<f64> {
+    text.lines()
+        .find_map(|l| l.strip_prefix(name)?.trim().parse().ok())
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn three_nodes_list_redirect_place_lose_a_killed_node_and_drain_one() {
+    let redis = RedisServer::start();
+    let a = node(&redis, "a", &[]);
+    let b = node(&redis, "b", &["--drain-s", "3"]);
+    let mut c = node(&redis, "c", &[]);
+    let http = reqwest::Client::new();
+    let raw = no_redirects();
+
+    // A match on each node: manual ones on a and c, one people play on b.
+    let on_a = create_here(&http, &a, json!({"map": "office", "clock": "manual"})).await;
+    let on_b = create_here(
+        &http,
+        &b,
+        json!({"map": "office", "opponent_control": "human", "planner": "idle",
+            "time_limit_s": 120, "spectator_delay_s": 0}),
+    )
+    .await;
+    let on_c = create_here(&http, &c, json!({"map": "office", "clock": "manual"})).await;
+    assert_eq!(on_b["node"]["id"], "b", "{on_b}");
+    assert_eq!(on_b["node"]["local"], true);
+    let id = |m: &Value| m["id"].as_str().unwrap().to_owned();
+    let (id_a, id_b, id_c) = (id(&on_a), id(&on_b), id(&on_c));
+
+    // 1. Any node's lobby lists every node's matches, each with the node that hosts it.
+    for lobby in [&a, &b, &c] {
+        until(10, "every match listed", || async {
+            listing(&http, lobby).await.len() == 3
+        })
+        .await;
+    }
+    let all = listing(&http, &a).await;
+    for (m, node, server) in [(&id_a, "a", &a), (&id_b, "b", &b), (&id_c, "c", &c)] {
+        let listed = all.iter().find(|x| x["id"] == m.as_str()).expect("listed");
+        assert_eq!(listed["node"]["id"], node, "{listed}");
+        assert_eq!(listed["node"]["url"], server.url(""), "{listed}");
+        assert_eq!(listed["node"]["local"], node == "a", "{listed}");
+        assert_eq!(listed["node"]["draining"], false, "{listed}");
+        assert_eq!(
+            listed["map"], "office",
+            "other nodes' summaries are whole: {listed}"
+        );
+    }
+    let metrics = http
+        .get(a.url("/metrics"))
+        .send()
+        .await
+        .unwrap()
+        .text()
+        .await
+        .unwrap();
+    assert_eq!(metric(&metrics, "lasertag_fleet_nodes"), Some(3.0));
+    assert!(metric(&metrics, "lasertag_fleet_redis_round_trips_total") > Some(0.0));
+
+    // 2. A request for b's match on a is sent to b: 307, the same path, the node named.
+    let r = raw
+        .get(a.url(&format!("/api/matches/{id_b}/stats?x=1")))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 307);
+    let location = r.headers()["location"].to_str().unwrap().to_owned();
+    assert_eq!(location, b.url(&format!("/api/matches/{id_b}/stats?x=1")));
+    assert_eq!(
+        r.headers()["access-control-allow-origin"],
+        "*",
+        "a page may read it"
+    );
+    let body: Value = r.json().await.unwrap();
+    assert_eq!(body["node"]["id"], "b", "{body}");
+    assert_eq!(body["location"], location.as_str());
+    // So is the WebSocket (which a browser cannot follow: the page goes to b itself).
+    match tokio_tungstenite::connect_async(format!("ws://{}/ws/matches/{id_b}", a.addr)).await {
+        Err(tokio_tungstenite::tungstenite::Error::Http(r)) => assert_eq!(r.status(), 307),
+        other => panic!("expected a 307 to the socket on b: {other:?}"),
+    }
+    // A match nobody holds is a 404, as outside a fleet.
+    let r = raw
+        .get(a.url("/api/matches/0123456789abcdef"))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 404);
+    // Joining through a, following the redirect as HTTP clients do, takes a seat on b.
+    let r = http
+        .post(a.url(&format!("/api/matches/{id_b}/players")))
+        .json(&json!({"name": "alice"}))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 201);
+    let joined: Value = r.json().await.unwrap();
+    let token = joined["token"].as_str().unwrap();
+    let (stream, _) = tokio_tungstenite::connect_async(format!(
+        "ws://{}/ws/matches/{id_b}?token={token}",
+        b.addr
+    ))
+    .await
+    .expect("the player's socket on b");
+    let mut player = Ws { stream };
+    player.next_of("snapshot").await;
+
+    // 3. A new match goes to the least-loaded node with room. One each: a keeps it (a tie
+    // stays); a then holds 2, so the next goes to b (the first of the emptiest, by id).
+    let post_a = || {
+        raw.post(a.url("/api/matches"))
+            .json(&json!({"map": "office", "clock": "manual"}))
+            .send()
+    };
+    let created: Value = http
+        .post(a.url("/api/matches"))
+        .json(&json!({"map": "office", "clock": "manual"}))
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
+    assert_eq!(created["node"]["id"], "a", "{created}");
+    let r = post_a().await.unwrap();
+    assert_eq!(r.status(), 307);
+    let location = r.headers()["location"].to_str().unwrap().to_owned();
+    assert_eq!(location, b.url("/api/matches?place=local"));
+    // The same request to `Location` creates it there.
+    let placed: Value = http
+        .post(&location)
+        .json(&json!({"map": "office", "clock": "manual"}))
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
+    assert_eq!(placed["node"]["id"], "b", "{placed}");
+    let placed = id(&placed);
+    until(10, "a hears of b's new match", || async {
+        hosted_on(&listing(&http, &a).await, "b").contains(&placed)
+    })
+    .await;
+    // b holds 2 now, as does a: c is the emptiest.
+    let r = post_a().await.unwrap();
+    assert_eq!(r.status(), 307);
+    assert_eq!(
+        r.headers()["location"].to_str().unwrap(),
+        c.url("/api/matches?place=local")
+    );
+    let r = raw
+        .post(a.url("/api/matches?place=nowhere"))
+        .json(&json!({"map": "office"}))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 400);
+
+    // 4. SIGKILL c: its key expires and every lobby drops it within TTL + heartbeat.
+    c.child.kill().expect("SIGKILL");
+    let killed = Instant::now();
+    let gone = until(20, "the killed node leaves a's listing", || async {
+        hosted_on(&listing(&http, &a).await, "c").is_empty()
+    })
+    .await;
+    let took = gone - killed;
+    let bound = Duration::from_secs_f64(TTL_S + HEARTBEAT_S);
+    eprintln!("a SIGKILLed node left the listing {took:?} after the kill (bound {bound:?})");
+    assert!(took <= bound + SLACK, "{took:?} > {bound:?} + {SLACK:?}");
+    let _ = c.child.wait();
+
+    // 5. SIGTERM b, which drains for 3 s: listed as draining at once; no new match.
+    let status = Command::new("kill")
+        .args(["-TERM", &b.child.id().to_string()])
+        .status()
+        .expect("kill runs");
+    assert!(status.success());
+    let signalled = Instant::now();
+    until(5, "a lists b as draining", || async {
+        let all = listing(&http, &a).await;
+        all.iter()
+            .filter(|m| m["node"]["id"] == "b")
+            .all(|m| m["node"]["draining"] == true)
+            && !hosted_on(&all, "b").is_empty()
+    })
+    .await;
+    let r = http
+        .post(b.url("/api/matches?place=local"))
+        .json(&json!({"map": "office", "clock": "manual"}))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 503, "a draining node takes no new match");
+    let r = raw
+        .post(b.url("/api/matches"))
+        .json(&json!({"map": "office", "clock": "manual"}))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 307, "it sends new matches to a node with room");
+    assert_eq!(
+        r.headers()["location"].to_str().unwrap(),
+        a.url("/api/matches?place=local")
+    );
+    // Its player plays on, then is told why the match ended and the socket closes.
+    let finished = loop {
+        match player.next().await {
+            Got::Json(v) if v["type"] == "finished" => break v,
+            Got::Json(_) => {}
+            other => panic!("the player's socket ended without `finished`: {other:?}"),
+        }
+    };
+    assert_eq!(finished["reason"], "server_shutdown", "{finished}");
+    assert!(
+        signalled.elapsed() >= Duration::from_millis(2500),
+        "the match went on through the drain: ended after {:?}",
+        signalled.elapsed()
+    );
+    let mut b = b;
+    let exit = loop {
+        if let Some(status) = b.child.try_wait().unwrap() {
+            break status;
+        }
+        assert!(
+            signalled.elapsed() < Duration::from_secs(3 + 5),
+            "b still running 5 s after its drain"
+        );
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    };
+    assert!(exit.success(), "{exit}");
+    // It deleted its key on the way out (rather than leaving it to expire)...
+    let mut redis_client = redis::Client::open(redis.url())
+        .unwrap()
+        .get_multiplexed_async_connection()
+        .await
+        .unwrap();
+    let exists: i64 = redis::cmd("EXISTS")
+        .arg("lasertag:fleet:node:b")
+        .query_async(&mut redis_client)
+        .await
+        .unwrap();
+    assert_eq!(exists, 0, "b's key is gone");
+    // ...so its matches leave a's listing at a's next read.
+    until(5, "b's matches leave a's listing", || async {
+        hosted_on(&listing(&http, &a).await, "b").is_empty()
+    })
+    .await;
+    let left = listing(&http, &a).await;
+    assert!(left.iter().all(|m| m["node"]["id"] == "a"), "{left:?}");
+}
+
+/// A page opened on node a plays a match hosted on node b: the lobby lists it with its
+/// node, Play joins on b (a cross-origin request) and opens the socket there, and the
+/// player's keys move its opponent on b.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_page_on_one_node_plays_a_match_hosted_on_another() {
+    let redis = RedisServer::start();
+    let a = node(&redis, "a", &[]);
+    let b = node(&redis, "b", &[]);
+    let http = reqwest::Client::new();
+    // A robot idles far away: the player is free to move.
+    let created = create_here(
+        &http,
+        &b,
+        json!({"map": "office", "robots": 1, "opponents": 1, "opponent_control": "human",
+            "planner": "idle", "time_limit_s": 120, "spectator_delay_s": 0,
+            "robot_starts": [[22.0, 1.5, 0.0]], "opponent_starts": [[3.0, 8.0]]}),
+    )
+    .await;
+    let id = created["id"].as_str().unwrap().to_owned();
+    let owner = created["owner_token"].as_str().unwrap().to_owned();
+    let opponent = || async {
+        let r: Value = http
+            .get(b.url(&format!("/api/matches/{id}")))
+            .bearer_auth(&owner)
+            .send()
+            .await
+            .unwrap()
+            .json()
+            .await
+            .unwrap();
+        r["opponents"][0].clone()
+    };
+
+    let mut browser = cdp::Browser::launch().await;
+    browser.navigate(&a.url("/")).await;
+    let row = format!("document.querySelector('#matches tbody tr[data-id=\"{id}\"]')");
+    let cell = browser
+        .wait_for(&format!("{row} && {row}.cells[0].textContent"), 20)
+        .await;
+    browser
+        .eval("document.getElementById('name').value = 'visitor'")
+        .await;
+    assert!(
+        cell.as_str().is_some_and(|c| c.ends_with(" · b")),
+        "the lobby names the node: {cell}"
+    );
+    browser
+        .eval(&format!("{row}.querySelector('button.play').click()"))
+        .await;
+    browser
+        .wait_for(
+            &format!(
+                "__lasertag.matchId === '{id}' && __lasertag.role === 'player' && __lasertag.connected && __lasertag.snapshots > 5"
+            ),
+            20,
+        )
+        .await;
+    assert_eq!(browser.eval("__lasertag.base").await, json!(b.url("")));
+    assert_eq!(browser.eval("location.origin").await, json!(a.url("")));
+    let on_b = listing(&http, &b).await;
+    let listed = on_b
+        .iter()
+        .find(|m| m["id"] == id.as_str())
+        .expect("listed");
+    assert_eq!(listed["players"], 1, "seated on b: {listed}");
+    let before = opponent().await;
+    browser.key("KeyW", true).await;
+    tokio::time::sleep(Duration::from_millis(800)).await;
+    browser.key("KeyW", false).await;
+    tokio::time::sleep(Duration::from_millis(200)).await;
+    let after = opponent().await;
+    let moved = (after["x"].as_f64().unwrap() - before["x"].as_f64().unwrap()).abs()
+        + (after["y"].as_f64().unwrap() - before["y"].as_f64().unwrap()).abs();
+    assert!(moved > 0.2, "moved {moved} m on b: {before} -> {after}");
+    let errors = browser.eval("__lasertag.errors").await;
+    assert_eq!(errors, json!([]), "{errors}");
+}
