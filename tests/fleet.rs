@@ -10,8 +10,10 @@
 //!   match, tells its players `finished` (`server_shutdown`) when the drain ends, leaves the
 //!   directory and exits 0.
 //! - In headless Chromium, the lobby of one node plays a match hosted on another.
+//! - With the fleet's shared PostgreSQL (`--database`), a match one node recorded is
+//!   listed and replayed by another, state for state.
 //!
-//! Needs `redis-server` (and Chromium for the last): `bash tests/run.sh` installs both when
+//! Needs `redis-server`, PostgreSQL's server and Chromium: `bash tests/run.sh` installs both when
 //! they are missing; without them these tests fail rather than pass unseen.
 
 #![cfg(unix)]
@@ -20,6 +22,8 @@
 #[allow(dead_code)]
 mod cdp;
 mod common;
+#[path = "common/postgres.rs"]
+mod postgres;
 #[path = "common/process.rs"]
 mod process;
 #[path = "common/redis_server.rs"]
@@ -447,4 +451,63 @@ async fn a_page_on_one_node_plays_a_match_hosted_on_another() {
     assert!(moved > 0.2, "moved {moved} m on b: {before} -> {after}");
     let errors = browser.eval("__lasertag.errors").await;
     assert_eq!(errors, json!([]), "{errors}");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_replay_recorded_on_one_node_is_served_by_another() {
+    let redis = RedisServer::start();
+    // The PostgreSQL client blocks on a runtime of its own: not on this test's.
+    let db = std::thread::spawn(|| postgres::database("fleet_replay"))
+        .join()
+        .expect("a database");
+    let (b, c) = (
+        node(&redis, "b", &["--database", &db.url]),
+        node(&redis, "c", &["--database", &db.url]),
+    );
+    let http = no_redirects();
+    // A short manual match on b, played to its end.
+    let created = create_here(
+        &http,
+        &b,
+        json!({"map": "office", "clock": "manual", "time_limit_s": 2, "seed": 7}),
+    )
+    .await;
+    let id = created["id"].as_str().expect("an id").to_owned();
+    let stepped = http
+        .post(b.url(&format!("/api/matches/{id}/step")))
+        .bearer_auth(created["owner_token"].as_str().expect("an owner token"))
+        .json(&json!({"ticks": 100}))
+        .send()
+        .await
+        .expect("b answers");
+    assert_eq!(stepped.status(), 200);
+    let ended: Value = stepped.json().await.expect("JSON");
+    assert_eq!(ended["status"], "finished", "{ended}");
+
+    // c never hosted it: it reads it from the shared database once b's writer has.
+    until(20, "c lists b's ended match among the replays", || {
+        let (http, url) = (http.clone(), c.url("/api/replays"));
+        let id = id.clone();
+        async move {
+            let Ok(r) = http.get(url).send().await else {
+                return false;
+            };
+            let listed: Value = r.json().await.unwrap_or(Value::Null);
+            listed.as_array().is_some_and(|all| {
+                all.iter()
+                    .any(|m| m["id"] == id.as_str() && m["complete"] == true)
+            })
+        }
+    })
+    .await;
+    for tick in [0, 17, 40] {
+        let path = format!("/api/replays/{id}/state?tick={tick}");
+        let on_c = http.get(c.url(&path)).send().await.expect("c answers");
+        assert_eq!(on_c.status(), 200, "{path} on c");
+        let on_b = http.get(b.url(&path)).send().await.expect("b answers");
+        assert_eq!(on_b.status(), 200, "{path} on b");
+        let (on_c, on_b): (Value, Value) = (on_c.json().await.unwrap(), on_b.json().await.unwrap());
+        assert_eq!(on_c["tick"], tick);
+        assert_eq!(on_c, on_b, "{path}: c and b replay the match alike");
+    }
 }
