@@ -231,6 +231,11 @@ async fn a_replay_follows_a_player_over_the_websocket() {
         "from",
     );
     assert_error(
+        &s.get(&format!("/api/replays/{id}/export?every=0")).await,
+        400,
+        "every",
+    );
+    assert_error(
         &s.get(&format!("/api/replays/{id}/export?belief=maybe"))
             .await,
         400,

@@ -73,7 +73,8 @@ if ! { [ -x "$ST" ] && "$ST" --version 2>/dev/null | grep -q "$SCHEMATHESIS_VERS
 fi
 # The server `cargo test` built, on a free loopback port, without the showcase. Every request
 # comes from 127.0.0.1, so the per-address request rate is lifted, and so is the number of
-# matches (schemathesis creates many; a full server would rightly answer 503, which is not
+# matches and the tick budget they are priced against (schemathesis creates many, most of
+# them manual matches that never tick; a full server would rightly answer 503, which is not
 # what this run is about), as are the per-client quotas; finished matches are removed after
 # 5 s. Schemathesis changes matches as the operator (a fresh admin token for this run).
 PORT=$(python3 -c 'import socket; s = socket.socket(); s.bind(("127.0.0.1", 0)); print(s.getsockname()[1])')
@@ -82,7 +83,7 @@ LASERTAG_ADDR="127.0.0.1:$PORT" LASERTAG_NO_SHOWCASE=true LASERTAG_ADMIN_TOKEN="
   LASERTAG_REQUESTS_PER_S=1000000 LASERTAG_REQUEST_BURST=1000000 \
   LASERTAG_MAX_MATCHES=100000 LASERTAG_MAX_MATCHES_PER_ADDRESS=100000 \
   LASERTAG_MAX_MAPS=100000 LASERTAG_MAX_MAPS_PER_ADDRESS=100000 LASERTAG_MAX_HOLDS_PER_ADDRESS=100000 \
-  LASERTAG_CLIENT_BUDGET_SHARE=1 \
+  LASERTAG_CLIENT_BUDGET_SHARE=1 LASERTAG_TICK_BUDGET_MS=1000000 \
   LASERTAG_FINISHED_GRACE_S=5 RUST_LOG=warn \
   target/debug/lasertag serve --data-dir "$(mktemp -d)" > target/schemathesis/server.log 2>&1 &
 SERVER_PID=$!

@@ -43,7 +43,8 @@ async fn start(registry: &Registry, round: u64) -> Option<String> {
         .ok()?
         .ok()?;
     let meta = MatchMeta {
-        id: format!("showcase-{}", random_id(4)),
+        // As long as any match's id: the history (shared by a fleet) keeps every showcase.
+        id: format!("showcase-{}", random_id(8)),
         map,
         clock: Clock::Realtime,
         players: 0,

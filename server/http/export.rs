@@ -61,7 +61,14 @@ pub async fn export(
     let last = r.last_tick;
     let from = number(&query, "from", last, Some(0))?;
     let to = number(&query, "to", last, Some(last))?;
-    let every = number(&query, "every", last.max(1), Some(1))?.max(1);
+    let every = number(&query, "every", last.max(1), Some(1))?;
+    if every == 0 {
+        // As the document says (minimum 1): a line every 0 ticks is no export.
+        return Err(ApiError::bad_request(format!(
+            "every: 0 is not an integer in 1..={}",
+            last.max(1)
+        )));
+    }
     if from > to {
         return Err(ApiError::bad_request(format!(
             "from: {from} is after to: {to}"
