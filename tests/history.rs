@@ -10,46 +10,8 @@ mod process;
 
 use std::time::Duration;
 
-use process::Server;
-use serde_json::{Value, json};
-
-/// A manual match on the server at `base`: (id, owner token).
-async fn create(client: &reqwest::Client, s: &Server, seed: u64) -> (String, String) {
-    let r: Value = client
-        .post(s.url("/api/matches"))
-        .json(
-            &json!({"map": "office", "robots": 2, "opponents": 2, "clock": "manual",
-            "opponent_bot": "evade", "seed": seed}),
-        )
-        .send()
-        .await
-        .unwrap()
-        .json()
-        .await
-        .unwrap();
-    (
-        r["id"].as_str().unwrap().to_string(),
-        r["owner_token"].as_str().unwrap().to_string(),
-    )
-}
-
-/// Steps `ticks` and answers the state after them.
-async fn step(client: &reqwest::Client, s: &Server, id: &str, token: &str, ticks: u64) -> Value {
-    let r = client
-        .post(s.url(&format!("/api/matches/{id}/step")))
-        .bearer_auth(token)
-        .json(&json!({"ticks": ticks}))
-        .send()
-        .await
-        .unwrap();
-    assert_eq!(r.status(), 200);
-    r.json().await.unwrap()
-}
-
-async fn get(client: &reqwest::Client, s: &Server, path: &str) -> (u16, Value) {
-    let r = client.get(s.url(path)).send().await.unwrap();
-    (r.status().as_u16(), r.json().await.unwrap_or(Value::Null))
-}
+use process::{Server, create, get, step};
+use serde_json::Value;
 
 #[tokio::test]
 async fn a_killed_server_keeps_its_history_and_the_match_it_was_playing() {

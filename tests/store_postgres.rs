@@ -28,7 +28,7 @@ use lasertag::store::{
     Backend, Ended, LeaderOrder, PlayerResult, Retention, Store, StoreError, Write,
 };
 use lasertag_core::world::{HumanInput, MatchConfig, WorldInput};
-use process::Server;
+use process::{Server, create, get, step};
 use serde_json::{Value, json};
 
 const KEEP_ALL: Retention = Retention {
@@ -410,43 +410,6 @@ fn a_bad_url_or_an_unreachable_database_is_named() {
         assert!(stderr.contains(says), "{stderr}");
         assert!(started.elapsed() < Duration::from_secs(20));
     }
-}
-
-/// A manual match on `s`: (id, owner token).
-async fn create(client: &reqwest::Client, s: &Server, seed: u64) -> (String, String) {
-    let r: Value = client
-        .post(s.url("/api/matches"))
-        .json(
-            &json!({"map": "office", "robots": 2, "opponents": 2, "clock": "manual",
-            "opponent_bot": "evade", "seed": seed}),
-        )
-        .send()
-        .await
-        .unwrap()
-        .json()
-        .await
-        .unwrap();
-    (
-        r["id"].as_str().unwrap().to_string(),
-        r["owner_token"].as_str().unwrap().to_string(),
-    )
-}
-
-async fn step(client: &reqwest::Client, s: &Server, id: &str, token: &str, ticks: u64) -> Value {
-    let r = client
-        .post(s.url(&format!("/api/matches/{id}/step")))
-        .bearer_auth(token)
-        .json(&json!({"ticks": ticks}))
-        .send()
-        .await
-        .unwrap();
-    assert_eq!(r.status(), 200);
-    r.json().await.unwrap()
-}
-
-async fn get(client: &reqwest::Client, s: &Server, path: &str) -> (u16, Value) {
-    let r = client.get(s.url(path)).send().await.unwrap();
-    (r.status().as_u16(), r.json().await.unwrap_or(Value::Null))
 }
 
 /// `id`'s row in `s`'s listing, waiting (the writer commits about once a second).

@@ -8,6 +8,8 @@ use std::net::SocketAddr;
 use std::process::{Child, Command, Stdio};
 use std::time::Duration;
 
+use serde_json::{Value, json};
+
 pub struct Server {
     pub child: Child,
     pub addr: SocketAddr,
@@ -66,4 +68,48 @@ impl Server {
     pub fn url(&self, path: &str) -> String {
         format!("http://{}{}", self.addr, path)
     }
+}
+
+/// A manual match on `s`: (id, owner token).
+pub async fn create(client: &reqwest::Client, s: &Server, seed: u64) -> (String, String) {
+    let r: Value = client
+        .post(s.url("/api/matches"))
+        .json(
+            &json!({"map": "office", "robots": 2, "opponents": 2, "clock": "manual",
+            "opponent_bot": "evade", "seed": seed}),
+        )
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
+    (
+        r["id"].as_str().unwrap().to_string(),
+        r["owner_token"].as_str().unwrap().to_string(),
+    )
+}
+
+/// Steps `ticks` and answers the state after them.
+pub async fn step(
+    client: &reqwest::Client,
+    s: &Server,
+    id: &str,
+    token: &str,
+    ticks: u64,
+) -> Value {
+    let r = client
+        .post(s.url(&format!("/api/matches/{id}/step")))
+        .bearer_auth(token)
+        .json(&json!({"ticks": ticks}))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 200);
+    r.json().await.unwrap()
+}
+
+pub async fn get(client: &reqwest::Client, s: &Server, path: &str) -> (u16, Value) {
+    let r = client.get(s.url(path)).send().await.unwrap();
+    (r.status().as_u16(), r.json().await.unwrap_or(Value::Null))
 }
