@@ -21,8 +21,9 @@ use std::time::{Duration, Instant, SystemTime};
 
 use lasertag::game::record::Recording;
 use lasertag::game::replay::Replay;
+use lasertag::game::view::{Clock, MatchMeta};
 use lasertag::maps::MapStore;
-use lasertag::protocol::{Clock, MatchMeta};
+use lasertag::store::codec::StoredClock;
 use lasertag::store::codec::{StoredSettings, encode_inputs};
 use lasertag::store::{Ended, Retention, Store, Write};
 use lasertag_core::planner::PlannerKind;
@@ -142,8 +143,13 @@ fn main() {
             }),
         })
     });
-    let settings = serde_json::to_string(&StoredSettings::of(&person, Clock::Realtime, false, 600))
-        .expect("settings");
+    let settings = serde_json::to_string(&StoredSettings::of(
+        &person,
+        StoredClock::Realtime,
+        false,
+        600,
+    ))
+    .expect("settings");
     let stored = settings.len()
         + played
             .inputs
@@ -243,7 +249,7 @@ fn main() {
     let mut most = 0;
     for i in 0..matches {
         let id = format!("m{i}");
-        let settings = StoredSettings::of(&MatchConfig::default(), Clock::Realtime, false, 0);
+        let settings = StoredSettings::of(&MatchConfig::default(), StoredClock::Realtime, false, 0);
         let writes = [
             Write::Begin {
                 id: id.clone(),

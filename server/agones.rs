@@ -152,7 +152,7 @@ fn load(registry: &Registry) -> Load {
         matches: all.len() as u64,
         people: all
             .iter()
-            .map(|h| h.hub.summary.borrow().players as u64)
+            .map(|h| h.hub.summary.borrow().meta.players as u64)
             .sum(),
     }
 }

@@ -1,21 +1,25 @@
 //! lasertag: the server around the deterministic match of `lasertag-core`.
 //!
 //! An imperative shell over a functional core (the core is its own crate, so the compiler
-//! keeps clocks, tasks, I/O and serialisation out of it):
-//! - edge: [`maps`] (map files), [`schema`] (hand-written OpenAPI pieces and lenient number
-//!   parsing), [`protocol`] (every JSON shape of the API, and the frames a match publishes);
-//! - shell: [`game`] (one tokio task per match), [`fleet`] (the directory of servers in
-//!   Redis, with `--fleet`), [`http`] (the axum router), [`config`]
-//!   (limits), [`access`] (owners, their tokens, per-client keys), [`metrics`] (Prometheus),
-//!   `agones` (with the `agones` feature: the Agones SDK lifecycle), `main.rs` (CLI; its `experiment` command runs
-//!   `lasertag-lab`).
+//! keeps clocks, tasks, I/O and serialisation out of it). Its floors, from the ground up
+//! (each imports only those below it; `tests/tidy.rs` checks):
+//! - [`config`] (limits), [`access`] (owners, their tokens, per-client keys), [`metrics`]
+//!   (Prometheus), [`schema`] (hand-written OpenAPI pieces and lenient number parsing),
+//!   [`maps`] (map files);
+//! - [`store`] (the history of matches: SQLite, or PostgreSQL for a fleet);
+//! - [`game`] (one tokio task per match, the registry, admission prices, replays, and what a
+//!   match shows of itself, in its own types);
+//! - [`protocol`] (every JSON shape of the API, converted from the game's and the core's
+//!   types);
+//! - [`fleet`] (the directory of servers in Redis, with `--fleet`), `agones` (with the
+//!   `agones` feature: the Agones SDK lifecycle), [`http`] (the axum router);
+//! - `main.rs` (CLI; its `experiment` command runs `lasertag-lab`).
 //!
 //! Invariants: a match is a pure function of (map, settings, seed, inputs by tick); robots'
 //! decisions read only what a robot could know; only a match's own task mutates it; this
 //! library never imports `lasertag-lab`.
 
 pub mod access;
-pub mod admission;
 #[cfg(feature = "agones")]
 pub mod agones;
 pub mod config;

@@ -1,6 +1,8 @@
 //! Every JSON shape of the HTTP and WebSocket interface (`docs/api.md`), and the
-//! conversions between them and the core's plain types. Nothing else in the crate derives serde
-//! (map files aside, in `maps.rs`), so the wire format is decided here and only here.
+//! conversions between them and the core's and the game's plain types: the game decides, this
+//! floor above it only speaks. Nothing else in the crate derives serde (map files aside, in
+//! `maps/`, and the history's stored form, in `store/codec.rs`), so the wire format is
+//! decided here and only here.
 //!
 //! Requests are parsed strictly: unknown fields are errors, and every error names the field
 //! ([`parse`] wraps serde with the JSON path of the failure).
@@ -10,7 +12,6 @@
 
 pub mod compact;
 pub mod fleet;
-pub mod frame;
 pub mod replay_ws;
 pub mod replays;
 pub mod robots;
@@ -19,9 +20,9 @@ pub mod state;
 pub mod ws;
 
 pub use state::{
-    Belief, ConfidenceState, DetectionDto, EventDto, Events, MatchMeta, MatchState, MatchStats,
-    MatchSummary, OpponentState, PoseDto, RobotState, Role, belief, event, finish_reason, notes,
-    state, summary,
+    Belief, ConfidenceState, DetectionDto, EventDto, Events, MatchState, MatchStats, MatchSummary,
+    OpponentState, PoseDto, RobotState, Role, belief, belief_of, event, finish_reason, notes,
+    read_belief, read_events, read_state, read_stats, read_summary, state, stats, summary,
 };
 
 use serde::de::DeserializeOwned;
@@ -172,6 +173,24 @@ pub enum Clock {
     Manual,
 }
 
+impl From<crate::game::view::Clock> for Clock {
+    fn from(c: crate::game::view::Clock) -> Self {
+        match c {
+            crate::game::view::Clock::Realtime => Clock::Realtime,
+            crate::game::view::Clock::Manual => Clock::Manual,
+        }
+    }
+}
+
+impl From<Clock> for crate::game::view::Clock {
+    fn from(c: Clock) -> Self {
+        match c {
+            Clock::Realtime => crate::game::view::Clock::Realtime,
+            Clock::Manual => crate::game::view::Clock::Manual,
+        }
+    }
+}
+
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, ToSchema)]
 #[serde(rename_all = "lowercase")]
 pub enum StartPlacement {
@@ -255,7 +274,7 @@ pub struct MatchRequest {
 }
 
 /// Default of `spectator_delay_s`.
-pub const SPECTATOR_DELAY_S: f64 = 30.0;
+pub const SPECTATOR_DELAY_S: f64 = crate::game::delay::SPECTATOR_DELAY_S;
 /// Most of `spectator_delay_s`: what a match holds back is priced by it.
 pub const MAX_SPECTATOR_DELAY_S: f64 = 600.0;
 
@@ -530,6 +549,16 @@ pub struct Joined {
     pub player_id: String,
     pub opponent_id: String,
     pub token: String,
+}
+
+impl From<crate::game::view::Joined> for Joined {
+    fn from(j: crate::game::view::Joined) -> Self {
+        Joined {
+            player_id: j.player_id,
+            opponent_id: AgentId::Opponent(j.slot).to_string(),
+            token: j.token,
+        }
+    }
 }
 
 #[cfg(test)]

@@ -4,7 +4,7 @@
 //!
 //! The schema is a contract that conformance tests (schemathesis) hold the server to: a body
 //! the schema allows must not be refused for its shape, and one it forbids must be refused.
-//! So every bound here is the same one the validators enforce (`protocol.rs`, `maps.rs`).
+//! So every bound here is the same one the validators enforce (`protocol.rs`, `maps/`).
 
 use serde::{Deserialize, Deserializer, de::Error as _};
 use utoipa::openapi::schema::{

@@ -125,10 +125,10 @@ async fn the_servers_own_matches_change_only_for_the_operator() {
         },
     )
     .unwrap();
-    let meta = lasertag::protocol::MatchMeta {
+    let meta = lasertag::game::view::MatchMeta {
         id: "house".into(),
         map: "office".into(),
-        clock: lasertag::protocol::Clock::Realtime,
+        clock: lasertag::game::view::Clock::Realtime,
         players: 0,
         spectators: 0,
         free_slots: 0,

@@ -20,7 +20,7 @@ mod process;
 
 use std::time::{Duration, Instant};
 
-use lasertag::protocol::Clock;
+use lasertag::store::codec::StoredClock;
 use lasertag::store::codec::{StoredSettings, decode_inputs};
 use lasertag::store::postgres::{Postgres, SCHEMA_VERSION};
 use lasertag::store::sqlite::Sqlite;
@@ -61,7 +61,7 @@ fn started(id: &str, n: u64, name: &str) -> Vec<Write> {
             arena: office(),
             settings: Box::new(StoredSettings::of(
                 &MatchConfig::default(),
-                Clock::Realtime,
+                StoredClock::Realtime,
                 false,
                 0,
             )),

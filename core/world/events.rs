@@ -32,6 +32,28 @@ pub enum FinishReason {
 }
 
 impl FinishReason {
+    /// Every reason, in declaration order.
+    pub const ALL: [FinishReason; 6] = [
+        FinishReason::AllTagged,
+        FinishReason::TimeLimit,
+        FinishReason::Stopped,
+        FinishReason::ServerShutdown,
+        FinishReason::Abandoned,
+        FinishReason::Overloaded,
+    ];
+
+    /// Its name, as the API, the history and the logs spell it.
+    pub fn name(self) -> &'static str {
+        match self {
+            FinishReason::AllTagged => "all_tagged",
+            FinishReason::TimeLimit => "time_limit",
+            FinishReason::Stopped => "stopped",
+            FinishReason::ServerShutdown => "server_shutdown",
+            FinishReason::Abandoned => "abandoned",
+            FinishReason::Overloaded => "overloaded",
+        }
+    }
+
     /// Who wins a match that ends for this reason: the robots by tagging every opponent;
     /// the opponents by lasting (the time limit) or when the match is stopped before they
     /// were all caught; nobody when the server shuts down or abandons it.

@@ -35,6 +35,9 @@ pub enum InputError {
     NotHuman(usize),
     #[error("no opponent slot {0} in this match")]
     NoSlot(usize),
+    /// Only robots' orders apply all or none (`World::apply_all`).
+    #[error("only robots' orders apply all or none")]
+    NotAllOrNone,
 }
 
 impl World {
@@ -86,6 +89,24 @@ impl World {
                 Ok(())
             }
         }
+    }
+
+    /// Applies every input or none: robots' orders only (each replaces its robot's order,
+    /// so a refused one puts back the orders before it), as an environment step gives them.
+    pub fn apply_all(&mut self, inputs: &[WorldInput]) -> Result<(), InputError> {
+        if !inputs.iter().all(|i| matches!(i, WorldInput::Robot { .. })) {
+            return Err(InputError::NotAllOrNone);
+        }
+        let before: Vec<_> = self.robots.iter().map(|r| r.api.clone()).collect();
+        for input in inputs {
+            if let Err(e) = self.apply(input) {
+                for (robot, api) in self.robots.iter_mut().zip(before) {
+                    robot.api = api;
+                }
+                return Err(e);
+            }
+        }
+        Ok(())
     }
 
     /// The keys the person in `slot` holds now, if a person plays it.

@@ -224,7 +224,7 @@ impl Directory {
         let summaries: Vec<_> = registry
             .all()
             .iter()
-            .map(|h| crate::protocol::MatchSummary::clone(&h.hub.summary.borrow()))
+            .map(|h| crate::protocol::summary(&h.hub.summary.borrow()))
             .collect();
         let record = NodeRecord {
             format: RECORD_FORMAT,

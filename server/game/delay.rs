@@ -18,10 +18,85 @@ use std::sync::Arc;
 
 use tokio::sync::watch;
 
-use crate::protocol::Belief;
-use crate::protocol::frame::{BELIEF_HOLD_EVERY, Frame};
-use crate::protocol::state::HeldBelief;
+use nalgebra::Point2;
+
+use crate::game::view::{BELIEF_HOLD_EVERY, Frame};
+use lasertag_core::tracker::{Confidence, Role};
 use lasertag_core::world::{MatchStatus, World};
+
+/// A belief as the tracker held it at one tick, kept compact (the tracker's own `f32`s) so
+/// that a match can hold some back: see `game::delay`.
+#[derive(Debug, Clone)]
+pub struct HeldBelief {
+    pub tick: u64,
+    pub roles: Vec<HeldRole>,
+}
+
+/// One role of a [`HeldBelief`]: the whole particle cloud.
+#[derive(Debug, Clone)]
+pub struct HeldRole {
+    pub id: u64,
+    pub count: u32,
+    pub tagged: bool,
+    pub confidence: f32,
+    pub state: Confidence,
+    pub particles: Vec<Point2<f32>>,
+    pub weights: Vec<f32>,
+}
+
+impl HeldBelief {
+    /// The team's merged belief in `world` (with a perfect radio, the shared tracker's; see
+    /// `Team::merged_belief`).
+    pub fn team(world: &World) -> HeldBelief {
+        HeldBelief::from_roles(world.tick, &world.team.merged_belief())
+    }
+
+    /// Robot `robot`'s own belief in `world`; `None` for a robot the match does not have.
+    pub fn robot(world: &World, robot: usize) -> Option<HeldBelief> {
+        let tracker = world.team.belief_of(robot, world.robots.len())?;
+        Some(HeldBelief::from_roles(world.tick, &tracker.roles))
+    }
+
+    /// Robot `robot`'s belief now, or the team's merged one when `None`; `None` for a
+    /// robot the match does not have.
+    pub fn of(world: &World, robot: Option<usize>) -> Option<HeldBelief> {
+        match robot {
+            None => Some(HeldBelief::team(world)),
+            Some(i) => HeldBelief::robot(world, i),
+        }
+    }
+
+    fn from_roles(tick: u64, roles: &[Role]) -> HeldBelief {
+        HeldBelief {
+            tick,
+            roles: roles
+                .iter()
+                .map(|r| HeldRole {
+                    id: r.id,
+                    count: r.count,
+                    tagged: r.tagged,
+                    confidence: r.confidence,
+                    state: r.confidence_state(),
+                    particles: r.particles().to_vec(),
+                    weights: r.weights().to_vec(),
+                })
+                .collect(),
+        }
+    }
+
+    /// Bytes it keeps.
+    pub fn bytes(&self) -> usize {
+        std::mem::size_of::<Self>()
+            + self
+                .roles
+                .iter()
+                .map(|r| std::mem::size_of::<HeldRole>() + r.particles.len() * 12)
+                .sum::<usize>()
+    }
+}
+
+/// How late a match people may play shows its truth unless its creator says otherwise.
+pub const SPECTATOR_DELAY_S: f64 = 30.0;
 
 /// The team's belief and each robot's at one tick.
 #[derive(Debug)]
@@ -146,13 +221,12 @@ impl HeldBack {
 
     /// The belief shown now: `robot`'s, or the team's; `None` for a robot the match does
     /// not have.
-    pub fn belief(&self, robot: Option<usize>) -> Option<Belief> {
+    pub fn belief(&self, robot: Option<usize>) -> Option<&HeldBelief> {
         let b = self.beliefs.front()?;
-        let held = match robot {
-            None => &b.team,
-            Some(i) => b.robots.get(i)?,
-        };
-        Some(held.to_belief(robot))
+        match robot {
+            None => Some(&b.team),
+            Some(i) => b.robots.get(i).map(|r| &**r),
+        }
     }
 
     /// The `seq` of the newest event shown.
@@ -187,7 +261,7 @@ mod tests {
         // A lossy radio: each robot keeps a tracker of its own, and each is held back.
         config.radio.loss = 0.2;
         let delay = 100;
-        let price = crate::admission::held_back(&config, delay).memory as usize;
+        let price = crate::game::admission::held_back(&config, delay).memory as usize;
         let mut world = World::new(arena, config).expect("world");
         let first = Arc::new(Frame::build(&world, &[], 0, 0, true));
         let (mut held, rx) = HeldBack::new(delay, first, &world);

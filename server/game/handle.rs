@@ -1,16 +1,16 @@
 //! A [`MatchHandle`]: the way to one match's task. Each method sends the task a
-//! [`Request`] and awaits its reply.
+//! [`Request`] and awaits its reply; reads take the caller's conversion, which runs on the
+//! task against a [`Reading`] of the match, so the game never names a wire type.
 
 use std::sync::Arc;
 
 use tokio::sync::{mpsc, oneshot};
 
-use super::{Hub, MatchError, Request, Seat, Sight};
+use super::view::{Clock, Joined};
+use super::{Answer, Hub, MatchError, Reading, Request, Seat, Sight};
 use crate::access::{ClientKey, Owner};
-use crate::admission::Price;
-use crate::protocol::robots::{ActResponse, Observation};
-use crate::protocol::{Belief, Clock, Events, Joined, MatchState, MatchStats, MatchSummary};
-use lasertag_core::world::{FinishReason, HumanInput, OpponentOrder, RobotOrder};
+use crate::game::admission::Price;
+use lasertag_core::world::{FinishReason, HumanInput, WorldInput};
 
 /// The way to one match's task.
 #[derive(Debug, Clone)]
@@ -28,83 +28,71 @@ pub struct MatchHandle {
 }
 
 impl MatchHandle {
+    fn gone(&self) -> MatchError {
+        MatchError::Gone(self.id.clone())
+    }
+
     async fn ask<T>(
         &self,
         make: impl FnOnce(oneshot::Sender<T>) -> Request,
     ) -> Result<T, MatchError> {
         let (reply, rx) = oneshot::channel();
-        self.tx
-            .send(make(reply))
+        self.tx.send(make(reply)).await.map_err(|_| self.gone())?;
+        rx.await.map_err(|_| self.gone())
+    }
+
+    /// Sends the request `make` builds around an [`Answer`] that runs `read` on the task.
+    async fn answered<T: Send + 'static>(
+        &self,
+        make: impl FnOnce(Answer) -> Request,
+        read: impl FnOnce(&mut Reading<'_>) -> Result<T, MatchError> + Send + 'static,
+    ) -> Result<T, MatchError> {
+        let (reply, rx) = oneshot::channel();
+        let answer: Answer = Box::new(move |reading| {
+            let _ = reply.send(match reading {
+                Ok(reading) => read(reading),
+                Err(e) => Err(e),
+            });
+        });
+        self.tx.send(make(answer)).await.map_err(|_| self.gone())?;
+        rx.await.map_err(|_| self.gone())?
+    }
+
+    /// Reads the match as a reader with `sight` may see it: `read` runs on the match's
+    /// task (keep it to a conversion).
+    pub async fn read<T: Send + 'static>(
+        &self,
+        sight: Sight,
+        read: impl FnOnce(&mut Reading<'_>) -> Result<T, MatchError> + Send + 'static,
+    ) -> Result<T, MatchError> {
+        self.answered(|answer| Request::Read { sight, answer }, read)
             .await
-            .map_err(|_| MatchError::Gone(self.id.clone()))?;
-        rx.await.map_err(|_| MatchError::Gone(self.id.clone()))
     }
 
-    pub async fn summary(&self) -> Result<MatchSummary, MatchError> {
-        self.ask(Request::Summary).await
-    }
-
-    pub async fn state(&self, sight: Sight) -> Result<MatchState, MatchError> {
-        self.ask(|reply| Request::State { sight, reply }).await
-    }
-
-    /// Robot `robot`'s own belief, or the team's merged view when `None`.
-    pub async fn belief(&self, robot: Option<usize>, sight: Sight) -> Result<Belief, MatchError> {
-        self.ask(|reply| Request::Belief {
-            robot,
-            sight,
-            reply,
-        })
-        .await?
-    }
-
-    pub async fn events(&self, since: u64, sight: Sight) -> Result<Events, MatchError> {
-        self.ask(|reply| Request::Events {
-            since,
-            sight,
-            reply,
-        })
+    /// Applies every input of `inputs` (all or none), runs `ticks` ticks of a manual-clock
+    /// match, then reads it live; `what` names the request in refusals.
+    pub async fn step<T: Send + 'static>(
+        &self,
+        what: &'static str,
+        inputs: Vec<WorldInput>,
+        ticks: u64,
+        read: impl FnOnce(&mut Reading<'_>) -> Result<T, MatchError> + Send + 'static,
+    ) -> Result<T, MatchError> {
+        self.answered(
+            |answer| Request::Step {
+                inputs,
+                ticks,
+                what,
+                answer,
+            },
+            read,
+        )
         .await
     }
 
-    pub async fn step(&self, ticks: u64) -> Result<MatchState, MatchError> {
-        self.ask(|reply| Request::Step { ticks, reply }).await?
-    }
-
-    pub async fn order(&self, opponent: usize, order: OpponentOrder) -> Result<(), MatchError> {
-        self.ask(|reply| Request::Order {
-            opponent,
-            order,
-            reply,
-        })
-        .await?
-    }
-
-    pub async fn order_robot(&self, robot: usize, order: RobotOrder) -> Result<(), MatchError> {
-        self.ask(|reply| Request::RobotOrder {
-            robot,
-            order,
-            reply,
-        })
-        .await?
-    }
-
-    pub async fn observation(&self, robot: usize) -> Result<Observation, MatchError> {
-        self.ask(|reply| Request::Observation { robot, reply })
-            .await?
-    }
-
-    pub async fn act(
-        &self,
-        orders: Vec<(usize, RobotOrder)>,
-        ticks: u64,
-    ) -> Result<ActResponse, MatchError> {
-        self.ask(|reply| Request::Act {
-            orders,
-            ticks,
-            reply,
-        })
-        .await?
+    /// One change from outside (an order for an opponent or a robot), from the next tick on.
+    pub async fn apply(&self, input: WorldInput) -> Result<(), MatchError> {
+        self.ask(|reply| Request::Apply { input, reply }).await?
     }
 
     pub async fn join(
@@ -118,10 +106,6 @@ impl MatchHandle {
             reply,
         })
         .await?
-    }
-
-    pub async fn stats(&self) -> Result<MatchStats, MatchError> {
-        self.ask(Request::Stats).await
     }
 
     pub async fn connect(&self, token: String) -> Result<Seat, MatchError> {
@@ -147,7 +131,6 @@ impl MatchHandle {
             .is_ok()
     }
 
-    /// Ends the match (for `reason`) and its task.
     /// Ends the match and waits for its task to finish (so that it is in the history when
     /// this returns).
     pub async fn stop(&self, reason: FinishReason) {

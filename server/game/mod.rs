@@ -5,12 +5,14 @@
 //! world, no torn reads). A real-time match ticks on a 50 ms interval; a manual one advances
 //! only when asked, in chunks between which it keeps answering other requests.
 
+pub mod admission;
 pub mod delay;
 mod handle;
 pub mod record;
 pub mod replay;
 pub mod showcase;
 mod task;
+pub mod view;
 
 use std::collections::BTreeMap;
 use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
@@ -21,37 +23,50 @@ use tokio::sync::{oneshot, watch};
 use tokio_util::sync::CancellationToken;
 
 use crate::access::{ClientKey, Owner};
-use crate::admission::{NoRoom, Price};
 use crate::config::Config;
+use crate::game::admission::{NoRoom, Price};
 use crate::maps::MapStore;
 use crate::metrics::Metrics;
-use crate::protocol::frame::Frame;
-use crate::protocol::robots::{ActResponse, Observation};
-use crate::protocol::{self, Belief, Events, Joined, MatchState, MatchStats, MatchSummary};
+use lasertag_core::sim::Physics;
 use lasertag_core::sim::arena::Arena;
-use lasertag_core::world::World;
-use lasertag_core::world::{FinishReason, HumanInput, OpponentOrder, RobotOrder};
+use lasertag_core::world::{FinishReason, HumanInput, InputError, World, WorldInput};
+use view::{Frame, Joined, MatchMeta, Summary};
 
 pub use crate::access::random_id;
 pub use handle::MatchHandle;
-pub use task::{TaskSettings, spawn_match};
+pub use task::{Reading, TaskSettings, spawn_match};
 
-/// A request refused by a match, mapped to an HTTP status at the edge.
+/// Why a match refused a request (`http` turns each into a status).
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum MatchError {
+    /// A change from outside the world refused (an unknown agent, an order it cannot take).
+    #[error(transparent)]
+    Input(#[from] InputError),
+    /// A robot index the match does not have.
     #[error("{0}")]
-    BadRequest(String),
+    NoRobot(String),
+    /// A request the match cannot take as it is (a name it cannot seat, …).
     #[error("{0}")]
-    NotFound(String),
+    Invalid(String),
+    /// Stepping asked of a match that runs in real time.
+    #[error("match {id} runs in real time; {what} works only on manual-clock matches")]
+    Realtime { id: String, what: &'static str },
+    /// A step asked while another is running.
+    #[error("match {0} is already stepping")]
+    Stepping(String),
+    #[error("match {0} has finished")]
+    Finished(String),
+    /// Every seat a person could take is taken (or the server's per-match limit is met).
     #[error("{0}")]
-    Conflict(String),
+    Full(String),
+    /// The asking client holds as much of the match as it may.
+    #[error("{0}")]
+    Quota(String),
+    /// A token that names no player of the match.
+    #[error("{0}")]
+    NotAPlayer(String),
     #[error("match {0} has ended")]
     Gone(String),
-    #[error("{0}")]
-    Unauthorized(String),
-    /// The client holds as much as it may.
-    #[error("{0}")]
-    TooMany(String),
 }
 
 /// Whether a reader may see a match's truth as it is now, or only as long ago as the match
@@ -64,51 +79,27 @@ pub enum Sight {
     Public,
 }
 
+/// What a match's task does with the match once it has done what was asked: reads it (the
+/// caller's conversion, run on the task) or tells why it refused.
+pub type Answer = Box<dyn FnOnce(Result<&mut Reading<'_>, MatchError>) + Send>;
+
 /// What a handler may ask of a match task.
-#[derive(Debug)]
 pub enum Request {
-    Summary(oneshot::Sender<MatchSummary>),
-    State {
-        sight: Sight,
-        reply: oneshot::Sender<MatchState>,
+    /// Read the match as a reader with `sight` may see it.
+    Read { sight: Sight, answer: Answer },
+    /// One change from outside (an opponent's or a robot's order), applied at once.
+    Apply {
+        input: WorldInput,
+        reply: oneshot::Sender<Result<(), MatchError>>,
     },
-    /// One robot's belief (by index), or the team's merged one.
-    Belief {
-        robot: Option<usize>,
-        sight: Sight,
-        reply: oneshot::Sender<Result<Belief, MatchError>>,
-    },
-    Events {
-        since: u64,
-        sight: Sight,
-        reply: oneshot::Sender<Events>,
-    },
+    /// A step of a manual-clock match: every input of `inputs` (all or none), then `ticks`
+    /// ticks; the answer reads the match live once the last has run. `what` names the
+    /// request in refusals (`step`, `act`).
     Step {
+        inputs: Vec<WorldInput>,
         ticks: u64,
-        reply: oneshot::Sender<Result<MatchState, MatchError>>,
-    },
-    Order {
-        opponent: usize,
-        order: OpponentOrder,
-        reply: oneshot::Sender<Result<(), MatchError>>,
-    },
-    /// An order for a robot driven from outside.
-    RobotOrder {
-        robot: usize,
-        order: RobotOrder,
-        reply: oneshot::Sender<Result<(), MatchError>>,
-    },
-    /// What one robot knows now.
-    Observation {
-        robot: usize,
-        reply: oneshot::Sender<Result<Observation, MatchError>>,
-    },
-    /// An environment step: every order (all or none), then `ticks` ticks, then every
-    /// robot's observation and the events of those ticks.
-    Act {
-        orders: Vec<(usize, RobotOrder)>,
-        ticks: u64,
-        reply: oneshot::Sender<Result<ActResponse, MatchError>>,
+        what: &'static str,
+        answer: Answer,
     },
     Join {
         name: String,
@@ -116,7 +107,6 @@ pub enum Request {
         client: Option<ClientKey>,
         reply: oneshot::Sender<Result<Joined, MatchError>>,
     },
-    Stats(oneshot::Sender<MatchStats>),
     /// A WebSocket connection wants to play the slot `token` belongs to.
     Connect {
         token: String,
@@ -132,6 +122,46 @@ pub enum Request {
     },
     /// End the match for this reason (deleted, or the server is shutting down) and its task.
     Stop(FinishReason),
+}
+
+impl Request {
+    /// Whether answering it may change what listings show (seats, orders, steps).
+    fn changes_listing(&self) -> bool {
+        !matches!(self, Request::Input { .. } | Request::Read { .. })
+    }
+
+    /// Whether it counts as a client's activity (keys do not: a connected player is
+    /// counted already).
+    fn is_activity(&self) -> bool {
+        !matches!(self, Request::Input { .. })
+    }
+
+    /// Whether it changes the match (what keeps a manual match alive).
+    fn is_change(&self) -> bool {
+        matches!(self, Request::Apply { .. } | Request::Step { .. })
+    }
+}
+
+impl std::fmt::Debug for Request {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Request::Read { sight, .. } => f.debug_struct("Read").field("sight", sight).finish(),
+            Request::Apply { input, .. } => f.debug_struct("Apply").field("input", input).finish(),
+            Request::Step { ticks, what, .. } => f
+                .debug_struct("Step")
+                .field("what", what)
+                .field("ticks", ticks)
+                .finish(),
+            Request::Join { name, .. } => f.debug_struct("Join").field("name", name).finish(),
+            Request::Connect { .. } => f.write_str("Connect"),
+            Request::Input { slot, seq, .. } => f
+                .debug_struct("Input")
+                .field("slot", slot)
+                .field("seq", seq)
+                .finish(),
+            Request::Stop(reason) => f.debug_tuple("Stop").field(reason).finish(),
+        }
+    }
 }
 
 /// A connection's place at a match: the opponent slot it plays.
@@ -155,10 +185,10 @@ pub struct Hub {
     /// What spectators see: `frames` again, or `delay_ticks` behind when people play.
     pub spectate: watch::Receiver<Arc<Frame>>,
     pub delay_ticks: u64,
-    /// How its opponents move (sent to players, who predict their own).
-    pub kinematics: crate::protocol::ws::Kinematics,
+    /// How its agents move (players are told how, and predict their own motion).
+    pub physics: Arc<Physics>,
     /// The match's summary as of its latest frame (what listings show).
-    pub summary: watch::Receiver<Arc<MatchSummary>>,
+    pub summary: watch::Receiver<Arc<Summary>>,
     pub arena: Arc<Arena>,
     pub spectators: Arc<AtomicUsize>,
 }
@@ -240,7 +270,7 @@ impl Registry {
     /// Starts a task for `world` and registers it, whatever the number of matches (the
     /// showcase's way in; requests go through [`Registry::try_start`]). Only the operator
     /// may change it.
-    pub fn start(&self, world: World, meta: protocol::MatchMeta) -> MatchHandle {
+    pub fn start(&self, world: World, meta: MatchMeta) -> MatchHandle {
         let mut matches = self.matches.write().unwrap_or_else(|e| e.into_inner());
         self.start_locked(
             &mut matches,
@@ -256,7 +286,7 @@ impl Registry {
     pub fn try_start(
         &self,
         world: World,
-        meta: protocol::MatchMeta,
+        meta: MatchMeta,
         owner: Owner,
         price: Price,
     ) -> Result<MatchHandle, NoRoom> {
@@ -380,7 +410,7 @@ impl Registry {
         &self,
         matches: &mut BTreeMap<String, MatchHandle>,
         world: World,
-        meta: protocol::MatchMeta,
+        meta: MatchMeta,
         owner: Owner,
         price: Price,
     ) -> MatchHandle {

@@ -17,7 +17,7 @@ use std::time::SystemTime;
 use lasertag_core::sim::arena::Arena;
 use lasertag_core::world::{MatchConfig, MatchStatus, SetupError, Side, World, WorldInput};
 
-use crate::protocol::MatchMeta;
+use crate::game::view::{Clock, MatchMeta};
 use crate::store::codec::StoredSettings;
 use crate::store::{Listed, Store, StoreError, Write};
 
@@ -131,7 +131,7 @@ impl Replay {
             meta: MatchMeta {
                 id: l.id,
                 map: l.map,
-                clock: settings.clock,
+                clock: Clock::of_stored(settings.clock),
                 players: 0,
                 spectators: 0,
                 free_slots: 0,
@@ -431,9 +431,7 @@ impl Replay {
                 Side::Robots => "robots".to_string(),
                 Side::Opponents => "opponents".to_string(),
             }),
-            reason: self
-                .reason
-                .map(|r| crate::protocol::finish_reason(r).to_string()),
+            reason: self.reason.map(|r| r.name().to_string()),
             complete: self.complete,
             players: self.players.clone(),
         }
@@ -444,7 +442,6 @@ impl Replay {
 mod tests {
     use super::*;
     use crate::maps::MapStore;
-    use crate::protocol::Clock;
     use lasertag_core::world::{ControlKind, HumanInput};
 
     /// A two-minute office match with a person's keys changing now and then.

@@ -4,8 +4,8 @@
 use std::sync::Arc;
 use std::time::Duration;
 
+use crate::game::view::{Clock, MatchMeta};
 use crate::game::{Registry, random_id};
-use crate::protocol::{Clock, MatchMeta};
 use lasertag_core::bots::BotKind;
 use lasertag_core::planner::PlannerKind;
 use lasertag_core::sim::TICK_HZ;
@@ -53,7 +53,7 @@ async fn start(registry: &Registry, round: u64) -> Option<String> {
         // Anyone who opens the server can take one of the showcase's bots with one click.
         bots_joinable: true,
         // People play it: its truth is shown late, as in any match with people.
-        spectator_delay_ticks: (crate::protocol::SPECTATOR_DELAY_S * TICK_HZ as f64) as u64,
+        spectator_delay_ticks: (crate::game::delay::SPECTATOR_DELAY_S * TICK_HZ as f64) as u64,
     };
     Some(registry.start(world, meta).id)
 }

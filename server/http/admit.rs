@@ -1,11 +1,11 @@
 //! Admission at the edge: a request that creates state is priced (see
-//! [`crate::admission`]) and checked against the per-request limits and the server's
+//! [`crate::game::admission`]) and checked against the per-request limits and the server's
 //! budgets before anything is built, and what is built runs on a bounded blocking pool.
 
 use axum::http::StatusCode;
 
-use crate::admission::NoRoom;
-use crate::admission::{self, Price};
+use crate::game::admission::NoRoom;
+use crate::game::admission::{self, Price};
 use crate::http::{ApiError, AppState};
 use crate::metrics::Refusal;
 

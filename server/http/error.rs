@@ -6,6 +6,7 @@ use axum::response::{IntoResponse, Response};
 
 use crate::game::MatchError;
 use crate::protocol::ErrorBody;
+use lasertag_core::world::{InputError, OrderError, RobotOrderError};
 
 #[derive(Debug, Clone, PartialEq)]
 pub struct ApiError {
@@ -36,14 +37,35 @@ impl ApiError {
 
 impl From<MatchError> for ApiError {
     fn from(e: MatchError) -> ApiError {
-        let status = match e {
-            MatchError::BadRequest(_) => StatusCode::BAD_REQUEST,
-            MatchError::NotFound(_) | MatchError::Gone(_) => StatusCode::NOT_FOUND,
-            MatchError::Conflict(_) => StatusCode::CONFLICT,
-            MatchError::Unauthorized(_) => StatusCode::UNAUTHORIZED,
-            MatchError::TooMany(_) => StatusCode::TOO_MANY_REQUESTS,
+        let status = match &e {
+            MatchError::Input(input) => input_status(input),
+            MatchError::NoRobot(_) | MatchError::Gone(_) => StatusCode::NOT_FOUND,
+            MatchError::Invalid(_) => StatusCode::BAD_REQUEST,
+            MatchError::Realtime { .. }
+            | MatchError::Stepping(_)
+            | MatchError::Finished(_)
+            | MatchError::Full(_) => StatusCode::CONFLICT,
+            MatchError::Quota(_) => StatusCode::TOO_MANY_REQUESTS,
+            MatchError::NotAPlayer(_) => StatusCode::UNAUTHORIZED,
         };
         ApiError::new(status, e.to_string())
+    }
+}
+
+/// A refused change from outside: an agent the match does not have is not found, an order
+/// the agent cannot take now conflicts with its state, a malformed one is the client's.
+fn input_status(e: &InputError) -> StatusCode {
+    match e {
+        InputError::Opponent(OrderError::UnknownOpponent(_))
+        | InputError::Robot(RobotOrderError::UnknownRobot(_))
+        | InputError::NoSlot(_) => StatusCode::NOT_FOUND,
+        InputError::Opponent(OrderError::OutsideArena { .. }) => StatusCode::BAD_REQUEST,
+        InputError::Opponent(_) | InputError::Robot(RobotOrderError::NotApiDriven) => {
+            StatusCode::CONFLICT
+        }
+        InputError::Robot(_) | InputError::NotHuman(_) | InputError::NotAllOrNone => {
+            StatusCode::BAD_REQUEST
+        }
     }
 }
 

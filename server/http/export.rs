@@ -16,13 +16,13 @@ use axum::body::{Body, Bytes};
 use axum::extract::{Path, Query, State};
 use axum::http::{StatusCode, header};
 use axum::response::{IntoResponse, Response};
-use serde::Serialize;
 use tokio::sync::{Semaphore, mpsc};
 
+use crate::game::view::Frame;
 use crate::http::replays::{find, number};
 use crate::http::{ApiError, AppState};
-use crate::protocol::frame::Frame;
-use crate::protocol::{self, Belief, ErrorBody, MatchState};
+use crate::protocol::replays::ExportLine;
+use crate::protocol::{self, ErrorBody};
 
 /// Exports running at once (each keeps a thread busy re-simulating).
 const EXPORTS: usize = 2;
@@ -34,14 +34,6 @@ const AHEAD: usize = 16;
 const STALL: Duration = Duration::from_secs(30);
 
 static RUNNING: Semaphore = Semaphore::const_new(EXPORTS);
-
-#[derive(Serialize)]
-struct Line<'a> {
-    tick: u64,
-    state: &'a MatchState,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    belief: Option<&'a Belief>,
-}
 
 #[utoipa::path(get, path = "/api/replays/{id}/export",
     params(("id" = String, Path),
@@ -110,11 +102,11 @@ pub async fn export(
                 let frame = Frame::build(world, &[], 0, 0, true);
                 let state = protocol::state(&frame, &r.meta, r.config());
                 let belief = if belief {
-                    protocol::belief(world, None)
+                    protocol::belief_of(world, None)
                 } else {
                     None
                 };
-                let mut line = serde_json::to_vec(&Line {
+                let mut line = serde_json::to_vec(&ExportLine {
                     tick,
                     state: &state,
                     belief: belief.as_ref(),

@@ -9,7 +9,8 @@ use axum::http::StatusCode;
 use axum::response::IntoResponse;
 
 use crate::access::{ClientKey, Owner};
-use crate::admission;
+use crate::game::admission;
+use crate::game::view::MatchMeta;
 use crate::game::{MatchHandle, Sight, random_id};
 use crate::http::admit::{no_room, off_workers, within_request_limits};
 use crate::http::auth::Bearer;
@@ -20,12 +21,12 @@ use crate::maps::{self, MapFile};
 use crate::metrics::Refusal;
 use crate::protocol::fleet::{Elsewhere, Listed, Place};
 use crate::protocol::{
-    Belief, CreateMatch, ErrorBody, Events, Health, JoinRequest, Joined, MapCreated, MapInfo,
-    MatchCreated, MatchMeta, MatchState, MatchStats, MatchSummary, OpponentCommand, StepRequest,
+    self, Belief, CreateMatch, ErrorBody, Events, Health, JoinRequest, Joined, MapCreated, MapInfo,
+    MatchCreated, MatchState, MatchStats, MatchSummary, OpponentCommand, StepRequest,
 };
 use lasertag_core::sim::AgentId;
 use lasertag_core::sim::arena::Arena;
-use lasertag_core::world::World;
+use lasertag_core::world::{World, WorldInput};
 
 /// The match `id` for a request that changes it: the token is checked first (see
 /// [`Bearer::may_change`]), then whether the match exists.
@@ -252,7 +253,7 @@ pub async fn list_matches(State(state): State<AppState>) -> Json<Vec<Listed>> {
         .registry
         .all()
         .iter()
-        .map(|h| MatchSummary::clone(&h.hub.summary.borrow()))
+        .map(|h| protocol::summary(&h.hub.summary.borrow()))
         .collect();
     // Other nodes' from the fleet's last read of the directory: never a wait on Redis.
     Json(match &state.fleet {
@@ -389,7 +390,7 @@ pub async fn create_match(
     let meta = MatchMeta {
         id: random_id(8),
         map: map_name,
-        clock: req.clock,
+        clock: req.clock.into(),
         players: 0,
         spectators: 0,
         free_slots: 0,
@@ -403,7 +404,7 @@ pub async fn create_match(
         .try_start(world, meta, owner, price)
         .map_err(no_room)?;
     // Asked of the task so that fields it owns (free slots) are filled in.
-    let mut summary = handle.summary().await?;
+    let mut summary = handle.read(Sight::Live, protocol::read_summary).await?;
     summary.node = state.fleet.as_ref().map(|f| f.me());
     Ok((
         StatusCode::CREATED,
@@ -433,7 +434,7 @@ pub async fn get_match(
     Path(id): Path<String>,
 ) -> Result<Json<MatchState>, ApiError> {
     let (handle, sight) = readable(&state, &bearer, &id)?;
-    Ok(Json(handle.state(sight).await?))
+    Ok(Json(handle.read(sight, protocol::read_state).await?))
 }
 
 #[utoipa::path(delete, path = "/api/matches/{id}", params(("id" = String, Path)),
@@ -473,7 +474,9 @@ pub async fn step(
             body.ticks
         )));
     }
-    Ok(Json(handle.step(body.ticks as u64).await?))
+    let ticks = body.ticks as u64;
+    let state = handle.step("step", Vec::new(), ticks, protocol::read_state);
+    Ok(Json(state.await?))
 }
 
 #[utoipa::path(get, path = "/api/matches/{id}/belief",
@@ -502,7 +505,9 @@ pub async fn belief(
             }
         },
     };
-    Ok(Json(handle.belief(robot, sight).await?))
+    Ok(Json(
+        handle.read(sight, protocol::read_belief(robot)).await?,
+    ))
 }
 
 #[utoipa::path(get, path = "/api/matches/{id}/events",
@@ -531,7 +536,9 @@ pub async fn events(
                 ))
             })?,
     };
-    Ok(Json(handle.events(since, sight).await?))
+    Ok(Json(
+        handle.read(sight, protocol::read_events(since)).await?,
+    ))
 }
 
 #[utoipa::path(post, path = "/api/matches/{id}/opponents/{oid}/command",
@@ -554,7 +561,12 @@ pub async fn command(
             "no opponent {oid:?} in match {id} (o0, o1, …)"
         )));
     };
-    handle.order(opponent, order).await?;
+    handle
+        .apply(WorldInput::Opponent {
+            slot: opponent,
+            order,
+        })
+        .await?;
     Ok(StatusCode::NO_CONTENT)
 }
 
@@ -570,7 +582,7 @@ pub async fn join(
 ) -> Result<impl IntoResponse, ApiError> {
     let handle = find(&state, &id)?;
     let joined = handle.join(body.name, Some(ClientKey::of(ip))).await?;
-    Ok((StatusCode::CREATED, Json(joined)))
+    Ok((StatusCode::CREATED, Json(Joined::from(joined))))
 }
 
 #[utoipa::path(get, path = "/api/matches/{id}/stats", params(("id" = String, Path)),
@@ -579,5 +591,6 @@ pub async fn stats(
     State(state): State<AppState>,
     Path(id): Path<String>,
 ) -> Result<Json<MatchStats>, ApiError> {
-    Ok(Json(find(&state, &id)?.stats().await?))
+    let handle = find(&state, &id)?;
+    Ok(Json(handle.read(Sight::Live, protocol::read_stats).await?))
 }

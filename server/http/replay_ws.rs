@@ -26,13 +26,13 @@ use tracing::Instrument;
 
 use crate::game::ConnectionGuard;
 use crate::game::replay::{Cursor, Replay};
+use crate::game::view::BELIEF_EVERY;
 use crate::http::admit::off_workers;
 use crate::http::limits::{AddressConnection, Bucket, ClientIp};
 use crate::http::replays::find;
 use crate::http::ws::{SEND_TIMEOUT, STRIKE_RECOVERY_S, STRIKES};
 use crate::http::{ApiError, AppState};
 use crate::metrics::{ClientGuard, Refusal};
-use crate::protocol::frame::BELIEF_EVERY;
 use crate::protocol::replay_ws::{self as rwire, ReplayControl, ReplayLimits, ReplayWelcome};
 use crate::protocol::ws as wire;
 use frames::{Show, Shown, seats, show};

@@ -8,9 +8,9 @@ use axum::Json;
 use axum::extract::{Path, Query, State};
 
 use crate::game::replay::{HistoryError, Replay};
+use crate::game::view::{Frame, Summary};
 use crate::http::admit::off_workers;
 use crate::http::{ApiError, AppState};
-use crate::protocol::frame::Frame;
 use crate::protocol::replays::{ReplayDetail, ReplayListed};
 use crate::protocol::{self, Belief, ErrorBody, MatchState, Winner};
 use crate::store::Listed;
@@ -142,7 +142,11 @@ pub async fn detail(
     let world = world_at(&state, r.clone(), last).await?;
     Ok(Json(ReplayDetail {
         listed: listed(&r.listed()),
-        settings: protocol::summary(&world, &r.meta),
+        settings: protocol::summary(&Summary::of(
+            &world,
+            &r.meta,
+            &Arc::new(world.config.clone()),
+        )),
         events: world.events().iter().map(protocol::event).collect(),
     }))
 }
@@ -185,7 +189,7 @@ pub async fn belief_at(
         },
     };
     let world = world_at(&state, r, tick).await?;
-    protocol::belief(&world, robot)
+    protocol::belief_of(&world, robot)
         .map(Json)
         .ok_or_else(|| ApiError::not_found("robot: no such robot in this match"))
 }

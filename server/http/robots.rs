@@ -12,7 +12,10 @@ use crate::http::body::JsonBody;
 use crate::http::handlers::{owned, readable};
 use crate::http::{ApiError, AppState};
 use crate::protocol::ErrorBody;
-use crate::protocol::robots::{ActRequest, ActResponse, Observation, RobotCommand, robot_index};
+use crate::protocol::robots::{
+    self, ActRequest, ActResponse, Observation, RobotCommand, robot_index,
+};
+use lasertag_core::world::{MatchStatus, WorldInput};
 
 /// The index of robot `rid`, or a 404 naming it.
 fn robot(id: &str, rid: &str) -> Result<usize, ApiError> {
@@ -35,7 +38,8 @@ pub async fn command(
 ) -> Result<StatusCode, ApiError> {
     let handle = owned(&state, &bearer, &id)?;
     let order = body.order("")?;
-    handle.order_robot(robot(&id, &rid)?, order).await?;
+    let robot = robot(&id, &rid)?;
+    handle.apply(WorldInput::Robot { robot, order }).await?;
     Ok(StatusCode::NO_CONTENT)
 }
 
@@ -54,7 +58,7 @@ pub async fn observation(
     // A robot's knowledge includes where it is and whom it sees: live, that would show a
     // person the robots hidden from them, so a match people play keeps it to its owner (the
     // delayed views are built from frames, which do not carry it).
-    let running = handle.hub.summary.borrow().status == crate::protocol::Status::Running;
+    let running = handle.hub.summary.borrow().status == MatchStatus::Running;
     if sight == Sight::Public && handle.hub.delay_ticks > 0 && running {
         return Err(ApiError::new(
             StatusCode::FORBIDDEN,
@@ -63,7 +67,10 @@ pub async fn observation(
             ),
         ));
     }
-    Ok(Json(handle.observation(robot(&id, &rid)?).await?))
+    let robot = robot(&id, &rid)?;
+    Ok(Json(
+        handle.read(sight, robots::read_observation(robot)).await?,
+    ))
 }
 
 #[utoipa::path(post, path = "/api/matches/{id}/act", params(("id" = String, Path)),
@@ -81,7 +88,11 @@ pub async fn act(
     let handle = owned(&state, &bearer, &id)?;
     let scans = body.scans;
     let (orders, ticks) = body.orders()?;
-    let mut answer = handle.act(orders, ticks).await?;
+    let inputs = orders
+        .into_iter()
+        .map(|(robot, order)| WorldInput::Robot { robot, order })
+        .collect();
+    let mut answer = handle.step("act", inputs, ticks, robots::read_act).await?;
     answer.encode_scans(scans);
     // Written into a buffer of about the answer's size (axum's `Json` starts at 128 bytes
     // and grows, copying, to the kilobyte or so an observation takes).

@@ -20,11 +20,11 @@ use tokio_util::sync::CancellationToken;
 use tracing::Instrument;
 
 use crate::config::Config;
+use crate::game::view::{BELIEF_EVERY, Frame, visible_to};
 use crate::game::{ConnectionGuard, MatchHandle, Seat, Sight, SpectatorSeat};
 use crate::http::limits::{AddressConnection, Bucket, ClientIp};
 use crate::http::{ApiError, AppState};
 use crate::metrics::{ClientGuard, Metrics, Refusal};
-use crate::protocol::frame::{BELIEF_EVERY, Frame, visible_to};
 use crate::protocol::ws::{self as wire, ClientMessage, Limits, Welcome};
 use lasertag_core::world::HumanInput;
 use lasertag_core::world::MatchStatus;
@@ -293,7 +293,7 @@ impl Connection {
             belief_every: BELIEF_EVERY,
             spectator_delay_s: self.handle.hub.delay_ticks as f64
                 / lasertag_core::sim::TICK_HZ as f64,
-            kinematics: self.handle.hub.kinematics,
+            kinematics: wire::Kinematics::of(&self.handle.hub.physics),
             protocol: 2,
             format: if self.compact { "compact" } else { "json" },
             belief: self.belief,
@@ -473,11 +473,11 @@ impl Connection {
         if with_events && frame.last_seq > self.last_seq {
             if self.last_seq < frame.since_seq {
                 // Frames were skipped while this client was slow: fetch what it missed.
+                let since = self.last_seq;
                 let missed = self
                     .handle
-                    .events(self.last_seq, Sight::Live)
+                    .read(Sight::Live, move |r| Ok(r.events(since).to_vec()))
                     .await
-                    .map(|e| e.events)
                     .unwrap_or_default();
                 for e in missed.iter().filter(|e| e.seq <= frame.since_seq) {
                     self.send(wire::event(e)).await?;

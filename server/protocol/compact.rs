@@ -39,7 +39,7 @@
 //!
 //! Bytes after the last run are the baseline's.
 
-use crate::protocol::frame::{BeliefView, Frame, Visible};
+use crate::game::view::{BeliefView, Frame, Visible};
 use lasertag_core::world::{ControlKind, MatchStatus, Side};
 
 /// Scans and clouds come with every this many ticks' snapshot (5 Hz).
@@ -296,9 +296,9 @@ fn encode_belief(o: &mut Out, b: &BeliefView) {
         o.u32(r.id.min(u32::MAX as u64) as u32);
         o.count(r.count as usize);
         let state = match r.state {
-            crate::protocol::ConfidenceState::Valid => 0u8,
-            crate::protocol::ConfidenceState::Suspicious => 1,
-            crate::protocol::ConfidenceState::Invalid => 2,
+            lasertag_core::tracker::Confidence::Valid => 0u8,
+            lasertag_core::tracker::Confidence::Suspicious => 1,
+            lasertag_core::tracker::Confidence::Invalid => 2,
         };
         o.u8(r.tagged as u8 | state << 1);
         o.u8((r.confidence.clamp(0.0, 1.0) * 255.0).round() as u8);

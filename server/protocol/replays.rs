@@ -1,10 +1,20 @@
-//! The shapes of history and replays: a finished match in the list, and one replay's
-//! summary with its settings and events.
+//! The shapes of history and replays: a finished match in the list, one replay's summary
+//! with its settings and events, and the lines of its export.
 
 use serde::Serialize;
 use utoipa::ToSchema;
 
-use super::{EventDto, MatchSummary, Winner};
+use super::{Belief, EventDto, MatchState, MatchSummary, Winner};
+
+/// One line of a replay's export (`GET /api/replays/{id}/export`): the state at `tick`, and
+/// the team's belief when asked for.
+#[derive(Debug, Serialize)]
+pub struct ExportLine<'a> {
+    pub tick: u64,
+    pub state: &'a MatchState,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub belief: Option<&'a Belief>,
+}
 
 /// A finished match as `GET /api/replays` lists it.
 #[derive(Debug, Clone, Serialize, ToSchema)]

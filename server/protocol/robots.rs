@@ -15,6 +15,7 @@ use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
 
 use super::{EventDto, Invalid, PoseDto, Status, Winner, invalid, mm, rad};
+use crate::game::{MatchError, Reading};
 use crate::schema;
 use lasertag_core::sim::{AgentId, Pose};
 use lasertag_core::world::{RobotObservation, RobotOrder};
@@ -314,6 +315,32 @@ pub struct ActResponse {
     pub observations: BTreeMap<String, Observation>,
     /// What happened during these ticks.
     pub events: Vec<EventDto>,
+}
+
+/// The answer to an environment step, read live once its last tick has run.
+pub fn read_act(r: &mut Reading<'_>) -> Result<ActResponse, MatchError> {
+    let Some(w) = r.live() else {
+        return Err(MatchError::Gone(r.meta().id.clone()));
+    };
+    Ok(ActResponse {
+        tick: w.tick,
+        status: super::status(w.status),
+        winner: super::winner(w.winner),
+        observations: (0..w.robots.len())
+            .filter_map(|i| {
+                let o = w.observation(i)?;
+                Some((AgentId::Robot(i).to_string(), observation(&o)))
+            })
+            .collect(),
+        events: r.stepped_events().iter().map(super::event).collect(),
+    })
+}
+
+/// What robot `robot` knows now.
+pub fn read_observation(
+    robot: usize,
+) -> impl FnOnce(&mut Reading<'_>) -> Result<Observation, MatchError> + Send + 'static {
+    move |r| Ok(observation(&r.observation(robot)?))
 }
 
 impl ActResponse {

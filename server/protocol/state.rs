@@ -2,26 +2,10 @@
 //! robot team's belief and the event log, converted from the core's types with coordinates rounded to the
 //! millimetre.
 
-use super::frame::{Frame, TrackingFrame};
 use super::*;
-
-/// What the shell knows about a match besides its world.
-#[derive(Debug, Clone)]
-pub struct MatchMeta {
-    pub id: String,
-    pub map: String,
-    pub clock: Clock,
-    pub players: usize,
-    /// WebSocket spectators connected now.
-    pub spectators: usize,
-    /// Opponent slots a person can take now.
-    pub free_slots: usize,
-    /// Whether people may take over bot opponents (the showcase).
-    pub bots_joinable: bool,
-    /// How far behind the match its truth is shown to all but its owner (0: live). Set
-    /// when people may play it (see `MatchRequest::spectator_delay_ticks`).
-    pub spectator_delay_ticks: u64,
-}
+use crate::game::delay::HeldBelief;
+use crate::game::view::{self, Frame, MatchMeta, TrackingFrame};
+use crate::game::{MatchError, Reading};
 
 /// A match in listings and the reply to `POST /api/matches`.
 #[derive(Debug, Clone, Serialize, ToSchema)]
@@ -96,29 +80,31 @@ pub fn notes(c: &MatchConfig) -> Vec<String> {
     notes
 }
 
-pub fn summary(world: &World, meta: &MatchMeta) -> MatchSummary {
-    let c = &world.config;
+/// A match as listings show it.
+pub fn summary(s: &view::Summary) -> MatchSummary {
+    let c = &*s.config;
+    let meta = &s.meta;
     MatchSummary {
         id: meta.id.clone(),
         map: meta.map.clone(),
-        clock: meta.clock,
-        tick: world.tick,
+        clock: meta.clock.into(),
+        tick: s.tick,
         tick_hz: TICK_HZ,
-        time_s: world.time_s(),
+        time_s: s.time_s,
         time_limit_s: c.time_limit_ticks as f64 / TICK_HZ as f64,
-        status: status(world.status),
-        winner: winner(world.winner),
-        robots: world.robots.len(),
-        opponents: world.opponents.len(),
-        opponents_left: world.opponents.iter().filter(|o| !o.tagged).count(),
+        status: status(s.status),
+        winner: winner(s.winner),
+        robots: s.robots,
+        opponents: s.opponents,
+        opponents_left: s.opponents_left,
         opponent_control: c.opponent_control.into(),
         opponent_bot: match c.opponent_bot {
             BotKind::Wander => OpponentBot::Wander,
             BotKind::Evade => OpponentBot::Evade,
             BotKind::Idle => OpponentBot::Idle,
         },
-        planner: planner_dto(world.team.kind()),
-        planner_active: planner_dto(world.team.kind()),
+        planner: planner_dto(s.planner),
+        planner_active: planner_dto(s.planner),
         tracker: Echo(c.tracker.clone()),
         coordination: Echo(c.coordination.clone()),
         localisation: c.localisation,
@@ -130,7 +116,7 @@ pub fn summary(world: &World, meta: &MatchMeta) -> MatchSummary {
         spectators: meta.spectators,
         free_slots: meta.free_slots,
         bots_joinable: meta.bots_joinable,
-        notes: notes(&world.config),
+        notes: notes(c),
         spectator_delay_s: meta.spectator_delay_ticks as f64 / TICK_HZ as f64,
         node: None,
     }
@@ -155,6 +141,23 @@ pub struct MatchStats {
     pub frames_published: u64,
     pub spectators: usize,
     pub players_connected: usize,
+}
+
+/// The stats of match `id`.
+pub fn stats(id: &str, s: &view::Stats) -> MatchStats {
+    MatchStats {
+        id: id.to_string(),
+        tick: s.tick,
+        ticks_measured: s.ticks_measured,
+        tick_us_p50: s.tick_us_p50,
+        tick_us_p99: s.tick_us_p99,
+        tick_us_max: s.tick_us_max,
+        tick_us_mean: s.tick_us_mean,
+        late_ticks: s.late_ticks,
+        frames_published: s.frames_published,
+        spectators: s.spectators,
+        players_connected: s.players_connected,
+    }
 }
 
 #[derive(Debug, Clone, Serialize, ToSchema)]
@@ -357,96 +360,31 @@ pub struct Belief {
     pub roles: Vec<Role>,
 }
 
-/// A belief as the tracker held it at one tick, kept compact (the tracker's own `f32`s) so
-/// that a match can hold some back: see `game::delay`.
-#[derive(Debug, Clone)]
-pub struct HeldBelief {
-    pub tick: u64,
-    roles: Vec<HeldRole>,
+/// Robot `robot`'s belief in `world` now, or the team's merged one; `None` for a robot the
+/// match does not have.
+pub fn belief_of(world: &World, robot: Option<usize>) -> Option<Belief> {
+    HeldBelief::of(world, robot).map(|b| belief(&b, robot))
 }
 
-#[derive(Debug, Clone)]
-struct HeldRole {
-    id: u64,
-    count: u32,
-    tagged: bool,
-    confidence: f32,
-    state: ConfidenceState,
-    particles: Vec<nalgebra::Point2<f32>>,
-    weights: Vec<f32>,
-}
-
-impl HeldBelief {
-    /// The team's merged belief in `world` (with a perfect radio, the shared tracker's; see
-    /// `Team::merged_belief`).
-    pub fn team(world: &World) -> HeldBelief {
-        HeldBelief::from_roles(world.tick, &world.team.merged_belief())
+/// `held` as the API shows it, for `robot` (or the team when `None`).
+pub fn belief(held: &HeldBelief, robot: Option<usize>) -> Belief {
+    Belief {
+        tick: held.tick,
+        robot: robot.map(|i| AgentId::Robot(i).to_string()),
+        roles: held
+            .roles
+            .iter()
+            .map(|r| Role {
+                id: r.id,
+                count: r.count,
+                tagged: r.tagged,
+                confidence: (r.confidence as f64 * 1000.0).round() / 1000.0,
+                state: r.state.into(),
+                particles: r.particles.iter().map(|p| [mm(p.x), mm(p.y)]).collect(),
+                weights: r.weights.iter().map(|w| *w as f64).collect(),
+            })
+            .collect(),
     }
-
-    /// Robot `robot`'s own belief in `world`; `None` for a robot the match does not have.
-    pub fn robot(world: &World, robot: usize) -> Option<HeldBelief> {
-        let tracker = world.team.belief_of(robot, world.robots.len())?;
-        Some(HeldBelief::from_roles(world.tick, &tracker.roles))
-    }
-
-    fn from_roles(tick: u64, roles: &[lasertag_core::tracker::Role]) -> HeldBelief {
-        HeldBelief {
-            tick,
-            roles: roles
-                .iter()
-                .map(|r| HeldRole {
-                    id: r.id,
-                    count: r.count,
-                    tagged: r.tagged,
-                    confidence: r.confidence,
-                    state: r.confidence_state().into(),
-                    particles: r.particles().to_vec(),
-                    weights: r.weights().to_vec(),
-                })
-                .collect(),
-        }
-    }
-
-    /// Bytes it keeps.
-    pub fn bytes(&self) -> usize {
-        std::mem::size_of::<Self>()
-            + self
-                .roles
-                .iter()
-                .map(|r| std::mem::size_of::<HeldRole>() + r.particles.len() * 12)
-                .sum::<usize>()
-    }
-
-    /// As the API shows it, for `robot` (or the team when `None`).
-    pub fn to_belief(&self, robot: Option<usize>) -> Belief {
-        Belief {
-            tick: self.tick,
-            robot: robot.map(|i| AgentId::Robot(i).to_string()),
-            roles: self
-                .roles
-                .iter()
-                .map(|r| Role {
-                    id: r.id,
-                    count: r.count,
-                    tagged: r.tagged,
-                    confidence: (r.confidence as f64 * 1000.0).round() / 1000.0,
-                    state: r.state,
-                    particles: r.particles.iter().map(|p| [mm(p.x), mm(p.y)]).collect(),
-                    weights: r.weights.iter().map(|w| *w as f64).collect(),
-                })
-                .collect(),
-        }
-    }
-}
-
-/// Robot `robot`'s belief now, or the team's merged one; `None` for a robot the match does
-/// not have.
-pub fn belief(world: &World, robot: Option<usize>) -> Option<Belief> {
-    let held = match robot {
-        None => Some(HeldBelief::team(world)),
-        Some(i) => HeldBelief::robot(world, i),
-    };
-    held.map(|b| b.to_belief(robot))
 }
 
 /// One entry of the event log. Fields beyond `seq`, `tick` and `kind` depend on the kind.
@@ -553,17 +491,47 @@ pub fn event(e: &lasertag_core::world::Event) -> EventDto {
 
 /// The wire name of why a match ended.
 pub fn finish_reason(reason: FinishReason) -> &'static str {
-    match reason {
-        FinishReason::AllTagged => "all_tagged",
-        FinishReason::TimeLimit => "time_limit",
-        FinishReason::Stopped => "stopped",
-        FinishReason::ServerShutdown => "server_shutdown",
-        FinishReason::Abandoned => "abandoned",
-        FinishReason::Overloaded => "overloaded",
-    }
+    reason.name()
 }
 
 #[derive(Debug, Clone, Serialize, ToSchema)]
 pub struct Events {
     pub events: Vec<EventDto>,
+}
+
+// What the handlers ask a match for (`MatchHandle::read`): each converts what its reader may
+// see, on the match's task.
+
+/// The ground truth, as the reader may see it.
+pub fn read_state(r: &mut Reading<'_>) -> Result<MatchState, MatchError> {
+    let frame = r.frame();
+    Ok(state(&frame, r.meta(), r.config()))
+}
+
+/// The match as listings show it, now.
+pub fn read_summary(r: &mut Reading<'_>) -> Result<MatchSummary, MatchError> {
+    Ok(summary(&r.summary()))
+}
+
+/// How the match's task keeps up.
+pub fn read_stats(r: &mut Reading<'_>) -> Result<MatchStats, MatchError> {
+    Ok(stats(&r.meta().id, &r.stats()))
+}
+
+/// Robot `robot`'s belief, or the team's, as the reader may see it.
+pub fn read_belief(
+    robot: Option<usize>,
+) -> impl FnOnce(&mut Reading<'_>) -> Result<Belief, MatchError> + Send + 'static {
+    move |r| Ok(belief(&*r.belief(robot)?, robot))
+}
+
+/// The events after `since` the reader may see.
+pub fn read_events(
+    since: u64,
+) -> impl FnOnce(&mut Reading<'_>) -> Result<Events, MatchError> + Send + 'static {
+    move |r| {
+        Ok(Events {
+            events: r.events(since).iter().map(event).collect(),
+        })
+    }
 }

@@ -13,11 +13,12 @@ use std::sync::OnceLock;
 use axum::extract::ws::Utf8Bytes;
 use serde::{Deserialize, Serialize};
 
+use crate::game::view::{BeliefView, Frame, Visible};
 use crate::maps::MapFile;
-use crate::protocol::frame::{BeliefView, Frame, Visible};
 use crate::protocol::{EventDto, OpponentControl, PoseDto, Status, Winner, status, winner};
 use crate::protocol::{Invalid, deserialize_at, invalid};
 use lasertag_core::sim::{AgentId, Pose};
+use lasertag_core::world::Event;
 
 /// Serialised forms of one frame, built by the first connection that needs them and shared
 /// by all the others (so 500 spectators cost one serialisation per tick, not 500).
@@ -420,7 +421,7 @@ fn belief_json(b: &BeliefView) -> String {
                 count: r.count,
                 tagged: r.tagged,
                 confidence: (r.confidence as f64 * 100.0).round() / 100.0,
-                state: r.state,
+                state: r.state.into(),
                 particles: r.particles,
                 mean: [mm(r.mean[0]), mm(r.mean[1])],
                 points: r.points.iter().flat_map(|p| [p[0], p[1]]).collect(),
@@ -429,14 +430,27 @@ fn belief_json(b: &BeliefView) -> String {
     })
 }
 
+/// The frame's shared encodings (made by the first viewer that asks).
+fn cache(frame: &Frame) -> Option<&WireCache> {
+    frame.encoded.get::<WireCache>()
+}
+
+/// `make()`, kept in `cell` of the frame's cache when there is one.
+fn cached<T: Clone>(cell: Option<&OnceLock<T>>, make: impl FnOnce() -> T) -> T {
+    match cell {
+        Some(cell) => cell.get_or_init(make).clone(),
+        None => make(),
+    }
+}
+
 /// Appends `"belief": …` to a serialised snapshot object.
 fn with_belief(mut snapshot: String, frame: &Frame) -> String {
     if let Some(b) = &frame.belief {
-        let belief = frame.wire.belief.get_or_init(|| belief_json(b));
+        let belief = cached(cache(frame).map(|c| &c.belief), || belief_json(b));
         if snapshot.ends_with('}') {
             snapshot.pop();
             snapshot.push_str(",\"belief\":");
-            snapshot.push_str(belief);
+            snapshot.push_str(&belief);
             snapshot.push('}');
         }
     }
@@ -445,18 +459,17 @@ fn with_belief(mut snapshot: String, frame: &Frame) -> String {
 
 /// The snapshot every spectator gets: serialised once per frame and shared.
 pub fn spectator_snapshot(frame: &Frame, belief: bool) -> Utf8Bytes {
-    let make = || Utf8Bytes::from(snapshot_json(frame, None, None));
+    let plain = || {
+        cached(cache(frame).map(|c| &c.spectator), || {
+            Utf8Bytes::from(snapshot_json(frame, None, None))
+        })
+    };
     if belief && frame.belief.is_some() {
-        frame
-            .wire
-            .spectator_belief
-            .get_or_init(|| {
-                let plain = frame.wire.spectator.get_or_init(make);
-                Utf8Bytes::from(with_belief(plain.as_str().to_string(), frame))
-            })
-            .clone()
+        cached(cache(frame).map(|c| &c.spectator_belief), || {
+            Utf8Bytes::from(with_belief(plain().as_str().to_string(), frame))
+        })
     } else {
-        frame.wire.spectator.get_or_init(make).clone()
+        plain()
     }
 }
 
@@ -464,9 +477,10 @@ pub fn spectator_snapshot(frame: &Frame, belief: bool) -> Utf8Bytes {
 /// frame and variant, and shared.
 pub fn spectator_compact(frame: &Frame, belief: bool, slow: bool) -> axum::body::Bytes {
     let belief = belief && frame.belief.is_some();
-    frame.wire.compact[belief as usize * 2 + slow as usize]
-        .get_or_init(|| crate::protocol::compact::snapshot(frame, None, None, belief, slow).into())
-        .clone()
+    cached(
+        cache(frame).map(|c| &c.compact[belief as usize * 2 + slow as usize]),
+        || crate::protocol::compact::snapshot(frame, None, None, belief, slow).into(),
+    )
 }
 
 /// A player's snapshot: what its opponent sees, plus the belief when switched on.
@@ -479,16 +493,18 @@ pub fn player_snapshot(frame: &Frame, you: &str, visible: &Visible, belief: bool
     })
 }
 
-pub fn event(e: &EventDto) -> Utf8Bytes {
+/// An `event` message.
+pub fn event(e: &Event) -> Utf8Bytes {
     Utf8Bytes::from(to_json(&EventWire {
         kind: "event",
-        event: e,
+        event: &crate::protocol::event(e),
     }))
 }
 
 /// The `finished` message, from the match's `finished` event.
 pub fn finished(frame: &Frame) -> Utf8Bytes {
-    let e = frame.finished.as_ref();
+    let e = frame.finished.as_ref().map(crate::protocol::event);
+    let e = e.as_ref();
     Utf8Bytes::from(to_json(&Finished {
         kind: "finished",
         tick: e.map_or(frame.tick, |e| e.tick),

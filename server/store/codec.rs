@@ -14,17 +14,17 @@ use flate2::Compression;
 use flate2::read::DeflateDecoder;
 use flate2::write::DeflateEncoder;
 use lasertag_core::bots::BotKind;
+use lasertag_core::planner::PlannerKind;
 use lasertag_core::settings::{Group, Value};
 use lasertag_core::sim::Odometry;
 use lasertag_core::world::{
-    FinishReason, HumanInput, MatchConfig, OpponentOrder, Placement, RobotOrder, WorldInput,
+    ControlKind, FinishReason, HumanInput, MatchConfig, OpponentOrder, Placement, RobotOrder,
+    WorldInput,
 };
 use lasertag_core::{localise, planner, radio, tracker};
 use nalgebra::Point2;
 use serde::{Deserialize, Serialize};
 use serde_json::{Map, Value as Json};
-
-use crate::protocol::{self, Clock, OpponentBot, OpponentControl, Planner};
 
 /// A stored match that cannot be read back.
 #[derive(Debug, thiserror::Error)]
@@ -44,9 +44,9 @@ pub struct StoredSettings {
     v: u32,
     robots: usize,
     opponents: usize,
-    opponent_control: OpponentControl,
-    opponent_bot: OpponentBot,
-    planner: Planner,
+    opponent_control: StoredControl,
+    opponent_bot: StoredBot,
+    planner: StoredPlanner,
     seed: u64,
     time_limit_ticks: u64,
     placement: StoredPlacement,
@@ -56,9 +56,101 @@ pub struct StoredSettings {
     radio: Map<String, Json>,
     odometry: Map<String, Json>,
     localiser: Map<String, Json>,
-    pub clock: Clock,
+    pub clock: StoredClock,
     pub bots_joinable: bool,
     pub spectator_delay_ticks: u64,
+}
+
+// The stored form's names for the core's kinds. They are the API's names too, but fixed
+// here on their own: a database outlives a change of the API.
+
+/// How a stored match's clock ran.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum StoredClock {
+    Realtime,
+    Manual,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+enum StoredControl {
+    Bot,
+    Api,
+    Human,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+enum StoredBot {
+    Wander,
+    Evade,
+    Idle,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+enum StoredPlanner {
+    Coordinated,
+    Baseline,
+    Idle,
+    Api,
+}
+
+impl StoredControl {
+    fn of(kind: ControlKind) -> StoredControl {
+        match kind {
+            ControlKind::Bot => StoredControl::Bot,
+            ControlKind::Api => StoredControl::Api,
+            ControlKind::Human => StoredControl::Human,
+        }
+    }
+
+    fn kind(self) -> ControlKind {
+        match self {
+            StoredControl::Bot => ControlKind::Bot,
+            StoredControl::Api => ControlKind::Api,
+            StoredControl::Human => ControlKind::Human,
+        }
+    }
+}
+
+impl StoredBot {
+    fn of(kind: BotKind) -> StoredBot {
+        match kind {
+            BotKind::Wander => StoredBot::Wander,
+            BotKind::Evade => StoredBot::Evade,
+            BotKind::Idle => StoredBot::Idle,
+        }
+    }
+
+    fn kind(self) -> BotKind {
+        match self {
+            StoredBot::Wander => BotKind::Wander,
+            StoredBot::Evade => BotKind::Evade,
+            StoredBot::Idle => BotKind::Idle,
+        }
+    }
+}
+
+impl StoredPlanner {
+    fn of(kind: PlannerKind) -> StoredPlanner {
+        match kind {
+            PlannerKind::Coordinated => StoredPlanner::Coordinated,
+            PlannerKind::Baseline => StoredPlanner::Baseline,
+            PlannerKind::Idle => StoredPlanner::Idle,
+            PlannerKind::Api => StoredPlanner::Api,
+        }
+    }
+
+    fn kind(self) -> PlannerKind {
+        match self {
+            StoredPlanner::Coordinated => PlannerKind::Coordinated,
+            StoredPlanner::Baseline => PlannerKind::Baseline,
+            StoredPlanner::Idle => PlannerKind::Idle,
+            StoredPlanner::Api => PlannerKind::Api,
+        }
+    }
 }
 
 #[derive(Debug, Clone, Serialize, Deserialize)]
@@ -118,7 +210,7 @@ impl StoredSettings {
     /// `config` as stored, with the shell's clock and spectator delay.
     pub fn of(
         config: &MatchConfig,
-        clock: Clock,
+        clock: StoredClock,
         bots_joinable: bool,
         spectator_delay_ticks: u64,
     ) -> StoredSettings {
@@ -126,13 +218,9 @@ impl StoredSettings {
             v: SETTINGS_VERSION,
             robots: config.robots,
             opponents: config.opponents,
-            opponent_control: config.opponent_control.into(),
-            opponent_bot: match config.opponent_bot {
-                BotKind::Wander => OpponentBot::Wander,
-                BotKind::Evade => OpponentBot::Evade,
-                BotKind::Idle => OpponentBot::Idle,
-            },
-            planner: protocol::planner_dto(config.planner),
+            opponent_control: StoredControl::of(config.opponent_control),
+            opponent_bot: StoredBot::of(config.opponent_bot),
+            planner: StoredPlanner::of(config.planner),
             seed: config.seed,
             time_limit_ticks: config.time_limit_ticks,
             placement: match &config.placement {
@@ -172,13 +260,9 @@ impl StoredSettings {
         Ok(MatchConfig {
             robots: self.robots,
             opponents: self.opponents,
-            opponent_control: self.opponent_control.into(),
-            opponent_bot: match self.opponent_bot {
-                OpponentBot::Wander => BotKind::Wander,
-                OpponentBot::Evade => BotKind::Evade,
-                OpponentBot::Idle => BotKind::Idle,
-            },
-            planner: protocol::planner_kind(self.planner),
+            opponent_control: self.opponent_control.kind(),
+            opponent_bot: self.opponent_bot.kind(),
+            planner: self.planner.kind(),
             seed: self.seed,
             time_limit_ticks: self.time_limit_ticks,
             placement: match &self.placement {
@@ -261,17 +345,9 @@ fn unpoints(p: &[[f32; 2]]) -> Vec<Point2<f32>> {
     p.iter().map(|p| Point2::new(p[0], p[1])).collect()
 }
 
+/// The reason a stored name stands for.
 pub fn reason_of(name: &str) -> Option<FinishReason> {
-    [
-        FinishReason::AllTagged,
-        FinishReason::TimeLimit,
-        FinishReason::Stopped,
-        FinishReason::ServerShutdown,
-        FinishReason::Abandoned,
-        FinishReason::Overloaded,
-    ]
-    .into_iter()
-    .find(|r| protocol::finish_reason(*r) == name)
+    FinishReason::ALL.into_iter().find(|r| r.name() == name)
 }
 
 impl StoredInput {
@@ -320,7 +396,7 @@ impl StoredInput {
             },
             WorldInput::End(reason) => StoredInput::End {
                 t,
-                reason: protocol::finish_reason(*reason).to_string(),
+                reason: reason.name().to_string(),
             },
         }
     }
@@ -412,7 +488,7 @@ mod tests {
     use lasertag_core::world::ControlKind;
 
     fn round_trip(config: &MatchConfig) {
-        let stored = StoredSettings::of(config, Clock::Manual, true, 600);
+        let stored = StoredSettings::of(config, StoredClock::Manual, true, 600);
         let text = serde_json::to_string(&stored).expect("json");
         let back: StoredSettings = serde_json::from_str(&text).expect("parse");
         let again = back.config().expect("config");
@@ -420,7 +496,7 @@ mod tests {
         assert_eq!(format!("{config:?}"), format!("{again:?}"));
         assert_eq!(
             (back.clock, back.bots_joinable, back.spectator_delay_ticks),
-            (Clock::Manual, true, 600)
+            (StoredClock::Manual, true, 600)
         );
     }
 

@@ -8,7 +8,7 @@ use super::MatchTask;
 use crate::game::replay::Replay;
 use crate::store::codec::StoredSettings;
 use crate::store::{Ended, Write, results, unix_ms};
-use lasertag_core::world::MatchStatus;
+use lasertag_core::world::{FinishReason, MatchStatus};
 
 /// How often a running match's inputs go to the store: what a crash may lose.
 pub(super) const FLUSH_EVERY: Duration = Duration::from_secs(1);
@@ -38,7 +38,7 @@ impl MatchTask {
         }
         let settings = StoredSettings::of(
             &self.world.config,
-            self.meta.clock,
+            self.meta.clock.stored(),
             self.meta.bots_joinable,
             self.meta.spectator_delay_ticks,
         );
@@ -105,7 +105,7 @@ impl MatchTask {
                 lasertag_core::world::Side::Robots => "robots",
                 lasertag_core::world::Side::Opponents => "opponents",
             }),
-            reason: replay.reason.map(crate::protocol::finish_reason),
+            reason: replay.reason.map(FinishReason::name),
             players: results::of(&self.world),
         };
         debug_assert_eq!(listed.ticks, ended.ticks);

@@ -20,8 +20,10 @@ use std::time::{Duration, Instant};
 use tokio::sync::{mpsc, oneshot, watch};
 
 mod history;
-mod robots;
+mod reading;
 mod seats;
+mod step;
+pub use reading::Reading;
 use seats::Player;
 use tokio::time::MissedTickBehavior;
 use tracing::Instrument;
@@ -29,14 +31,12 @@ use tracing::Instrument;
 use crate::access::{ClientKey, same_secret};
 use crate::game::delay::HeldBack;
 use crate::game::record::Recording;
-use crate::game::{Hub, MatchError, Request, Seat, Sight, random_id};
+use crate::game::view::{BELIEF_EVERY, Clock, Frame, Joined, MatchMeta, SeatView, Stats, Summary};
+use crate::game::{Answer, Hub, MatchError, Request, Seat, random_id};
 use crate::metrics::{Metrics, Refusal, TickHistograms};
-use crate::protocol::frame::{BELIEF_EVERY, Frame, SeatView};
-use crate::protocol::robots::ActResponse;
-use crate::protocol::{self, Clock, Joined, MatchMeta, MatchState, MatchStats, MatchSummary};
-use lasertag_core::sim::{AgentId, TICK_HZ};
+use lasertag_core::sim::TICK_HZ;
 use lasertag_core::world::{Control, FinishReason, HumanInput, InputError, StepMark, WorldInput};
-use lasertag_core::world::{MatchStatus, World};
+use lasertag_core::world::{MatchConfig, MatchStatus, World};
 
 /// Ticks over which overruns are counted, and how many of them may overrun before the match
 /// is ended (`overloaded`): ten seconds of real time at 20 Hz, half of it over budget, is
@@ -58,18 +58,9 @@ struct PendingStep {
     remaining: u64,
     /// Ticks run since the last frame (one is published every `STEP_CHUNK`).
     unpublished: u64,
-    answer: StepAnswer,
-}
-
-/// Who waits for a manual step, and for what.
-enum StepAnswer {
-    /// `POST /step`: the state after it.
-    State(oneshot::Sender<Result<MatchState, MatchError>>),
-    /// `POST /act`: the observations after it and the events from `since` on.
-    Act {
-        since: u64,
-        reply: oneshot::Sender<Result<ActResponse, MatchError>>,
-    },
+    /// The events logged before the step began (its answer reads those after).
+    since: u64,
+    answer: Answer,
 }
 
 /// What a match task needs from the shell besides its world.
@@ -127,12 +118,13 @@ pub fn spawn_match(
             (Some(held), rx)
         }
     };
-    let (summaries_tx, summary) = watch::channel(Arc::new(protocol::summary(&world, &meta)));
+    let config = Arc::new(world.config.clone());
+    let (summaries_tx, summary) = watch::channel(Arc::new(Summary::of(&world, &meta, &config)));
     let hub = Hub {
         frames,
         spectate,
         delay_ticks: meta.spectator_delay_ticks,
-        kinematics: crate::protocol::ws::Kinematics::of(&world.config.physics),
+        physics: Arc::new(world.config.physics.clone()),
         summary,
         arena: world.arena.clone(),
         spectators: Arc::new(AtomicUsize::new(0)),
@@ -147,7 +139,7 @@ pub fn spawn_match(
     }
     .or_else(|| match_runtime().cloned())
     .unwrap_or_else(tokio::runtime::Handle::current);
-    let kind = protocol::planner_name(world.team.kind());
+    let kind = world.team.kind().name();
     let clock = match meta.clock {
         Clock::Realtime => "realtime",
         Clock::Manual => "manual",
@@ -165,6 +157,7 @@ pub fn spawn_match(
         last_change: now,
         histograms,
         world,
+        config,
         meta,
         settings,
         frames: frames_tx,
@@ -212,6 +205,8 @@ fn match_runtime() -> Option<&'static tokio::runtime::Handle> {
 
 struct MatchTask {
     world: World,
+    /// `world.config`, shared with every summary published.
+    config: Arc<MatchConfig>,
     /// Every change from outside applied to `world`, for its replay.
     recording: Recording,
     /// Whether the finished match went to the history already.
@@ -234,7 +229,7 @@ struct MatchTask {
     held: Option<HeldBack>,
     /// The match as listings show it, published with each frame so that the lobby never
     /// waits on this task.
-    summaries: watch::Sender<Arc<MatchSummary>>,
+    summaries: watch::Sender<Arc<Summary>>,
     spectators: Arc<AtomicUsize>,
     published_seq: u64,
     robot_tags: u32,
@@ -282,13 +277,16 @@ impl MatchTask {
                         self.archive();
                         break;
                     }
-                    if !matches!(req, Request::Input { .. }) {
+                    if req.is_activity() {
                         self.last_activity = Instant::now();
                     }
-                    let changes_seats = !matches!(req, Request::Input { .. } | Request::Summary(_) | Request::State { .. } | Request::Belief { .. } | Request::Events { .. } | Request::Stats(_) | Request::Observation { .. } | Request::Act { .. });
+                    if req.is_change() {
+                        self.last_change = Instant::now();
+                    }
+                    let changes_listing = req.changes_listing();
                     self.answer(req, realtime, &mut pending);
                     // Joins, seats and commands change what the lobby shows.
-                    if changes_seats {
+                    if changes_listing {
                         self.publish_summary();
                     }
                 }
@@ -340,7 +338,7 @@ impl MatchTask {
                             self.frame_stale = true;
                         }
                         if over {
-                            self.answer_step(step.answer);
+                            self.answer_step(step);
                         } else {
                             pending = Some(step);
                             tokio::task::yield_now().await;
@@ -398,113 +396,23 @@ impl MatchTask {
     }
 
     fn answer(&mut self, req: Request, realtime: bool, pending: &mut Option<PendingStep>) {
-        let id = self.meta.id.clone();
         match req {
             Request::Stop(_) => {}
-            Request::Summary(reply) => {
+            Request::Read { sight, answer } => {
+                // A read sees the counts as they are now (the frame catches up when read).
                 self.refresh_meta();
-                let _ = reply.send(protocol::summary(&self.world, &self.meta));
+                let since = self.world.events().len() as u64;
+                answer(Ok(&mut Reading::new(self, sight, since)));
             }
-            Request::State { sight, reply } => {
-                self.refresh_frame();
-                let _ = reply.send(self.state(sight));
+            Request::Apply { input, reply } => {
+                let _ = reply.send(self.apply(input).map_err(MatchError::Input));
             }
-            Request::Belief {
-                robot,
-                sight,
-                reply,
-            } => {
-                let belief = match self.held_back(sight) {
-                    Some(held) => held.belief(robot),
-                    None => protocol::belief(&self.world, robot),
-                };
-                let belief = belief.ok_or_else(|| {
-                    MatchError::NotFound(format!(
-                        "robot: no robot r{} in this match (it has {})",
-                        robot.unwrap_or_default(),
-                        self.world.robots.len()
-                    ))
-                });
-                let _ = reply.send(belief);
-            }
-            Request::Events {
-                since,
-                sight,
-                reply,
-            } => {
-                let shown = self.held_back(sight).map_or(u64::MAX, |h| h.shown_seq());
-                let events = self
-                    .world
-                    .events_since(since)
-                    .iter()
-                    .take_while(|e| e.seq <= shown)
-                    .map(protocol::event)
-                    .collect();
-                let _ = reply.send(protocol::Events { events });
-            }
-            Request::Stats(reply) => {
-                let _ = reply.send(self.stats());
-            }
-            Request::Step { ticks, reply } => {
-                self.last_change = Instant::now();
-                if realtime {
-                    let _ = reply.send(Err(MatchError::Conflict(format!(
-                        "match {id} runs in real time; step works only on manual-clock matches"
-                    ))));
-                } else if pending.is_some() {
-                    let _ = reply.send(Err(MatchError::Conflict(format!(
-                        "match {id} is already stepping"
-                    ))));
-                } else {
-                    *pending = Some(PendingStep {
-                        remaining: ticks,
-                        unpublished: 0,
-                        answer: StepAnswer::State(reply),
-                    });
-                }
-            }
-            Request::RobotOrder {
-                robot,
-                order,
-                reply,
-            } => {
-                self.last_change = Instant::now();
-                let _ = reply.send(self.order_robot(robot, order));
-            }
-            Request::Observation { robot, reply } => {
-                let _ = reply.send(self.observe(robot));
-            }
-            Request::Act {
-                orders,
+            Request::Step {
+                inputs,
                 ticks,
-                reply,
-            } => {
-                self.last_change = Instant::now();
-                self.act(orders, ticks, realtime, pending, reply);
-            }
-            Request::Order {
-                opponent,
-                order,
-                reply,
-            } => {
-                self.last_change = Instant::now();
-                use lasertag_core::world::OrderError;
-                let result = self
-                    .apply(WorldInput::Opponent {
-                        slot: opponent,
-                        order,
-                    })
-                    .map_err(|e| match e {
-                        InputError::Opponent(e) => e,
-                        other => OrderError::UnknownOpponent(other.to_string()),
-                    })
-                    .map_err(|e| match e {
-                        OrderError::UnknownOpponent(_) => MatchError::NotFound(e.to_string()),
-                        OrderError::OutsideArena { .. } => MatchError::BadRequest(e.to_string()),
-                        _ => MatchError::Conflict(e.to_string()),
-                    });
-                let _ = reply.send(result);
-            }
+                what,
+                answer,
+            } => self.begin_step(inputs, ticks, what, answer, realtime, pending),
             Request::Join {
                 name,
                 client,
@@ -577,31 +485,11 @@ impl MatchTask {
         self.publish_summary();
     }
 
-    /// What is held back from a viewer with `sight`: nothing for the owner, nor once the
-    /// match is over (then nothing is left to hide).
-    fn held_back(&self, sight: Sight) -> Option<&HeldBack> {
-        match sight {
-            Sight::Live => None,
-            Sight::Public if self.world.status == MatchStatus::Finished => None,
-            Sight::Public => self.held.as_ref(),
-        }
-    }
-
-    /// The ground truth as a viewer with `sight` may see it. The latest published frame is
-    /// the world as it is now: whatever changes what the state shows publishes one.
-    fn state(&self, sight: Sight) -> MatchState {
-        let frame = match self.held_back(sight) {
-            Some(held) => held.shown().clone(),
-            None => self.frames.borrow().clone(),
-        };
-        protocol::state(&frame, &self.meta, &self.world.config)
-    }
-
     /// Publishes the match as listings show it (players and spectators counted now).
     fn publish_summary(&mut self) {
         self.refresh_meta();
         self.summaries
-            .send_replace(Arc::new(protocol::summary(&self.world, &self.meta)));
+            .send_replace(Arc::new(Summary::of(&self.world, &self.meta, &self.config)));
     }
 
     fn record(&mut self, took: Duration) {
@@ -642,7 +530,7 @@ impl MatchTask {
         self.tick_next = (self.tick_next + 1) % TICK_WINDOW;
     }
 
-    fn stats(&self) -> MatchStats {
+    fn stats(&self) -> Stats {
         let mut v = self.tick_us.clone();
         v.sort_unstable();
         let pct = |q: f64| -> f64 {
@@ -652,8 +540,7 @@ impl MatchTask {
                 v[((v.len() - 1) as f64 * q).round() as usize] as f64
             }
         };
-        MatchStats {
-            id: self.meta.id.clone(),
+        Stats {
             tick: self.world.tick,
             ticks_measured: v.len(),
             tick_us_p50: pct(0.5),

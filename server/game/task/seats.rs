@@ -124,17 +124,17 @@ impl MatchTask {
         let sent = name.chars().count();
         let name = name.trim().to_string();
         if name.is_empty() || sent > 32 || name.chars().any(char::is_control) {
-            return Err(MatchError::BadRequest(
+            return Err(MatchError::Invalid(
                 "name: must be 1 to 32 printable characters".into(),
             ));
         }
         if self.world.status == MatchStatus::Finished {
-            return Err(MatchError::Conflict(format!("match {id} has finished")));
+            return Err(MatchError::Finished(id.clone()));
         }
         let max = self.settings.max_players;
         if self.players.iter().flatten().count() >= max {
             self.settings.metrics.refuse(Refusal::PlayersFull);
-            return Err(MatchError::Conflict(format!(
+            return Err(MatchError::Full(format!(
                 "players: match {id} is at this server's limit of {max} per match"
             )));
         }
@@ -149,7 +149,7 @@ impl MatchTask {
                 .count();
             if held >= self.settings.max_holds {
                 self.settings.metrics.refuse(Refusal::ClientQuota);
-                return Err(MatchError::TooMany(format!(
+                return Err(MatchError::Quota(format!(
                     "{c} holds {held} slot(s) of match {id} without playing them, its most; connect with a token, or wait {} s for a hold to lapse",
                     self.settings.join_hold.as_secs_f64()
                 )));
@@ -157,7 +157,7 @@ impl MatchTask {
         }
         let slot = (0..self.players.len())
             .find(|&i| self.slot_free(i))
-            .ok_or_else(|| MatchError::Conflict(format!("match {id} has no free opponent slot")))?;
+            .ok_or_else(|| MatchError::Full(format!("match {id} has no free opponent slot")))?;
         let player = Player {
             id: random_id(8),
             name: name.as_str().into(),
@@ -174,7 +174,7 @@ impl MatchTask {
         tracing::info!(player = %player.name, slot, "player joined");
         let joined = Joined {
             player_id: player.id.clone(),
-            opponent_id: AgentId::Opponent(slot).to_string(),
+            slot,
             token: player.token.clone(),
         };
         self.players[slot] = Some(player);
@@ -190,10 +190,10 @@ impl MatchTask {
             .iter()
             .position(|p| p.as_ref().is_some_and(|p| same_secret(&p.token, token)))
             .ok_or_else(|| {
-                MatchError::Unauthorized(format!("token: not a player of match {}", self.meta.id))
+                MatchError::NotAPlayer(format!("token: not a player of match {}", self.meta.id))
             })?;
         let Some(p) = self.players[slot].as_mut() else {
-            return Err(MatchError::Unauthorized("token: slot was freed".into()));
+            return Err(MatchError::NotAPlayer("token: slot was freed".into()));
         };
         if let Some(old) = p.kick.take() {
             let _ = old.send(());
@@ -210,7 +210,7 @@ impl MatchTask {
         tracing::info!(player = %p.name, slot, generation = p.generation, "player connected");
         Ok(Seat {
             slot,
-            opponent_id: AgentId::Opponent(slot).to_string(),
+            opponent_id: lasertag_core::sim::AgentId::Opponent(slot).to_string(),
             name: p.name.to_string(),
             generation: p.generation,
             kicked,

@@ -6,7 +6,7 @@
 use axum::extract::ws::Message;
 
 use crate::game::replay::Replay;
-use crate::protocol::frame::{BELIEF_EVERY, Frame, SeatView, visible_to};
+use crate::game::view::{BELIEF_EVERY, Frame, SeatView, visible_to};
 use crate::protocol::{compact, ws as wire};
 use lasertag_core::sim::AgentId;
 use lasertag_core::world::{EventKind, MatchStatus, World};

@@ -4,7 +4,7 @@
 use super::super::codec::StoredSettings;
 use super::super::{Backend, Ended, PlayerResult, Retention, Write};
 use super::*;
-use crate::protocol::Clock;
+use crate::store::codec::StoredClock;
 use lasertag_core::world::{HumanInput, MatchConfig, WorldInput};
 
 fn dir(what: &str) -> std::path::PathBuf {
@@ -31,7 +31,7 @@ fn a_match(id: &str, n: usize, name: &str, won: bool) -> Vec<Write> {
             arena,
             settings: Box::new(StoredSettings::of(
                 &MatchConfig::default(),
-                Clock::Realtime,
+                StoredClock::Realtime,
                 false,
                 0,
             )),

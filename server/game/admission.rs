@@ -175,7 +175,7 @@ const HELD_BYTES_PER_PARTICLE: f64 = 12.0;
 /// (`game::delay`): a frame per tick of the delay and a belief of the team and of each
 /// robot with a tracker of its own every `BELIEF_HOLD_EVERY` ticks. Nothing for a live match.
 pub fn held_back(config: &MatchConfig, delay_ticks: u64) -> Price {
-    use crate::protocol::frame::{
+    use crate::game::view::{
         BELIEF_BUDGET, BELIEF_EVERY, BELIEF_HOLD_EVERY, BELIEF_MIN_PER_ROLE, CLOUD_POINTS,
     };
     if delay_ticks == 0 {

@@ -1,10 +1,12 @@
-//! What a match task publishes after every tick: one shared [`Frame`] of ground truth.
+//! What a match shows of itself, in the game's own terms: one shared [`Frame`] of ground
+//! truth after every tick, the [`Summary`] listings read, its [`MatchMeta`] and [`Stats`]. `protocol` turns these into the wire's
+//! shapes; nothing here knows JSON.
 //!
 //! The task builds a frame once per tick (O(agents + particles shown), never O(clients)) and
 //! publishes it on a `watch` channel: the latest frame wins, so a slow viewer skips stale
 //! frames instead of slowing the tick. Each WebSocket connection filters a frame for its
 //! viewer (a player sees what its opponent has in line of sight) and serialises it; what
-//! every spectator gets is serialised once per frame and shared ([`crate::protocol::ws::WireCache`]).
+//! every spectator gets is serialised once per frame and shared through [`Frame::encoded`].
 //!
 //! The belief is thinned for display here: each role's cloud is resampled (systematic
 //! resampling, no randomness) down to a few hundred points in all, quantised to centimetres,
@@ -14,20 +16,20 @@
 //! is computed here, where the truth is shown anyway, and never in the core's tick: it reads
 //! the world and changes nothing in the match.
 
-use std::sync::Arc;
+use std::any::Any;
+use std::sync::{Arc, OnceLock};
 
 use nalgebra::Point2;
 
-use crate::protocol::EventDto;
-use crate::protocol::ws::WireCache;
 use lasertag_core::localise::Localiser;
+use lasertag_core::planner::PlannerKind;
 use lasertag_core::sim::Pose;
 use lasertag_core::sim::arena::Arena;
 use lasertag_core::sim::sensors::Detection;
-use lasertag_core::tracker::Role;
 use lasertag_core::tracker::estimate::tracking_quality;
 use lasertag_core::tracker::gospa::{Gospa, Params};
-use lasertag_core::world::{ControlKind, EventKind};
+use lasertag_core::tracker::{Confidence, Role};
+use lasertag_core::world::{ControlKind, Event, EventKind, MatchConfig};
 use lasertag_core::world::{MatchStatus, Side, World};
 
 /// Ticks between two belief updates sent to viewers (5 Hz at 20 Hz ticks).
@@ -112,7 +114,7 @@ pub struct RoleView {
     pub tagged: bool,
     /// The team's trust in the cloud and what it makes of it (see `tracker::Confidence`).
     pub confidence: f32,
-    pub state: crate::protocol::ConfidenceState,
+    pub state: Confidence,
     /// Particles the tracker holds for this role.
     pub particles: usize,
     /// Weighted mean of the cloud (metres).
@@ -168,7 +170,7 @@ pub struct Frame {
     /// The belief measured against the truth, every tick.
     pub tracking: TrackingFrame,
     /// Events logged since the previous frame, oldest first.
-    pub events: Vec<EventDto>,
+    pub events: Vec<Event>,
     /// The `seq` of the last event before this frame's (0 for none).
     pub since_seq: u64,
     /// The `seq` of the newest event so far.
@@ -177,9 +179,22 @@ pub struct Frame {
     /// events of every frame so far.
     pub robot_tags: u32,
     /// The `finished` event, once the match has ended.
-    pub finished: Option<EventDto>,
+    pub finished: Option<Event>,
     /// Serialised forms shared by every spectator of this frame.
-    pub wire: WireCache,
+    pub encoded: Encoded,
+}
+
+/// The encodings of one frame that its viewers share, made by the first viewer that needs
+/// them: the sockets keep their own cache type here (`protocol::ws::WireCache`), which the
+/// game does not know.
+#[derive(Debug, Default)]
+pub struct Encoded(OnceLock<Box<dyn Any + Send + Sync>>);
+
+impl Encoded {
+    /// The cache of type `T`, made on first use; `None` if another type got here first.
+    pub fn get<T: Any + Send + Sync + Default>(&self) -> Option<&T> {
+        self.0.get_or_init(|| Box::new(T::default())).downcast_ref()
+    }
 }
 
 impl Frame {
@@ -197,7 +212,7 @@ impl Frame {
                 .iter()
                 .filter(|e| matches!(e.kind, EventKind::RobotTagged { .. }))
                 .count() as u32;
-        let events: Vec<EventDto> = new_events.iter().map(crate::protocol::event).collect();
+        let events: Vec<Event> = new_events.to_vec();
         let last_seq = events.last().map_or(since_seq, |e| e.seq);
         let roles = world.team.merged_belief();
         Frame {
@@ -256,10 +271,10 @@ impl Frame {
                         .iter()
                         .rev()
                         .find(|e| matches!(e.kind, EventKind::Finished { .. }))
-                        .map(crate::protocol::event)
+                        .cloned()
                 })
                 .flatten(),
-            wire: WireCache::default(),
+            encoded: Encoded::default(),
         }
     }
 }
@@ -288,7 +303,7 @@ impl Frame {
             + robots
             + self.opponents.capacity() * std::mem::size_of::<OpponentFrame>()
             + belief
-            + self.events.capacity() * std::mem::size_of::<EventDto>()
+            + self.events.capacity() * std::mem::size_of::<Event>()
     }
 }
 
@@ -339,7 +354,7 @@ fn belief_view_of(tick: u64, roles: &[Role]) -> BeliefView {
                     count: r.count,
                     tagged: r.tagged,
                     confidence: r.confidence,
-                    state: r.confidence_state().into(),
+                    state: r.confidence_state(),
                     particles: r.particles().len(),
                     mean: weighted_mean(r.particles(), r.weights()),
                     points: thin(r.particles(), r.weights(), k),
@@ -397,6 +412,113 @@ pub fn thin(points: &[Point2<f32>], weights: &[f32], k: usize) -> Vec<[i32; 2]> 
         }
     }
     out
+}
+
+/// How a match's clock runs: 20 Hz of real time, or a tick only when asked.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Clock {
+    Realtime,
+    Manual,
+}
+
+impl Clock {
+    /// As the history stores it.
+    pub fn stored(self) -> crate::store::codec::StoredClock {
+        match self {
+            Clock::Realtime => crate::store::codec::StoredClock::Realtime,
+            Clock::Manual => crate::store::codec::StoredClock::Manual,
+        }
+    }
+
+    /// As the history stored it.
+    pub fn of_stored(clock: crate::store::codec::StoredClock) -> Clock {
+        match clock {
+            crate::store::codec::StoredClock::Realtime => Clock::Realtime,
+            crate::store::codec::StoredClock::Manual => Clock::Manual,
+        }
+    }
+}
+
+/// What the shell knows about a match besides its world.
+#[derive(Debug, Clone)]
+pub struct MatchMeta {
+    pub id: String,
+    pub map: String,
+    pub clock: Clock,
+    pub players: usize,
+    /// WebSocket spectators connected now.
+    pub spectators: usize,
+    /// Opponent slots a person can take now.
+    pub free_slots: usize,
+    /// Whether people may take over bot opponents (the showcase).
+    pub bots_joinable: bool,
+    /// How far behind the match its truth is shown to all but its owner (0: live). Set
+    /// when people may play it (see `MatchRequest::spectator_delay_ticks`).
+    pub spectator_delay_ticks: u64,
+}
+
+/// A match as listings show it, published with every frame so that a listing never waits
+/// on the match's task.
+#[derive(Debug, Clone)]
+pub struct Summary {
+    pub meta: MatchMeta,
+    pub tick: u64,
+    pub time_s: f64,
+    pub status: MatchStatus,
+    pub winner: Option<Side>,
+    pub robots: usize,
+    pub opponents: usize,
+    pub opponents_left: usize,
+    /// The planner the team runs.
+    pub planner: PlannerKind,
+    /// The match's settings (they do not change while it runs).
+    pub config: Arc<MatchConfig>,
+}
+
+impl Summary {
+    /// The summary of `world` now; `config` is `world.config`, shared.
+    pub fn of(world: &World, meta: &MatchMeta, config: &Arc<MatchConfig>) -> Summary {
+        Summary {
+            meta: meta.clone(),
+            tick: world.tick,
+            time_s: world.time_s(),
+            status: world.status,
+            winner: world.winner,
+            robots: world.robots.len(),
+            opponents: world.opponents.len(),
+            opponents_left: world.opponents.iter().filter(|o| !o.tagged).count(),
+            planner: world.team.kind(),
+            config: config.clone(),
+        }
+    }
+}
+
+/// How a match's task keeps up (wall-clock measurements of the shell, not part of the
+/// deterministic match).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Stats {
+    pub tick: u64,
+    /// Ticks the percentiles cover (the most recent ones).
+    pub ticks_measured: usize,
+    /// Compute time of one tick (the step plus building the published frame), microseconds.
+    pub tick_us_p50: f64,
+    pub tick_us_p99: f64,
+    pub tick_us_max: f64,
+    pub tick_us_mean: f64,
+    /// Real-time ticks that were late by more than a whole tick period.
+    pub late_ticks: u64,
+    pub frames_published: u64,
+    pub spectators: usize,
+    pub players_connected: usize,
+}
+
+/// A person's place at a match, as `join` gives it: the player, the opponent slot and the
+/// secret its WebSocket connects with.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Joined {
+    pub player_id: String,
+    pub slot: usize,
+    pub token: String,
 }
 
 #[cfg(test)]
