@@ -5,7 +5,8 @@
 //! - edge: [`maps`] (map files), [`schema`] (hand-written OpenAPI pieces and lenient number
 //!   parsing), [`protocol`] (every JSON shape of the API, and the frames a match publishes);
 //! - shell: [`game`] (one tokio task per match), [`fleet`] (the directory of servers in
-//!   Redis, with `--fleet`), [`http`] (the axum router), [`config`]
+//!   Redis, with `--fleet`), [`service`] (the use cases the handlers call), [`http`] (the
+//!   axum router), [`config`]
 //!   (limits), [`access`] (owners, their tokens, per-client keys), [`metrics`] (Prometheus),
 //!   `agones` (with the `agones` feature: the Agones SDK lifecycle), `main.rs` (CLI; its `experiment` command runs
 //!   `lasertag-lab`).
@@ -26,4 +27,5 @@ pub mod maps;
 pub mod metrics;
 pub mod protocol;
 pub mod schema;
+pub mod service;
 pub mod store;

@@ -32,6 +32,7 @@ const SERVER_FLOORS: &[&str] = &[
     "game",
     "fleet",
     "agones",
+    "service",
     "http",
 ];
 
