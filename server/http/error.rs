@@ -178,3 +178,29 @@ impl From<StatsError> for ApiError {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_servers_limits_are_503_and_a_clients_share_429() {
+        let server = ApiError::from(NoRoom::Draining);
+        assert_eq!(server.status, StatusCode::SERVICE_UNAVAILABLE);
+        assert!(
+            server.message.contains("shutting down"),
+            "{}",
+            server.message
+        );
+        let client = ApiError::from(NoRoom::Client {
+            client: crate::access::ClientKey::of([10, 0, 0, 1].into()),
+            max: 3,
+        });
+        assert_eq!(client.status, StatusCode::TOO_MANY_REQUESTS);
+        assert!(
+            client.message.starts_with("10.0.0.1 holds 3 matches"),
+            "{}",
+            client.message
+        );
+    }
+}

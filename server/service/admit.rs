@@ -73,3 +73,32 @@ pub fn within_request_limits(
     registry.metrics.refuse(Refusal::Budget);
     Err(over)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::maps::MapStore;
+
+    #[test]
+    fn a_request_over_a_limit_is_refused_naming_it() {
+        let registry = Registry::new(MapStore::default());
+        let cheap = Price::default();
+        assert_eq!(within_request_limits(&registry, "the map", cheap), Ok(()));
+        let heavy = Price {
+            memory: (registry.config.max_request_memory_mb + 1) * 1_000_000,
+            ..Price::default()
+        };
+        let over = within_request_limits(&registry, "the map", heavy).unwrap_err();
+        assert!(matches!(
+            over,
+            OverLimit::Memory {
+                what: "the map",
+                ..
+            }
+        ));
+        assert!(
+            over.to_string().starts_with("the map would keep about"),
+            "{over}"
+        );
+    }
+}

@@ -66,7 +66,7 @@ pub enum CreateError {
 #[derive(Debug)]
 pub enum Created<R> {
     /// The match runs here.
-    Here(MatchCreated),
+    Here(Box<MatchCreated>),
     /// The fleet placed it on another node: what `elsewhere` made of that node.
     Elsewhere(R),
 }
@@ -149,10 +149,10 @@ pub async fn create<R>(
     // Asked of the task so that fields it owns (free slots) are filled in.
     let mut summary = handle.summary().await?;
     summary.node = service.fleet.map(|f| f.me());
-    Ok(Created::Here(MatchCreated {
+    Ok(Created::Here(Box::new(MatchCreated {
         summary,
         owner_token,
-    }))
+    })))
 }
 
 /// Refuses more agents, or more particles, than this server takes in one match.
