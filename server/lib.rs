@@ -12,7 +12,8 @@
 //! - [`protocol`] (every JSON shape of the API, converted from the game's and the core's
 //!   types);
 //! - [`fleet`] (the directory of servers in Redis, with `--fleet`), `agones` (with the
-//!   `agones` feature: the Agones SDK lifecycle), [`http`] (the axum router);
+//!   `agones` feature: the Agones SDK lifecycle);
+//! - [`service`] (the use cases the handlers call), [`http`] (the axum router);
 //! - `main.rs` (CLI; its `experiment` command runs `lasertag-lab`).
 //!
 //! Invariants: a match is a pure function of (map, settings, seed, inputs by tick); robots'
@@ -30,4 +31,5 @@ pub mod maps;
 pub mod metrics;
 pub mod protocol;
 pub mod schema;
+pub mod service;
 pub mod store;

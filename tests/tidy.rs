@@ -22,7 +22,7 @@ const SIM_FLOORS: &[&str] = &[
 /// The server library's modules from the ground floor up.
 const SERVER_FLOORS: &[&str] = &[
     "config", "access", "metrics", "schema", "maps", "store", "game", "protocol", "fleet",
-    "agones", "http",
+    "agones", "service", "http",
 ];
 
 /// The only crates the core may depend on: geometry, seeded randomness and typed errors.

@@ -219,20 +219,40 @@ pub fn mb(bytes: u64) -> String {
     format!("{:.0} MB", bytes as f64 / 1e6)
 }
 
-/// Why a new match was not let in.
-#[derive(Debug, Clone, Copy, PartialEq)]
+/// Why a new match (or map) was not let in; each says what to do about it.
+#[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
 pub enum NoRoom {
     /// The server holds its most matches (the number).
+    #[error(
+        "the server holds {0} matches, its most; try again when one has finished (finished matches are removed after a grace period)"
+    )]
     Server(usize),
     /// This client holds its most matches.
+    #[error(
+        "{client} holds {max} matches, the most one client may; delete one (DELETE /api/matches/{{id}} with its owner_token) or wait for one to end"
+    )]
     Client {
         client: crate::access::ClientKey,
         max: usize,
     },
     /// What is admitted already and this would take the server past its memory budget.
+    #[error(
+        "the server's memory budget of {} is taken ({} admitted; this needs {}); try again when matches have ended",
+        mb(*.budget),
+        mb(*.held),
+        mb(*.asked)
+    )]
     Memory { held: u64, asked: u64, budget: u64 },
     /// This client's matches and maps and this would be priced past its share of the
     /// server's budgets.
+    #[error(
+        "{client} holds matches and maps priced at {} and {:.1} ms per tick; this needs {} and {:.1} ms, past the share one client may hold ({} and {tick_ms:.1} ms); delete a match or map (with its owner_token) or wait for one to end",
+        mb(.held.memory),
+        .held.tick_ms,
+        mb(.asked.memory),
+        .asked.tick_ms,
+        mb(*.memory)
+    )]
     ClientBudget {
         client: crate::access::ClientKey,
         held: Price,
@@ -242,12 +262,18 @@ pub enum NoRoom {
         tick_ms: f64,
     },
     /// The running matches and this one would be priced past the tick budget.
+    #[error(
+        "the server's tick budget of {budget_ms:.0} ms is taken ({held_ms:.1} ms admitted; this match needs {asked_ms:.1} ms); try again when matches have ended"
+    )]
     Cpu {
         held_ms: f64,
         asked_ms: f64,
         budget_ms: f64,
     },
     /// The server is draining before it shuts down.
+    #[error(
+        "the server is shutting down and takes no new matches; its running matches go on until they end"
+    )]
     Draining,
 }
 

@@ -5,7 +5,15 @@ use axum::http::StatusCode;
 use axum::response::{IntoResponse, Response};
 
 use crate::game::MatchError;
+use crate::game::admission::NoRoom;
+use crate::game::replay::HistoryError;
 use crate::protocol::ErrorBody;
+use crate::service::PoolError;
+use crate::service::admit::OverLimit;
+use crate::service::maps::MapsError;
+use crate::service::matches::CreateError;
+use crate::service::players::StatsError;
+use crate::service::replays::ReplaysError;
 use lasertag_core::world::{InputError, OrderError, RobotOrderError};
 
 #[derive(Debug, Clone, PartialEq)]
@@ -96,5 +104,125 @@ impl IntoResponse for ApiError {
 impl From<crate::protocol::Invalid> for ApiError {
     fn from(e: crate::protocol::Invalid) -> ApiError {
         ApiError::bad_request(e.to_string())
+    }
+}
+
+/// The server's or the client's room or budgets taken: the server's limits are 503 (try
+/// again later), a client's share 429 (its own matches and maps are in the way).
+impl From<NoRoom> for ApiError {
+    fn from(e: NoRoom) -> ApiError {
+        let status = match e {
+            NoRoom::Client { .. } | NoRoom::ClientBudget { .. } => StatusCode::TOO_MANY_REQUESTS,
+            NoRoom::Server(_) | NoRoom::Memory { .. } | NoRoom::Cpu { .. } | NoRoom::Draining => {
+                StatusCode::SERVICE_UNAVAILABLE
+            }
+        };
+        ApiError::new(status, e.to_string())
+    }
+}
+
+/// A request priced past a per-request limit is the client's to shrink.
+impl From<OverLimit> for ApiError {
+    fn from(e: OverLimit) -> ApiError {
+        ApiError::bad_request(e.to_string())
+    }
+}
+
+/// A job of the blocking pool that did not finish is the server's fault.
+impl From<PoolError> for ApiError {
+    fn from(e: PoolError) -> ApiError {
+        ApiError::new(StatusCode::INTERNAL_SERVER_ERROR, e.to_string())
+    }
+}
+
+/// A store that failed is the server's fault, not the request's.
+fn history(e: HistoryError) -> ApiError {
+    tracing::error!("history: {e}");
+    ApiError::new(
+        StatusCode::INTERNAL_SERVER_ERROR,
+        format!("the history could not be read: {e}"),
+    )
+}
+
+impl From<CreateError> for ApiError {
+    fn from(e: CreateError) -> ApiError {
+        match e {
+            CreateError::NoRoom(e) => e.into(),
+            CreateError::OverLimit(e) => e.into(),
+            CreateError::Pool(e) => e.into(),
+            CreateError::Match(e) => e.into(),
+            CreateError::NoMap(_) => ApiError::not_found(e.to_string()),
+            CreateError::Invalid(_)
+            | CreateError::TooManyAgents { .. }
+            | CreateError::TooManyParticles { .. }
+            | CreateError::BadMap(_)
+            | CreateError::NotAMap
+            | CreateError::Setup(_) => ApiError::bad_request(e.to_string()),
+        }
+    }
+}
+
+impl From<MapsError> for ApiError {
+    fn from(e: MapsError) -> ApiError {
+        match e {
+            MapsError::NoRoom(e) => e.into(),
+            MapsError::OverLimit(e) => e.into(),
+            MapsError::Pool(e) => e.into(),
+            MapsError::NotFound(_) => ApiError::not_found(e.to_string()),
+            MapsError::Invalid(_) => ApiError::bad_request(e.to_string()),
+            MapsError::Taken(_) | MapsError::InUse(_) => ApiError::conflict(e.to_string()),
+            MapsError::Full(_) => ApiError::new(StatusCode::SERVICE_UNAVAILABLE, e.to_string()),
+            MapsError::Quota { .. } => ApiError::new(StatusCode::TOO_MANY_REQUESTS, e.to_string()),
+            MapsError::Shipped(_) => ApiError::new(StatusCode::FORBIDDEN, e.to_string()),
+        }
+    }
+}
+
+impl From<ReplaysError> for ApiError {
+    fn from(e: ReplaysError) -> ApiError {
+        match e {
+            ReplaysError::History(e) => history(e),
+            ReplaysError::Pool(e) => e.into(),
+            ReplaysError::NotFound(_) | ReplaysError::PastTheEnd { .. } | ReplaysError::NoRobot => {
+                ApiError::not_found(e.to_string())
+            }
+            ReplaysError::Replay(_) => ApiError::bad_request(e.to_string()),
+        }
+    }
+}
+
+impl From<StatsError> for ApiError {
+    fn from(e: StatsError) -> ApiError {
+        match e {
+            StatsError::History(e) => history(e),
+            StatsError::Pool(e) => e.into(),
+            StatsError::NoHistory | StatsError::NoPlayer(_) => ApiError::not_found(e.to_string()),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_servers_limits_are_503_and_a_clients_share_429() {
+        let server = ApiError::from(NoRoom::Draining);
+        assert_eq!(server.status, StatusCode::SERVICE_UNAVAILABLE);
+        assert!(
+            server.message.contains("shutting down"),
+            "{}",
+            server.message
+        );
+        let client = ApiError::from(NoRoom::Client {
+            client: crate::access::ClientKey::of([10, 0, 0, 1].into()),
+            max: 3,
+        });
+        assert_eq!(client.status, StatusCode::TOO_MANY_REQUESTS);
+        assert!(
+            client.message.starts_with("10.0.0.1 holds 3 matches"),
+            "{}",
+            client.message
+        );
     }
 }

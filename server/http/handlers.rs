@@ -1,32 +1,28 @@
 //! One function per endpoint of `docs/api.md`.
 
 use std::collections::HashMap;
-use std::sync::Arc;
 
 use axum::Json;
 use axum::extract::{Path, Query, State};
 use axum::http::StatusCode;
-use axum::response::IntoResponse;
+use axum::response::{IntoResponse, Response};
 
-use crate::access::{ClientKey, Owner};
-use crate::game::admission;
-use crate::game::view::MatchMeta;
-use crate::game::{MatchHandle, Sight, random_id};
-use crate::http::admit::{no_room, off_workers, within_request_limits};
+use crate::access::ClientKey;
+use crate::game::{MatchHandle, Sight};
 use crate::http::auth::Bearer;
 use crate::http::body::JsonBody;
 use crate::http::limits::ClientIp;
-use crate::http::{ApiError, AppState};
-use crate::maps::{self, MapFile};
-use crate::metrics::Refusal;
-use crate::protocol::fleet::{Elsewhere, Listed, Place};
+use crate::http::{ApiError, AppState, fleet};
+use crate::maps::MapFile;
+use crate::protocol::fleet::{Elsewhere, Listed, NodeRef, Place};
 use crate::protocol::{
     self, Belief, CreateMatch, ErrorBody, Events, Health, JoinRequest, Joined, MapCreated, MapInfo,
     MatchCreated, MatchState, MatchStats, MatchSummary, OpponentCommand, StepRequest,
 };
+use crate::service::maps;
+use crate::service::matches::{self, Created};
 use lasertag_core::sim::AgentId;
-use lasertag_core::sim::arena::Arena;
-use lasertag_core::world::{World, WorldInput};
+use lasertag_core::world::WorldInput;
 
 /// The match `id` for a request that changes it: the token is checked first (see
 /// [`Bearer::may_change`]), then whether the match exists.
@@ -69,20 +65,7 @@ pub async fn health() -> Json<Health> {
 
 #[utoipa::path(get, path = "/api/maps", responses((status = 200, body = [MapInfo])))]
 pub async fn list_maps(State(state): State<AppState>) -> Json<Vec<MapInfo>> {
-    let maps = state
-        .registry
-        .maps
-        .read()
-        .unwrap_or_else(|e| e.into_inner());
-    Json(
-        maps.iter()
-            .map(|m| MapInfo {
-                name: m.arena.def.name.clone(),
-                width: m.arena.def.width as f64,
-                height: m.arena.def.height as f64,
-            })
-            .collect(),
-    )
+    Json(maps::list(state.service()))
 }
 
 #[utoipa::path(get, path = "/api/maps/{name}", params(("name" = String, Path)),
@@ -91,14 +74,7 @@ pub async fn get_map(
     State(state): State<AppState>,
     Path(name): Path<String>,
 ) -> Result<Json<MapFile>, ApiError> {
-    let maps = state
-        .registry
-        .maps
-        .read()
-        .unwrap_or_else(|e| e.into_inner());
-    maps.get(&name)
-        .map(|m| Json(maps::to_file(&m.arena.def)))
-        .ok_or_else(|| ApiError::not_found(format!("no map {name:?}")))
+    Ok(Json(maps::get(state.service(), &name)?))
 }
 
 #[utoipa::path(post, path = "/api/maps", request_body = MapFile,
@@ -112,83 +88,8 @@ pub async fn add_map(
     ClientIp(ip): ClientIp,
     JsonBody(value): JsonBody<serde_json::Value>,
 ) -> Result<impl IntoResponse, ApiError> {
-    let def = off_workers(&state, "validating the map", move || {
-        maps::from_value(value)
-    })
-    .await?
-    .map_err(|e| ApiError::bad_request(e.to_string()))?;
-    let client = ClientKey::of(ip);
-    map_room(&state, &def.name, client)?;
-    let price = admission::map(&def);
-    within_request_limits(&state, "the map", price)?;
-    state
-        .registry
-        .has_budget(price, Some(client))
-        .map_err(no_room)?;
-    let name = def.name.clone();
-    let info = MapInfo {
-        name: def.name.clone(),
-        width: def.width as f64,
-        height: def.height as f64,
-    };
-    let arena = off_workers(&state, "building the map", move || {
-        Arc::new(Arena::new(def))
-    })
-    .await?;
-    // Checked again: others may have uploaded while this one was built.
-    map_room(&state, &name, client)?;
-    let owner = Owner::new(Some(client));
-    let owner_token = owner.token.clone().unwrap_or_default();
-    let mut store = state
-        .registry
-        .maps
-        .write()
-        .unwrap_or_else(|e| e.into_inner());
-    if !store.insert_owned(arena, owner, price.memory) {
-        return Err(ApiError::conflict(format!("a map named {name:?} exists")));
-    }
-    Ok((
-        StatusCode::CREATED,
-        Json(MapCreated {
-            map: info,
-            owner_token,
-        }),
-    ))
-}
-
-/// Refuses a map upload whose name is taken, past the server's most maps, or past the
-/// client's quota.
-fn map_room(state: &AppState, name: &str, client: ClientKey) -> Result<(), ApiError> {
-    let cfg = &state.registry.config;
-    let store = state
-        .registry
-        .maps
-        .read()
-        .unwrap_or_else(|e| e.into_inner());
-    if store.contains(name) {
-        return Err(ApiError::conflict(format!("a map named {name:?} exists")));
-    }
-    if store.len() >= cfg.max_maps {
-        state.registry.metrics.refuse(Refusal::MapsFull);
-        return Err(ApiError::new(
-            StatusCode::SERVICE_UNAVAILABLE,
-            format!(
-                "the server holds {} maps, its most; uploaded maps can be deleted by their owners",
-                cfg.max_maps
-            ),
-        ));
-    }
-    if store.uploaded_by(client) >= cfg.max_maps_per_address {
-        state.registry.metrics.refuse(Refusal::ClientQuota);
-        return Err(ApiError::new(
-            StatusCode::TOO_MANY_REQUESTS,
-            format!(
-                "{client} has uploaded {} maps, the most one client may keep; delete one (DELETE /api/maps/{{name}} with its owner_token)",
-                cfg.max_maps_per_address
-            ),
-        ));
-    }
-    Ok(())
+    let created = maps::add(state.service(), ClientKey::of(ip), value).await?;
+    Ok((StatusCode::CREATED, Json(created)))
 }
 
 #[utoipa::path(delete, path = "/api/maps/{name}", params(("name" = String, Path)),
@@ -200,46 +101,10 @@ pub async fn delete_map(
     bearer: Bearer,
     Path(name): Path<String>,
 ) -> Result<StatusCode, ApiError> {
-    let stored = state
-        .registry
-        .maps
-        .read()
-        .unwrap_or_else(|e| e.into_inner())
-        .get(&name)
-        .cloned();
-    bearer.may_change(
-        &state,
-        stored.as_ref().map(|m| &m.owner),
-        &format!("map {name:?}"),
-    )?;
-    let stored = stored.ok_or_else(|| ApiError::not_found(format!("no map {name:?}")))?;
-    if stored.owner.token.is_none() {
-        return Err(ApiError::new(
-            StatusCode::FORBIDDEN,
-            format!("map {name:?} is shipped with the server and cannot be removed"),
-        ));
-    }
-    let in_use = state.registry.all().into_iter().any(|h| {
-        Arc::ptr_eq(&h.hub.arena, &stored.arena)
-            && h.hub.frames.borrow().status == lasertag_core::world::MatchStatus::Running
-    });
-    if in_use {
-        return Err(ApiError::conflict(format!(
-            "map {name:?} is in use by a running match; delete it when the match has ended"
-        )));
-    }
-    let mut maps = state
-        .registry
-        .maps
-        .write()
-        .unwrap_or_else(|e| e.into_inner());
-    // Only the map that was checked: a new one under the same name is not this request's.
-    if maps
-        .get(&name)
-        .is_some_and(|m| Arc::ptr_eq(&m.arena, &stored.arena))
-    {
-        maps.remove(&name);
-    }
+    let stored = maps::stored(state.service(), &name);
+    let owner = stored.as_ref().map(|m| &m.owner);
+    bearer.may_change(&state, owner, &format!("map {name:?}"))?;
+    maps::delete(state.service(), &name, stored)?;
     Ok(StatusCode::NO_CONTENT)
 }
 
@@ -247,22 +112,7 @@ pub async fn delete_map(
     description = "This server's matches; in a fleet (`--fleet`), every node's, each with the `node` that hosts it.",
     responses((status = 200, body = [MatchSummary])))]
 pub async fn list_matches(State(state): State<AppState>) -> Json<Vec<Listed>> {
-    // Published summaries, not a question to each task: a match busy stepping thousands of
-    // ticks must not hold up the lobby.
-    let local: Vec<MatchSummary> = state
-        .registry
-        .all()
-        .iter()
-        .map(|h| protocol::summary(&h.hub.summary.borrow()))
-        .collect();
-    // Other nodes' from the fleet's last read of the directory: never a wait on Redis.
-    Json(match &state.fleet {
-        Some(fleet) => fleet.listing(local),
-        None => local
-            .into_iter()
-            .map(|s| Listed::Local(Box::new(s)))
-            .collect(),
-    })
+    Json(matches::list(state.service()))
 }
 
 #[utoipa::path(post, path = "/api/matches", request_body = CreateMatch,
@@ -285,143 +135,26 @@ pub async fn create_match(
     bearer: Bearer,
     Query(query): Query<HashMap<String, String>>,
     JsonBody(body): JsonBody<CreateMatch>,
-) -> Result<axum::response::Response, ApiError> {
+) -> Result<Response, ApiError> {
     let place = match query.get("place") {
         None => Place::Fleet,
         Some(p) => Place::parse(p).ok_or_else(|| {
             ApiError::bad_request(format!("place: {p:?} is not a placement (fleet or local)"))
         })?,
     };
-    // Placed before anything is checked or built: the node it goes to checks it.
-    if let Some(fleet) = &state.fleet
-        && place == Place::Fleet
-        && let crate::fleet::Placement::Remote(node) = fleet.place()
-    {
-        let message = format!("node {} has more room for a new match", node.id);
-        if let Some(moved) = crate::http::fleet::redirect(node, "/api/matches?place=local", message)
-        {
-            return Ok(moved);
-        }
-    }
     // The operator's matches count against no address's quota.
     let client = (!bearer.is_admin(&state)).then(|| ClientKey::of(ip));
-    let req = body
-        .validate()
-        .map_err(|e| ApiError::bad_request(e.to_string()))?;
-    let cfg = &state.registry.config;
-    let metrics = &state.registry.metrics;
-    let agents = req.config.robots + req.config.opponents;
-    if agents > cfg.max_agents_per_match {
-        metrics.refuse(Refusal::TooManyAgents);
-        return Err(ApiError::bad_request(format!(
-            "robots + opponents: {} + {} = {agents} agents is over this server's limit of {} per match",
-            req.config.robots, req.config.opponents, cfg.max_agents_per_match
-        )));
-    }
-    // The tracker holds at most one role per opponent.
-    let particles = req.config.tracker.particles_per_role * req.config.opponents;
-    if particles > cfg.max_particles_per_match {
-        metrics.refuse(Refusal::TooManyParticles);
-        return Err(ApiError::bad_request(format!(
-            "tracker.particles_per_role: {} per role × {} opponents = {particles} particles is over this server's limit of {} per match",
-            req.config.tracker.particles_per_role,
-            req.config.opponents,
-            cfg.max_particles_per_match
-        )));
-    }
-    // Refused before anything is built; `try_start` checks again under the lock.
-    state.registry.has_room(client).map_err(no_room)?;
-    // A stored map is built already (and was priced when it was added); an inline one is
-    // validated, priced with the match and built for it alone.
-    let source = match req.map {
-        serde_json::Value::String(name) => {
-            let maps = state
-                .registry
-                .maps
-                .read()
-                .unwrap_or_else(|e| e.into_inner());
-            let arena = maps
-                .get(&name)
-                .map(|m| m.arena.clone())
-                .ok_or_else(|| ApiError::not_found(format!("map: no map {name:?}")))?;
-            MapSource::Stored(arena)
-        }
-        value @ serde_json::Value::Object(_) => {
-            let def = off_workers(&state, "validating the map", move || {
-                maps::from_value(value)
-            })
-            .await?
-            .map_err(|e| {
-                // Name the field as the request has it: `map.obstacles[2]`, or `map`.
-                let path = if e.path == "map" {
-                    e.path
-                } else {
-                    format!("map.{}", e.path)
-                };
-                ApiError::bad_request(format!("{path}: {}", e.message))
-            })?;
-            MapSource::Inline(def)
-        }
-        _ => {
-            return Err(ApiError::bad_request(
-                "map: must be a map name or a map object",
-            ));
-        }
+    // A node whose URL makes no header takes no redirect: the match is created here.
+    let redirect = |node: NodeRef| {
+        let message = format!("node {} has more room for a new match", node.id);
+        fleet::redirect(node, "/api/matches?place=local", message)
     };
-    let held = admission::held_back(&req.config, req.spectator_delay_ticks);
-    let price = held
-        + match &source {
-            MapSource::Stored(arena) => admission::match_on(&arena.def, &req.config),
-            MapSource::Inline(def) => admission::map(def) + admission::match_on(def, &req.config),
-        };
-    within_request_limits(&state, "the match", price)?;
-    state.registry.has_budget(price, client).map_err(no_room)?;
-    let config = req.config;
-    let world = off_workers(&state, "setting up the match", move || {
-        let arena = match source {
-            MapSource::Stored(arena) => arena,
-            MapSource::Inline(def) => Arc::new(Arena::new(def)),
-        };
-        World::new(arena, config)
-    })
-    .await?
-    .map_err(|e| ApiError::bad_request(e.to_string()))?;
-    let map_name = world.arena.def.name.clone();
-    let meta = MatchMeta {
-        id: random_id(8),
-        map: map_name,
-        clock: req.clock.into(),
-        players: 0,
-        spectators: 0,
-        free_slots: 0,
-        bots_joinable: req.bots_joinable,
-        spectator_delay_ticks: req.spectator_delay_ticks,
-    };
-    let owner = Owner::new(client);
-    let owner_token = owner.token.clone().unwrap_or_default();
-    let handle = state
-        .registry
-        .try_start(world, meta, owner, price)
-        .map_err(no_room)?;
-    // Asked of the task so that fields it owns (free slots) are filled in.
-    let mut summary = handle.read(Sight::Live, protocol::read_summary).await?;
-    summary.node = state.fleet.as_ref().map(|f| f.me());
-    Ok((
-        StatusCode::CREATED,
-        Json(MatchCreated {
-            summary,
-            owner_token,
-        }),
+    Ok(
+        match matches::create(state.service(), client, place, body, redirect).await? {
+            Created::Here(created) => (StatusCode::CREATED, Json(created)).into_response(),
+            Created::Elsewhere(moved) => moved,
+        },
     )
-        .into_response())
-}
-
-/// Where a new match's map comes from.
-enum MapSource {
-    /// A map the server holds, built already.
-    Stored(Arc<Arena>),
-    /// A map in the request, validated and to be built for this match alone.
-    Inline(lasertag_core::sim::arena::MapDef),
 }
 
 #[utoipa::path(get, path = "/api/matches/{id}", params(("id" = String, Path)),

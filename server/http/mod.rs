@@ -1,6 +1,6 @@
 //! The HTTP interface: [`app`] builds the axum router that the binary serves and the tests
-//! call directly. Handlers parse and validate at the edge ([`body::JsonBody`]), then talk to
-//! the [`Registry`] and to match tasks; they never hold a world.
+//! call directly. Handlers parse and validate at the edge ([`body::JsonBody`]), call one use
+//! case ([`crate::service`]) or match task, and map its answer; they never hold a world.
 
 mod admit;
 mod auth;
@@ -33,6 +33,7 @@ use tower_http::trace::TraceLayer;
 
 use crate::fleet::Fleet;
 use crate::game::Registry;
+use crate::service::{Pool, Service};
 pub use error::ApiError;
 pub use serve::{ConnectionLimits, serve};
 
@@ -41,10 +42,21 @@ pub use serve::{ConnectionLimits, serve};
 pub struct AppState {
     pub registry: Arc<Registry>,
     pub limits: Arc<limits::AddressLimits>,
-    /// Permits to build maps and worlds on the blocking pool: one per core.
-    pub builders: Arc<tokio::sync::Semaphore>,
+    /// The blocking pool that validates and builds maps and worlds: one job per core.
+    pub pool: Pool,
     /// This node's part in a fleet (`--fleet`), if it is in one.
     pub fleet: Option<Arc<Fleet>>,
+}
+
+impl AppState {
+    /// What the use cases work with.
+    pub fn service(&self) -> Service<'_> {
+        Service {
+            registry: &self.registry,
+            pool: &self.pool,
+            fleet: self.fleet.as_deref(),
+        }
+    }
 }
 
 /// The whole HTTP surface: the API under `/api`, WebSockets under `/ws`, metrics at
@@ -69,7 +81,7 @@ fn router(registry: Arc<Registry>, web_dir: PathBuf, fleet: Option<Arc<Fleet>>) 
     let state = AppState {
         registry,
         limits: Arc::default(),
-        builders: Arc::new(tokio::sync::Semaphore::new(cores)),
+        pool: Pool::new(cores),
         fleet,
     };
     let api = Router::new()

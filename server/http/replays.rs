@@ -1,5 +1,5 @@
 //! The endpoints of history and replays: the finished matches, one replay's summary, and
-//! its state and belief at any tick (re-simulated off the async workers).
+//! its state and belief at any tick (see [`crate::service::replays`]).
 
 use std::collections::HashMap;
 use std::sync::Arc;
@@ -7,60 +7,16 @@ use std::sync::Arc;
 use axum::Json;
 use axum::extract::{Path, Query, State};
 
-use crate::game::replay::{HistoryError, Replay};
-use crate::game::view::{Frame, Summary};
-use crate::http::admit::off_workers;
+use crate::game::replay::Replay;
 use crate::http::{ApiError, AppState};
 use crate::protocol::replays::{ReplayDetail, ReplayListed};
-use crate::protocol::{self, Belief, ErrorBody, MatchState, Winner};
-use crate::store::Listed;
+use crate::protocol::{Belief, ErrorBody, MatchState};
+use crate::service::replays;
 use lasertag_core::sim::AgentId;
 
-pub(crate) fn listed(l: &Listed) -> ReplayListed {
-    let secs = |ms: i64| ms as f64 / 1000.0;
-    ReplayListed {
-        id: l.id.clone(),
-        map: l.map.clone(),
-        started_at: secs(l.started_at_ms),
-        ended_at: secs(l.ended_at_ms.unwrap_or(l.started_at_ms)),
-        ticks: l.ticks,
-        winner: match l.winner.as_deref() {
-            Some("robots") => Some(Winner::Robots),
-            Some("opponents") => Some(Winner::Opponents),
-            _ => None,
-        },
-        reason: l.reason.clone(),
-        complete: l.complete,
-        players: l.players.clone(),
-    }
-}
-
-/// The replay `id`, or a 404 naming it. Loading one from the store is blocking work.
+/// The replay `id`, or a 404 naming it.
 pub(crate) async fn find(state: &AppState, id: &str) -> Result<Arc<Replay>, ApiError> {
-    let history = state.registry.history.clone();
-    let found = match history.get(id) {
-        Some(r) => Some(r),
-        None => {
-            let key = id.to_string();
-            off_workers(state, "loading the replay", move || history.load(&key))
-                .await?
-                .map_err(history_error)?
-        }
-    };
-    found.ok_or_else(|| {
-        ApiError::not_found(format!(
-            "no replay {id} (matches are replayable once they have ended)"
-        ))
-    })
-}
-
-/// A store that failed is the server's fault, not the request's.
-pub(crate) fn history_error(e: HistoryError) -> ApiError {
-    tracing::error!("history: {e}");
-    ApiError::new(
-        axum::http::StatusCode::INTERNAL_SERVER_ERROR,
-        format!("the history could not be read: {e}"),
-    )
+    Ok(replays::find(state.service(), id).await?)
 }
 
 /// `?name=` as an integer in `0..=max`, or `default` when absent.
@@ -81,31 +37,6 @@ pub(crate) fn number(
     }
 }
 
-/// `?tick=`: a number (else 400) that is one of the replay's ticks (else 404: a tick past
-/// the end is a state the replay does not have).
-fn tick(query: &HashMap<String, String>, r: &Replay) -> Result<u64, ApiError> {
-    let t = number(query, "tick", u64::MAX, None)?;
-    if t > r.last_tick {
-        return Err(ApiError::not_found(format!(
-            "tick: the replay has ticks 0 to {}, not {t}",
-            r.last_tick
-        )));
-    }
-    Ok(t)
-}
-
-/// The world of `r` at `tick`, re-simulated off the async workers.
-async fn world_at(
-    state: &AppState,
-    r: Arc<Replay>,
-    tick: u64,
-) -> Result<lasertag_core::world::World, ApiError> {
-    state.registry.history.opened(&r);
-    off_workers(state, "replaying the match", move || r.world_at(tick))
-        .await?
-        .map_err(|e| ApiError::bad_request(e.to_string()))
-}
-
 #[utoipa::path(get, path = "/api/replays",
     params(("limit" = Option<u64>, Query, minimum = 1, maximum = 500, description = "at most this many (50)"),
            ("before" = Option<String>, Query, description = "only matches that ended before this one")),
@@ -120,15 +51,10 @@ pub async fn list(
             "limit: 0 is not an integer in 1..=500",
         ));
     }
-    let limit = limit as usize;
     let before = query.get("before").cloned();
-    let history = state.registry.history.clone();
-    let replays = off_workers(&state, "listing the history", move || {
-        history.list(limit, before.as_deref())
-    })
-    .await?
-    .map_err(history_error)?;
-    Ok(Json(replays.iter().map(listed).collect()))
+    Ok(Json(
+        replays::list(state.service(), limit as usize, before).await?,
+    ))
 }
 
 #[utoipa::path(get, path = "/api/replays/{id}", params(("id" = String, Path)),
@@ -138,17 +64,7 @@ pub async fn detail(
     Path(id): Path<String>,
 ) -> Result<Json<ReplayDetail>, ApiError> {
     let r = find(&state, &id).await?;
-    let last = r.last_tick;
-    let world = world_at(&state, r.clone(), last).await?;
-    Ok(Json(ReplayDetail {
-        listed: listed(&r.listed()),
-        settings: protocol::summary(&Summary::of(
-            &world,
-            &r.meta,
-            &Arc::new(world.config.clone()),
-        )),
-        events: world.events().iter().map(protocol::event).collect(),
-    }))
+    Ok(Json(replays::detail(state.service(), r).await?))
 }
 
 #[utoipa::path(get, path = "/api/replays/{id}/state",
@@ -160,10 +76,8 @@ pub async fn state_at(
     Query(query): Query<HashMap<String, String>>,
 ) -> Result<Json<MatchState>, ApiError> {
     let r = find(&state, &id).await?;
-    let tick = tick(&query, &r)?;
-    let world = world_at(&state, r.clone(), tick).await?;
-    let frame = Frame::build(&world, &[], 0, 0, true);
-    Ok(Json(protocol::state(&frame, &r.meta, r.config())))
+    let tick = replays::tick(&r, number(&query, "tick", u64::MAX, None)?)?;
+    Ok(Json(replays::state_at(state.service(), r, tick).await?))
 }
 
 #[utoipa::path(get, path = "/api/replays/{id}/belief",
@@ -176,7 +90,7 @@ pub async fn belief_at(
     Query(query): Query<HashMap<String, String>>,
 ) -> Result<Json<Belief>, ApiError> {
     let r = find(&state, &id).await?;
-    let tick = tick(&query, &r)?;
+    let tick = replays::tick(&r, number(&query, "tick", u64::MAX, None)?)?;
     let robot = match query.get("robot") {
         None => None,
         Some(v) => match v.parse() {
@@ -188,8 +102,7 @@ pub async fn belief_at(
             }
         },
     };
-    let world = world_at(&state, r, tick).await?;
-    protocol::belief_of(&world, robot)
-        .map(Json)
-        .ok_or_else(|| ApiError::not_found("robot: no such robot in this match"))
+    Ok(Json(
+        replays::belief_at(state.service(), r, tick, robot).await?,
+    ))
 }
