@@ -29,8 +29,8 @@ use crate::http::socket::{self, Asked, End, Manner, Socket};
 use crate::http::{ApiError, AppState};
 use crate::metrics::Refusal;
 use crate::protocol::frame::BELIEF_EVERY;
-use crate::protocol::replay_ws::{self as rwire, ReplayControl, ReplayLimits, ReplayWelcome};
-use crate::protocol::socket::{self as common, MessageLimits};
+use crate::protocol::replay_ws::{self as rwire, ReplayControl, ReplayWelcome};
+use crate::protocol::socket::{self as common, Limits};
 use crate::protocol::ws as wire;
 use frames::{Show, Shown, seats, show};
 use lasertag_core::sim::{AgentId, TICK_HZ};
@@ -292,9 +292,9 @@ impl Viewer {
             } else {
                 "json"
             },
-            limits: ReplayLimits {
-                messages: MessageLimits::of(&self.state.registry.config),
-                seeks_per_s: SEEKS_PER_S,
+            limits: Limits {
+                seeks_per_s: Some(SEEKS_PER_S),
+                ..Limits::of(&self.state.registry.config)
             },
         };
         self.sock.text(rwire::welcome(&welcome)).await?;

@@ -23,8 +23,8 @@ use crate::http::socket::{self, Asked, End, Manner, Socket};
 use crate::http::{ApiError, AppState};
 use crate::metrics::Refusal;
 use crate::protocol::frame::{BELIEF_EVERY, Frame, visible_to};
-use crate::protocol::socket::{self as common, MessageLimits};
-use crate::protocol::ws::{self as wire, ClientMessage, Limits, Welcome};
+use crate::protocol::socket::{self as common, Limits};
+use crate::protocol::ws::{self as wire, ClientMessage, Welcome};
 use lasertag_core::world::HumanInput;
 use lasertag_core::world::MatchStatus;
 
@@ -160,8 +160,8 @@ impl Connection {
             format: if self.compact { "compact" } else { "json" },
             belief: self.belief,
             limits: Limits {
-                messages: MessageLimits::of(&self.config),
-                reconnect_s: self.config.reconnect_grace.as_secs_f64(),
+                reconnect_s: Some(self.config.reconnect_grace.as_secs_f64()),
+                ..Limits::of(&self.config)
             },
         };
         self.sock.text(wire::welcome(&welcome)).await?;

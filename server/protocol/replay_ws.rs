@@ -11,7 +11,7 @@ use axum::extract::ws::Utf8Bytes;
 use serde::{Deserialize, Serialize};
 
 use crate::maps::MapFile;
-use crate::protocol::socket::{self, MessageLimits, to_json};
+use crate::protocol::socket::{self, Limits, to_json};
 use crate::protocol::ws::Kinematics;
 use crate::protocol::{Invalid, invalid};
 
@@ -97,16 +97,6 @@ impl ReplayControl {
     }
 }
 
-/// Limits a viewer should know (sent in the first message).
-#[derive(Debug, Clone, Serialize)]
-pub struct ReplayLimits {
-    #[serde(flatten)]
-    pub messages: MessageLimits,
-    /// Seeks carried out per second at most: more are not refused, only the latest waiting
-    /// one is shown when the next is due.
-    pub seeks_per_s: f64,
-}
-
 /// The first message on a replay socket: the replay, and what the live `welcome` gives a
 /// page to draw with.
 #[derive(Debug, Clone, Serialize)]
@@ -135,7 +125,7 @@ pub struct ReplayWelcome<'a> {
     pub kinematics: Kinematics,
     pub protocol: u32,
     pub format: &'static str,
-    pub limits: ReplayLimits,
+    pub limits: Limits,
 }
 
 #[derive(Debug, Clone, Serialize)]

@@ -63,22 +63,33 @@ pub fn ping(v: serde_json::Value) -> Result<f64, Invalid> {
     Ok(t)
 }
 
-/// What a client may send, announced in a socket's first message.
+/// What a client may send, announced in a socket's first message, and what is particular
+/// to the socket.
 #[derive(Debug, Clone, Serialize)]
-pub struct MessageLimits {
+pub struct Limits {
     pub max_message_bytes: usize,
     /// Sustained messages per second.
     pub messages_per_s: f64,
     /// Messages that may come at once.
     pub burst: f64,
+    /// The live socket's: seconds a dropped player has to come back with the same token.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub reconnect_s: Option<f64>,
+    /// The replay socket's: seeks carried out per second at most: more are not refused,
+    /// only the latest waiting one is shown when the next is due.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub seeks_per_s: Option<f64>,
 }
 
-impl MessageLimits {
-    pub fn of(config: &Config) -> MessageLimits {
-        MessageLimits {
+impl Limits {
+    /// The message limits of `config`, nothing particular.
+    pub fn of(config: &Config) -> Limits {
+        Limits {
             max_message_bytes: config.max_message_bytes,
             messages_per_s: config.messages_per_s,
             burst: config.message_burst,
+            reconnect_s: None,
+            seeks_per_s: None,
         }
     }
 }
@@ -140,6 +151,21 @@ mod tests {
             r#"{"type":"error","error":"x","message":"x"}"#
         );
         assert_eq!(pong(1.5).as_str(), r#"{"type":"pong","t":1.5}"#);
+    }
+
+    #[test]
+    fn limits_name_only_what_the_socket_has() {
+        let limits = Limits {
+            max_message_bytes: 1,
+            messages_per_s: 2.0,
+            burst: 3.0,
+            reconnect_s: Some(4.0),
+            seeks_per_s: None,
+        };
+        assert_eq!(
+            to_json(&limits),
+            r#"{"max_message_bytes":1,"messages_per_s":2.0,"burst":3.0,"reconnect_s":4.0}"#
+        );
     }
 
     #[test]

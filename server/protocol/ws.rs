@@ -16,7 +16,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::maps::MapFile;
 use crate::protocol::frame::{BeliefView, Frame, Visible};
-use crate::protocol::socket::{self, MessageLimits, to_json};
+use crate::protocol::socket::{self, Limits, to_json};
 use crate::protocol::{EventDto, OpponentControl, PoseDto, Status, Winner, status, winner};
 use crate::protocol::{Invalid, invalid};
 use lasertag_core::sim::{AgentId, Pose};
@@ -93,15 +93,6 @@ impl ClientMessage {
             other => Err(socket::unknown_type(other, TYPES)),
         }
     }
-}
-
-/// Limits a client should know (sent in `welcome`).
-#[derive(Debug, Clone, Serialize)]
-pub struct Limits {
-    #[serde(flatten)]
-    pub messages: MessageLimits,
-    /// Seconds a dropped player has to come back with the same token.
-    pub reconnect_s: f64,
 }
 
 #[derive(Debug, Clone, Serialize)]
