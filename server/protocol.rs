@@ -16,6 +16,7 @@ pub mod replay_ws;
 pub mod replays;
 pub mod robots;
 pub mod settings;
+pub mod socket;
 pub mod state;
 pub mod ws;
 

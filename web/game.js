@@ -1,10 +1,11 @@
-// One match in the browser: the WebSocket, smooth motion between snapshots, the keyboard,
-// the HUD (score, timer, ping, tag feed) and the end screen.
+// One match in the browser: its WebSocket (socket.js), smooth motion between snapshots, the
+// keyboard, the HUD (score, timer, ping, tag feed) and the end screen.
 
-import { segments, visibility, castRay, angleDiff } from "./geometry.js";
-import { draw, fit, roleColor } from "./render.js";
+import { segments, visibility } from "./geometry.js";
+import { draw, fit } from "./render.js";
+import { addBeam, between, feedLine, fmtTime, legend } from "./hud.js";
 import { Predictor } from "./predict.js";
-import { CompactDecoder } from "./compact.js";
+import { PageSocket, socketUrl } from "./socket.js";
 
 const $ = (id) => document.getElementById(id);
 const TICK_MS = 50;
@@ -21,19 +22,6 @@ const JITTER_WINDOW = 60;
 
 /** What tests read: counts of what was drawn, the feed, the end. */
 export const debug = (window.__lasertag = window.__lasertag || {});
-
-/** The WebSocket URL of `path` on the node at `base` (its URL in a fleet listing), or on the
- * page's own server when `base` is empty. Browsers follow no redirect when opening a socket,
- * so the page goes to the match's node itself. */
-export function socketUrl(base, path) {
-  const at = base ? new URL(base) : location;
-  return `${at.protocol === "https:" ? "wss" : "ws"}://${at.host}${path}`;
-}
-
-function fmtTime(s) {
-  s = Math.max(0, Math.floor(s));
-  return `${Math.floor(s / 60)}:${String(s % 60).padStart(2, "0")}`;
-}
 
 export class Game {
   constructor({ matchId, token, base = "", onLobby, onReplay, onStaleToken }) {
@@ -63,8 +51,6 @@ export class Game {
     this.predictor = null;
     this.renderTick = null;
     this.ended = null;
-    this.closedByUs = false;
-    this.retries = 0;
     Object.assign(debug, {
       page: "game", matchId, base, role: token ? "player" : "spectator", connected: false,
       snapshots: 0, lastTick: null, drawn: null, feed: [], ended: null, ping: null, you: null,
@@ -81,7 +67,15 @@ export class Game {
     $("end-lobby").onclick = () => this.onLobby();
     $("end-replay").onclick = () => this.onReplay(this);
     $("end-watch").hidden = true;
-    this.connect();
+    // Snapshots in the compact binary form (see compact.js); the rest stays JSON text.
+    const q = `?format=compact${token ? `&token=${encodeURIComponent(token)}` : ""}`;
+    this.socket = new PageSocket(this, {
+      url: () => socketUrl(base, `/ws/matches/${encodeURIComponent(matchId)}${q}`),
+      types: { welcome: "welcome", snapshot: "snapshot", event: "event", finished: "finished", pong: "pong" },
+      // Players keep their opponent for a while: try to come back.
+      retries: 20,
+    });
+    this.socket.connect();
     this.pingTimer = setInterval(() => this.send({ type: "ping", t: performance.now() }), 1000);
     this.inputTimer = setInterval(() => this.inputTicks(performance.now()), 10);
     const loop = (t) => { if (!this.stopped) { this.frame(t); requestAnimationFrame(loop); } };
@@ -90,86 +84,43 @@ export class Game {
 
   stop() {
     this.stopped = true;
-    this.closedByUs = true;
     clearInterval(this.pingTimer);
     clearInterval(this.inputTimer);
     window.removeEventListener("keydown", this.onKey);
     window.removeEventListener("keyup", this.onKey);
     window.removeEventListener("blur", this.onBlur);
-    if (this.ws) this.ws.close(1000, "left");
+    this.socket.close(1000, "left");
   }
 
-  connect() {
-    // Snapshots in the compact binary form (see compact.js); the rest stays JSON text.
-    const q = `?format=compact${this.token ? `&token=${encodeURIComponent(this.token)}` : ""}`;
-    const ws = new WebSocket(socketUrl(this.base, `/ws/matches/${encodeURIComponent(this.matchId)}${q}`));
-    ws.binaryType = "arraybuffer";
-    this.decoder = new CompactDecoder();
-    this.ws = ws;
-    ws.onopen = () => { debug.connected = true; this.retries = 0; };
-    ws.onmessage = (m) => {
-      const binary = typeof m.data !== "string";
-      // What the page receives, for measurements of the bandwidth a client needs.
-      debug.rxBytes = (debug.rxBytes || 0) + (binary ? m.data.byteLength : m.data.length);
-      let msg;
-      try { msg = binary ? this.decoder.decode(m.data) : JSON.parse(m.data); } catch (e) {
-        debug.errors.push(String(e));
-        return;
-      }
-      this.message(msg);
-    };
-    ws.onclose = (e) => {
-      debug.connected = false;
-      if (this.closedByUs || this.stopped) return;
-      if (this.token && !this.welcomed && this.onStaleToken) {
-        // Refused before the first message: the stored token's slot was freed. Join again.
-        this.stop();
-        this.onStaleToken();
-        return;
-      }
-      if (e.code === 1008) {
-        $("hud-status").textContent = `disconnected: ${e.reason}`;
-        return;
-      }
-      if (this.ended && (e.code === 1000 || e.code === 1001)) {
-        // The match ended and was removed, or the server shut down: the end screen stays.
-        return;
-      }
-      // Players keep their opponent for a while: try to come back.
-      if (this.retries++ < 20) {
-        $("hud-status").textContent = "connection lost — reconnecting…";
-        setTimeout(() => this.connect(), 1000);
-      } else {
-        $("hud-status").textContent = "connection lost";
-      }
-    };
+  /** A close the page did not ask for: true when there is no coming back. */
+  lost(e) {
+    if (this.stopped) return true;
+    if (this.token && !this.welcomed && this.onStaleToken) {
+      // Refused before the first message: the stored token's slot was freed. Join again.
+      this.stop();
+      this.onStaleToken();
+      return true;
+    }
+    if (e.code === 1008) {
+      $("hud-status").textContent = `disconnected: ${e.reason}`;
+      return true;
+    }
+    // The match ended and was removed, or the server shut down: the end screen stays.
+    return Boolean(this.ended) && (e.code === 1000 || e.code === 1001);
   }
 
   send(obj) {
-    if (this.ws && this.ws.readyState === WebSocket.OPEN) this.ws.send(JSON.stringify(obj));
+    this.socket.send(obj);
   }
 
-  message(msg) {
-    switch (msg.type) {
-      case "welcome": return this.welcome(msg);
-      case "snapshot": return this.snapshot(msg);
-      case "event": return this.event(msg);
-      case "finished": return this.finished(msg);
-      case "pong": {
-        const rtt = performance.now() - msg.t;
-        debug.ping = rtt;
-        const jitter = debug.jitterMs || 0;
-        // A hint a player can act on: what the round trip and the jitter will feel like.
-        const quality = rtt < 120 && jitter < 40 ? "good" : rtt < 250 && jitter < 100 ? "fair" : "poor";
-        $("hud-ping").textContent = `ping ${rtt.toFixed(0)} ms · jitter ${jitter.toFixed(0)} ms · ${quality}`;
-        $("hud-ping").dataset.quality = quality;
-        return;
-      }
-      case "error":
-        debug.errors.push(msg.error);
-        console.warn("server:", msg.error);
-        return;
-    }
+  pong(msg) {
+    const rtt = performance.now() - msg.t;
+    debug.ping = rtt;
+    const jitter = debug.jitterMs || 0;
+    // A hint a player can act on: what the round trip and the jitter will feel like.
+    const quality = rtt < 120 && jitter < 40 ? "good" : rtt < 250 && jitter < 100 ? "fair" : "poor";
+    $("hud-ping").textContent = `ping ${rtt.toFixed(0)} ms · jitter ${jitter.toFixed(0)} ms · ${quality}`;
+    $("hud-ping").dataset.quality = quality;
   }
 
   welcome(w) {
@@ -254,7 +205,7 @@ export class Game {
     let text = null;
     let cls = e.kind;
     switch (e.kind) {
-      case "shot": this.beam(e, latest); break;
+      case "shot": addBeam(this.beams, e, latest, this.segs); break;
       case "tag": text = `${this.who(e.by)} tagged ${e.target === this.you ? "you" : this.who(e.target)}`; break;
       case "robot_tagged": text = `${e.by === this.you ? "you" : this.who(e.by)} tagged ${e.target} (frozen 10 s)`; break;
       case "role_split": text = `belief: role ${e.role} split from ${e.from}`; cls = "role"; break;
@@ -267,29 +218,7 @@ export class Game {
     }
     if (!text) return;
     debug.feed.push({ kind: e.kind, text, seq: e.seq });
-    const li = document.createElement("li");
-    li.className = cls;
-    li.textContent = text;
-    const feed = $("feed");
-    feed.prepend(li);
-    while (feed.children.length > 8) feed.lastChild.remove();
-  }
-
-  beam(e, snap) {
-    if (!snap) return;
-    const all = [...snap.robots, ...snap.opponents];
-    const from = all.find((a) => a.id === e.by);
-    if (!from) return; // out of sight
-    const to = e.hit && all.find((a) => a.id === e.hit);
-    let x2, y2;
-    if (to) { x2 = to.x; y2 = to.y; } else {
-      const dx = Math.cos(from.theta), dy = Math.sin(from.theta);
-      const r = this.segs ? castRay(this.segs, from.x, from.y, dx, dy, 6) : 6;
-      x2 = from.x + dx * r; y2 = from.y + dy * r;
-    }
-    const color = e.by.startsWith("r") ? "#9fdcff" : "#ff6b8b";
-    this.beams.push({ x1: from.x, y1: from.y, x2, y2, t0: performance.now(), color });
-    if (this.beams.length > 20) this.beams.shift();
+    feedLine(text, cls);
   }
 
   finished(f) {
@@ -320,20 +249,7 @@ export class Game {
   }
 
   legend() {
-    const el = $("legend");
-    if (!this.beliefOn || !this.belief) { el.replaceChildren(); return; }
-    const rows = this.belief.roles.filter((r) => !r.tagged).map((r) => {
-      const div = document.createElement("div");
-      const dot = document.createElement("i");
-      dot.style.background = roleColor(r.id);
-      const trust = r.state ? ` · ${r.state} (${Number(r.confidence).toFixed(2)})` : "";
-      div.append(dot, `role ${r.id}: ${r.count} opponent${r.count === 1 ? "" : "s"} · ${r.particles} particles${trust}`);
-      return div;
-    });
-    const head = document.createElement("div");
-    head.textContent = "robots' belief (B)";
-    head.style.color = "#8b949e";
-    el.replaceChildren(head, ...rows);
+    legend($("legend"), this.beliefOn ? this.belief : null, true);
   }
 
   key(e) {
@@ -368,7 +284,7 @@ export class Game {
    * in order) and predicts it. Timers run late in a busy or hidden tab: a long gap starts
    * the ticks again rather than sending a burst. */
   inputTicks(now) {
-    if (this.role !== "player" || !this.ws || this.ws.readyState !== WebSocket.OPEN) return;
+    if (this.role !== "player" || !this.socket.open) return;
     if (this.tickAt === null || now - this.tickAt > 500) this.tickAt = now - TICK_MS;
     while (now - this.tickAt >= TICK_MS) {
       this.tickAt += TICK_MS;
@@ -398,7 +314,7 @@ export class Game {
       const ahead = Math.min(t - latest.tick, MAX_EXTRAPOLATE_TICKS);
       if (!prev || ahead <= 0) return { snap: latest, robots: latest.robots, opponents: latest.opponents };
       // Beyond the newest snapshot: carry each agent on along its last step.
-      return { snap: latest, ...this.lerp(prev, latest, 1 + ahead / (latest.tick - prev.tick)) };
+      return { snap: latest, ...between(prev, latest, 1 + ahead / (latest.tick - prev.tick)) };
     }
     let a = snaps[0], b = latest;
     for (let i = snaps.length - 1; i > 0; i--) {
@@ -408,17 +324,7 @@ export class Game {
       const s = t <= a.tick ? a : b;
       return { snap: s, robots: s.robots, opponents: s.opponents };
     }
-    return { snap: b, ...this.lerp(a, b, (t - a.tick) / (b.tick - a.tick)) };
-  }
-
-  /** Agents of `b`, moved `f` of the way from where they were in `a` (f > 1 extrapolates). */
-  lerp(a, b, f) {
-    const move = (list0, list1) => list1.map((q) => {
-      const p = list0.find((x) => x.id === q.id);
-      if (!p || q.tagged) return q;
-      return { ...q, x: p.x + (q.x - p.x) * f, y: p.y + (q.y - p.y) * f, theta: p.theta + angleDiff(p.theta, q.theta) * f };
-    });
-    return { robots: move(a.robots, b.robots), opponents: move(a.opponents, b.opponents) };
+    return { snap: b, ...between(a, b, (t - a.tick) / (b.tick - a.tick)) };
   }
 
   frame(now) {

@@ -1,12 +1,12 @@
 // A finished match played back (#/replay/<id>; `?as=o0` for that player's own view): the
-// replay socket (/ws/replays/<id>, docs/api.md), the arena drawn by render.js exactly as a
+// replay socket (/ws/replays/<id>, docs/api.md; socket.js), the arena drawn by render.js exactly as a
 // live match is, and the controls: play and pause, the speed, a timeline marked with the
 // match's events, the robots' belief (B) and, from a player's view, a switch to everyone's.
 
-import { segments, visibility, castRay, angleDiff } from "./geometry.js";
-import { draw, fit, roleColor } from "./render.js";
-import { CompactDecoder } from "./compact.js";
-import { socketUrl } from "./game.js";
+import { segments, visibility } from "./geometry.js";
+import { draw, fit } from "./render.js";
+import { addBeam, between, feedLine, fmtTime, legend } from "./hud.js";
+import { PageSocket, socketUrl } from "./socket.js";
 
 const $ = (id) => document.getElementById(id);
 const debug = (window.__lasertag = window.__lasertag || {});
@@ -22,11 +22,6 @@ const MARKED = {
   role_split: (e) => `belief: role ${e.role} split from ${e.from}`,
   role_merge: (e) => `belief: role ${e.from} merged into ${e.role}`,
 };
-
-function fmtTime(s) {
-  s = Math.max(0, Math.floor(s));
-  return `${Math.floor(s / 60)}:${String(s % 60).padStart(2, "0")}`;
-}
 
 const sleep = (ms) => new Promise((r) => setTimeout(r, ms));
 
@@ -52,7 +47,17 @@ export class Replay {
     this.playing = true;
     this.ticks = 0;
     this.lastSeek = 0;
-    this.retries = 0;
+    // The tick a connection starts at: where the page is.
+    this.from = 0;
+    this.socket = new PageSocket(this, {
+      url: () => {
+        const q = new URLSearchParams({ format: "compact", tick: String(this.from), speed: String(this.speed) });
+        if (this.fogged) q.set("as", this.as);
+        return socketUrl(this.base, `/ws/replays/${encodeURIComponent(this.id)}?${q}`);
+      },
+      types: { replay: "welcome", snapshot: "snapshot", event: "event", replay_status: "status" },
+      retries: 5,
+    });
     Object.assign(debug, {
       page: "replay", replayId: id, view: this.fogged ? this.as : "full", connected: false,
       snapshots: 0, lastTick: null, drawn: null, feed: [], playing: null, speed: null,
@@ -78,7 +83,7 @@ export class Replay {
     this.stopped = true;
     clearTimeout(this.seekTimer);
     window.removeEventListener("keydown", this.onKey);
-    if (this.ws) { this.ws.onclose = null; this.ws.close(1000, "left"); }
+    this.socket.close(1000, "left");
   }
 
   /** The replay's summary and events (for the timeline), then the socket. A match that has
@@ -112,51 +117,21 @@ export class Replay {
   }
 
   connect(tick) {
-    const q = new URLSearchParams({ format: "compact", tick: String(tick), speed: String(this.speed) });
-    if (this.fogged) q.set("as", this.as);
-    const ws = new WebSocket(socketUrl(this.base, `/ws/replays/${encodeURIComponent(this.id)}?${q}`));
-    ws.binaryType = "arraybuffer";
-    this.decoder = new CompactDecoder();
-    this.ws = ws;
-    ws.onopen = () => { debug.connected = true; this.retries = 0; };
-    ws.onmessage = (m) => {
-      let msg;
-      try {
-        msg = typeof m.data === "string" ? JSON.parse(m.data) : this.decoder.decode(m.data);
-      } catch (e) {
-        debug.errors.push(String(e));
-        return;
-      }
-      this.message(msg);
-    };
-    ws.onclose = (e) => {
-      debug.connected = false;
-      if (this.stopped) return;
-      if (e.code === 1001) { $("hud-status").textContent = "the server is shutting down"; return; }
-      if (this.retries++ < 5) {
-        $("hud-status").textContent = "connection lost — reconnecting…";
-        setTimeout(() => { if (!this.stopped) this.connect(this.latest ? this.latest.tick : 0); }, 1000);
-      } else {
-        $("hud-status").textContent = "connection lost";
-      }
-    };
+    this.from = tick;
+    this.socket.connect();
+  }
+
+  /** A close the page did not ask for: true when there is no coming back; otherwise the
+   * next try starts where the page is. */
+  lost(e) {
+    if (this.stopped) return true;
+    if (e.code === 1001) { $("hud-status").textContent = "the server is shutting down"; return true; }
+    this.from = this.latest ? this.latest.tick : 0;
+    return false;
   }
 
   send(obj) {
-    if (this.ws && this.ws.readyState === WebSocket.OPEN) this.ws.send(JSON.stringify(obj));
-  }
-
-  message(msg) {
-    switch (msg.type) {
-      case "replay": return this.welcome(msg);
-      case "snapshot": return this.snapshot(msg);
-      case "event": return this.event(msg);
-      case "replay_status": return this.status(msg);
-      case "error":
-        debug.errors.push(msg.message || msg.error);
-        console.warn("server:", msg.message || msg.error);
-        return;
-    }
+    this.socket.send(obj);
   }
 
   welcome(w) {
@@ -245,7 +220,7 @@ export class Replay {
   }
 
   event(e) {
-    if (e.kind === "shot") return this.beam(e);
+    if (e.kind === "shot") return addBeam(this.beams, e, this.latest, this.segs);
     const text = {
       tag: () => `${this.who(e.by)} tagged ${this.who(e.target)}`,
       robot_tagged: () => `${this.who(e.by)} tagged ${e.target} (frozen 10 s)`,
@@ -256,49 +231,14 @@ export class Replay {
       finished: () => (e.winner ? `match over: ${e.winner} win` : `match over: ${e.reason.replace("_", " ")}`),
     }[e.kind];
     if (!text) return;
-    const li = document.createElement("li");
-    li.className = e.kind.startsWith("role") ? "role" : e.kind;
-    li.textContent = text();
-    debug.feed.push({ kind: e.kind, text: li.textContent, seq: e.seq });
+    const line = text();
+    debug.feed.push({ kind: e.kind, text: line, seq: e.seq });
     if (debug.feed.length > 50) debug.feed.shift();
-    const feed = $("feed");
-    feed.prepend(li);
-    while (feed.children.length > 8) feed.lastChild.remove();
-  }
-
-  beam(e) {
-    const snap = this.latest;
-    if (!snap) return;
-    const all = [...snap.robots, ...snap.opponents];
-    const from = all.find((a) => a.id === e.by);
-    if (!from) return; // out of the view's sight
-    const to = e.hit && all.find((a) => a.id === e.hit);
-    let x2, y2;
-    if (to) { x2 = to.x; y2 = to.y; } else {
-      const dx = Math.cos(from.theta), dy = Math.sin(from.theta);
-      const r = castRay(this.segs, from.x, from.y, dx, dy, 6);
-      x2 = from.x + dx * r; y2 = from.y + dy * r;
-    }
-    const color = e.by.startsWith("r") ? "#9fdcff" : "#ff6b8b";
-    this.beams.push({ x1: from.x, y1: from.y, x2, y2, t0: performance.now(), color });
-    if (this.beams.length > 20) this.beams.shift();
+    feedLine(line, e.kind.startsWith("role") ? "role" : e.kind);
   }
 
   legend() {
-    const el = $("legend");
-    if (!this.beliefOn || !this.belief) { el.replaceChildren(); return; }
-    const rows = this.belief.roles.filter((r) => !r.tagged).map((r) => {
-      const div = document.createElement("div");
-      const dot = document.createElement("i");
-      dot.style.background = roleColor(r.id);
-      const trust = r.state ? ` · ${r.state} (${Number(r.confidence).toFixed(2)})` : "";
-      div.append(dot, `role ${r.id}: ${r.count} opponent${r.count === 1 ? "" : "s"}${trust}`);
-      return div;
-    });
-    const head = document.createElement("div");
-    head.textContent = "robots' belief (B)";
-    head.style.color = "#8b949e";
-    el.replaceChildren(head, ...rows);
+    legend($("legend"), this.beliefOn ? this.belief : null, false);
   }
 
   /** The timeline's marks: tags, frozen robots, and the belief's splits and merges. */
@@ -378,7 +318,7 @@ export class Replay {
     if (!this.beliefChosen) this.beliefOn = !this.fogged;
     $("replay-belief").classList.toggle("on", this.beliefOn);
     debug.view = this.fogged ? this.as : "full";
-    if (this.ws) { this.ws.onclose = null; this.ws.close(1000, "view"); }
+    this.socket.close(1000, "view");
     this.latest = null;
     this.prev = null;
     this.belief = null;
@@ -407,13 +347,7 @@ export class Replay {
     const b = this.latest;
     const a = this.prev;
     if (!a) return { robots: b.robots, opponents: b.opponents };
-    const f = Math.min(1, (now - this.arrived) / this.span);
-    const move = (list0, list1) => list1.map((q) => {
-      const p = list0.find((x) => x.id === q.id);
-      if (!p || q.tagged) return q;
-      return { ...q, x: p.x + (q.x - p.x) * f, y: p.y + (q.y - p.y) * f, theta: p.theta + angleDiff(p.theta, q.theta) * f };
-    });
-    return { robots: move(a.robots, b.robots), opponents: move(a.opponents, b.opponents) };
+    return between(a, b, Math.min(1, (now - this.arrived) / this.span));
   }
 
   frame(now) {

@@ -16,6 +16,7 @@ mod replay_ws;
 mod replays;
 mod robots;
 mod serve;
+pub mod socket;
 pub mod ws;
 
 use std::path::PathBuf;

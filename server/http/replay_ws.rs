@@ -10,30 +10,27 @@
 //! What is sent is what the live sockets sent: the spectators' snapshot (or, with `?as=o0`,
 //! what that person's own socket showed: only what its opponent had in line of sight) and
 //! the events of the ticks played, so a page draws a replay with the renderer it draws a
-//! match with. Messages are size-capped, rate-limited and parsed strictly as on the live
-//! socket; seeks past [`SEEKS_PER_S`] are coalesced (only the latest waiting one is shown).
+//! match with. Messages are size-capped, rate-limited and parsed strictly as on every
+//! socket ([`crate::http::socket`]); seeks past [`SEEKS_PER_S`] are coalesced (only the latest waiting one is shown).
 
 use std::collections::HashMap;
 use std::sync::Arc;
 use std::time::Duration;
 
-use axum::extract::ws::{CloseFrame, Message, Utf8Bytes, WebSocket, WebSocketUpgrade};
-use axum::extract::{Path, Query, State};
-use axum::http::StatusCode;
+use axum::extract::State;
+use axum::extract::ws::Message;
 use axum::response::Response;
 use tokio::time::Instant;
-use tracing::Instrument;
 
-use crate::game::ConnectionGuard;
 use crate::game::replay::{Cursor, Replay};
 use crate::game::view::BELIEF_EVERY;
 use crate::http::admit::off_workers;
-use crate::http::limits::{AddressConnection, Bucket, ClientIp};
 use crate::http::replays::find;
-use crate::http::ws::{SEND_TIMEOUT, STRIKE_RECOVERY_S, STRIKES};
+use crate::http::socket::{self, Asked, End, Manner, Socket};
 use crate::http::{ApiError, AppState};
-use crate::metrics::{ClientGuard, Refusal};
-use crate::protocol::replay_ws::{self as rwire, ReplayControl, ReplayLimits, ReplayWelcome};
+use crate::metrics::Refusal;
+use crate::protocol::replay_ws::{self as rwire, ReplayControl, ReplayWelcome};
+use crate::protocol::socket::{self as common, Limits};
 use crate::protocol::ws as wire;
 use frames::{Show, Shown, seats, show};
 use lasertag_core::sim::{AgentId, TICK_HZ};
@@ -46,11 +43,6 @@ pub const SEEKS_PER_S: f64 = 10.0;
 /// Snapshots per second at most: above 1× a step covers several ticks.
 const STEPS_PER_S: f64 = TICK_HZ as f64;
 
-/// Close codes (RFC 6455): policy violation, message too big, going away, internal error.
-const POLICY: u16 = 1008;
-const TOO_BIG: u16 = 1009;
-const GOING_AWAY: u16 = 1001;
-const INTERNAL: u16 = 1011;
 /// How long a closing connection waits for the client's close reply.
 const CLOSE_DRAIN: Duration = Duration::from_secs(1);
 
@@ -58,63 +50,23 @@ const CLOSE_DRAIN: Duration = Duration::from_secs(1);
 /// address's open sockets), then serves the connection in its own task.
 pub async fn upgrade(
     State(state): State<AppState>,
-    Path(id): Path<String>,
-    Query(query): Query<HashMap<String, String>>,
-    ClientIp(ip): ClientIp,
-    ws: Result<WebSocketUpgrade, axum::extract::ws::rejection::WebSocketUpgradeRejection>,
+    Asked { id, query, ip, ws }: Asked,
 ) -> Result<Response, ApiError> {
-    let registry = &state.registry;
-    let cfg = &registry.config;
-    if registry.shutdown.is_cancelled() {
-        return Err(ApiError::new(
-            StatusCode::SERVICE_UNAVAILABLE,
-            "the server is shutting down",
-        ));
-    }
-    if let Some(k) = query
-        .keys()
-        .find(|k| !matches!(k.as_str(), "tick" | "speed" | "as" | "format"))
-    {
-        return Err(ApiError::bad_request(format!(
-            "{k}: unknown query parameter (tick, speed, as, format)"
-        )));
-    }
+    socket::refuse_while_stopping(&state.registry)?;
+    socket::only_params(&query, &["tick", "speed", "as", "format"])?;
     let replay = find(&state, &id).await?;
     let options = Options::of(&query, &replay)?;
-    let ws = ws.map_err(|e| ApiError::bad_request(format!("not a WebSocket upgrade: {e}")))?;
-    let Some(address) = state
-        .limits
-        .open_connection(ip, cfg.max_connections_per_address)
-    else {
-        registry.metrics.refuse(Refusal::ConnectionsPerAddress);
-        return Err(ApiError::new(
-            StatusCode::TOO_MANY_REQUESTS,
-            format!(
-                "too many connections from {ip}: at most {} WebSockets open at once per address",
-                cfg.max_connections_per_address
-            ),
-        ));
-    };
+    let admitted = socket::admit(&state, ip, ws)?;
     let span = tracing::info_span!("replay_ws", replay_id = %id, %ip);
-    let hard = cfg.hard_message_bytes();
-    Ok(ws
-        .max_message_size(hard)
-        .max_frame_size(hard)
-        .on_upgrade(move |socket| {
-            async move {
-                tracing::debug!("connected");
-                let guards = Guards {
-                    _address: address,
-                    _open: state.registry.connection(),
-                    _client: state.registry.metrics.client("replay"),
-                };
-                Viewer::new(socket, state, replay, options, guards)
-                    .run()
-                    .await;
-                tracing::debug!("disconnected");
-            }
-            .instrument(span)
-        }))
+    let manner = Manner {
+        role: "replay",
+        close_drain: CLOSE_DRAIN,
+        error: common::error_with_message,
+    };
+    let app = state.clone();
+    Ok(admitted.open(&state, manner, span, move |sock| {
+        Viewer::new(sock, app, replay, options).run()
+    }))
 }
 
 /// What the query asked for, checked before the upgrade.
@@ -168,15 +120,7 @@ impl Options {
                 }
             },
         };
-        let compact = match query.get("format").map(String::as_str) {
-            None | Some("json") => false,
-            Some("compact") => true,
-            Some(other) => {
-                return Err(ApiError::bad_request(format!(
-                    "format: {other:?} is not a snapshot format (json or compact)"
-                )));
-            }
-        };
+        let compact = socket::compact_format(query)?;
         Ok(Options {
             tick,
             speed,
@@ -186,19 +130,6 @@ impl Options {
     }
 }
 
-/// Counts a connection holds until it ends: per address, open (for shutdown), per role.
-struct Guards {
-    _address: AddressConnection,
-    _open: ConnectionGuard,
-    _client: ClientGuard,
-}
-
-/// Why a connection ends: the client left, or close with this code and reason.
-enum End {
-    Gone,
-    Close(u16, String),
-}
-
 /// Time between two steps at `speed`, and ticks per step.
 fn pace(speed: f64) -> (Duration, f64) {
     let per_tick = 1.0 / (TICK_HZ as f64 * speed);
@@ -206,9 +137,9 @@ fn pace(speed: f64) -> (Duration, f64) {
     (Duration::from_secs_f64(period), period / per_tick)
 }
 
-/// One replay connection: its cursor, what it plays and how fast, and its limits.
+/// One replay connection: its cursor, what it plays and how fast.
 struct Viewer {
-    socket: WebSocket,
+    sock: Socket,
     state: AppState,
     replay: Arc<Replay>,
     options: Options,
@@ -225,25 +156,13 @@ struct Viewer {
     next_step: Instant,
     pending_seek: Option<u64>,
     next_seek: Instant,
-    messages: Bucket,
-    strikes: Bucket,
-    _guards: Guards,
 }
 
 impl Viewer {
-    fn new(
-        socket: WebSocket,
-        state: AppState,
-        replay: Arc<Replay>,
-        options: Options,
-        guards: Guards,
-    ) -> Viewer {
-        let cfg = &state.registry.config;
+    fn new(sock: Socket, state: AppState, replay: Arc<Replay>, options: Options) -> Viewer {
         let now = Instant::now();
         Viewer {
-            messages: Bucket::new(cfg.message_burst, cfg.messages_per_s),
-            strikes: Bucket::new(STRIKES, 1.0 / STRIKE_RECOVERY_S),
-            socket,
+            sock,
             cursor: None,
             tick: options.tick,
             playing: options.tick < replay.last_tick,
@@ -259,40 +178,12 @@ impl Viewer {
             state,
             replay,
             options,
-            _guards: guards,
         }
     }
 
     async fn run(mut self) {
-        if let Err(End::Close(code, reason)) = self.serve().await {
-            let close = Message::Close(Some(CloseFrame {
-                code,
-                reason: Utf8Bytes::from(truncate(&reason, 120)),
-            }));
-            if let Ok(Ok(())) = tokio::time::timeout(SEND_TIMEOUT, self.socket.send(close)).await {
-                // Read what the client still sends until its close, so the socket is not
-                // reset under the close frame.
-                let drain = async {
-                    while let Some(Ok(m)) = self.socket.recv().await {
-                        if matches!(m, Message::Close(_)) {
-                            break;
-                        }
-                    }
-                };
-                let _ = tokio::time::timeout(CLOSE_DRAIN, drain).await;
-            }
-        }
-    }
-
-    async fn send(&mut self, message: Message) -> Result<(), End> {
-        match tokio::time::timeout(SEND_TIMEOUT, self.socket.send(message)).await {
-            Ok(Ok(())) => Ok(()),
-            _ => Err(End::Gone),
-        }
-    }
-
-    async fn text(&mut self, text: Utf8Bytes) -> Result<(), End> {
-        self.send(Message::Text(text)).await
+        let end = self.serve().await;
+        self.sock.close(end).await;
     }
 
     fn show_options(&self, fresh: bool, events: bool) -> Show {
@@ -342,21 +233,17 @@ impl Viewer {
                 _ => 0,
             })
             .sum();
-        self.state
-            .registry
-            .metrics
-            .snapshot_bytes
-            .with_label_values(&["replay"])
-            .inc_by(bytes as u64);
+        self.sock.count_snapshot(bytes);
         for m in shown.messages.iter().cloned() {
-            self.send(m).await?;
+            self.sock.send(m).await?;
         }
         Ok(shown)
     }
 
     async fn status(&mut self) -> Result<(), End> {
         let tick = self.pending_seek.unwrap_or(self.tick);
-        self.text(rwire::status(tick, self.playing, self.speed))
+        self.sock
+            .text(rwire::status(tick, self.playing, self.speed))
             .await
     }
 
@@ -377,7 +264,6 @@ impl Viewer {
         })
         .await?;
         let (map, kinematics, time_limit_s, seated) = welcome;
-        let cfg = self.state.registry.config.clone();
         let you = self.options.view.map(|i| AgentId::Opponent(i).to_string());
         let welcome = ReplayWelcome {
             kind: "replay",
@@ -406,42 +292,27 @@ impl Viewer {
             } else {
                 "json"
             },
-            limits: ReplayLimits {
-                max_message_bytes: cfg.max_message_bytes,
-                messages_per_s: cfg.messages_per_s,
-                burst: cfg.message_burst,
-                seeks_per_s: SEEKS_PER_S,
+            limits: Limits {
+                seeks_per_s: Some(SEEKS_PER_S),
+                ..Limits::of(&self.state.registry.config)
             },
         };
-        self.text(rwire::welcome(&welcome)).await?;
+        self.sock.text(rwire::welcome(&welcome)).await?;
         self.cursor = Some(cursor);
         self.job(None, 0, first).await?;
         self.next_step = Instant::now() + pace(self.speed).0;
-        let shutdown = self.state.registry.shutdown.clone();
+        let shutdown = self.sock.shutdown().clone();
         loop {
             tokio::select! {
                 biased;
                 _ = shutdown.cancelled() => {
-                    return Err(going_away());
+                    return Err(End::going_away());
                 }
-                msg = self.socket.recv() => match msg {
-                    None | Some(Ok(Message::Close(_))) => return Err(End::Gone),
-                    Some(Err(e)) => {
-                        let text = e.to_string();
-                        return Err(if text.contains("too long") || text.contains("Space limit") || text.contains("capacity") {
-                            self.state.registry.metrics.refuse(Refusal::MessageTooLarge);
-                            End::Close(TOO_BIG, format!("message over {} bytes", cfg.hard_message_bytes()))
-                        } else {
-                            End::Gone
-                        });
+                msg = self.sock.recv() => {
+                    if let Some(c) = self.sock.read(msg, ReplayControl::parse).await? {
+                        self.on_control(c).await?;
                     }
-                    Some(Ok(Message::Text(text))) => self.on_text(text.as_str()).await?,
-                    Some(Ok(Message::Binary(b))) => {
-                        let why = format!("binary message of {} bytes: send JSON text", b.len());
-                        self.strike(Refusal::MessageInvalid, &why).await?;
-                    }
-                    Some(Ok(_)) => {} // pings are answered by the socket itself
-                },
+                }
                 _ = tokio::time::sleep_until(self.next_seek), if self.pending_seek.is_some() => {
                     self.seek().await?;
                 }
@@ -488,40 +359,10 @@ impl Viewer {
         Ok(())
     }
 
-    /// A bad message: an `error` now, a close when it happens too often.
-    async fn strike(&mut self, refusal: Refusal, why: &str) -> Result<(), End> {
-        self.state.registry.metrics.refuse(refusal);
-        if self.strikes.take().is_err() {
-            return Err(End::Close(
-                POLICY,
-                format!("too many bad messages; last: {why}"),
-            ));
-        }
-        self.text(rwire::error(why)).await
-    }
-
-    async fn on_text(&mut self, text: &str) -> Result<(), End> {
-        let cfg = &self.state.registry.config;
-        let (max, per_s, burst) = (cfg.max_message_bytes, cfg.messages_per_s, cfg.message_burst);
-        if text.len() > max {
-            let why = format!(
-                "message of {} bytes is over the {max}-byte limit",
-                text.len()
-            );
-            return self.strike(Refusal::MessageTooLarge, &why).await;
-        }
-        if self.messages.take().is_err() {
-            let why =
-                format!("rate limit: at most {per_s} messages per second (bursts of {burst})");
-            return self.strike(Refusal::MessageRate, &why).await;
-        }
-        let control = match ReplayControl::parse(text) {
-            Ok(c) => c,
-            Err(e) => return self.strike(Refusal::MessageInvalid, &e.to_string()).await,
-        };
+    async fn on_control(&mut self, control: ReplayControl) -> Result<(), End> {
         let last = self.replay.last_tick;
         match control {
-            ReplayControl::Ping { t } => self.text(wire::pong(t)).await,
+            ReplayControl::Ping { t } => self.sock.text(common::pong(t)).await,
             ReplayControl::Play => {
                 if !self.playing && self.pending_seek.is_none() && self.tick >= last {
                     // Play at the end starts again, as a video player does.
@@ -543,7 +384,7 @@ impl Viewer {
             }
             ReplayControl::Seek { tick } if tick > last => {
                 let why = format!("tick: {tick} is past the replay's last tick, {last}");
-                self.strike(Refusal::MessageInvalid, &why).await
+                self.sock.strike(Refusal::MessageInvalid, &why).await
             }
             ReplayControl::Seek { tick } => {
                 // Coalesced: a later seek replaces one not shown yet.
@@ -574,24 +415,8 @@ async fn blocking<T: Send + 'static>(
     let shutdown = state.registry.shutdown.clone();
     tokio::select! {
         done = off_workers(&state, "replaying the match", work) => done
-            .map_err(|e| End::Close(INTERNAL, e.message))?
-            .map_err(|e| End::Close(INTERNAL, e)),
-        _ = shutdown.cancelled() => Err(going_away()),
+            .map_err(|e| End::internal(e.message))?
+            .map_err(End::internal),
+        _ = shutdown.cancelled() => Err(End::going_away()),
     }
-}
-
-fn going_away() -> End {
-    End::Close(GOING_AWAY, "the server is shutting down".into())
-}
-
-fn truncate(s: &str, max: usize) -> String {
-    // Close reasons must fit a control frame (123 bytes).
-    let mut out = String::new();
-    for c in s.chars() {
-        if out.len() + c.len_utf8() > max {
-            break;
-        }
-        out.push(c);
-    }
-    out
 }

@@ -5,101 +5,45 @@
 //! costs the tick nothing and the other clients nothing. Events are never skipped for a
 //! client that keeps up; one that fell behind gets the missing ones from the match's log.
 //!
-//! What a client sends is size-capped, parsed strictly, and rate-limited by a token bucket;
-//! every bad message gets an `error`, and a client that keeps sending them is closed with a
-//! reason (close code 1008).
+//! What a client sends is size-capped, parsed strictly, and rate-limited by a token bucket,
+//! as on every socket ([`crate::http::socket`]); which compact snapshot carries what is the
+//! connection's [`Schedule`].
 
-use std::collections::HashMap;
 use std::time::Duration;
 
-use axum::extract::ws::{CloseFrame, Message, Utf8Bytes, WebSocket, WebSocketUpgrade};
-use axum::extract::{Path, Query, State};
+use axum::extract::State;
+use axum::extract::ws::Message;
 use axum::http::StatusCode;
 use axum::response::Response;
-use tokio_util::sync::CancellationToken;
-use tracing::Instrument;
 
 use crate::config::Config;
 use crate::game::view::{BELIEF_EVERY, Frame, visible_to};
-use crate::game::{ConnectionGuard, MatchHandle, Seat, Sight, SpectatorSeat};
-use crate::http::limits::{AddressConnection, Bucket, ClientIp};
+use crate::game::{MatchHandle, Seat, Sight, SpectatorSeat};
+use crate::http::socket::schedule::Schedule;
+use crate::http::socket::{self, Asked, End, Manner, Socket};
 use crate::http::{ApiError, AppState};
-use crate::metrics::{ClientGuard, Metrics, Refusal};
-use crate::protocol::ws::{self as wire, ClientMessage, Limits, Welcome};
+use crate::metrics::Refusal;
+use crate::protocol::socket::{self as common, Limits};
+use crate::protocol::ws::{self as wire, ClientMessage, Welcome};
 use lasertag_core::world::HumanInput;
 use lasertag_core::world::MatchStatus;
 
-/// Bad messages tolerated in a row before the connection is closed...
-pub const STRIKES: f64 = 10.0;
-/// ...recovering one strike every this many seconds.
-pub const STRIKE_RECOVERY_S: f64 = 5.0;
-/// A client that cannot take a message within this time is dropped.
-pub const SEND_TIMEOUT: Duration = Duration::from_secs(10);
-
 /// How long a closing connection waits for the client's close reply.
 const CLOSE_DRAIN: Duration = Duration::from_secs(3);
-/// ...and when the server is shutting down (it has 5 s in all).
-const SHUTDOWN_DRAIN: Duration = Duration::from_secs(1);
-/// Close codes (RFC 6455): policy violation, message too big, normal, going away.
-const POLICY: u16 = 1008;
-const TOO_BIG: u16 = 1009;
-const NORMAL: u16 = 1000;
-const GOING_AWAY: u16 = 1001;
 
 pub async fn upgrade(
     State(state): State<AppState>,
-    Path(id): Path<String>,
-    Query(query): Query<HashMap<String, String>>,
-    ClientIp(ip): ClientIp,
-    ws: Result<WebSocketUpgrade, axum::extract::ws::rejection::WebSocketUpgradeRejection>,
+    Asked { id, query, ip, ws }: Asked,
 ) -> Result<Response, ApiError> {
     let registry = &state.registry;
     let cfg = &registry.config;
-    if registry.shutdown.is_cancelled() {
-        return Err(ApiError::new(
-            StatusCode::SERVICE_UNAVAILABLE,
-            "the server is shutting down",
-        ));
-    }
+    socket::refuse_while_stopping(registry)?;
     let handle = registry
         .get(&id)
         .ok_or_else(|| ApiError::not_found(format!("no match {id}")))?;
-    if let Some(k) = query
-        .keys()
-        .find(|k| !matches!(k.as_str(), "token" | "format"))
-    {
-        return Err(ApiError::bad_request(format!(
-            "{k}: unknown query parameter (token, format)"
-        )));
-    }
-    let compact = match query.get("format").map(String::as_str) {
-        None | Some("json") => false,
-        Some("compact") => true,
-        Some(other) => {
-            return Err(ApiError::bad_request(format!(
-                "format: {other:?} is not a snapshot format (json or compact)"
-            )));
-        }
-    };
-    let ws = ws.map_err(|e| {
-        ApiError::new(
-            axum::http::StatusCode::BAD_REQUEST,
-            format!("not a WebSocket upgrade: {e}"),
-        )
-    })?;
-    let Some(address) = state
-        .limits
-        .open_connection(ip, cfg.max_connections_per_address)
-    else {
-        registry.metrics.refuse(Refusal::ConnectionsPerAddress);
-        return Err(ApiError::new(
-            StatusCode::TOO_MANY_REQUESTS,
-            format!(
-                "too many connections from {ip}: at most {} WebSockets open at once per address",
-                cfg.max_connections_per_address
-            ),
-        ));
-    };
+    socket::only_params(&query, &["token", "format"])?;
+    let compact = socket::compact_format(&query)?;
+    let admitted = socket::admit(&state, ip, ws)?;
     // A bad token is refused here, before the upgrade (401); so is a spectator past the cap.
     let seat = match query.get("token") {
         Some(token) => Seated::Player(handle.connect(token.clone()).await?),
@@ -122,26 +66,17 @@ pub async fn upgrade(
         Seated::Spectator(_) => "spectator",
     };
     let span = tracing::info_span!("ws", match_id = %id, role, %ip);
-    let registry = state.registry.clone();
-    let hard = cfg.hard_message_bytes();
-    Ok(ws
-        .max_message_size(hard)
-        .max_frame_size(hard)
-        .on_upgrade(move |socket| {
-            async move {
-                tracing::debug!("connected");
-                let guards = Guards {
-                    _address: address,
-                    _open: registry.connection(),
-                    _client: registry.metrics.client(role),
-                };
-                let mut connection = Connection::new(socket, handle, seat, &registry, guards);
-                connection.compact = compact;
-                connection.run().await;
-                tracing::debug!("disconnected");
-            }
-            .instrument(span)
-        }))
+    let manner = Manner {
+        role,
+        close_drain: CLOSE_DRAIN,
+        error: common::error,
+    };
+    let config = cfg.clone();
+    Ok(admitted.open(&state, manner, span, move |sock| {
+        let mut connection = Connection::new(sock, handle, seat, config);
+        connection.compact = compact;
+        connection.run()
+    }))
 }
 
 /// What the connection plays: an opponent slot, or a counted spectator's place.
@@ -150,121 +85,48 @@ enum Seated {
     Spectator(SpectatorSeat),
 }
 
-/// Counts a connection holds until it ends: per address, open (for shutdown), per role.
-struct Guards {
-    _address: AddressConnection,
-    _open: ConnectionGuard,
-    _client: ClientGuard,
-}
-
-/// Why a connection ends.
-enum End {
-    /// The client left or the socket failed: nothing more to send.
-    Gone,
-    /// Close with this code and reason.
-    Close(u16, String),
-}
-
 struct Connection {
-    socket: WebSocket,
+    sock: Socket,
     handle: MatchHandle,
     seat: Option<Seat>,
     config: Config,
-    metrics: Metrics,
-    shutdown: CancellationToken,
-    role: &'static str,
     /// Whether it is shown everything (from the spectators' frames): a spectator, or a
     /// player whose opponent was tagged and has left the arena.
     watching: bool,
     belief: bool,
-    /// Snapshots as compact binary messages (else JSON text), and the ticks whose snapshot
-    /// last carried the slow parts and the belief (each is sent again once it is due).
+    /// Snapshots as compact binary messages (else JSON text), and which parts each carries.
     compact: bool,
-    slow_at: Option<u64>,
-    belief_at: Option<u64>,
-    /// The last compact snapshot written, whole: the baseline of the next one's delta.
-    sent: Option<axum::body::Bytes>,
+    schedule: Schedule,
     last_seq: u64,
     finished_sent: bool,
-    messages: Bucket,
-    strikes: Bucket,
     _spectator: Option<SpectatorSeat>,
-    _guards: Guards,
 }
 
 impl Connection {
-    fn new(
-        socket: WebSocket,
-        handle: MatchHandle,
-        seated: Seated,
-        registry: &crate::game::Registry,
-        guards: Guards,
-    ) -> Self {
+    fn new(sock: Socket, handle: MatchHandle, seated: Seated, config: Config) -> Self {
         let (seat, spectator) = match seated {
             Seated::Player(s) => (Some(s), None),
             Seated::Spectator(s) => (None, Some(s)),
         };
-        let cfg = registry.config.clone();
         Connection {
-            socket,
+            sock,
             watching: seat.is_none(),
             belief: seat.is_none(),
             compact: false,
-            slow_at: None,
-            belief_at: None,
-            sent: None,
-            role: if seat.is_some() {
-                "player"
-            } else {
-                "spectator"
-            },
+            schedule: Schedule::default(),
             seat,
             handle,
-            messages: Bucket::new(cfg.message_burst, cfg.messages_per_s),
-            strikes: Bucket::new(STRIKES, 1.0 / STRIKE_RECOVERY_S),
-            config: cfg,
-            metrics: registry.metrics.clone(),
-            shutdown: registry.shutdown.clone(),
+            config,
             last_seq: 0,
             finished_sent: false,
             _spectator: spectator,
-            _guards: guards,
         }
     }
 
     async fn run(mut self) {
         let end = self.serve().await;
-        if let Err(End::Close(code, reason)) = end {
-            let drain = if self.shutdown.is_cancelled() {
-                SHUTDOWN_DRAIN
-            } else {
-                CLOSE_DRAIN
-            };
-            let close = Message::Close(Some(CloseFrame {
-                code,
-                reason: Utf8Bytes::from(reason),
-            }));
-            if let Ok(Ok(())) = tokio::time::timeout(SEND_TIMEOUT, self.socket.send(close)).await {
-                // Finish the closing handshake: read (and drop) what the client still sends
-                // until its close, so the socket is not reset under the close frame.
-                let drain_fut = async {
-                    while let Some(Ok(m)) = self.socket.recv().await {
-                        if matches!(m, Message::Close(_)) {
-                            break;
-                        }
-                    }
-                };
-                let _ = tokio::time::timeout(drain, drain_fut).await;
-            }
-        }
+        self.sock.close(end).await;
         // Dropping the seat's `kicked` receiver tells the match task the player has gone.
-    }
-
-    async fn send(&mut self, text: Utf8Bytes) -> Result<(), End> {
-        match tokio::time::timeout(SEND_TIMEOUT, self.socket.send(Message::Text(text))).await {
-            Ok(Ok(())) => Ok(()),
-            _ => Err(End::Gone),
-        }
     }
 
     async fn serve(&mut self) -> Result<(), End> {
@@ -298,15 +160,14 @@ impl Connection {
             format: if self.compact { "compact" } else { "json" },
             belief: self.belief,
             limits: Limits {
-                max_message_bytes: self.config.max_message_bytes,
-                messages_per_s: self.config.messages_per_s,
-                burst: self.config.message_burst,
-                reconnect_s: self.config.reconnect_grace.as_secs_f64(),
+                reconnect_s: Some(self.config.reconnect_grace.as_secs_f64()),
+                ..Limits::of(&self.config)
             },
         };
-        self.send(wire::welcome(&welcome)).await?;
+        self.sock.text(wire::welcome(&welcome)).await?;
         self.last_seq = frame.last_seq;
         self.deliver(&frame, false).await?;
+        let shutdown = self.sock.shutdown().clone();
         // The receiver is moved out so the loop can borrow `self` mutably; it lives until
         // this function returns.
         let mut kicked = self
@@ -322,7 +183,7 @@ impl Connection {
                         let last = frames.borrow().clone();
                         if !self.finished_sent {
                             self.finished_sent = true;
-                            self.send(wire::finished(&last)).await?;
+                            self.sock.text(wire::finished(&last)).await?;
                         }
                         return Err(self.ended());
                     }
@@ -337,30 +198,17 @@ impl Connection {
                         frames.mark_changed();
                     }
                 }
-                msg = self.socket.recv() => match msg {
-                    None | Some(Ok(Message::Close(_))) => return Err(End::Gone),
-                    Some(Err(e)) => {
-                        let text = e.to_string();
-                        return Err(if text.contains("too long") || text.contains("Space limit") || text.contains("capacity") {
-                            self.metrics.refuse(Refusal::MessageTooLarge);
-                            End::Close(TOO_BIG, format!("message over {} bytes", self.config.hard_message_bytes()))
-                        } else {
-                            End::Gone
-                        });
+                msg = self.sock.recv() => {
+                    if let Some(m) = self.sock.read(msg, ClientMessage::parse).await? {
+                        self.on_message(m).await?;
                     }
-                    Some(Ok(Message::Text(text))) => self.on_text(text.as_str()).await?,
-                    Some(Ok(Message::Binary(b))) => {
-                        let why = format!("binary message of {} bytes: send JSON text", b.len());
-                        self.strike(Refusal::MessageInvalid, &why).await?;
-                    }
-                    Some(Ok(_)) => {} // pings are answered by the socket itself
-                },
-                _ = self.shutdown.cancelled(), if !self.finished_sent => {
+                }
+                _ = shutdown.cancelled(), if !self.finished_sent => {
                     // The match task is being stopped too and will publish its end; this
                     // tells the client even if the task's last frame is not seen first.
                     self.finished_sent = true;
                     let last = frames.borrow().clone();
-                    self.send(wire::finished_by_shutdown(&last)).await?;
+                    self.sock.text(wire::finished_by_shutdown(&last)).await?;
                     return Err(self.ended());
                 }
                 kick = async {
@@ -370,7 +218,7 @@ impl Connection {
                     }
                 } => match kick {
                     Ok(()) => {
-                        return Err(End::Close(POLICY, "another connection took over this player".into()));
+                        return Err(End::policy("another connection took over this player"));
                     }
                     Err(_) => kicked = None, // the task ended; `frames` will say so
                 },
@@ -388,10 +236,10 @@ impl Connection {
 
     /// How to close once the match has ended.
     fn ended(&self) -> End {
-        if self.shutdown.is_cancelled() {
-            End::Close(GOING_AWAY, "the server is shutting down".into())
+        if self.sock.shutdown().is_cancelled() {
+            End::going_away()
         } else {
-            End::Close(NORMAL, "the match has ended".into())
+            End::normal("the match has ended")
         }
     }
 
@@ -407,14 +255,10 @@ impl Connection {
 
     /// The compact snapshot of `frame` (see `protocol::compact`).
     async fn deliver_compact(&mut self, frame: &Frame) -> Result<(), End> {
-        use crate::protocol::compact::{self, BELIEF_COMPACT_EVERY, SLOW_EVERY};
+        use crate::protocol::compact;
         let finished = frame.status == MatchStatus::Finished;
-        let due = |at: Option<u64>, every: u64| {
-            finished || at.is_none_or(|t| frame.tick >= t + every || frame.tick < t)
-        };
-        let slow = due(self.slow_at, SLOW_EVERY);
-        let belief =
-            self.belief && frame.belief.is_some() && due(self.belief_at, BELIEF_COMPACT_EVERY);
+        let wanted = self.belief && frame.belief.is_some();
+        let mut parts = self.schedule.parts(frame.tick, finished, wanted);
         let visible = match &self.seat {
             Some(seat) if !self.watching => {
                 visible_to(frame, &self.handle.hub.arena, seat.slot).map(|v| (seat.slot, v))
@@ -422,32 +266,16 @@ impl Connection {
             _ => None,
         };
         let whole = match &visible {
-            None => wire::spectator_compact(frame, belief, slow),
-            Some((slot, v)) => compact::snapshot(frame, Some(*slot), Some(v), belief, false).into(),
+            None => wire::spectator_compact(frame, parts.belief, parts.slow),
+            Some((slot, v)) => {
+                // A player's own view has no slow parts: they stay due.
+                parts.slow = false;
+                compact::snapshot(frame, Some(*slot), Some(v), parts.belief, false).into()
+            }
         };
-        let bytes = match self
-            .sent
-            .as_deref()
-            .and_then(|base| compact::delta(base, &whole))
-        {
-            Some(d) => d.into(),
-            None => whole.clone(),
-        };
-        self.sent = Some(whole);
-        if visible.is_none() && slow {
-            self.slow_at = Some(frame.tick);
-        }
-        if belief {
-            self.belief_at = Some(frame.tick);
-        }
-        self.metrics
-            .snapshot_bytes
-            .with_label_values(&[self.role])
-            .inc_by(bytes.len() as u64);
-        match tokio::time::timeout(SEND_TIMEOUT, self.socket.send(Message::Binary(bytes))).await {
-            Ok(Ok(())) => Ok(()),
-            _ => Err(End::Gone),
-        }
+        let bytes = self.schedule.sent(frame.tick, parts, whole);
+        self.sock.count_snapshot(bytes.len());
+        self.sock.send(Message::Binary(bytes)).await
     }
 
     /// The JSON snapshot of `frame`.
@@ -461,11 +289,8 @@ impl Connection {
                 None => wire::spectator_snapshot(frame, self.belief),
             },
         };
-        self.metrics
-            .snapshot_bytes
-            .with_label_values(&[self.role])
-            .inc_by(snapshot.len() as u64);
-        self.send(snapshot).await
+        self.sock.count_snapshot(snapshot.len());
+        self.sock.text(snapshot).await
     }
 
     /// The events since the last one sent, and `finished` once.
@@ -480,56 +305,25 @@ impl Connection {
                     .await
                     .unwrap_or_default();
                 for e in missed.iter().filter(|e| e.seq <= frame.since_seq) {
-                    self.send(wire::event(e)).await?;
+                    self.sock.text(wire::event(e)).await?;
                 }
             }
             let last = self.last_seq;
             for e in frame.events.iter().filter(|e| e.seq > last) {
-                self.send(wire::event(e)).await?;
+                self.sock.text(wire::event(e)).await?;
             }
             self.last_seq = frame.last_seq;
         }
         if frame.status == MatchStatus::Finished && !self.finished_sent {
             self.finished_sent = true;
-            self.send(wire::finished(frame)).await?;
+            self.sock.text(wire::finished(frame)).await?;
         }
         Ok(())
     }
 
-    /// A bad message: an `error` now, a close when it happens too often.
-    async fn strike(&mut self, refusal: Refusal, why: &str) -> Result<(), End> {
-        self.metrics.refuse(refusal);
-        if self.strikes.take().is_err() {
-            return Err(End::Close(
-                POLICY,
-                truncate(&format!("too many bad messages; last: {why}"), 120),
-            ));
-        }
-        self.send(wire::error(why)).await
-    }
-
-    async fn on_text(&mut self, text: &str) -> Result<(), End> {
-        let max = self.config.max_message_bytes;
-        if text.len() > max {
-            let why = format!(
-                "message of {} bytes is over the {max}-byte limit",
-                text.len()
-            );
-            return self.strike(Refusal::MessageTooLarge, &why).await;
-        }
-        if self.messages.take().is_err() {
-            let why = format!(
-                "rate limit: at most {} messages per second (bursts of {})",
-                self.config.messages_per_s, self.config.message_burst
-            );
-            return self.strike(Refusal::MessageRate, &why).await;
-        }
-        let msg = match ClientMessage::parse(text) {
-            Ok(m) => m,
-            Err(e) => return self.strike(Refusal::MessageInvalid, &e.to_string()).await,
-        };
+    async fn on_message(&mut self, msg: ClientMessage) -> Result<(), End> {
         match msg {
-            ClientMessage::Ping { t } => self.send(wire::pong(t)).await,
+            ClientMessage::Ping { t } => self.sock.text(common::pong(t)).await,
             ClientMessage::Belief { on } => {
                 self.belief = on;
                 Ok(())
@@ -543,6 +337,7 @@ impl Connection {
             } => {
                 let Some(seat) = &self.seat else {
                     return self
+                        .sock
                         .strike(
                             Refusal::MessageInvalid,
                             "input: spectators cannot move anyone",
@@ -553,7 +348,7 @@ impl Connection {
                 let frame = self.handle.hub.frames.borrow().clone();
                 if frame.opponents.get(slot).is_some_and(|o| o.tagged) {
                     let why = format!("input: {} has been tagged", seat.opponent_id);
-                    return self.send(wire::error(&why)).await;
+                    return self.sock.error(&why).await;
                 }
                 let input = HumanInput {
                     forward: forward as f32,
@@ -562,7 +357,7 @@ impl Connection {
                     seen_tick: view_tick,
                 };
                 if !self.handle.input(slot, generation, input, seq).await {
-                    return Err(End::Close(NORMAL, "the match has ended".into()));
+                    return Err(End::normal("the match has ended"));
                 }
                 Ok(())
             }
@@ -572,16 +367,4 @@ impl Connection {
 
 fn dummy_receiver() -> tokio::sync::oneshot::Receiver<()> {
     tokio::sync::oneshot::channel().1
-}
-
-fn truncate(s: &str, max: usize) -> String {
-    // Close reasons must fit a control frame (123 bytes).
-    let mut out = String::new();
-    for c in s.chars() {
-        if out.len() + c.len_utf8() > max {
-            break;
-        }
-        out.push(c);
-    }
-    out
 }

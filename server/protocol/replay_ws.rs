@@ -3,14 +3,17 @@
 //! Snapshots and events are the live socket's own ([`crate::protocol::ws`]), so a page
 //! draws a replay with the renderer it draws a match with; what is new is here: the first
 //! message (`replay`, the live `welcome`'s counterpart), `replay_status` whenever playing,
-//! pausing or the speed changes, and the client's controls ([`ReplayControl`]).
+//! pausing or the speed changes, and the client's controls ([`ReplayControl`]). `pong`,
+//! `belief` and `ping` are the live socket's ([`crate::protocol::socket`]); `error` too, with
+//! its text in `message` as well as in `error` (the live socket's field, which pages read).
 
 use axum::extract::ws::Utf8Bytes;
 use serde::{Deserialize, Serialize};
 
 use crate::maps::MapFile;
+use crate::protocol::socket::{self, Limits, to_json};
 use crate::protocol::ws::Kinematics;
-use crate::protocol::{Invalid, deserialize_at, invalid};
+use crate::protocol::{Invalid, invalid};
 
 /// The slowest and fastest a replay plays, as multiples of real time.
 pub const MIN_SPEED: f64 = 0.25;
@@ -56,22 +59,6 @@ struct SpeedMsg {
     speed: f64,
 }
 
-#[derive(Deserialize)]
-#[serde(deny_unknown_fields)]
-struct BeliefMsg {
-    on: bool,
-}
-
-#[derive(Deserialize)]
-#[serde(deny_unknown_fields)]
-struct PingMsg {
-    t: f64,
-}
-
-fn fields<T: serde::de::DeserializeOwned>(v: serde_json::Value) -> Result<T, Invalid> {
-    deserialize_at(v, "message")
-}
-
 const TYPES: &str = "play, pause, seek, speed, belief or ping";
 
 /// `speed` if it is a speed a replay plays at, else what is wrong with it.
@@ -90,56 +77,24 @@ impl ReplayControl {
     /// Parses and range-checks a viewer's text message, naming what is wrong. Whether a
     /// seek's tick is one of the replay's is for the caller, who knows the replay.
     pub fn parse(text: &str) -> Result<ReplayControl, Invalid> {
-        let mut v: serde_json::Value =
-            serde_json::from_str(text).map_err(|e| invalid("message", format!("not JSON: {e}")))?;
-        let Some(obj) = v.as_object_mut() else {
-            return Err(invalid("message", "must be a JSON object with a \"type\""));
-        };
-        let kind = match obj.remove("type") {
-            Some(serde_json::Value::String(s)) => s,
-            Some(_) => return Err(invalid("type", "must be a string")),
-            None => return Err(invalid("type", format!("missing ({TYPES})"))),
-        };
+        let (kind, v) = socket::typed(text, TYPES)?;
         match kind.as_str() {
-            "play" => fields::<Nothing>(v).map(|_| ReplayControl::Play),
-            "pause" => fields::<Nothing>(v).map(|_| ReplayControl::Pause),
+            "play" => socket::fields::<Nothing>(v).map(|_| ReplayControl::Play),
+            "pause" => socket::fields::<Nothing>(v).map(|_| ReplayControl::Pause),
             "seek" => {
-                let tick = fields::<SeekMsg>(v)?.tick;
+                let tick = socket::fields::<SeekMsg>(v)?.tick;
                 u64::try_from(tick)
                     .map(|tick| ReplayControl::Seek { tick })
                     .map_err(|_| invalid("tick", format!("{tick} must be 0 or more")))
             }
             "speed" => Ok(ReplayControl::Speed {
-                speed: check_speed("speed", fields::<SpeedMsg>(v)?.speed)?,
+                speed: check_speed("speed", socket::fields::<SpeedMsg>(v)?.speed)?,
             }),
-            "belief" => Ok(ReplayControl::Belief {
-                on: fields::<BeliefMsg>(v)?.on,
-            }),
-            "ping" => {
-                let t = fields::<PingMsg>(v)?.t;
-                if !t.is_finite() {
-                    return Err(invalid("t", format!("{t} must be a finite number")));
-                }
-                Ok(ReplayControl::Ping { t })
-            }
-            other => Err(invalid(
-                "type",
-                format!("unknown message type {other:?} ({TYPES})"),
-            )),
+            "belief" => socket::belief(v).map(|on| ReplayControl::Belief { on }),
+            "ping" => socket::ping(v).map(|t| ReplayControl::Ping { t }),
+            other => Err(socket::unknown_type(other, TYPES)),
         }
     }
-}
-
-/// Limits a viewer should know (sent in the first message).
-#[derive(Debug, Clone, Serialize)]
-pub struct ReplayLimits {
-    pub max_message_bytes: usize,
-    /// Sustained messages per second, and how many may come at once.
-    pub messages_per_s: f64,
-    pub burst: f64,
-    /// Seeks carried out per second at most: more are not refused, only the latest waiting
-    /// one is shown when the next is due.
-    pub seeks_per_s: f64,
 }
 
 /// The first message on a replay socket: the replay, and what the live `welcome` gives a
@@ -170,7 +125,7 @@ pub struct ReplayWelcome<'a> {
     pub kinematics: Kinematics,
     pub protocol: u32,
     pub format: &'static str,
-    pub limits: ReplayLimits,
+    pub limits: Limits,
 }
 
 #[derive(Debug, Clone, Serialize)]
@@ -180,20 +135,6 @@ struct Status {
     tick: u64,
     playing: bool,
     speed: f64,
-}
-
-#[derive(Debug, Clone, Serialize)]
-struct ErrorWire<'a> {
-    #[serde(rename = "type")]
-    kind: &'static str,
-    /// `error` as on the live socket (pages already read it), `message` the same text.
-    error: &'a str,
-    message: &'a str,
-}
-
-fn to_json<T: Serialize>(v: &T) -> String {
-    // Plain structs of numbers and strings: serialising them cannot fail.
-    serde_json::to_string(v).unwrap_or_else(|e| format!(r#"{{"type":"error","error":"{e}"}}"#))
 }
 
 pub fn welcome(w: &ReplayWelcome<'_>) -> Utf8Bytes {
@@ -207,14 +148,6 @@ pub fn status(tick: u64, playing: bool, speed: f64) -> Utf8Bytes {
         tick,
         playing,
         speed,
-    }))
-}
-
-pub fn error(message: &str) -> Utf8Bytes {
-    Utf8Bytes::from(to_json(&ErrorWire {
-        kind: "error",
-        error: message,
-        message,
     }))
 }
 

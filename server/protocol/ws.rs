@@ -2,8 +2,9 @@
 //! implemented and documented in docs/api.md.
 //!
 //! Server to client, JSON text with a `type`: `welcome` (once, first), `snapshot` (every
-//! tick), `event` (as in the events endpoint), `finished` (once, at the end), `pong`, `error`.
-//! Client to server: `input`, `belief`, `ping` ([`ClientMessage`]).
+//! tick), `event` (as in the events endpoint), `finished` (once, at the end), `pong`, `error`
+//! (those two, and what `belief` and `ping` hold, as the replay socket has them:
+//! [`crate::protocol::socket`]). Client to server: `input`, `belief`, `ping` ([`ClientMessage`]).
 //!
 //! Sizes: positions are metres rounded to millimetres, headings to 1e-4 rad, scan ranges are
 //! integer centimetres, belief points integer centimetres in one flat array `[x0, y0, x1, …]`.
@@ -15,8 +16,9 @@ use serde::{Deserialize, Serialize};
 
 use crate::game::view::{BeliefView, Frame, Visible};
 use crate::maps::MapFile;
+use crate::protocol::socket::{self, Limits, to_json};
 use crate::protocol::{EventDto, OpponentControl, PoseDto, Status, Winner, status, winner};
-use crate::protocol::{Invalid, deserialize_at, invalid};
+use crate::protocol::{Invalid, invalid};
 use lasertag_core::sim::{AgentId, Pose};
 use lasertag_core::world::Event;
 
@@ -65,87 +67,33 @@ struct InputMsg {
     view_tick: Option<u64>,
 }
 
-#[derive(Deserialize)]
-#[serde(deny_unknown_fields)]
-struct BeliefMsg {
-    on: bool,
-}
-
-#[derive(Deserialize)]
-#[serde(deny_unknown_fields)]
-struct PingMsg {
-    t: f64,
-}
-
-/// Deserialises `v`, naming the field of the failure.
-fn fields<T: serde::de::DeserializeOwned>(v: serde_json::Value) -> Result<T, Invalid> {
-    deserialize_at(v, "message")
-}
+const TYPES: &str = "input, belief or ping";
 
 impl ClientMessage {
     /// Parses and range-checks a client's text message, naming what is wrong.
     pub fn parse(text: &str) -> Result<ClientMessage, Invalid> {
-        let mut v: serde_json::Value =
-            serde_json::from_str(text).map_err(|e| invalid("message", format!("not JSON: {e}")))?;
-        let Some(obj) = v.as_object_mut() else {
-            return Err(invalid("message", "must be a JSON object with a \"type\""));
-        };
-        let kind = match obj.remove("type") {
-            Some(serde_json::Value::String(s)) => s,
-            Some(_) => return Err(invalid("type", "must be a string")),
-            None => return Err(invalid("type", "missing (input, belief or ping)")),
-        };
-        let msg = match kind.as_str() {
+        let (kind, v) = socket::typed(text, TYPES)?;
+        match kind.as_str() {
             "input" => {
-                let m: InputMsg = fields(v)?;
-                ClientMessage::Input {
+                let m: InputMsg = socket::fields(v)?;
+                for (field, v) in [("forward", m.forward), ("turn", m.turn)] {
+                    if !(v.is_finite() && (-1.0..=1.0).contains(&v)) {
+                        return Err(invalid(field, format!("{v} must be in -1..=1")));
+                    }
+                }
+                Ok(ClientMessage::Input {
                     forward: m.forward,
                     turn: m.turn,
                     tag: m.tag,
                     seq: m.seq,
                     view_tick: m.view_tick,
-                }
+                })
             }
-            "belief" => ClientMessage::Belief {
-                on: fields::<BeliefMsg>(v)?.on,
-            },
-            "ping" => ClientMessage::Ping {
-                t: fields::<PingMsg>(v)?.t,
-            },
-            other => {
-                return Err(invalid(
-                    "type",
-                    format!("unknown message type {other:?} (input, belief or ping)"),
-                ));
-            }
-        };
-        match &msg {
-            ClientMessage::Input { forward, turn, .. } => {
-                for (field, v) in [("forward", forward), ("turn", turn)] {
-                    if !(v.is_finite() && (-1.0..=1.0).contains(v)) {
-                        return Err(invalid(field, format!("{v} must be in -1..=1")));
-                    }
-                }
-            }
-            ClientMessage::Ping { t } if !t.is_finite() => {
-                return Err(invalid("t", format!("{t} must be a finite number")));
-            }
-            _ => {}
+            "belief" => socket::belief(v).map(|on| ClientMessage::Belief { on }),
+            "ping" => socket::ping(v).map(|t| ClientMessage::Ping { t }),
+            other => Err(socket::unknown_type(other, TYPES)),
         }
-        Ok(msg)
     }
-}
-
-/// Limits a client should know (sent in `welcome`).
-#[derive(Debug, Clone, Serialize)]
-pub struct Limits {
-    pub max_message_bytes: usize,
-    /// Sustained messages per second.
-    pub messages_per_s: f64,
-    /// Messages that may come at once.
-    pub burst: f64,
-    /// Seconds a dropped player has to come back with the same token.
-    pub reconnect_s: f64,
 }
 
 #[derive(Debug, Clone, Serialize)]
@@ -307,25 +255,6 @@ struct Finished {
     winner: Option<Winner>,
     reason: Option<&'static str>,
     time_s: f64,
-}
-
-#[derive(Debug, Clone, Serialize)]
-struct ErrorWire<'a> {
-    #[serde(rename = "type")]
-    kind: &'static str,
-    error: &'a str,
-}
-
-#[derive(Debug, Clone, Serialize)]
-struct Pong {
-    #[serde(rename = "type")]
-    kind: &'static str,
-    t: f64,
-}
-
-fn to_json<T: Serialize>(v: &T) -> String {
-    // Plain structs of numbers and strings: serialising them cannot fail.
-    serde_json::to_string(v).unwrap_or_else(|e| format!(r#"{{"type":"error","error":"{e}"}}"#))
 }
 
 fn mm(v: f32) -> f64 {
@@ -527,17 +456,6 @@ pub fn finished_by_shutdown(frame: &Frame) -> Utf8Bytes {
         reason: Some("server_shutdown"),
         time_s: frame.time_s,
     }))
-}
-
-pub fn error(message: &str) -> Utf8Bytes {
-    Utf8Bytes::from(to_json(&ErrorWire {
-        kind: "error",
-        error: message,
-    }))
-}
-
-pub fn pong(t: f64) -> Utf8Bytes {
-    Utf8Bytes::from(to_json(&Pong { kind: "pong", t }))
 }
 
 pub fn welcome(w: &Welcome<'_>) -> Utf8Bytes {

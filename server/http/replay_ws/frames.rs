@@ -7,6 +7,7 @@ use axum::extract::ws::Message;
 
 use crate::game::replay::Replay;
 use crate::game::view::{BELIEF_EVERY, Frame, SeatView, visible_to};
+use crate::http::socket::schedule::due;
 use crate::protocol::{compact, ws as wire};
 use lasertag_core::sim::AgentId;
 use lasertag_core::world::{EventKind, MatchStatus, World};
@@ -76,11 +77,12 @@ pub fn at_end(replay: &Replay, world: &World) -> bool {
 pub fn show(replay: &Replay, world: &World, show: Show) -> Shown {
     let tick = world.tick;
     let belief = show.belief
-        && (show.fresh
-            || at_end(replay, world)
-            || show
-                .belief_at
-                .is_none_or(|t| tick < t || tick >= t + BELIEF_EVERY));
+        && due(
+            show.belief_at,
+            tick,
+            BELIEF_EVERY,
+            show.fresh || at_end(replay, world),
+        );
     let all = world.events().len() as u64;
     let since = show.events_after.unwrap_or(all).min(all);
     let robot_tags = world.events()[..since as usize]

@@ -1,0 +1,441 @@
+//! What every WebSocket of the server does alike (`ws`: a live match, `replay_ws`: a
+//! replay): the checks before the upgrade that are not about what is shown, the counts a
+//! connection holds while it is open, and a [`Socket`] that sends with a time-out, caps,
+//! rate-limits and parses what the client sends (every bad message gets an `error`; a client
+//! that keeps sending them is closed, close code 1008), and closes with a code and a reason.
+//!
+//! Each socket's loop is its own (what it waits on differs); it reads with [`Socket::recv`],
+//! which is cancel-safe in a `select!`, and hands what came to [`Socket::read`].
+
+pub mod schedule;
+
+use std::collections::HashMap;
+use std::future::Future;
+use std::net::IpAddr;
+use std::time::Duration;
+
+use axum::extract::ws::rejection::WebSocketUpgradeRejection;
+use axum::extract::ws::{CloseFrame, Message, Utf8Bytes, WebSocket, WebSocketUpgrade};
+use axum::extract::{FromRequestParts, Path, Query};
+use axum::http::StatusCode;
+use axum::http::request::Parts;
+use axum::response::{IntoResponse, Response};
+use tokio_util::sync::CancellationToken;
+use tracing::Instrument;
+
+use crate::game::{ConnectionGuard, Registry};
+use crate::http::limits::{AddressConnection, Bucket, ClientIp};
+use crate::http::{ApiError, AppState};
+use crate::metrics::{ClientGuard, Metrics, Refusal};
+use crate::protocol::Invalid;
+
+/// Bad messages tolerated in a row before the connection is closed...
+pub const STRIKES: f64 = 10.0;
+/// ...recovering one strike every this many seconds.
+pub const STRIKE_RECOVERY_S: f64 = 5.0;
+/// A client that cannot take a message within this time is dropped.
+pub const SEND_TIMEOUT: Duration = Duration::from_secs(10);
+
+/// How long a closing connection waits for the client's close reply when the server is
+/// shutting down (it has 5 s in all).
+const SHUTDOWN_DRAIN: Duration = Duration::from_secs(1);
+/// Close reasons are cut to this many bytes: they must fit a control frame (123 bytes).
+const REASON_BYTES: usize = 120;
+
+/// Close codes (RFC 6455): normal, going away, policy violation, message too big, internal
+/// error.
+const NORMAL: u16 = 1000;
+const GOING_AWAY: u16 = 1001;
+const POLICY: u16 = 1008;
+const TOO_BIG: u16 = 1009;
+const INTERNAL: u16 = 1011;
+
+/// Why a connection ends.
+#[derive(Debug)]
+pub enum End {
+    /// The client left or the socket failed: nothing more to send.
+    Gone,
+    /// Close with this code and reason.
+    Close(u16, String),
+}
+
+impl End {
+    /// The client broke a rule (1008).
+    pub fn policy(reason: impl Into<String>) -> End {
+        End::Close(POLICY, reason.into())
+    }
+
+    /// What the socket showed has ended (1000).
+    pub fn normal(reason: impl Into<String>) -> End {
+        End::Close(NORMAL, reason.into())
+    }
+
+    /// The server is shutting down (1001).
+    pub fn going_away() -> End {
+        End::Close(GOING_AWAY, "the server is shutting down".into())
+    }
+
+    /// The server failed at what the socket needed (1011).
+    pub fn internal(reason: impl Into<String>) -> End {
+        End::Close(INTERNAL, reason.into())
+    }
+}
+
+/// What a socket's upgrade request brings: the id in its path, its query, the client's
+/// address, and the upgrade itself (or why it is none, refused by [`admit`] after the
+/// socket's own checks).
+pub struct Asked {
+    pub id: String,
+    pub query: HashMap<String, String>,
+    pub ip: IpAddr,
+    pub ws: Result<WebSocketUpgrade, WebSocketUpgradeRejection>,
+}
+
+impl FromRequestParts<AppState> for Asked {
+    type Rejection = Response;
+
+    async fn from_request_parts(parts: &mut Parts, state: &AppState) -> Result<Self, Response> {
+        let Path(id) = Path::<String>::from_request_parts(parts, state)
+            .await
+            .map_err(IntoResponse::into_response)?;
+        let Query(query) = Query::<HashMap<String, String>>::from_request_parts(parts, state)
+            .await
+            .map_err(IntoResponse::into_response)?;
+        let ClientIp(ip) = ClientIp::from_request_parts(parts, state)
+            .await
+            .unwrap_or_else(|never| match never {});
+        let ws = WebSocketUpgrade::from_request_parts(parts, state).await;
+        Ok(Asked { id, query, ip, ws })
+    }
+}
+
+/// 503 while the server shuts down: no socket opens then.
+pub fn refuse_while_stopping(registry: &Registry) -> Result<(), ApiError> {
+    if registry.shutdown.is_cancelled() {
+        return Err(ApiError::new(
+            StatusCode::SERVICE_UNAVAILABLE,
+            "the server is shutting down",
+        ));
+    }
+    Ok(())
+}
+
+/// 400 for a query parameter the socket does not take; `names` are those it takes.
+pub fn only_params(query: &HashMap<String, String>, names: &[&str]) -> Result<(), ApiError> {
+    match query.keys().find(|k| !names.contains(&k.as_str())) {
+        Some(k) => Err(ApiError::bad_request(format!(
+            "{k}: unknown query parameter ({})",
+            names.join(", ")
+        ))),
+        None => Ok(()),
+    }
+}
+
+/// `?format=`: whether snapshots go as compact binary messages (else JSON text).
+pub fn compact_format(query: &HashMap<String, String>) -> Result<bool, ApiError> {
+    match query.get("format").map(String::as_str) {
+        None | Some("json") => Ok(false),
+        Some("compact") => Ok(true),
+        Some(other) => Err(ApiError::bad_request(format!(
+            "format: {other:?} is not a snapshot format (json or compact)"
+        ))),
+    }
+}
+
+/// An upgrade request that is a WebSocket's, counted against its address's open sockets.
+pub struct Admitted {
+    ws: WebSocketUpgrade,
+    address: AddressConnection,
+}
+
+/// 400 for a request that is no WebSocket upgrade, 429 for an address with all the sockets
+/// it may have open.
+pub fn admit(
+    state: &AppState,
+    ip: IpAddr,
+    ws: Result<WebSocketUpgrade, WebSocketUpgradeRejection>,
+) -> Result<Admitted, ApiError> {
+    let ws = ws.map_err(|e| ApiError::bad_request(format!("not a WebSocket upgrade: {e}")))?;
+    let registry = &state.registry;
+    let max = registry.config.max_connections_per_address;
+    let Some(address) = state.limits.open_connection(ip, max) else {
+        registry.metrics.refuse(Refusal::ConnectionsPerAddress);
+        return Err(ApiError::new(
+            StatusCode::TOO_MANY_REQUESTS,
+            format!(
+                "too many connections from {ip}: at most {max} WebSockets open at once per address"
+            ),
+        ));
+    };
+    Ok(Admitted { ws, address })
+}
+
+/// What differs between the sockets' [`Socket`]s.
+pub struct Manner {
+    /// The metrics' label for the connection (`player`, `spectator`, `replay`).
+    pub role: &'static str,
+    /// How long a closing connection waits for the client's close reply.
+    pub close_drain: Duration,
+    /// The `error` message a bad message is answered with.
+    pub error: fn(&str) -> Utf8Bytes,
+}
+
+impl Admitted {
+    /// Upgrades, with messages capped at the hard size, and serves the connection with
+    /// `serve` in its own task, inside `span`.
+    pub fn open<F, Fut>(
+        self,
+        state: &AppState,
+        manner: Manner,
+        span: tracing::Span,
+        serve: F,
+    ) -> Response
+    where
+        F: FnOnce(Socket) -> Fut + Send + 'static,
+        Fut: Future<Output = ()> + Send + 'static,
+    {
+        let registry = state.registry.clone();
+        let hard = registry.config.hard_message_bytes();
+        let address = self.address;
+        self.ws
+            .max_message_size(hard)
+            .max_frame_size(hard)
+            .on_upgrade(move |socket| {
+                async move {
+                    tracing::debug!("connected");
+                    serve(Socket::new(socket, &registry, manner, address)).await;
+                    tracing::debug!("disconnected");
+                }
+                .instrument(span)
+            })
+    }
+}
+
+/// Counts a connection holds until it ends: per address, open (for shutdown), per role.
+struct Guards {
+    _address: AddressConnection,
+    _open: ConnectionGuard,
+    _client: ClientGuard,
+}
+
+/// One client's WebSocket, with its limits.
+pub struct Socket {
+    socket: WebSocket,
+    manner: Manner,
+    metrics: Metrics,
+    shutdown: CancellationToken,
+    max_message_bytes: usize,
+    hard_message_bytes: usize,
+    /// How the rate limit is said: sustained messages per second, and bursts.
+    rate: (f64, f64),
+    messages: Bucket,
+    strikes: Bucket,
+    _guards: Guards,
+}
+
+impl Socket {
+    fn new(
+        socket: WebSocket,
+        registry: &Registry,
+        manner: Manner,
+        address: AddressConnection,
+    ) -> Socket {
+        let cfg = &registry.config;
+        Socket {
+            socket,
+            metrics: registry.metrics.clone(),
+            shutdown: registry.shutdown.clone(),
+            max_message_bytes: cfg.max_message_bytes,
+            hard_message_bytes: cfg.hard_message_bytes(),
+            rate: (cfg.messages_per_s, cfg.message_burst),
+            messages: Bucket::new(cfg.message_burst, cfg.messages_per_s),
+            strikes: Bucket::new(STRIKES, 1.0 / STRIKE_RECOVERY_S),
+            _guards: Guards {
+                _address: address,
+                _open: registry.connection(),
+                _client: registry.metrics.client(manner.role),
+            },
+            manner,
+        }
+    }
+
+    /// The server's shutdown token.
+    pub fn shutdown(&self) -> &CancellationToken {
+        &self.shutdown
+    }
+
+    /// Counts `bytes` of snapshots sent, under the connection's role.
+    pub fn count_snapshot(&self, bytes: usize) {
+        self.metrics
+            .snapshot_bytes
+            .with_label_values(&[self.manner.role])
+            .inc_by(bytes as u64);
+    }
+
+    /// The client's next message, as it came: hand it to [`Socket::read`]. Cancel-safe.
+    pub async fn recv(&mut self) -> Option<Result<Message, axum::Error>> {
+        self.socket.recv().await
+    }
+
+    /// What the client sent, checked: a text message within the size cap and the rate
+    /// limit that `parse` takes. Anything else is struck (`Ok(None)`, or the end after too
+    /// many); a ping frame is `Ok(None)` (the socket answers it itself); a close, a failed
+    /// socket or a message over the hard cap end the connection.
+    pub async fn read<T>(
+        &mut self,
+        msg: Option<Result<Message, axum::Error>>,
+        parse: impl FnOnce(&str) -> Result<T, Invalid>,
+    ) -> Result<Option<T>, End> {
+        let text = match msg {
+            None | Some(Ok(Message::Close(_))) => return Err(End::Gone),
+            Some(Err(e)) => {
+                let text = e.to_string();
+                if text.contains("too long")
+                    || text.contains("Space limit")
+                    || text.contains("capacity")
+                {
+                    self.metrics.refuse(Refusal::MessageTooLarge);
+                    let reason = format!("message over {} bytes", self.hard_message_bytes);
+                    return Err(End::Close(TOO_BIG, reason));
+                }
+                return Err(End::Gone);
+            }
+            Some(Ok(Message::Text(text))) => text,
+            Some(Ok(Message::Binary(b))) => {
+                let why = format!("binary message of {} bytes: send JSON text", b.len());
+                return self
+                    .strike(Refusal::MessageInvalid, &why)
+                    .await
+                    .map(|()| None);
+            }
+            Some(Ok(_)) => return Ok(None),
+        };
+        let max = self.max_message_bytes;
+        if text.len() > max {
+            let why = format!(
+                "message of {} bytes is over the {max}-byte limit",
+                text.len()
+            );
+            return self
+                .strike(Refusal::MessageTooLarge, &why)
+                .await
+                .map(|()| None);
+        }
+        if self.messages.take().is_err() {
+            let (per_s, burst) = self.rate;
+            let why =
+                format!("rate limit: at most {per_s} messages per second (bursts of {burst})");
+            return self.strike(Refusal::MessageRate, &why).await.map(|()| None);
+        }
+        match parse(text.as_str()) {
+            Ok(m) => Ok(Some(m)),
+            Err(e) => {
+                let why = e.to_string();
+                self.strike(Refusal::MessageInvalid, &why)
+                    .await
+                    .map(|()| None)
+            }
+        }
+    }
+
+    /// A bad message: an `error` now, a close when it happens too often.
+    pub async fn strike(&mut self, refusal: Refusal, why: &str) -> Result<(), End> {
+        self.metrics.refuse(refusal);
+        if self.strikes.take().is_err() {
+            return Err(End::policy(format!("too many bad messages; last: {why}")));
+        }
+        self.error(why).await
+    }
+
+    /// An `error` that is no strike (the message was fine; what it asked for is not).
+    pub async fn error(&mut self, why: &str) -> Result<(), End> {
+        let text = (self.manner.error)(why);
+        self.text(text).await
+    }
+
+    /// Sends `message`, or ends the connection if the client cannot take it in time.
+    pub async fn send(&mut self, message: Message) -> Result<(), End> {
+        match tokio::time::timeout(SEND_TIMEOUT, self.socket.send(message)).await {
+            Ok(Ok(())) => Ok(()),
+            _ => Err(End::Gone),
+        }
+    }
+
+    pub async fn text(&mut self, text: Utf8Bytes) -> Result<(), End> {
+        self.send(Message::Text(text)).await
+    }
+
+    /// Ends the connection as `end` says: nothing more for a client gone; a close frame (its
+    /// reason cut to fit) and the closing handshake otherwise.
+    pub async fn close(&mut self, end: Result<(), End>) {
+        let Err(End::Close(code, reason)) = end else {
+            return;
+        };
+        let drain = if self.shutdown.is_cancelled() {
+            SHUTDOWN_DRAIN
+        } else {
+            self.manner.close_drain
+        };
+        let close = Message::Close(Some(CloseFrame {
+            code,
+            reason: Utf8Bytes::from(truncate(&reason, REASON_BYTES)),
+        }));
+        if let Ok(Ok(())) = tokio::time::timeout(SEND_TIMEOUT, self.socket.send(close)).await {
+            // Finish the closing handshake: read (and drop) what the client still sends
+            // until its close, so the socket is not reset under the close frame.
+            let drain_fut = async {
+                while let Some(Ok(m)) = self.socket.recv().await {
+                    if matches!(m, Message::Close(_)) {
+                        break;
+                    }
+                }
+            };
+            let _ = tokio::time::timeout(drain, drain_fut).await;
+        }
+    }
+}
+
+/// The longest start of `s` within `max` bytes, cut between characters.
+fn truncate(s: &str, max: usize) -> String {
+    let mut out = String::new();
+    for c in s.chars() {
+        if out.len() + c.len_utf8() > max {
+            break;
+        }
+        out.push(c);
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn close_reasons_are_cut_between_characters() {
+        assert_eq!(truncate("short", REASON_BYTES), "short");
+        let long = "é".repeat(100);
+        let cut = truncate(&long, REASON_BYTES);
+        assert_eq!(cut.len(), REASON_BYTES);
+        assert_eq!(truncate("aé", 2), "a");
+    }
+
+    #[test]
+    fn only_the_named_parameters_and_formats_pass() {
+        let q = |pairs: &[(&str, &str)]| -> HashMap<String, String> {
+            pairs
+                .iter()
+                .map(|(k, v)| (k.to_string(), v.to_string()))
+                .collect()
+        };
+        assert!(only_params(&q(&[("token", "x")]), &["token", "format"]).is_ok());
+        let e = only_params(&q(&[("x", "1")]), &["token", "format"]).unwrap_err();
+        assert_eq!(e.message, "x: unknown query parameter (token, format)");
+        assert_eq!(compact_format(&q(&[])).ok(), Some(false));
+        assert_eq!(
+            compact_format(&q(&[("format", "compact")])).ok(),
+            Some(true)
+        );
+        assert!(compact_format(&q(&[("format", "xml")])).is_err());
+    }
+}

@@ -1,0 +1,94 @@
+// A page's WebSocket (game.js: a live match, replay.js: a replay): the URL on the node that
+// serves it, compact binary snapshots decoded and JSON text parsed, each message handed to
+// the page's handler for its `type`, the server's `error`s kept for the tests, and a
+// connection lost tried again a second later, a few times in a row.
+
+import { CompactDecoder } from "./compact.js";
+
+/** The wait before a lost connection is tried again. */
+const RETRY_MS = 1000;
+
+/** The page's status line. */
+const status = (text) => { document.getElementById("hud-status").textContent = text; };
+
+/** The WebSocket URL of `path` on the node at `base` (its URL in a fleet listing), or on the
+ * page's own server when `base` is empty. Browsers follow no redirect when opening a socket,
+ * so the page goes to the match's node itself. */
+export function socketUrl(base, path) {
+  const at = base ? new URL(base) : location;
+  return `${at.protocol === "https:" ? "wss" : "ws"}://${at.host}${path}`;
+}
+
+/** The counters the tests read (`window.__lasertag`, as the pages have it). */
+const debug = (window.__lasertag = window.__lasertag || {});
+
+export class PageSocket {
+  /** The socket of `page`: `url()` is where to connect, asked on every try; `types` names
+   * the page's method for each message type it reads (the others are dropped, an `error`
+   * kept for the tests); `page.lost(e)` hears of a close the page did not ask for, and is
+   * true when the page has dealt with it; otherwise the socket is tried again, `retries`
+   * times in a row at the most. */
+  constructor(page, { url, types, retries }) {
+    Object.assign(this, { page, url, types, retries });
+    this.tries = 0;
+    this.ws = null;
+  }
+
+  connect() {
+    const ws = new WebSocket(this.url());
+    ws.binaryType = "arraybuffer";
+    const decoder = new CompactDecoder();
+    this.ws = ws;
+    ws.onopen = () => { debug.connected = true; this.tries = 0; };
+    ws.onmessage = (m) => {
+      const binary = typeof m.data !== "string";
+      // What the page receives, for measurements of the bandwidth a client needs.
+      debug.rxBytes = (debug.rxBytes || 0) + (binary ? m.data.byteLength : m.data.length);
+      let msg;
+      try { msg = binary ? decoder.decode(m.data) : JSON.parse(m.data); } catch (e) {
+        debug.errors.push(String(e));
+        return;
+      }
+      this.dispatch(msg);
+    };
+    ws.onclose = (e) => {
+      debug.connected = false;
+      if (this.page.lost(e)) return;
+      if (this.tries++ < this.retries) {
+        status("connection lost — reconnecting…");
+        setTimeout(() => { if (this.ws === ws) this.connect(); }, RETRY_MS);
+      } else {
+        status("connection lost");
+      }
+    };
+  }
+
+  dispatch(msg) {
+    const method = this.types[msg.type];
+    if (method) return this.page[method](msg);
+    if (msg.type === "error") {
+      debug.errors.push(msg.error);
+      console.warn("server:", msg.error);
+    }
+  }
+
+  /** Whether a message sent now goes out. */
+  get open() {
+    return Boolean(this.ws) && this.ws.readyState === WebSocket.OPEN;
+  }
+
+  send(obj) {
+    if (this.open) this.ws.send(JSON.stringify(obj));
+  }
+
+  /** Closes the socket the page is done with: no handler hears from it again. */
+  close(code, reason) {
+    const ws = this.ws;
+    this.ws = null;
+    if (!ws) return;
+    ws.onmessage = null;
+    ws.onclose = null;
+    debug.connected = false;
+    ws.close(code, reason);
+  }
+}
