@@ -467,13 +467,8 @@ pub async fn step(
     JsonBody(body): JsonBody<StepRequest>,
 ) -> Result<Json<MatchState>, ApiError> {
     let handle = owned(&state, &bearer, &id)?;
-    if !(1..=100_000).contains(&body.ticks) {
-        return Err(ApiError::bad_request(format!(
-            "ticks: {} must be in 1..=100000",
-            body.ticks
-        )));
-    }
-    Ok(Json(handle.step(body.ticks as u64).await?))
+    let ticks = body.ticks()?;
+    Ok(Json(handle.step(ticks).await?))
 }
 
 #[utoipa::path(get, path = "/api/matches/{id}/belief",
