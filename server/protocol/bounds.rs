@@ -85,7 +85,7 @@ pub const STEP_TICKS: Bound = Bound {
     kind: Kind::Integer,
     range: closed(1.0, 100_000.0),
     default: None,
-    doc: "Ticks `step` advances the match by (required).",
+    doc: "Ticks `step` advances the match by.",
 };
 
 /// `ticks` of `POST /api/matches/{id}/act`: the range of `step`'s, and a default.
@@ -192,12 +192,12 @@ impl Bound {
         };
         let description = match self.default {
             Some(_) => format!(
-                "{} {} (default {}).",
+                "{} Range {}, default {}.",
                 self.doc,
                 self.range_text(),
                 self.default_text()
             ),
-            None => format!("{} {}.", self.doc, self.range_text()),
+            None => format!("{} Range {}.", self.doc, self.range_text()),
         };
         let object = ObjectBuilder::new()
             .schema_type(schema_type)

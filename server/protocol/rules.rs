@@ -78,7 +78,7 @@ pub struct Detection {
 pub struct Tag {
     /// A tag hits what is within this many degrees either side of the heading.
     pub half_angle_deg: f64,
-    /// …and within this many metres, in line of sight.
+    /// How far a tag reaches, metres (in line of sight).
     pub range: f64,
     /// Ticks after a shot before the device fires again.
     pub cooldown_ticks: u64,
