@@ -5,6 +5,7 @@ import { segments, visibility, castRay, angleDiff } from "./geometry.js";
 import { draw, fit, roleColor } from "./render.js";
 import { Predictor } from "./predict.js";
 import { CompactDecoder } from "./compact.js";
+import { rules } from "./rules.js";
 
 const $ = (id) => document.getElementById(id);
 const TICK_MS = 50;
@@ -284,7 +285,8 @@ export class Game {
     let x2, y2;
     if (to) { x2 = to.x; y2 = to.y; } else {
       const dx = Math.cos(from.theta), dy = Math.sin(from.theta);
-      const r = this.segs ? castRay(this.segs, from.x, from.y, dx, dy, 6) : 6;
+      const reach = rules.tag.range;
+      const r = this.segs ? castRay(this.segs, from.x, from.y, dx, dy, reach) : reach;
       x2 = from.x + dx * r; y2 = from.y + dy * r;
     }
     const color = e.by.startsWith("r") ? "#9fdcff" : "#ff6b8b";

@@ -6,6 +6,7 @@
 import { segments, visibility, castRay, angleDiff } from "./geometry.js";
 import { draw, fit, roleColor } from "./render.js";
 import { CompactDecoder } from "./compact.js";
+import { rules } from "./rules.js";
 import { socketUrl } from "./game.js";
 
 const $ = (id) => document.getElementById(id);
@@ -276,7 +277,7 @@ export class Replay {
     let x2, y2;
     if (to) { x2 = to.x; y2 = to.y; } else {
       const dx = Math.cos(from.theta), dy = Math.sin(from.theta);
-      const r = castRay(this.segs, from.x, from.y, dx, dy, 6);
+      const r = castRay(this.segs, from.x, from.y, dx, dy, rules.tag.range);
       x2 = from.x + dx * r; y2 = from.y + dy * r;
     }
     const color = e.by.startsWith("r") ? "#9fdcff" : "#ff6b8b";
