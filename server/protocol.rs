@@ -10,11 +10,13 @@
 //! What a match shows of itself (its summary, ground truth, the team's belief, the event
 //! log) is in [`state`]; requests and the small shapes are here.
 
+pub mod bounds;
 pub mod compact;
 pub mod fleet;
 pub mod replay_ws;
 pub mod replays;
 pub mod robots;
+pub mod rules;
 pub mod settings;
 pub mod socket;
 pub mod state;
@@ -208,13 +210,13 @@ pub struct CreateMatch {
     /// A map name, or an inline map object.
     #[schema(schema_with = schema::map_or_name)]
     pub map: serde_json::Value,
-    /// 1..=8 robots (default 2).
+    /// [`bounds::ROBOTS`].
     #[serde(default, deserialize_with = "schema::opt_int")]
-    #[schema(minimum = 1, maximum = 8)]
+    #[schema(schema_with = bounds::robots_schema)]
     pub robots: Option<i64>,
-    /// 1..=32 opponents (default 1).
+    /// [`bounds::OPPONENTS`].
     #[serde(default, deserialize_with = "schema::opt_int")]
-    #[schema(minimum = 1, maximum = 32)]
+    #[schema(schema_with = bounds::opponents_schema)]
     pub opponents: Option<i64>,
     pub opponent_control: Option<OpponentControl>,
     pub opponent_bot: Option<OpponentBot>,
@@ -230,23 +232,21 @@ pub struct CreateMatch {
     #[serde(default, deserialize_with = "schema::opt_seed")]
     #[schema(schema_with = schema::seed)]
     pub seed: Option<u64>,
-    /// Seconds, in (0, 86400] (default 300).
-    #[schema(exclusive_minimum = 0.0, maximum = 86_400.0)]
+    /// [`bounds::TIME_LIMIT_S`].
+    #[schema(schema_with = bounds::time_limit_s_schema)]
     pub time_limit_s: Option<f64>,
     /// Where agents start when no explicit starts are given (default `spawns`).
     pub placement: Option<StartPlacement>,
     /// Explicit robot starts `[x, y, heading]`, one per robot.
-    #[schema(schema_with = schema::robot_starts)]
+    #[schema(schema_with = bounds::robot_starts_schema)]
     pub robot_starts: Option<Vec<[f64; 3]>>,
     /// Explicit opponent starts `[x, y]`, one per opponent.
-    #[schema(schema_with = schema::opponent_starts)]
+    #[schema(schema_with = bounds::opponent_starts_schema)]
     pub opponent_starts: Option<Vec<[f64; 2]>>,
     /// Whether people may take over bot opponents (default false; the showcase allows it).
     pub bots_joinable: Option<bool>,
-    /// Seconds, 0..=600 (default 30): how far behind the match its state, belief, events and
-    /// spectator WebSocket run for everyone but its owner, when people may play it (human
-    /// opponents, or `bots_joinable`). Ignored, and echoed as 0, when they may not.
-    #[schema(minimum = 0.0, maximum = 600.0)]
+    /// [`bounds::SPECTATOR_DELAY_S`].
+    #[schema(schema_with = bounds::spectator_delay_s_schema)]
     pub spectator_delay_s: Option<f64>,
     /// Whether robots localise themselves from odometry, laser and landmarks (default true;
     /// false leaves each robot its odometry alone, which drifts).
@@ -274,10 +274,8 @@ pub struct MatchRequest {
     pub spectator_delay_ticks: u64,
 }
 
-/// Default of `spectator_delay_s`.
-pub const SPECTATOR_DELAY_S: f64 = crate::game::delay::SPECTATOR_DELAY_S;
-/// Most of `spectator_delay_s`: what a match holds back is priced by it.
-pub const MAX_SPECTATOR_DELAY_S: f64 = 600.0;
+/// Default of `spectator_delay_s` ([`bounds::SPECTATOR_DELAY_S`]).
+pub const SPECTATOR_DELAY_S: f64 = bounds::SPECTATOR_DELAY_S.default_value();
 
 fn refused(field: &str, message: String) -> FieldError {
     FieldError {
@@ -286,39 +284,12 @@ fn refused(field: &str, message: String) -> FieldError {
     }
 }
 
-fn in_range(field: &str, v: i64, lo: i64, hi: i64) -> Result<i64, FieldError> {
-    if (lo..=hi).contains(&v) {
-        Ok(v)
-    } else {
-        Err(refused(field, format!("{v} must be in {lo}..={hi}")))
-    }
-}
-
-fn finite_in(field: &str, v: f64, lo: f64, hi: f64, lo_open: bool) -> Result<f64, FieldError> {
-    let ok = v.is_finite() && (if lo_open { v > lo } else { v >= lo }) && v <= hi;
-    if ok {
-        Ok(v)
-    } else {
-        let open = if lo_open { "(" } else { "[" };
-        Err(refused(
-            field,
-            format!("{v} must be finite and in {open}{lo}, {hi}]"),
-        ))
-    }
-}
-
 impl CreateMatch {
     /// Checks ranges and fills in defaults; an error names the field.
     pub fn validate(self) -> Result<MatchRequest, FieldError> {
-        let robots = in_range("robots", self.robots.unwrap_or(2), 1, 8)? as usize;
-        let opponents = in_range("opponents", self.opponents.unwrap_or(1), 1, 32)? as usize;
-        let time_limit_s = finite_in(
-            "time_limit_s",
-            self.time_limit_s.unwrap_or(300.0),
-            0.0,
-            86_400.0,
-            true,
-        )?;
+        let robots = bounds::ROBOTS.integer(self.robots)? as usize;
+        let opponents = bounds::OPPONENTS.integer(self.opponents)? as usize;
+        let time_limit_s = bounds::TIME_LIMIT_S.number(self.time_limit_s)?;
         let check_points = |field: &str, pts: &[&[f64]]| -> Result<(), FieldError> {
             for (i, p) in pts.iter().enumerate() {
                 if let Some(v) = p
@@ -398,13 +369,7 @@ impl CreateMatch {
             ..config
         };
         let bots_joinable = self.bots_joinable.unwrap_or(false);
-        let delay_s = finite_in(
-            "spectator_delay_s",
-            self.spectator_delay_s.unwrap_or(SPECTATOR_DELAY_S),
-            0.0,
-            MAX_SPECTATOR_DELAY_S,
-            false,
-        )?;
+        let delay_s = bounds::SPECTATOR_DELAY_S.number(self.spectator_delay_s)?;
         let people = bots_joinable || config.opponent_control == ControlKind::Human;
         Ok(MatchRequest {
             map: self.map,
@@ -475,10 +440,17 @@ pub(crate) fn winner(w: Option<Side>) -> Option<Winner> {
 #[derive(Debug, Clone, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct StepRequest {
-    /// 1..=100000
+    /// [`bounds::STEP_TICKS`].
     #[serde(deserialize_with = "schema::int")]
-    #[schema(minimum = 1, maximum = 100_000)]
+    #[schema(schema_with = bounds::step_ticks_schema)]
     pub ticks: i64,
+}
+
+impl StepRequest {
+    /// The ticks to advance, checked ([`bounds::STEP_TICKS`]).
+    pub fn ticks(&self) -> Result<u64, Invalid> {
+        Ok(bounds::STEP_TICKS.integer(Some(self.ticks))? as u64)
+    }
 }
 
 /// Body of `POST /api/matches/{id}/opponents/{oid}/command`: exactly one field.

@@ -19,8 +19,8 @@ pub const MAX_VERTICES: usize = 10_000;
 /// Most vertices of one polygon: checking that it does not cross itself compares every
 /// pair of its edges.
 pub const MAX_POLYGON_VERTICES: usize = 1_000;
-/// Most robot spawns, and most opponent spawns (matches have at most 8 robots and 32
-/// opponents; spawns wrap): each is checked against every wall.
+/// Most robot spawns, and most opponent spawns (at least as many as a match may have agents
+/// of a side, `protocol::bounds`; spawns wrap): each is checked against every wall.
 pub const MAX_SPAWNS: usize = 64;
 /// Most landmarks: a localising robot looks for every one of them each tick.
 pub const MAX_LANDMARKS: usize = 256;
@@ -47,27 +47,14 @@ fn nullable_array() -> SchemaType {
     SchemaType::from_iter([Type::Array, Type::Null])
 }
 
-/// Explicit robot starts `[x, y, heading]`, at most 8 (one per robot).
-pub fn robot_starts() -> RefOr<Schema> {
+/// Explicit starts, `[x, y, heading]` (`n` 3) or `[x, y]` (`n` 2), at most `at_most` (the
+/// most agents of that side a match may have: `protocol::bounds`).
+pub fn starts(n: usize, at_most: usize, description: &str) -> RefOr<Schema> {
     ArrayBuilder::new()
         .schema_type(nullable_array())
-        .items(tuple(3, -MAX_COORDINATE, MAX_COORDINATE))
-        .max_items(Some(8))
-        .description(Some(
-            "Explicit robot starts `[x, y, heading]`, one per robot (the count must equal `robots`, each inside the arena and clear of walls).",
-        ))
-        .into()
-}
-
-/// Explicit opponent starts `[x, y]`, at most 32 (one per opponent).
-pub fn opponent_starts() -> RefOr<Schema> {
-    ArrayBuilder::new()
-        .schema_type(nullable_array())
-        .items(tuple(2, -MAX_COORDINATE, MAX_COORDINATE))
-        .max_items(Some(32))
-        .description(Some(
-            "Explicit opponent starts `[x, y]`, one per opponent (the count must equal `opponents`, each inside the arena and clear of walls).",
-        ))
+        .items(tuple(n, -MAX_COORDINATE, MAX_COORDINATE))
+        .max_items(Some(at_most))
+        .description(Some(description))
         .into()
 }
 

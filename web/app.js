@@ -7,6 +7,7 @@
 import { Game, debug } from "./game.js";
 import { Replay } from "./replay.js";
 import { showHistory, showLeaderboard, showPlayer } from "./pages.js";
+import { rules } from "./rules.js";
 
 const $ = (id) => document.getElementById(id);
 let game = null;
@@ -261,6 +262,14 @@ async function route() {
 }
 
 $("name").value = localStorage.getItem("lasertag.name") || "";
+// The form's ranges and defaults are the server's; the page offers no more opponents than
+// index.html's `max` (fewer than a match may have).
+for (const name of ["robots", "opponents"]) {
+  const bound = rules.bounds[name], input = $("create").elements[name];
+  input.min = bound.minimum;
+  input.value = bound.default;
+  if (!input.max) input.max = bound.maximum;
+}
 $("create").addEventListener("submit", create);
 window.addEventListener("hashchange", route);
 route();

@@ -43,11 +43,12 @@ export function visibility(segs, x, y, n = 360, max = 60) {
   return pts;
 }
 
-/** A laser fan: 180° ahead of (x, y, theta), `n` beams, each stopped by walls. */
-export function fan(segs, x, y, theta, n = 61, range = 8) {
+/** A laser fan: `fov` radians centred on theta at (x, y), `n` beams reaching `range`, each
+ * stopped by walls. */
+export function fan(segs, x, y, theta, n, range, fov) {
   const pts = [];
   for (let i = 0; i < n; i++) {
-    const a = theta + (i / (n - 1) - 0.5) * Math.PI;
+    const a = theta + (i / (n - 1) - 0.5) * fov;
     const dx = Math.cos(a), dy = Math.sin(a);
     const r = castRay(segs, x, y, dx, dy, range);
     pts.push([x + dx * r, y + dy * r]);

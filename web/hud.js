@@ -4,6 +4,7 @@
 
 import { castRay, angleDiff } from "./geometry.js";
 import { roleColor } from "./render.js";
+import { rules } from "./rules.js";
 
 /** Beams drawn at once, at the most; lines in the feed. */
 const MAX_BEAMS = 20;
@@ -45,7 +46,7 @@ export function feedLine(text, cls) {
 }
 
 /** Adds to `beams` the laser of shot `e` as `snap` shows it: from the shooter to what it
- * hit, or along its heading to the first wall (6 m at the most); nothing when the shooter
+ * hit, or along its heading to the first wall (the tag's range at the most); nothing when the shooter
  * is out of sight. */
 export function addBeam(beams, e, snap, segs) {
   if (!snap) return;
@@ -56,7 +57,8 @@ export function addBeam(beams, e, snap, segs) {
   let x2, y2;
   if (to) { x2 = to.x; y2 = to.y; } else {
     const dx = Math.cos(from.theta), dy = Math.sin(from.theta);
-    const r = segs ? castRay(segs, from.x, from.y, dx, dy, 6) : 6;
+    const reach = rules.tag.range;
+    const r = segs ? castRay(segs, from.x, from.y, dx, dy, reach) : reach;
     x2 = from.x + dx * r; y2 = from.y + dy * r;
   }
   const color = e.by.startsWith("r") ? "#9fdcff" : "#ff6b8b";

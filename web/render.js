@@ -2,6 +2,7 @@
 // and returns counts of what it drew, which the page exposes for tests (window.__lasertag).
 
 import { fan } from "./geometry.js";
+import { rules, laserFov } from "./rules.js";
 
 export const COLORS = {
   floor: "#161c25",
@@ -128,12 +129,13 @@ export function draw(ctx, v, scene) {
     if (r.scan && r.scan.length) {
       const n = r.scan.length;
       pts = r.scan.map((cm, i) => {
-        const a = r.theta + ((i - (n - 1) / 2) * Math.PI) / (n - 1);
+        const a = r.theta + ((i - (n - 1) / 2) * laserFov) / (n - 1);
         const d = cm / 100;
         return [r.x + Math.cos(a) * d, r.y + Math.sin(a) * d];
       });
     } else {
-      pts = fan(scene.segs, r.x, r.y, r.theta);
+      // Fewer beams than the laser's: the drawn fan only needs its outline.
+      pts = fan(scene.segs, r.x, r.y, r.theta, 61, rules.laser.range, laserFov);
     }
     path(ctx, v, [[r.x, r.y], ...pts]);
     ctx.fillStyle = COLORS.fan;
@@ -279,7 +281,7 @@ export function draw(ctx, v, scene) {
   // Agents.
   for (const r of scene.robots) {
     const color = r.frozen ? COLORS.robotFrozen : COLORS.robot;
-    disc(ctx, v, r.x, r.y, 0.25, color, "#e6f1ff", 2);
+    disc(ctx, v, r.x, r.y, rules.agent_radius, color, "#e6f1ff", 2);
     heading(ctx, v, r.x, r.y, r.theta, 0.45, "#e6f1ff");
     if (r.frozen) {
       ctx.beginPath();
@@ -296,7 +298,7 @@ export function draw(ctx, v, scene) {
   for (const o of scene.opponents) {
     if (o.tagged) continue;
     const mine = o.id === scene.you;
-    disc(ctx, v, o.x, o.y, 0.25, mine ? COLORS.you : COLORS.opponent, "#fff", mine ? 3 : 2);
+    disc(ctx, v, o.x, o.y, rules.agent_radius, mine ? COLORS.you : COLORS.opponent, "#fff", mine ? 3 : 2);
     heading(ctx, v, o.x, o.y, o.theta, 0.45, "#fff");
     label(ctx, v, o.x, o.y, mine ? "you" : o.name || o.id, mine ? COLORS.you : "#ffc2cd");
     counts.opponents++;

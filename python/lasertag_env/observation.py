@@ -1,6 +1,8 @@
 """The fixed-shape observation vector of one robot, built from the server's observation.
 
-Layout (float32, in this order; ``layout.slices`` names each part):
+Layout (float32, in this order; ``layout.slices`` names each part), with the rules of the
+server's ``GET /api/rules`` (the numbers below are its defaults: 181 beams over 180°, an
+8 m reach):
 
 ===============  ===========  =================================================================
 part             length       values
@@ -40,25 +42,36 @@ from binascii import a2b_hex
 import numpy as np
 from gymnasium import spaces
 
+from .rules import SHIPPED
+
 __all__ = ["ObservationLayout", "LASER_RANGE", "BEAMS"]
 
-LASER_RANGE = 8.0  # metres: the laser's and the opponent detector's reach (game-rules.md)
-BEAMS = 181
-_HALF_FOV = math.pi / 2
+#: Metres: the laser's and the opponent detector's reach, in the shipped rules (a layout
+#: takes its server's).
+LASER_RANGE = float(SHIPPED["laser"]["range"])
+#: Beams of a scan, in the shipped rules (a layout takes its server's).
+BEAMS = int(SHIPPED["laser"]["beams"])
 _AGE_SCALE = 100.0
-_MM_RANGE = np.float32(1000.0 * LASER_RANGE)
 
 
 class ObservationLayout:
-    """The vector's parts for ``robots`` robots and ``detections`` detection slots."""
+    """The vector's parts for ``robots`` robots and ``detections`` detection slots, for
+    the sensors of ``rules`` (the server's ``GET /api/rules``; the shipped rules when
+    None)."""
 
-    def __init__(self, robots: int, detections: int, width: float, height: float):
+    def __init__(self, robots: int, detections: int, width: float, height: float,
+                 rules: dict | None = None):
+        laser = (rules or SHIPPED)["laser"]
+        self.beams = int(laser["beams"])
+        self.laser_range = float(laser["range"])
+        self._mm_range = np.float32(1000.0 * self.laser_range)
+        self._half_fov = math.radians(laser["fov_deg"]) / 2
         self.robots = robots
         self.k = detections
         self.width = float(width)
         self.height = float(height)
         parts = [
-            ("scan", BEAMS, 0.0, 1.0),
+            ("scan", self.beams, 0.0, 1.0),
             ("pose", 4, -1.0, 1.0),
             ("spread", 1, 0.0, 1.0),
             ("status", 2, 0.0, 1.0),
@@ -99,7 +112,7 @@ class ObservationLayout:
         """The vector of robot ``robot`` (its index) from its server observation."""
         v = np.empty((1, self.size), dtype=np.float32)
         self._scans_into(v, [obs])
-        v[0, BEAMS:] = self._tail(obs, robot, time_fraction)
+        v[0, self.beams:] = self._tail(obs, robot, time_fraction)
         return self._bound(v)[0]
 
     def encode_all(self, observations: list, time_fraction: float) -> np.ndarray:
@@ -107,7 +120,7 @@ class ObservationLayout:
         array: a few numpy calls for the whole team rather than a few per robot."""
         v = np.empty((len(observations), self.size), dtype=np.float32)
         self._scans_into(v, observations)
-        v[:, BEAMS:] = [self._tail(o, i, time_fraction) for i, o in enumerate(observations)]
+        v[:, self.beams:] = [self._tail(o, i, time_fraction) for i, o in enumerate(observations)]
         return self._bound(v)
 
     def _bound(self, v: np.ndarray) -> np.ndarray:
@@ -118,17 +131,18 @@ class ObservationLayout:
         return v
 
     def _scans_into(self, v: np.ndarray, observations: list) -> None:
-        """Each observation's scan / 8 m into its row of ``v``. Packed scans (hex) are
+        """Each observation's scan / the laser's reach into its row of ``v``. Packed scans (hex) are
         unpacked, and the raw observation gets the list of metres the JSON would have
         held."""
+        beams = self.beams
         scans = [o["scan"] for o in observations]
         if isinstance(scans[0], str):
             packed = [a2b_hex(s) for s in scans]
-            if all(len(b) == 2 * BEAMS for b in packed):
-                mm = np.frombuffer(b"".join(packed), dtype="<u2").reshape(len(packed), BEAMS)
+            if all(len(b) == 2 * beams for b in packed):
+                mm = np.frombuffer(b"".join(packed), dtype="<u2").reshape(len(packed), beams)
                 # millimetres / 8000 in float32 is exactly the float32 of (the JSON's
                 # metres, mm / 1000 in float64) / 8: checked for every u16 in the tests.
-                np.divide(mm, _MM_RANGE, out=v[:, :BEAMS])
+                np.divide(mm, self._mm_range, out=v[:, :beams])
                 for o, metres in zip(observations, (mm / 1000.0).tolist()):
                     o["scan"] = metres
                 return
@@ -137,14 +151,14 @@ class ObservationLayout:
             for o, b in zip(observations, packed):
                 o["scan"] = (np.frombuffer(b, dtype="<u2") / 1000.0).tolist()
                 scans.append(o["scan"])
-        if all(len(s) == BEAMS for s in scans):
-            np.divide(scans, LASER_RANGE, out=v[:, :BEAMS])
+        if all(len(s) == beams for s in scans):
+            np.divide(scans, self.laser_range, out=v[:, :beams])
             return
         for row, s in zip(v, scans):
             if s:
-                np.divide(s, LASER_RANGE, out=row[:BEAMS])
+                np.divide(s, self.laser_range, out=row[:beams])
             else:  # a frozen robot senses nothing
-                row[:BEAMS] = 0.0
+                row[:beams] = 0.0
 
     def _tail(self, obs: dict, robot: int, time_fraction: float) -> list:
         """Everything after the scan, as a list (numpy item assignments cost far more per
@@ -160,7 +174,7 @@ class ObservationLayout:
         if len(dets) > 1:
             dets = sorted(dets, key=_range)
         for det in dets[: self.k]:
-            tail += (1.0, det["range"] / LASER_RANGE, det["bearing"] / _HALF_FOV)
+            tail += (1.0, det["range"] / self.laser_range, det["bearing"] / self._half_fov)
         tail += self._no_detection * (self.k - min(len(dets), self.k))
         if self.robots > 1:
             mates = self._no_mates[:]

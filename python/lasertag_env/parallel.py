@@ -19,11 +19,12 @@ from pettingzoo import ParallelEnv
 from .client import Client, ServerError, error_message, loads
 from .observation import ObservationLayout
 from .render import Renderer
+from .rules import SHIPPED, check_bound, fetch
 from .server import LocalServer
 
 __all__ = ["LasertagParallelEnv", "parallel_env", "DEFAULT_REWARDS"]
 
-TICK_HZ = 20
+TICK_HZ = SHIPPED["tick_hz"]
 
 DEFAULT_REWARDS = {
     # Each tag the robot makes (an opponent eliminated by its shot).
@@ -74,9 +75,10 @@ class LasertagParallelEnv(ParallelEnv):
         pixels_per_metre: float = 20.0,
         packed_scans: bool = True,
     ):
-        _check_int("robots", robots, 1, 8)
-        _check_int("opponents", opponents, 1, 32)
-        _check_int("ticks_per_step", ticks_per_step, 1, 100_000)
+        # Types here; ranges once the server has said its bounds (below).
+        for name, value in (("robots", robots), ("opponents", opponents),
+                            ("ticks_per_step", ticks_per_step)):
+            _check_int(name, value, None, None)
         _check_seed(seed)
         if max_steps is not None:
             _check_int("max_steps", max_steps, 1, None)
@@ -124,6 +126,10 @@ class LasertagParallelEnv(ParallelEnv):
         try:
             self._client = Client(url, token)
             self._check_server()
+            self.rules = fetch(self._client)
+            check_bound(self.rules, "robots", robots)
+            check_bound(self.rules, "opponents", opponents)
+            check_bound(self.rules, "ticks", ticks_per_step, "ticks_per_step")
             if isinstance(map, str):
                 self.map_def = self._fetch_map(map)
             else:
@@ -155,7 +161,7 @@ class LasertagParallelEnv(ParallelEnv):
         self.possible_agents = [f"r{i}" for i in range(robots)]
         self.layout = ObservationLayout(
             robots, opponents if detections is None else detections,
-            self.map_def["width"], self.map_def["height"],
+            self.map_def["width"], self.map_def["height"], self.rules,
         )
         self._obs_spaces = {a: self.layout.space() for a in self.possible_agents}
         # forward and turn are fractions of the top speed and turn rate (counter-clockwise
@@ -440,9 +446,11 @@ def _unpack(a) -> tuple[float, float, float]:
     return forward, turn, tag
 
 
-def _check_int(name: str, value, lo: int, hi: int | None) -> None:
+def _check_int(name: str, value, lo: int | None, hi: int | None) -> None:
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
         raise TypeError(f"{name} must be an integer, not {value!r}")
+    if lo is None:
+        return
     if value < lo or (hi is not None and value > hi):
         bound = f"in {lo}..={hi}" if hi is not None else f"at least {lo}"
         raise ValueError(f"{name}: {value} must be {bound}")
@@ -473,11 +481,13 @@ def parallel_env(
       uses a running server (``admin_token=``, default $LASERTAG_ADMIN_TOKEN, lifts its
       per-address limits); a :class:`LocalServer` is shared and left running.
     - ``map``: a map name on the server, or an inline map object (docs/map-format.md).
-    - ``robots`` (1..=8) agents ``r0 …``; ``opponents`` (1..=32) bots of kind
-      ``opponent_bot`` (``wander``, ``evade``, ``idle``).
+    - ``robots`` agents ``r0 …``; ``opponents`` bots of kind ``opponent_bot``
+      (``wander``, ``evade``, ``idle``); both within the server's bounds (``GET /api/rules``,
+      kept as ``env.rules``).
     - ``seed``: the first episode's match seed (see ``reset``).
     - ``max_steps``: steps before truncation (None: only the match's time limit,
-      ``time_limit_s``, 300 s by default); ``ticks_per_step`` ticks (1/20 s each) per step.
+      ``time_limit_s``, 300 s by default); ``ticks_per_step`` ticks (``env.rules["tick_hz"]``
+      to a second) per step.
     - ``render_mode``: None or ``"rgb_array"``.
     - keywords: ``admin_token``, ``time_limit_s``, ``placement`` (``"spawns"`` or
       ``"random"``), ``detections`` (slots in the observation, default ``opponents``),

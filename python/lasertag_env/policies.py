@@ -11,10 +11,13 @@ import math
 
 import numpy as np
 
+from .rules import SHIPPED
+
 __all__ = ["idle", "hunter"]
 
-_AIM = math.radians(3.0)  # the tag cone is ±5°; aim inside it allowing for detection noise
-_TAG_RANGE = 6.0
+# Aim 2° inside the tag cone, allowing for detection noise.
+_AIM = math.radians(SHIPPED["tag"]["half_angle_deg"] - 2.0)
+_TAG_RANGE = SHIPPED["tag"]["range"]
 
 
 def idle(obs: dict) -> np.ndarray:

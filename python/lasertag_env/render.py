@@ -12,6 +12,8 @@ import math
 
 import numpy as np
 
+from .rules import SHIPPED
+
 __all__ = ["Renderer"]
 
 BACKGROUND = (246, 246, 242)
@@ -22,7 +24,7 @@ OPPONENT = (220, 60, 50)
 TAGGED = (175, 175, 175)
 LASER = (60, 170, 90)
 HEADING = (20, 20, 20)
-AGENT_RADIUS = 0.25  # metres (game-rules.md)
+AGENT_RADIUS = SHIPPED["agent_radius"]  # metres
 
 
 class Renderer:

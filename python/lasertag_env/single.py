@@ -14,7 +14,7 @@ import gymnasium
 import numpy as np
 
 from . import policies
-from .parallel import LasertagParallelEnv
+from .parallel import TICK_HZ, LasertagParallelEnv
 
 __all__ = ["LasertagEnv", "single_agent_env"]
 
@@ -29,7 +29,7 @@ class LasertagEnv(gymnasium.Env):
     ``max_steps``, ``ticks_per_step``, …; see :func:`lasertag_env.parallel_env`).
     """
 
-    metadata = {"render_modes": ["rgb_array"], "render_fps": 20}
+    metadata = {"render_modes": ["rgb_array"], "render_fps": TICK_HZ}
 
     def __init__(
         self,

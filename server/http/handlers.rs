@@ -201,13 +201,7 @@ pub async fn step(
     JsonBody(body): JsonBody<StepRequest>,
 ) -> Result<Json<MatchState>, ApiError> {
     let handle = owned(&state, &bearer, &id)?;
-    if !(1..=100_000).contains(&body.ticks) {
-        return Err(ApiError::bad_request(format!(
-            "ticks: {} must be in 1..=100000",
-            body.ticks
-        )));
-    }
-    let ticks = body.ticks as u64;
+    let ticks = body.ticks()?;
     let state = handle.step("step", Vec::new(), ticks, protocol::read_state);
     Ok(Json(state.await?))
 }

@@ -15,6 +15,7 @@ mod players;
 mod replay_ws;
 mod replays;
 mod robots;
+mod rules;
 mod serve;
 pub mod socket;
 pub mod ws;
@@ -88,6 +89,7 @@ fn router(registry: Arc<Registry>, web_dir: PathBuf, fleet: Option<Arc<Fleet>>) 
     let api = Router::new()
         .route("/health", get(handlers::health))
         .route("/openapi.json", get(openapi::document))
+        .route("/rules", get(rules::rules))
         .route("/maps", get(handlers::list_maps).post(handlers::add_map))
         .route(
             "/maps/{name}",

@@ -16,6 +16,7 @@ use crate::protocol::*;
     ),
     paths(
         handlers::health,
+        crate::http::rules::rules,
         handlers::list_maps,
         handlers::get_map,
         handlers::add_map,
@@ -45,6 +46,14 @@ use crate::protocol::*;
     components(schemas(
         ErrorBody,
         Health,
+        rules::Rules,
+        rules::Motion,
+        rules::Laser,
+        rules::Detection,
+        rules::Tag,
+        rules::Landmarks,
+        rules::RequestBounds,
+        rules::BoundDto,
         MapInfo,
         MapCreated,
         MapFile,

@@ -14,7 +14,7 @@ use std::collections::BTreeMap;
 use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
 
-use super::{EventDto, Invalid, PoseDto, Status, Winner, invalid, mm, rad};
+use super::{EventDto, Invalid, PoseDto, Status, Winner, bounds, invalid, mm, rad};
 use crate::game::{MatchError, Reading};
 use crate::schema;
 use lasertag_core::sim::{AgentId, Pose};
@@ -112,9 +112,9 @@ pub struct ActRequest {
     /// A command per robot id (`r0`, …); robots left out keep their last one.
     #[serde(default)]
     pub commands: BTreeMap<String, RobotCommand>,
-    /// Ticks to advance after applying the commands, 1..=100000 (1).
-    #[serde(default = "one", deserialize_with = "schema::int")]
-    #[schema(minimum = 1, maximum = 100_000)]
+    /// [`bounds::ACT_TICKS`].
+    #[serde(default = "default_ticks", deserialize_with = "schema::int")]
+    #[schema(schema_with = bounds::act_ticks_schema)]
     pub ticks: i64,
     /// How the answer writes each observation's `scan`: `numbers` (metres, the default) or
     /// `hex` (see [`Scan::Hex`]).
@@ -134,19 +134,14 @@ pub enum ScanEncoding {
     Hex,
 }
 
-fn one() -> i64 {
-    1
+fn default_ticks() -> i64 {
+    bounds::ACT_TICKS.default_value() as i64
 }
 
 impl ActRequest {
     /// Every command as (robot index, order), checked; the first bad one is the error.
     pub fn orders(self) -> Result<(Vec<(usize, RobotOrder)>, u64), Invalid> {
-        if !(1..=100_000).contains(&self.ticks) {
-            return Err(invalid(
-                "ticks",
-                format!("{} must be in 1..=100000", self.ticks),
-            ));
-        }
+        let ticks = bounds::ACT_TICKS.integer(Some(self.ticks))?;
         let mut orders = Vec::with_capacity(self.commands.len());
         for (rid, command) in self.commands {
             let at = format!("commands.{rid}");
@@ -154,7 +149,7 @@ impl ActRequest {
                 .ok_or_else(|| invalid(at.clone(), "is not a robot id (r0, r1, …)"))?;
             orders.push((index, command.order(&at)?));
         }
-        Ok((orders, self.ticks as u64))
+        Ok((orders, ticks as u64))
     }
 }
 

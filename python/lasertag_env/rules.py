@@ -1,0 +1,52 @@
+"""The rules every match plays by, as the server states them (``GET /api/rules``): the
+laser's beams, field of view and reach, the tag's range, speeds, the tick rate, and the
+bounds of the requests' numbers.
+
+An environment asks its server (:func:`fetch`). Without a server (building an
+:class:`~lasertag_env.observation.ObservationLayout` by hand, or a server too old to say),
+the package's copy stands in (:data:`SHIPPED`, from ``rules.json``, which the server's tests
+write from the same declarations, so the two cannot drift apart).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+
+from .client import Client, ServerError
+
+__all__ = ["SHIPPED", "fetch", "check_bound"]
+
+
+def _load_shipped() -> dict:
+    with open(os.path.join(os.path.dirname(__file__), "rules.json"), encoding="utf-8") as f:
+        return json.load(f)
+
+
+#: The rules of the server this package was written against (``rules.json``).
+SHIPPED: dict = _load_shipped()
+
+
+def fetch(client: Client) -> dict:
+    """The server's rules; the shipped ones from a server without ``GET /api/rules``."""
+    try:
+        return client.call("GET", "/api/rules")
+    except ServerError as e:
+        if e.status == 404:
+            return SHIPPED
+        raise
+
+
+def check_bound(rules: dict, field: str, value, name: str | None = None) -> None:
+    """Raises ``ValueError`` as the server would (``robots: 9 must be in 1..=8``) when
+    ``value`` is outside the server's bound of request field ``field`` (``name`` in the
+    message, ``field`` by default)."""
+    b = rules["bounds"][field]
+    lo, hi = b["minimum"], b["maximum"]
+    below = value <= lo if b["exclusive_minimum"] else value < lo
+    if below or value > hi:
+        if b["integer"]:
+            bound = f"in {int(lo)}..={int(hi)}"
+        else:
+            bound = f"in {'(' if b['exclusive_minimum'] else '['}{lo:g}, {hi:g}]"
+        raise ValueError(f"{name or field}: {value} must be {bound}")
