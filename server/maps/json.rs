@@ -1,17 +1,7 @@
-//! Map files (`docs/map-format.md`): parse, validate, and convert to a [`MapDef`]; and the
-//! formats researchers already have (`docs/map-import.md`), converted into ours.
-//!
-//! [`MapFile`] is the JSON shape; [`validate`] enforces every rule of the spec and reports
-//! the first violation as a [`MapError`] naming field and index. Every other way into the
-//! server goes through [`validate`] too, so an imported map obeys the same rules as one
-//! written by hand:
-//! - [`import`]: a ROS map_server map ([`ros`]: YAML plus a PGM or PNG [`image`]) or a
-//!   MovingAI grid ([`movingai`]) becomes an occupancy [`grid`], then rectangles, spawns
-//!   ([`spawns`]) and landmarks;
-//! - [`raster`]: the way back, a map drawn onto a grid for a ROS export;
-//! - [`store`]: [`MapStore`], the shipped and uploaded maps with their built [`Arena`]s,
-//!   loaded from a folder of `.json`, `.yaml` and `.map` files;
-//! - [`cli`]: the binary's `map import` and `map export` commands.
+//! Our map format (`docs/map-format.md`): [`MapFile`] is the JSON shape; [`validate`]
+//! enforces every rule of the spec and reports the first violation as a [`MapError`] naming
+//! field and index, and turns the file into a [`MapDef`]. Every way into the server goes
+//! through [`validate`], imported maps included.
 
 use nalgebra::Point2;
 use serde::{Deserialize, Serialize};
@@ -19,22 +9,10 @@ use serde::{Deserialize, Serialize};
 use lasertag_core::sim::AGENT_RADIUS;
 use lasertag_core::sim::arena::{MapDef, point_in_polygon};
 
-pub mod cli;
-pub mod grid;
-pub mod image;
-pub mod import;
-pub mod movingai;
-pub mod raster;
-pub mod ros;
-pub mod spawns;
-pub mod store;
-
-pub use import::{ImportError, ImportOptions, Imported, Problem};
-pub use store::{LoadError, MapStore, StoredMap};
+use crate::schema::{MAX_LANDMARKS, MAX_POLYGON_VERTICES, MAX_SPAWNS, MAX_VERTICES};
 
 /// Largest map file or inline map accepted.
 pub const MAX_MAP_BYTES: usize = 1 << 20;
-pub use crate::schema::{MAX_LANDMARKS, MAX_POLYGON_VERTICES, MAX_SPAWNS, MAX_VERTICES};
 
 /// The JSON object of a map, as in files and API bodies.
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq, utoipa::ToSchema)]
