@@ -9,8 +9,9 @@
 //! with a module A brought into scope by a `use` (`use crate::maps;` then `maps::X`), and
 //! its longest prefix that is a file module is B's. Paths in `use` declarations count like
 //! any other, `pub use` re-exports too, and braces expand (`crate::{a::X, b::{self, Y}}`
-//! names `a` and `b`). Declaring a module (`mod child;`) is not importing it. Which lines are
-//! code (no comments, no unit-test tail) is the caller's to say.
+//! names `a` and `b`). Declaring a module (`mod child;`) is not importing it. An inline
+//! module (`mod defaults { … }`) is part of its file: paths inside it are read as the file's.
+//! Which lines are code (no comments, no unit-test tail) is the caller's to say.
 
 use std::collections::{BTreeMap, BTreeSet, VecDeque};
 use std::path::{Path, PathBuf};
