@@ -13,12 +13,13 @@ use lasertag_core::settings::{FieldType, Group, Value};
 use lasertag_core::sim::arena::Arena;
 
 use crate::capture::Capture;
+use crate::execute::{self, Outcome};
 use crate::filters::Filters;
 use crate::localisation::Localisation;
 use crate::merge;
 use crate::reacquire::Reacquire;
 use crate::shard::ShardArgs;
-use crate::study::{self, MapStamp, Outcome, Study};
+use crate::study::{MapStamp, Study};
 use crate::uncertainty::Uncertainty;
 
 /// Reads every map of a directory into arenas (the binary's map loader).
@@ -289,7 +290,7 @@ pub fn run(e: Experiment, load: LoadMaps) -> Result<(), LabError> {
                 },
                 maps: MapStamp::all(&arenas),
             };
-            let done = study::execute(&study, shard, &out, |j| study.run_one(&arenas, j))?;
+            let done = execute::execute(&study, shard, &out, |j| study.run_one(&arenas, j))?;
             finish(done, Report::Capture, &out)
         }
         Experiment::Reacquire {
@@ -322,7 +323,7 @@ pub fn run(e: Experiment, load: LoadMaps) -> Result<(), LabError> {
                 },
                 map: MapStamp::of(&arena.def),
             };
-            let done = study::execute(&study, shard, &out, |j| study.run_one(&arena, j))?;
+            let done = execute::execute(&study, shard, &out, |j| study.run_one(&arena, j))?;
             finish(done, Report::Reacquire, &out)
         }
         Experiment::Localisation {
@@ -353,7 +354,7 @@ pub fn run(e: Experiment, load: LoadMaps) -> Result<(), LabError> {
                 maps: MapStamp::all(&arenas),
             };
             let variants = crate::localisation::variants(&arenas);
-            let done = study::execute(&study, shard, &out, |j| study.run_one(&variants, j))?;
+            let done = execute::execute(&study, shard, &out, |j| study.run_one(&variants, j))?;
             finish(done, Report::Localisation, &out)
         }
         Experiment::Uncertainty {
@@ -397,7 +398,7 @@ pub fn run(e: Experiment, load: LoadMaps) -> Result<(), LabError> {
                 },
                 maps: MapStamp::all(&arenas),
             };
-            let done = study::execute(&study, shard, &out, |j| study.run_one(&arenas, j))?;
+            let done = execute::execute(&study, shard, &out, |j| study.run_one(&arenas, j))?;
             finish(done, Report::Uncertainty, &out)
         }
         Experiment::Filters {
@@ -428,7 +429,7 @@ pub fn run(e: Experiment, load: LoadMaps) -> Result<(), LabError> {
                 },
                 map: MapStamp::of(&arena.def),
             };
-            let done = study::execute(&study, shard, &out, |j| study.run_one(&arena, j))?;
+            let done = execute::execute(&study, shard, &out, |j| study.run_one(&arena, j))?;
             finish(done, Report::Filters, &out)
         }
         Experiment::Merge { parts, out } => {

@@ -49,7 +49,7 @@ pub enum LabError {
 /// Parts that are each well-formed but do not make one study.
 #[derive(Debug, thiserror::Error)]
 pub enum MergeError {
-    #[error("no part files (*.{ext}) in {}", list(paths), ext = crate::part::EXTENSION)]
+    #[error("no part files (*.{ext}) in {}", list(paths), ext = crate::shard::EXTENSION)]
     NoParts { paths: Vec<PathBuf> },
     #[error("{} is a part of experiment `{other_name}`, {} of `{first_name}`: merge one study at a time", other.display(), first.display())]
     Experiment {

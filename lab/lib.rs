@@ -15,11 +15,12 @@
 //! measured, and the files made from all the records. That lets a study be split over
 //! machines ([`shard`]: `--shard INDEX/COUNT`, each shard writing a [`part`] of records,
 //! [`record`] their lossless text) and joined again ([`merge`]) into the very files one
-//! machine writes.
+//! machine writes; [`execute`] runs a study or a shard of it.
 
 pub mod capture;
 pub mod cli;
 pub mod error;
+pub mod execute;
 pub mod filters;
 pub mod localisation;
 pub mod merge;

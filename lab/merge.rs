@@ -3,7 +3,7 @@
 //! and the same number of shards, every shard once. Each part's records are read back bit
 //! for bit ([`crate::record`]) and put in the study's order, and the experiment's own
 //! [`Study::write`] makes the files. A whole run goes through [`join`] too, with its one
-//! shard in memory ([`crate::study::execute`]), so the files are the single run's byte for
+//! shard in memory ([`crate::execute::execute`]), so the files are the single run's byte for
 //! byte.
 
 use std::collections::BTreeMap;
@@ -27,7 +27,9 @@ pub fn read_parts(paths: &[PathBuf]) -> Result<Vec<Part>, LabError> {
             })?;
             let mut found: Vec<PathBuf> = entries
                 .filter_map(|e| e.ok().map(|e| e.path()))
-                .filter(|f| f.is_file() && f.extension().is_some_and(|x| x == part::EXTENSION))
+                .filter(|f| {
+                    f.is_file() && f.extension().is_some_and(|x| x == crate::shard::EXTENSION)
+                })
                 .collect();
             found.sort();
             files.extend(found);

@@ -28,10 +28,8 @@ use std::fmt::Display;
 use std::path::{Path, PathBuf};
 
 use crate::error::LabError;
-use crate::shard::Shard;
+use crate::shard::{EXTENSION, Shard};
 
-/// The part files' extension, which `merge` looks for in a directory.
-pub const EXTENSION: &str = "part";
 /// The first line that is not a comment, with the format's version.
 const MAGIC: &str = "lasertag-experiment-part";
 const VERSION: u32 = 1;

@@ -8,6 +8,9 @@
 use std::fmt;
 use std::str::FromStr;
 
+/// The part files' extension, which `merge` looks for in a directory.
+pub const EXTENSION: &str = "part";
+
 /// The flag every experiment command takes, declared once and flattened into each.
 #[derive(Debug, Clone, Copy, Default, clap::Args)]
 pub struct ShardArgs {
@@ -89,9 +92,7 @@ impl Shard {
     pub fn file_name(self, experiment: &str) -> String {
         format!(
             "{experiment}.shard-{}-of-{}.{}",
-            self.index,
-            self.count,
-            crate::part::EXTENSION
+            self.index, self.count, EXTENSION
         )
     }
 }

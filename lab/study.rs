@@ -3,21 +3,18 @@
 //! [`Record`] per run; then, from the records in the study's order, aggregate and plot
 //! ([`Study::write`]). Run as shards, each writes its records to a part ([`crate::part`]) and
 //! `merge` reads them back bit for bit; run whole, a study is the merge of its one shard,
-//! held in memory. Either way the same records reach the same `write`, so the merged files
-//! are the single run's, byte for byte.
+//! held in memory ([`crate::execute`]). Either way the same records reach the same `write`,
+//! so the merged files are the single run's, byte for byte.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::sync::Arc;
 
 use lasertag_core::settings::{Group, Value};
 use lasertag_core::sim::arena::{Arena, MapDef};
 
 use crate::error::LabError;
-use crate::merge;
-use crate::part::{self, Header, Params, Part};
-use crate::record::{self, Record};
-use crate::run_all;
-use crate::shard::Shard;
+use crate::part::Params;
+use crate::record::Record;
 
 /// One experiment's study, as its parameters define it.
 pub trait Study: Sized {
@@ -38,74 +35,6 @@ pub trait Study: Sized {
     fn runs(&self) -> usize;
     /// Aggregates and plots the runs (all of them, in the study's order) into `out`.
     fn write(&self, runs: Vec<Self::Run>, out: &Path) -> Result<Self::Report, LabError>;
-}
-
-/// What running a study, or a shard of it, produced.
-pub enum Outcome<R> {
-    /// The whole study: its files are written and this is its report.
-    Files(R),
-    /// A shard: its part is written.
-    Part(Written),
-}
-
-/// A part just written.
-pub struct Written {
-    pub path: PathBuf,
-    pub shard: Shard,
-    pub runs: usize,
-    pub study_runs: usize,
-}
-
-/// Runs `study` (or its `shard`), `run(j)` making run `j`'s record, on every core with a
-/// progress bar; writes the files, or the shard's part into `<out>/parts/`.
-///
-/// The whole study is the merge of its one shard, held in memory: its records are written
-/// as text, read back and aggregated by [`merge::join`], as a merge of parts is. So the
-/// files of a whole run and of a merge come from the same bytes through the same code.
-pub fn execute<S: Study>(
-    study: &S,
-    shard: Option<Shard>,
-    out: &Path,
-    run: impl Fn(usize) -> Result<S::Run, LabError> + Sync,
-) -> Result<Outcome<S::Report>, LabError> {
-    let total = study.runs();
-    let (dir, label) = match shard {
-        None => (out.to_owned(), S::LABEL.to_string()),
-        Some(s) => (out.join("parts"), format!("{} {s}", S::LABEL)),
-    };
-    // Before the matches, so that an unwritable `--out` fails at once.
-    crate::error::create_dir_all(&dir)?;
-    let header = Header {
-        experiment: S::NAME.to_string(),
-        shard: shard.unwrap_or(Shard::ALL),
-        study_runs: total,
-        params: study.params(),
-    };
-    let mine: Vec<usize> = header.shard.runs(total).collect();
-    let records = run_all(&label, mine.len(), |k| {
-        run(mine[k]).map(|r| record::to_line(&r))
-    });
-    let lines = mine
-        .iter()
-        .zip(records)
-        .map(|(&j, r)| r.map(|line| (j, line)))
-        .collect::<Result<Vec<_>, _>>()?;
-    let Some(shard) = shard else {
-        let whole = Part {
-            path: out.to_owned(),
-            header,
-            runs: lines.into_iter().map(|(j, text)| (j, 0, text)).collect(),
-        };
-        return merge::join::<S>(std::slice::from_ref(&whole), out).map(Outcome::Files);
-    };
-    let path = dir.join(shard.file_name(S::NAME));
-    part::write(&path, &header, &lines)?;
-    Ok(Outcome::Part(Written {
-        path,
-        shard,
-        runs: lines.len(),
-        study_runs: total,
-    }))
 }
 
 /// A map as a study names it: its name and a fingerprint of its contents, so that parts run

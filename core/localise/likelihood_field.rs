@@ -6,7 +6,7 @@ use std::sync::Arc;
 
 use nalgebra::Point2;
 
-use super::Settings;
+use super::tuning::Settings;
 use crate::sim::arena::Arena;
 
 /// Log-likelihood of a beam end point, on a lattice over the arena plus a margin.

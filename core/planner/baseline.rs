@@ -9,7 +9,7 @@ use rand_chacha::ChaCha8Rng;
 
 use crate::nav::{DistanceField, PathFollower, steer, turn_to};
 use crate::planner::pursuit::{engage, nearest_sighting, pursuit_goal};
-use crate::planner::{Knowledge, RobotCommand, TeamView};
+use crate::planner::view::{Knowledge, RobotCommand, TeamView};
 use crate::radio::Status;
 use crate::sim::arena::Arena;
 use crate::sim::views::candidate_points;

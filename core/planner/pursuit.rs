@@ -8,7 +8,7 @@
 use nalgebra::{Point2, Vector2};
 
 use crate::nav::{steer, turn_to};
-use crate::planner::RobotView;
+use crate::planner::view::RobotView;
 use crate::sim::arena::Arena;
 use crate::sim::motion::propose;
 use crate::sim::sensors::detection_point;

@@ -1,6 +1,7 @@
 //! Unit tests of the team: the radio between robots and what each hears.
 use super::*;
 use crate::radio::Settings as RadioSettings;
+use crate::sim::sensors::Detection;
 use rand::SeedableRng;
 
 fn open_room() -> Arena {

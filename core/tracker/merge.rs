@@ -7,7 +7,7 @@
 
 use crate::sim::AGENT_RADIUS;
 use crate::sim::arena::Arena;
-use crate::tracker::Role;
+use crate::tracker::role::Role;
 
 #[derive(Debug, Clone)]
 pub struct Histograms {

@@ -8,10 +8,11 @@ use nalgebra::{Point2, Vector2};
 use crate::sim::arena::Arena;
 use crate::sim::sensors::detection_point;
 use crate::sim::{AGENT_RADIUS, DT, Pose};
-use crate::tracker::{
+use crate::tracker::role::{
     CONFIDENCE_LOOK_DECAY, CONFIDENCE_TIME_CONSTANT_S, CONTRADICTED_KEEP, LaserModel, Role,
-    Sighting, Tracker, TrackerEvent,
+    Sighting, TrackerEvent,
 };
+use crate::tracker::state::Tracker;
 
 /// Lateral spread (m) of a detection's position: sensor noise plus the pose estimate's error.
 fn detection_sigma(range: f32) -> f32 {

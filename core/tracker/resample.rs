@@ -5,7 +5,8 @@
 use rand::RngExt;
 
 use crate::sim::arena::Arena;
-use crate::tracker::{CONTRADICTED_TICKS, LaserModel, Role, Sighting, Tracker};
+use crate::tracker::role::{CONTRADICTED_TICKS, LaserModel, Role, Sighting};
+use crate::tracker::state::Tracker;
 
 impl Tracker {
     /// Stage 5.

@@ -2,7 +2,10 @@
 //! late sightings from teammates and world-model confidence, on small arenas built in code.
 
 use super::observe::fast_atan2;
+use super::role::CONTRADICTED_TICKS;
 use super::*;
+use crate::sim::Pose;
+use crate::sim::sensors::Detection;
 use rand::SeedableRng;
 
 fn open_room() -> Arena {

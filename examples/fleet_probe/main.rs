@@ -144,7 +144,12 @@ async fn run(args: Args) -> Result<(), String> {
     };
     let mut nodes = Vec::new();
     for k in 0..args.nodes {
-        nodes.push(start_node(&args, k, redis.as_ref().map(|r| r.1))?);
+        nodes.push(start_node(
+            &args.server,
+            args.heartbeat_s,
+            k,
+            redis.as_ref().map(|r| r.1),
+        )?);
     }
     let http = reqwest::Client::new();
     let mut redis_con = match &redis {

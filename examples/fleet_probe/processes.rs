@@ -3,11 +3,9 @@
 
 use std::io::{BufRead, BufReader};
 use std::net::SocketAddr;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
-
-use crate::Args;
 
 /// A child process killed when dropped.
 pub struct Process(pub Child);
@@ -67,11 +65,18 @@ pub fn start_redis(bin: &PathBuf) -> Result<(Process, u16), String> {
     Ok((Process(child), port))
 }
 
-pub fn start_node(args: &Args, k: usize, redis: Option<u16>) -> Result<Node, String> {
+/// Starts node `k` of the server binary `server`, in the fleet of the Redis on port `redis`
+/// (heartbeat every `heartbeat_s`) or alone.
+pub fn start_node(
+    server: &Path,
+    heartbeat_s: f64,
+    k: usize,
+    redis: Option<u16>,
+) -> Result<Node, String> {
     let data =
         std::env::temp_dir().join(format!("lasertag-fleet-probe-{}-{k}", std::process::id()));
     let _ = std::fs::remove_dir_all(&data);
-    let mut cmd = Command::new(&args.server);
+    let mut cmd = Command::new(server);
     cmd.args(["serve", "--addr", "127.0.0.1:0", "--no-showcase"])
         .arg("--data-dir")
         .arg(&data)
@@ -88,12 +93,12 @@ pub fn start_node(args: &Args, k: usize, redis: Option<u16>) -> Result<Node, Str
     if let Some(port) = redis {
         cmd.args(["--fleet", &format!("redis://127.0.0.1:{port}/0")])
             .args(["--node-id", &format!("n{k}")])
-            .args(["--fleet-heartbeat-s", &args.heartbeat_s.to_string()])
-            .args(["--fleet-ttl-s", &(3.0 * args.heartbeat_s).to_string()]);
+            .args(["--fleet-heartbeat-s", &heartbeat_s.to_string()])
+            .args(["--fleet-ttl-s", &(3.0 * heartbeat_s).to_string()]);
     }
     let mut child = cmd
         .spawn()
-        .map_err(|e| format!("{}: {e}", args.server.display()))?;
+        .map_err(|e| format!("{}: {e}", server.display()))?;
     let stdout = child.stdout.take().ok_or("no stdout")?;
     let (tx, rx) = std::sync::mpsc::channel();
     std::thread::spawn(move || {

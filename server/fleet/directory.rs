@@ -19,7 +19,8 @@ use redis::aio::MultiplexedConnection;
 use tokio::sync::{mpsc, oneshot};
 use tokio::time::{Instant, MissedTickBehavior};
 
-use super::{Fleet, RemoteNode, View};
+use crate::fleet::nodes::{RemoteNode, Settings, View};
+use crate::game::Registry;
 use crate::protocol::fleet::{NodeRecord, NodeRef, RECORD_FORMAT, RemoteSummary};
 
 const NODES: &str = "lasertag:fleet:nodes";
@@ -30,7 +31,10 @@ fn node_key(id: &str) -> String {
 
 /// The directory task's state between heartbeats.
 struct Directory {
-    fleet: Arc<Fleet>,
+    settings: Arc<Settings>,
+    registry: Arc<Registry>,
+    /// Hands the handlers each new view of the other nodes.
+    publish: Box<dyn Fn(View) + Send + Sync>,
     client: redis::Client,
     connection: Option<MultiplexedConnection>,
     /// When Redis last answered a whole heartbeat.
@@ -45,14 +49,18 @@ struct Directory {
 }
 
 pub(super) async fn run(
-    fleet: Arc<Fleet>,
+    settings: Settings,
+    registry: Arc<Registry>,
+    publish: Box<dyn Fn(View) + Send + Sync>,
     client: redis::Client,
     mut leave: mpsc::Receiver<oneshot::Sender<()>>,
 ) {
-    let heartbeat = fleet.settings.heartbeat;
-    let draining = fleet.registry.draining.clone();
+    let heartbeat = settings.heartbeat;
+    let draining = registry.draining.clone();
     let mut directory = Directory {
-        fleet,
+        settings: Arc::new(settings),
+        registry,
+        publish,
         client,
         connection: None,
         last_ok: None,
@@ -61,8 +69,8 @@ pub(super) async fn run(
         unreadable: Default::default(),
     };
     tracing::info!(
-        node = %directory.fleet.settings.node_id,
-        url = %directory.fleet.settings.public_url,
+        node = %directory.settings.node_id,
+        url = %directory.settings.public_url,
         "fleet: joining the directory"
     );
     let mut ticks = tokio::time::interval(heartbeat);
@@ -87,7 +95,7 @@ pub(super) async fn run(
 
 impl Directory {
     fn timeout(&self) -> Duration {
-        self.fleet.settings.heartbeat
+        self.settings.heartbeat
     }
 
     async fn connection(&mut self) -> Result<MultiplexedConnection, redis::RedisError> {
@@ -110,8 +118,8 @@ impl Directory {
         &mut self,
         pipe: &redis::Pipeline,
     ) -> Result<T, redis::RedisError> {
-        let fleet = self.fleet.clone();
-        let metrics = &fleet.registry.metrics;
+        let registry = self.registry.clone();
+        let metrics = &registry.metrics;
         metrics.fleet_round_trips.inc();
         let r = match self.connection().await {
             Ok(mut c) => pipe.query_async(&mut c).await,
@@ -132,7 +140,7 @@ impl Directory {
                 }
                 self.failing = false;
                 self.last_ok = Some(Instant::now());
-                self.fleet.set_view(view);
+                (self.publish)(view);
             }
             Err(e) => {
                 if !self.failing {
@@ -143,11 +151,9 @@ impl Directory {
                 }
                 self.failing = true;
                 // Past the TTL nothing tells whether the others are alive: list only ours.
-                let stale = self
-                    .last_ok
-                    .is_none_or(|t| t.elapsed() > self.fleet.settings.ttl);
+                let stale = self.last_ok.is_none_or(|t| t.elapsed() > self.settings.ttl);
                 if stale {
-                    self.fleet.set_view(View::default());
+                    (self.publish)(View::default());
                 }
             }
         }
@@ -155,10 +161,10 @@ impl Directory {
 
     /// Writes this node's record and reads every other's.
     async fn exchange(&mut self) -> Result<View, redis::RedisError> {
-        let fleet = self.fleet.clone();
-        let me = &fleet.settings.node_id;
+        let settings = self.settings.clone();
+        let me = &settings.node_id;
         let record = self.record();
-        let ttl_ms = self.fleet.settings.ttl.as_millis() as u64;
+        let ttl_ms = self.settings.ttl.as_millis() as u64;
         let mut pipe = redis::pipe();
         pipe.cmd("SET")
             .arg(node_key(me))
@@ -220,7 +226,7 @@ impl Directory {
 
     /// This node's record: its load and every match it holds, as its own listing shows them.
     fn record(&self) -> Vec<u8> {
-        let registry = &self.fleet.registry;
+        let registry = &self.registry;
         let summaries: Vec<_> = registry
             .all()
             .iter()
@@ -228,8 +234,8 @@ impl Directory {
             .collect();
         let record = NodeRecord {
             format: RECORD_FORMAT,
-            id: self.fleet.settings.node_id.clone(),
-            url: self.fleet.settings.public_url.clone(),
+            id: self.settings.node_id.clone(),
+            url: self.settings.public_url.clone(),
             capacity: registry.config.max_matches,
             held: summaries.len(),
             players: summaries.iter().map(|s| s.players).sum(),
@@ -242,7 +248,7 @@ impl Directory {
 
     /// Deletes this node's key and id: the others drop it on their next read.
     async fn leave(&mut self) {
-        let me = self.fleet.settings.node_id.clone();
+        let me = self.settings.node_id.clone();
         let mut pipe = redis::pipe();
         pipe.cmd("DEL")
             .arg(node_key(&me))

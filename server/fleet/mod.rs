@@ -15,6 +15,9 @@
 //! it died (4 s with the defaults) plus one Redis round trip.
 
 mod directory;
+pub mod nodes;
+
+pub use nodes::{RemoteNode, Settings, View};
 
 use std::collections::{HashMap, VecDeque};
 use std::net::SocketAddr;
@@ -25,7 +28,7 @@ use tokio::sync::{mpsc, oneshot};
 
 use crate::game::Registry;
 use crate::protocol::MatchSummary;
-use crate::protocol::fleet::{Listed, NodeRef, RemoteSummary};
+use crate::protocol::fleet::{Listed, NodeRef};
 
 /// The defaults of the fleet's timing (seconds).
 pub mod defaults {
@@ -78,16 +81,6 @@ pub enum FleetError {
         "--fleet-ttl-s ({ttl:?}) must be at least twice --fleet-heartbeat-s ({heartbeat:?}), which must be at least 0.05 s"
     )]
     Timing { heartbeat: Duration, ttl: Duration },
-}
-
-/// The fleet's settings, checked.
-#[derive(Debug, Clone)]
-pub struct Settings {
-    pub node_id: String,
-    /// Without a trailing slash.
-    pub public_url: String,
-    pub heartbeat: Duration,
-    pub ttl: Duration,
 }
 
 impl FleetArgs {
@@ -181,41 +174,6 @@ fn default_node_id() -> String {
         format!("node-{suffix}")
     } else {
         format!("{host}-{suffix}")
-    }
-}
-
-/// Another node, as its last heartbeat described it.
-#[derive(Debug, Clone)]
-pub struct RemoteNode {
-    pub node: NodeRef,
-    pub capacity: usize,
-    pub held: usize,
-    pub players: usize,
-    pub spectators: usize,
-    pub matches: Vec<RemoteSummary>,
-}
-
-/// The other nodes of the fleet as of the last read of the directory.
-#[derive(Debug, Default)]
-pub struct View {
-    /// By id.
-    pub nodes: Vec<RemoteNode>,
-    /// Match id → index in `nodes`.
-    hosts: HashMap<String, usize>,
-}
-
-impl View {
-    pub fn new(mut nodes: Vec<RemoteNode>) -> View {
-        nodes.sort_by(|a, b| a.node.id.cmp(&b.node.id));
-        let mut hosts = HashMap::new();
-        for (i, n) in nodes.iter().enumerate() {
-            for m in &n.matches {
-                if let Some(id) = m.get("id").and_then(|v| v.as_str()) {
-                    hosts.entry(id.to_owned()).or_insert(i);
-                }
-            }
-        }
-        View { nodes, hosts }
     }
 }
 
@@ -328,7 +286,14 @@ impl Fleet {
             leave,
         });
         fleet.registry.metrics.fleet_nodes.set(1);
-        tokio::spawn(directory::run(fleet.clone(), client, leave_rx));
+        let publisher = fleet.clone();
+        tokio::spawn(directory::run(
+            fleet.settings.clone(),
+            fleet.registry.clone(),
+            Box::new(move |view| publisher.set_view(view)),
+            client,
+            leave_rx,
+        ));
         fleet
     }
 

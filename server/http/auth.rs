@@ -8,7 +8,8 @@ use axum::http::request::Parts;
 
 use crate::access::{Owner, same_secret};
 use crate::game::Sight;
-use crate::http::{ApiError, AppState};
+use crate::http::error::ApiError;
+use crate::http::state::AppState;
 use crate::metrics::Refusal;
 
 /// The bearer token of a request, if it sent one.

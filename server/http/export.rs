@@ -19,8 +19,9 @@ use axum::response::{IntoResponse, Response};
 use tokio::sync::{Semaphore, mpsc};
 
 use crate::game::view::Frame;
+use crate::http::error::ApiError;
 use crate::http::replays::{find, number};
-use crate::http::{ApiError, AppState};
+use crate::http::state::AppState;
 use crate::protocol::replays::ExportLine;
 use crate::protocol::{self, ErrorBody};
 

@@ -13,7 +13,7 @@ use axum::middleware::Next;
 use axum::response::{IntoResponse, Response};
 use tower_http::cors::{Any, CorsLayer};
 
-use crate::http::AppState;
+use crate::http::state::AppState;
 use crate::protocol::fleet::{Elsewhere, NodeRef};
 
 /// The match id a path names: `/api/matches/{id}…` or `/ws/matches/{id}`.

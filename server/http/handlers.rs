@@ -4,15 +4,17 @@ use std::collections::HashMap;
 
 use axum::Json;
 use axum::extract::{Path, Query, State};
-use axum::http::StatusCode;
+use axum::http::{StatusCode, header};
 use axum::response::{IntoResponse, Response};
 
 use crate::access::ClientKey;
 use crate::game::{MatchHandle, Sight};
 use crate::http::auth::Bearer;
 use crate::http::body::JsonBody;
+use crate::http::error::ApiError;
+use crate::http::fleet;
 use crate::http::limits::ClientIp;
-use crate::http::{ApiError, AppState, fleet};
+use crate::http::state::AppState;
 use crate::maps::MapFile;
 use crate::protocol::fleet::{Elsewhere, Listed, NodeRef, Place};
 use crate::protocol::{
@@ -320,4 +322,19 @@ pub async fn stats(
 ) -> Result<Json<MatchStats>, ApiError> {
     let handle = find(&state, &id)?;
     Ok(Json(handle.read(Sight::Live, protocol::read_stats).await?))
+}
+
+/// `GET /metrics`: every metric family in the Prometheus text format (version 0.0.4).
+#[utoipa::path(get, path = "/metrics",
+    description = "Prometheus text format: lasertag_matches{state}, lasertag_clients{role}, lasertag_tick_seconds{kind,clock}, lasertag_tracker_seconds{kind}, lasertag_planner_seconds{kind}, lasertag_snapshot_bytes_total{role}, lasertag_refused_total{reason}, lasertag_matches_removed_total{reason}, lasertag_late_ticks_total.",
+    responses((status = 200, content_type = "text/plain", body = String)))]
+pub async fn metrics(State(state): State<AppState>) -> impl IntoResponse {
+    state.registry.refresh_metrics();
+    (
+        [(
+            header::CONTENT_TYPE,
+            "text/plain; version=0.0.4; charset=utf-8",
+        )],
+        state.registry.metrics.render(),
+    )
 }

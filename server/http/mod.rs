@@ -18,16 +18,16 @@ mod robots;
 mod rules;
 mod serve;
 pub mod socket;
+mod state;
 pub mod ws;
 
 use std::path::PathBuf;
 use std::sync::Arc;
 
 use axum::Router;
-use axum::extract::{DefaultBodyLimit, OriginalUri, State};
+use axum::extract::{DefaultBodyLimit, OriginalUri};
 use axum::handler::HandlerWithoutStateExt;
-use axum::http::{StatusCode, header};
-use axum::response::IntoResponse;
+use axum::http::StatusCode;
 use axum::routing::{get, post};
 use tower_http::compression::CompressionLayer;
 use tower_http::services::ServeDir;
@@ -35,31 +35,10 @@ use tower_http::trace::TraceLayer;
 
 use crate::fleet::Fleet;
 use crate::game::Registry;
-use crate::service::{Pool, Service};
+use crate::service::Pool;
 pub use error::ApiError;
 pub use serve::{ConnectionLimits, serve};
-
-/// What every handler shares.
-#[derive(Debug, Clone)]
-pub struct AppState {
-    pub registry: Arc<Registry>,
-    pub limits: Arc<limits::AddressLimits>,
-    /// The blocking pool that validates and builds maps and worlds: one job per core.
-    pub pool: Pool,
-    /// This node's part in a fleet (`--fleet`), if it is in one.
-    pub fleet: Option<Arc<Fleet>>,
-}
-
-impl AppState {
-    /// What the use cases work with.
-    pub fn service(&self) -> Service<'_> {
-        Service {
-            registry: &self.registry,
-            pool: &self.pool,
-            fleet: self.fleet.as_deref(),
-        }
-    }
-}
+pub use state::AppState;
 
 /// The whole HTTP surface: the API under `/api`, WebSockets under `/ws`, metrics at
 /// `/metrics`, the static client everywhere else. The limits and settings are the registry's
@@ -148,7 +127,7 @@ fn router(registry: Arc<Registry>, web_dir: PathBuf, fleet: Option<Arc<Fleet>>) 
         .nest("/api", api)
         .route("/ws/matches/{id}", get(ws::upgrade))
         .route("/ws/replays/{id}", get(replay_ws::upgrade))
-        .route("/metrics", get(metrics))
+        .route("/metrics", get(handlers::metrics))
         .fallback_service(static_files)
         // Bodies are read (and limited) by `JsonBody`; this layer is the outer guard so a huge
         // upload is cut off even on routes that do not read bodies.
@@ -174,21 +153,6 @@ fn router(registry: Arc<Registry>, web_dir: PathBuf, fleet: Option<Arc<Fleet>>) 
         router = router.layer(fleet::cors());
     }
     router.with_state(state)
-}
-
-/// `GET /metrics`: every metric family in the Prometheus text format (version 0.0.4).
-#[utoipa::path(get, path = "/metrics",
-    description = "Prometheus text format: lasertag_matches{state}, lasertag_clients{role}, lasertag_tick_seconds{kind,clock}, lasertag_tracker_seconds{kind}, lasertag_planner_seconds{kind}, lasertag_snapshot_bytes_total{role}, lasertag_refused_total{reason}, lasertag_matches_removed_total{reason}, lasertag_late_ticks_total.",
-    responses((status = 200, content_type = "text/plain", body = String)))]
-pub async fn metrics(State(state): State<AppState>) -> impl IntoResponse {
-    state.registry.refresh_metrics();
-    (
-        [(
-            header::CONTENT_TYPE,
-            "text/plain; version=0.0.4; charset=utf-8",
-        )],
-        state.registry.metrics.render(),
-    )
 }
 
 async fn not_found(OriginalUri(uri): OriginalUri) -> ApiError {

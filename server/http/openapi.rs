@@ -41,7 +41,7 @@ use crate::protocol::*;
         crate::http::players::leaderboard,
         handlers::join,
         handlers::stats,
-        crate::http::metrics,
+        crate::http::handlers::metrics,
     ),
     components(schemas(
         ErrorBody,

@@ -6,7 +6,8 @@ use std::collections::HashMap;
 use axum::Json;
 use axum::extract::{Path, Query, State};
 
-use crate::http::{ApiError, AppState};
+use crate::http::error::ApiError;
+use crate::http::state::AppState;
 use crate::protocol::ErrorBody;
 use crate::protocol::replays::{Leaderboard, PlayerDetail};
 use crate::service::players;

@@ -8,7 +8,8 @@ use axum::Json;
 use axum::extract::{Path, Query, State};
 
 use crate::game::replay::Replay;
-use crate::http::{ApiError, AppState};
+use crate::http::error::ApiError;
+use crate::http::state::AppState;
 use crate::protocol::replays::{ReplayDetail, ReplayListed};
 use crate::protocol::{Belief, ErrorBody, MatchState};
 use crate::service::replays;

@@ -9,8 +9,9 @@ use axum::response::{IntoResponse, Response};
 use crate::game::Sight;
 use crate::http::auth::Bearer;
 use crate::http::body::JsonBody;
+use crate::http::error::ApiError;
 use crate::http::handlers::{owned, readable};
-use crate::http::{ApiError, AppState};
+use crate::http::state::AppState;
 use crate::protocol::ErrorBody;
 use crate::protocol::robots::{
     self, ActRequest, ActResponse, Observation, RobotCommand, robot_index,

@@ -24,8 +24,9 @@ use tokio_util::sync::CancellationToken;
 use tracing::Instrument;
 
 use crate::game::{ConnectionGuard, Registry};
+use crate::http::error::ApiError;
 use crate::http::limits::{AddressConnection, Bucket, ClientIp};
-use crate::http::{ApiError, AppState};
+use crate::http::state::AppState;
 use crate::metrics::{ClientGuard, Metrics, Refusal};
 use crate::protocol::Invalid;
 

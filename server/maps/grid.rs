@@ -1,15 +1,10 @@
-//! An occupancy grid (a wall or free per cell) and its conversion into one of our maps:
-//! walls merged into few rectangles, the arena the grid's extent, spawns and landmarks
-//! placed by `spawns`.
+//! An occupancy grid (a wall or free per cell), coarsened, cropped and its walls merged
+//! into few rectangles, which `import` makes the obstacles of one of our maps.
 //!
 //! Rectangles rather than traced outlines: they are exact (every wall cell is covered and
 //! no free cell is), never self-intersecting, and greedy merging (runs along each row, then
 //! equal runs of the rows above) keeps an ordinary indoor map well under the 10,000-vertex
 //! limit of the format.
-
-use crate::maps::import::{MAX_CELLS, Problem};
-use crate::maps::spawns;
-use crate::maps::{MAX_VERTICES, MapFile};
 
 /// The largest arena side the map format allows (metres).
 pub const MAX_SIDE: f64 = 500.0;
@@ -174,57 +169,6 @@ impl Grid {
 /// `1.8500000000000003`; far below any cell.
 pub fn round(v: f64) -> f64 {
     (v * 1e6).round() / 1e6
-}
-
-/// The grid made one of our maps (not yet validated): the arena is the grid's extent, each
-/// wall rectangle an obstacle, spawns and landmarks from [`spawns::place`].
-pub fn to_map_file(grid: &Grid, name: &str) -> Result<MapFile, Problem> {
-    if grid.cols * grid.rows > MAX_CELLS {
-        return Err(Problem::Content(format!(
-            "{} × {} cells, the limit is {MAX_CELLS}",
-            grid.cols, grid.rows
-        )));
-    }
-    let width = round(grid.cols as f64 * grid.cell);
-    let height = round(grid.rows as f64 * grid.cell);
-    if width > MAX_SIDE || height > MAX_SIDE {
-        let most = MAX_SIDE / grid.cols.max(grid.rows) as f64;
-        return Err(Problem::Content(format!(
-            "the map is {width} m × {height} m ({} × {} cells of {} m), the limit is {MAX_SIDE} \
-             m a side: a MovingAI map needs a --cell-size of at most {most:.3}; a ROS map this \
-             big is not an arena for robots that see 8 m",
-            grid.cols,
-            grid.rows,
-            round(grid.cell)
-        )));
-    }
-    let count = grid.count_rectangles();
-    if count * 4 > MAX_VERTICES {
-        return Err(Problem::Content(format!(
-            "its walls make {count} rectangles ({} vertices), the limit is {MAX_VERTICES} \
-             vertices: coarsen the grid (--resolution-scale 2 or more)",
-            count * 4
-        )));
-    }
-    let rects = grid.rectangles();
-    let at = |k: usize| round(k as f64 * grid.cell);
-    let obstacles = rects
-        .iter()
-        .map(|q| {
-            let (x0, x1, y0, y1) = (at(q.c0), at(q.c1), at(q.r0), at(q.r1));
-            vec![[x0, y0], [x1, y0], [x1, y1], [x0, y1]]
-        })
-        .collect();
-    let placed = spawns::place(grid)?;
-    Ok(MapFile {
-        name: name.to_string(),
-        width,
-        height,
-        obstacles,
-        robot_spawns: placed.robots,
-        opponent_spawns: placed.opponents,
-        landmarks: placed.landmarks,
-    })
 }
 
 #[cfg(test)]

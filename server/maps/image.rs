@@ -10,7 +10,7 @@
 
 use std::io::Cursor;
 
-use crate::maps::import::{MAX_CELLS, Problem};
+use crate::maps::format::{MAX_CELLS, Problem};
 
 /// A decoded image, rows from the top.
 #[derive(Debug, Clone, PartialEq)]

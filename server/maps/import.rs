@@ -1,74 +1,19 @@
 //! Importing maps researchers already have: a ROS map_server map or a MovingAI grid, read
-//! into an occupancy [`Grid`], then converted into one of our maps (`grid::to_map_file`) and
+//! into an occupancy [`Grid`], then converted into one of our maps ([`to_map_file`]) and
 //! checked by the same validator as a map written by hand.
 //!
 //! Every error names the file, and the field or line where it can; nothing a file holds
 //! reaches an `unwrap`, and every size is bounded before anything is allocated for it.
 
-use std::io::Read;
 use std::path::Path;
 
 use lasertag_core::sim::arena::MapDef;
 
-use crate::maps::grid::{self, Grid};
-use crate::maps::store::FileKind;
-use crate::maps::{MAX_MAP_BYTES, MapError, MapFile, movingai, ros, validate};
-
-/// Most bytes read from one imported file (a YAML, an image or a MovingAI grid): a plain
-/// (ASCII) PGM of the largest grid takes up to 4 bytes a cell.
-pub const MAX_FILE_BYTES: u64 = 4 * MAX_CELLS as u64 + 4096;
-
-/// Most cells (pixels) a grid may have: 4096 × 4096, the size of the maps gmapping writes
-/// by default (4000 × 4000), so real SLAM maps fit. The importer holds a few bytes a cell.
-pub const MAX_CELLS: usize = 4096 * 4096;
-
-/// What is wrong with an imported file; [`ImportError`] adds which file.
-#[derive(Debug, thiserror::Error)]
-pub enum Problem {
-    #[error("{0}")]
-    Io(#[from] std::io::Error),
-    #[error("line {line}: {message}")]
-    Line { line: usize, message: String },
-    #[error("{field}: {message}")]
-    Field { field: String, message: String },
-    #[error("{0}")]
-    Content(String),
-    /// The converted map broke a rule of our format (the validator's error).
-    #[error("{0}")]
-    Invalid(#[from] MapError),
-}
-
-impl Problem {
-    pub fn line(line: usize, message: impl Into<String>) -> Problem {
-        Problem::Line {
-            line,
-            message: message.into(),
-        }
-    }
-
-    pub fn field(field: impl Into<String>, message: impl Into<String>) -> Problem {
-        Problem::Field {
-            field: field.into(),
-            message: message.into(),
-        }
-    }
-
-    /// This problem, found in `file`.
-    pub fn in_file(self, file: &Path) -> ImportError {
-        ImportError {
-            file: file.display().to_string(),
-            problem: self,
-        }
-    }
-}
-
-/// A map file that could not be imported: the file, then what is wrong with it.
-#[derive(Debug, thiserror::Error)]
-#[error("{file}: {problem}")]
-pub struct ImportError {
-    pub file: String,
-    pub problem: Problem,
-}
+use crate::maps::format::{FileKind, ImportError, MAX_CELLS, Problem, read_bounded};
+use crate::maps::grid::{Grid, MAX_SIDE, round};
+use crate::maps::json::{MAX_MAP_BYTES, MapFile, validate};
+use crate::maps::{movingai, ros, spawns};
+use crate::schema::MAX_VERTICES;
 
 /// How to read an imported map.
 #[derive(Debug, Clone, PartialEq)]
@@ -183,7 +128,7 @@ pub fn convert(
     }
     // Nanometres: the sums above leave digits in the last place that mean nothing.
     let origin = origin.map(|v| (v * 1e9).round() / 1e9 + 0.0);
-    let file = grid::to_map_file(&grid, name)?;
+    let file = to_map_file(&grid, name)?;
     let def = validate(&file)?;
     let text = to_json(&file);
     if text.len() > MAX_MAP_BYTES {
@@ -209,6 +154,57 @@ fn no_free_cell() -> Problem {
     )
 }
 
+/// The grid made one of our maps (not yet validated): the arena is the grid's extent, each
+/// wall rectangle an obstacle, spawns and landmarks from [`spawns::place`].
+pub fn to_map_file(grid: &Grid, name: &str) -> Result<MapFile, Problem> {
+    if grid.cols * grid.rows > MAX_CELLS {
+        return Err(Problem::Content(format!(
+            "{} × {} cells, the limit is {MAX_CELLS}",
+            grid.cols, grid.rows
+        )));
+    }
+    let width = round(grid.cols as f64 * grid.cell);
+    let height = round(grid.rows as f64 * grid.cell);
+    if width > MAX_SIDE || height > MAX_SIDE {
+        let most = MAX_SIDE / grid.cols.max(grid.rows) as f64;
+        return Err(Problem::Content(format!(
+            "the map is {width} m × {height} m ({} × {} cells of {} m), the limit is {MAX_SIDE} \
+             m a side: a MovingAI map needs a --cell-size of at most {most:.3}; a ROS map this \
+             big is not an arena for robots that see 8 m",
+            grid.cols,
+            grid.rows,
+            round(grid.cell)
+        )));
+    }
+    let count = grid.count_rectangles();
+    if count * 4 > MAX_VERTICES {
+        return Err(Problem::Content(format!(
+            "its walls make {count} rectangles ({} vertices), the limit is {MAX_VERTICES} \
+             vertices: coarsen the grid (--resolution-scale 2 or more)",
+            count * 4
+        )));
+    }
+    let rects = grid.rectangles();
+    let at = |k: usize| round(k as f64 * grid.cell);
+    let obstacles = rects
+        .iter()
+        .map(|q| {
+            let (x0, x1, y0, y1) = (at(q.c0), at(q.c1), at(q.r0), at(q.r1));
+            vec![[x0, y0], [x1, y0], [x1, y1], [x0, y1]]
+        })
+        .collect();
+    let placed = spawns::place(grid)?;
+    Ok(MapFile {
+        name: name.to_string(),
+        width,
+        height,
+        obstacles,
+        robot_spawns: placed.robots,
+        opponent_spawns: placed.opponents,
+        landmarks: placed.landmarks,
+    })
+}
+
 /// A file's stem made a map name: lower case, every character other than `a-z 0-9 - _`
 /// turned into `-` (runs of them into one), at most 64 characters; `map` when nothing is left.
 pub fn map_name(stem: &str) -> String {
@@ -228,22 +224,6 @@ pub fn map_name(stem: &str) -> String {
     } else {
         trimmed.to_string()
     }
-}
-
-/// Reads a whole file of at most [`MAX_FILE_BYTES`].
-pub fn read_bounded(path: &Path) -> Result<Vec<u8>, ImportError> {
-    let file = std::fs::File::open(path).map_err(|e| Problem::Io(e).in_file(path))?;
-    let mut bytes = Vec::new();
-    file.take(MAX_FILE_BYTES + 1)
-        .read_to_end(&mut bytes)
-        .map_err(|e| Problem::Io(e).in_file(path))?;
-    if bytes.len() as u64 > MAX_FILE_BYTES {
-        return Err(Problem::Content(format!(
-            "larger than {MAX_FILE_BYTES} bytes, the limit for an imported file"
-        ))
-        .in_file(path));
-    }
-    Ok(bytes)
 }
 
 /// A map file as JSON text, one polygon or point per line so that a large imported map

@@ -7,8 +7,8 @@
 //! alike, so water is a wall; a swamp is floor. The first row is the top of the map (as the
 //! benchmarks draw it), so a map reads the same way up in our viewer.
 
+use crate::maps::format::{MAX_CELLS, Problem};
 use crate::maps::grid::Grid;
-use crate::maps::import::{MAX_CELLS, Problem};
 
 /// The terrain characters and what they are.
 const TERRAIN: &str = ". G S @ O T W";

@@ -10,8 +10,8 @@
 
 use lasertag_core::sim::arena::MapDef;
 
+use crate::maps::format::{MAX_CELLS, Problem};
 use crate::maps::grid::Grid;
-use crate::maps::import::{MAX_CELLS, Problem};
 
 /// How close (in pixels) a point may come to a pixel edge and still count as on it: far
 /// above the rounding of `f32` coordinates, far below anything drawn.

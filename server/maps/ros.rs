@@ -11,10 +11,11 @@ use std::path::{Path, PathBuf};
 
 use serde::Deserialize;
 
+use crate::maps::format::{ImportError, Problem, read_bounded};
 use crate::maps::grid::Grid;
 use crate::maps::image::{self, Image};
-use crate::maps::import::{self, ImportError, Problem};
-use crate::maps::{MAX_MAP_BYTES, raster};
+use crate::maps::json::MAX_MAP_BYTES;
+use crate::maps::raster;
 use lasertag_core::sim::arena::MapDef;
 
 /// How map_server turns a pixel into an occupancy value (the YAML's `mode`).
@@ -204,7 +205,7 @@ pub fn occupancy(image: &Image, meta: &Meta) -> Vec<i8> {
 /// Reads a ROS map: its occupancy as our grid (free exactly where map_server says 0) and
 /// its origin.
 pub fn read(yaml_path: &Path) -> Result<(Grid, [f64; 3]), ImportError> {
-    let bytes = import::read_bounded(yaml_path)?;
+    let bytes = read_bounded(yaml_path)?;
     if bytes.len() > MAX_MAP_BYTES {
         return Err(Problem::Content(format!(
             "{} bytes, the limit for a map's YAML is {MAX_MAP_BYTES}",
@@ -221,7 +222,7 @@ pub fn read(yaml_path: &Path) -> Result<(Grid, [f64; 3]), ImportError> {
                 .in_file(yaml_path),
         );
     }
-    let bytes = import::read_bounded(&meta.image)?;
+    let bytes = read_bounded(&meta.image)?;
     let image = image::decode(&bytes).map_err(|p| p.in_file(&meta.image))?;
     let data = occupancy(&image, &meta);
     let grid = Grid {

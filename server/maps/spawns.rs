@@ -12,8 +12,8 @@
 use lasertag_core::sim::AGENT_RADIUS;
 use lasertag_core::sim::arena::NAV_MARGIN;
 
+use crate::maps::format::Problem;
 use crate::maps::grid::{Grid, round};
-use crate::maps::import::Problem;
 
 /// The room a spawn has around it (metres): an agent's radius, the core's navigation
 /// margin and 2 cm to spare.

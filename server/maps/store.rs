@@ -7,8 +7,9 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use crate::access::{ClientKey, Owner};
-use crate::maps::import::{self, ImportError, ImportOptions, Problem};
-use crate::maps::{MapError, parse};
+use crate::maps::format::{FileKind, ImportError, Problem};
+use crate::maps::import::{self, ImportOptions};
+use crate::maps::json::{MapError, parse};
 use lasertag_core::sim::arena::{Arena, MapDef};
 
 /// A map known to the server: its definition and the arena built from it (shared by matches).
@@ -48,29 +49,6 @@ pub enum LoadError {
         name: String,
         first: String,
     },
-}
-
-/// The kinds of map file a folder may hold, by extension.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum FileKind {
-    /// Ours (`docs/map-format.md`).
-    Json,
-    /// A ROS map_server YAML file and the image it names.
-    Ros,
-    /// A MovingAI benchmark grid.
-    MovingAi,
-}
-
-impl FileKind {
-    /// The kind a file's extension says, if it is a map file at all.
-    pub fn of(path: &Path) -> Option<FileKind> {
-        match path.extension()?.to_str()? {
-            "json" => Some(FileKind::Json),
-            "yaml" => Some(FileKind::Ros),
-            "map" => Some(FileKind::MovingAi),
-            _ => None,
-        }
-    }
 }
 
 /// A map read from one file, with the frame it came in (for an export to restore).

@@ -11,59 +11,28 @@
 //! embedded and bundled; PostgreSQL ([`postgres`], `--database`) is the fleet's, one database
 //! that every server writes its own matches to and reads everyone's from.
 
+pub mod backend;
 pub mod codec;
 pub mod postgres;
 pub mod results;
 pub mod sqlite;
 
-use std::path::{Path, PathBuf};
-use std::sync::mpsc::{Receiver, RecvTimeoutError, SyncSender, TrySendError};
-use std::sync::{Arc, Mutex};
-use std::time::{Duration, SystemTime};
-
-use lasertag_core::sim::arena::Arena;
-use lasertag_core::world::WorldInput;
-
-use codec::StoredSettings;
+pub use backend::{
+    Backend, Ended, HEARTBEAT, LeaderOrder, Listed, PlayerStats, Retention, StoreError, Stored,
+    Write, unix_ms,
+};
 pub use results::PlayerResult;
+
+use std::path::{Path, PathBuf};
+use std::sync::Mutex;
+use std::sync::mpsc::{Receiver, RecvTimeoutError, SyncSender, TrySendError};
+use std::time::Duration;
 
 /// Writes the channel holds before [`Store::send`] refuses (a second of a thousand busy
 /// matches).
 const WRITE_QUEUE: usize = 4096;
 /// Most writes committed in one transaction.
 const BATCH: usize = 512;
-/// How often the writer thread calls [`Backend::heartbeat`], busy or idle.
-pub const HEARTBEAT: Duration = Duration::from_secs(10);
-
-/// What went wrong with the store.
-#[derive(Debug, Clone, thiserror::Error)]
-pub enum StoreError {
-    #[error("data directory {path}: {message}")]
-    Io { path: String, message: String },
-    #[error("database: {0}")]
-    Database(String),
-    #[error("--database: {0}")]
-    DatabaseUrl(String),
-    #[error("cannot connect to PostgreSQL at {target}: {message}")]
-    Connect { target: String, message: String },
-    #[error("a stored match is already called {0}")]
-    Duplicate(String),
-    #[error("the database's schema is version {found}, newer than this server's {known}")]
-    NewerSchema { found: usize, known: usize },
-    #[error("no stored match {0}")]
-    Unknown(String),
-    #[error(transparent)]
-    Codec(#[from] std::sync::Arc<codec::CodecError>),
-    #[error("the store is closed")]
-    Closed,
-}
-
-impl From<codec::CodecError> for StoreError {
-    fn from(e: codec::CodecError) -> Self {
-        StoreError::Codec(Arc::new(e))
-    }
-}
-
 /// The `serve` command's history flags.
 #[derive(Debug, Clone, clap::Args)]
 pub struct StoreArgs {
@@ -97,118 +66,6 @@ impl StoreArgs {
             max_bytes: self.keep_mb.saturating_mul(1 << 20),
         }
     }
-}
-
-/// How much the store keeps: the oldest ended matches go first past either limit.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct Retention {
-    pub max_matches: u64,
-    pub max_bytes: u64,
-}
-
-/// One change to the history, from a match task.
-#[derive(Debug)]
-pub enum Write {
-    /// A match started.
-    Begin {
-        id: String,
-        arena: Arc<Arena>,
-        settings: Box<StoredSettings>,
-        started_at: SystemTime,
-    },
-    /// Inputs applied since the last append, and the tick the match has reached.
-    Append {
-        id: String,
-        inputs: Vec<(u64, WorldInput)>,
-        /// Everyone who has played it so far, when that changed.
-        names: Option<Vec<String>>,
-        tick: u64,
-    },
-    /// The match ended (after its last append).
-    Finish { id: String, ended: Ended },
-    /// Answers once everything before it is committed.
-    Flush(std::sync::mpsc::Sender<()>),
-}
-
-/// How a match ended.
-#[derive(Debug, Clone)]
-pub struct Ended {
-    /// Unix milliseconds.
-    pub ended_at: i64,
-    pub ticks: u64,
-    pub winner: Option<&'static str>,
-    pub reason: Option<&'static str>,
-    pub players: Vec<PlayerResult>,
-}
-
-/// An ended match as lists show it.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Listed {
-    pub id: String,
-    pub map: String,
-    pub started_at_ms: i64,
-    pub ended_at_ms: Option<i64>,
-    pub ticks: u64,
-    pub winner: Option<String>,
-    pub reason: Option<String>,
-    /// False for a match the server was killed in the middle of.
-    pub complete: bool,
-    pub players: Vec<String>,
-}
-
-/// An ended match, whole: enough to replay it.
-#[derive(Debug, Clone)]
-pub struct Stored {
-    pub listed: Listed,
-    /// JSON of [`StoredSettings`].
-    pub settings: String,
-    /// The map as a map file (docs/map-format.md).
-    pub map_document: String,
-    /// Deflated chunks of inputs ([`codec::decode_inputs`]), in order.
-    pub chunks: Vec<Vec<u8>>,
-}
-
-/// A player name's totals over the stored matches.
-#[derive(Debug, Clone, PartialEq)]
-pub struct PlayerStats {
-    pub name: String,
-    pub matches: u64,
-    pub wins: u64,
-    /// Robots this name tagged.
-    pub tags: u64,
-    pub longest_survival_ticks: u64,
-}
-
-/// What a leaderboard ranks by.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum LeaderOrder {
-    Wins,
-    Tags,
-    Survival,
-    Matches,
-}
-
-/// The operations a database must offer the store.
-pub trait Backend: Send {
-    /// Called by the writer thread every [`HEARTBEAT`]: a shared database hears that this
-    /// writer is alive, and closes the matches of writers it has not heard from.
-    fn heartbeat(&mut self) -> Result<(), StoreError> {
-        Ok(())
-    }
-    /// The database's size on disk, when the backend knows it (a server database).
-    fn database_bytes(&mut self) -> Result<Option<u64>, StoreError> {
-        Ok(None)
-    }
-    /// Commits `batch` in one transaction.
-    fn write(&mut self, batch: &[Write]) -> Result<(), StoreError>;
-    fn list(&mut self, limit: usize, before: Option<&str>) -> Result<Vec<Listed>, StoreError>;
-    fn load(&mut self, id: &str) -> Result<Option<Stored>, StoreError>;
-    fn player(&mut self, name: &str) -> Result<Option<PlayerStats>, StoreError>;
-    fn played(&mut self, name: &str, limit: usize) -> Result<Vec<Listed>, StoreError>;
-    fn leaders(&mut self, order: LeaderOrder, limit: usize)
-    -> Result<Vec<PlayerStats>, StoreError>;
-    /// (ended matches, their bytes).
-    fn totals(&mut self) -> Result<(u64, u64), StoreError>;
 }
 
 /// The history on disk: a writer thread and a connection for reads.
@@ -386,18 +243,4 @@ fn write_loop(mut backend: Box<dyn Backend>, rx: Receiver<Write>) {
             }
         }
     }
-}
-
-/// A map document's key: equal documents are stored once.
-pub(crate) fn map_key(document: &str) -> String {
-    use std::hash::{Hash, Hasher};
-    let mut h = std::collections::hash_map::DefaultHasher::new();
-    document.hash(&mut h);
-    format!("{:016x}-{}", h.finish(), document.len())
-}
-
-/// Unix milliseconds of `t`.
-pub fn unix_ms(t: SystemTime) -> i64 {
-    t.duration_since(SystemTime::UNIX_EPOCH)
-        .map_or(0, |d| d.as_millis() as i64)
 }

@@ -27,11 +27,15 @@ use std::time::Duration;
 use ::postgres::config::{Host, SslMode};
 use ::postgres::{Client, Config, NoTls, Row};
 
-use super::{Backend, LeaderOrder, Listed, PlayerStats, Retention, StoreError, Stored};
+use crate::store::backend::{
+    self, Backend, LeaderOrder, Listed, PlayerStats, Retention, StoreError, Stored,
+};
 
+mod convert;
 mod schema;
 mod write;
 
+use convert::{big, db, describe};
 use schema::Statements;
 pub use schema::{SCHEMA_VERSION, migrate};
 use write::{Change, apply, evict};
@@ -46,22 +50,6 @@ const RETRY_AT_MOST: Duration = Duration::from_secs(5);
 /// How long connecting may take when the URL does not say (`connect_timeout`).
 const CONNECT_TIMEOUT: Duration = Duration::from_secs(5);
 
-/// An error of the client, with the database's own message when there is one ("db error"
-/// alone says nothing).
-fn describe(e: &::postgres::Error) -> String {
-    if let Some(d) = e.as_db_error() {
-        let mut text = format!("{} {}: {}", d.severity(), d.code().code(), d.message());
-        if let Some(detail) = d.detail() {
-            text.push_str(&format!(" ({detail})"));
-        }
-        return text;
-    }
-    match std::error::Error::source(e) {
-        Some(cause) => format!("{e}: {cause}"),
-        None => e.to_string(),
-    }
-}
-
 /// Whether `e` may have cost the connection: a closed socket, an I/O error, or the server's
 /// FATAL (a terminated backend). The client may not know yet that its connection is gone
 /// (it reads the socket only during a request), so the caller connects again.
@@ -69,15 +57,6 @@ fn lost(e: &::postgres::Error) -> bool {
     e.is_closed()
         || e.as_db_error()
             .is_none_or(|d| matches!(d.severity(), "FATAL" | "PANIC"))
-}
-
-fn db(e: ::postgres::Error) -> StoreError {
-    StoreError::Database(describe(&e))
-}
-
-/// A count or tick as PostgreSQL's `BIGINT`.
-fn big(n: u64) -> i64 {
-    i64::try_from(n).unwrap_or(i64::MAX)
 }
 
 /// Checks `url` (a `postgres://` URL or a `key=value` string) and answers its settings and
@@ -369,8 +348,8 @@ impl Drop for Postgres {
 }
 
 impl Backend for Postgres {
-    fn write(&mut self, batch: &[super::Write]) -> Result<(), StoreError> {
-        let now = super::unix_ms(std::time::SystemTime::now());
+    fn write(&mut self, batch: &[backend::Write]) -> Result<(), StoreError> {
+        let now = backend::unix_ms(std::time::SystemTime::now());
         let mut changes = Vec::with_capacity(batch.len());
         for change in batch.iter().filter_map(Change::of) {
             match change {

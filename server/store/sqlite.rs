@@ -10,7 +10,9 @@ use std::path::Path;
 
 use rusqlite::{Connection, OptionalExtension, params};
 
-use super::{Ended, LeaderOrder, Listed, PlayerStats, StoreError, Stored};
+use crate::store::backend::{
+    self, Ended, LeaderOrder, Listed, PlayerStats, Retention, StoreError, Stored,
+};
 
 /// The schema, one migration a step: step i takes `user_version` i to i + 1.
 const MIGRATIONS: &[&str] = &[
@@ -391,12 +393,12 @@ pub fn leaders(
 /// The SQLite [`Backend`](super::Backend).
 pub struct Sqlite {
     conn: Connection,
-    retention: super::Retention,
+    retention: Retention,
 }
 
 impl Sqlite {
     /// The writer's connection: creates and migrates the database.
-    pub fn open(dir: &Path, retention: super::Retention) -> Result<Sqlite, StoreError> {
+    pub fn open(dir: &Path, retention: Retention) -> Result<Sqlite, StoreError> {
         Ok(Sqlite {
             conn: open(dir)?,
             retention,
@@ -404,7 +406,7 @@ impl Sqlite {
     }
 
     /// A reader's connection to a database [`Sqlite::open`] made.
-    pub fn reader(dir: &Path, retention: super::Retention) -> Result<Sqlite, StoreError> {
+    pub fn reader(dir: &Path, retention: Retention) -> Result<Sqlite, StoreError> {
         Ok(Sqlite {
             conn: open_reader(dir)?,
             retention,
@@ -416,10 +418,10 @@ impl Sqlite {
     }
 }
 
-impl super::Backend for Sqlite {
-    fn write(&mut self, batch: &[super::Write]) -> Result<(), StoreError> {
-        use super::Write;
-        let now = super::unix_ms(std::time::SystemTime::now());
+impl backend::Backend for Sqlite {
+    fn write(&mut self, batch: &[backend::Write]) -> Result<(), StoreError> {
+        use backend::Write;
+        let now = backend::unix_ms(std::time::SystemTime::now());
         let tx = self.conn.transaction().map_err(db)?;
         let mut finished = false;
         for w in batch {
@@ -440,10 +442,10 @@ impl super::Backend for Sqlite {
                                 &tx,
                                 id,
                                 &arena.def.name,
-                                &super::map_key(&document),
+                                &backend::map_key(&document),
                                 &document,
                                 &settings,
-                                super::unix_ms(*started_at),
+                                backend::unix_ms(*started_at),
                             )
                         })
                 }
@@ -453,7 +455,8 @@ impl super::Backend for Sqlite {
                     names,
                     tick,
                 } => {
-                    let chunk = (!inputs.is_empty()).then(|| super::codec::encode_inputs(inputs));
+                    let chunk =
+                        (!inputs.is_empty()).then(|| crate::store::codec::encode_inputs(inputs));
                     let names = names
                         .as_ref()
                         .map(|n| serde_json::to_string(n).unwrap_or_else(|_| "[]".into()));

@@ -42,7 +42,7 @@ use nalgebra::Point2;
 
 use crate::nav::{self, PathFollower, steer, turn_to};
 use crate::planner::pursuit::{engage_looking_ahead, nearest_sighting, pursuit_goal};
-use crate::planner::{Knowledge, RobotCommand, RobotView, TeamView};
+use crate::planner::view::{Knowledge, RobotCommand, RobotView, TeamView};
 use crate::radio::Status;
 use crate::sim::arena::Arena;
 use crate::sim::views::{ViewSpec, ViewTable};

@@ -6,7 +6,7 @@ use nalgebra::Point2;
 
 use super::{Coordinated, STUCK_TICKS};
 use crate::nav::{DistanceField, PathFollower};
-use crate::planner::{Knowledge, TeamView};
+use crate::planner::view::{Knowledge, TeamView};
 use crate::sim::AGENT_RADIUS;
 use crate::sim::arena::Arena;
 

@@ -6,7 +6,7 @@ use nalgebra::Point2;
 
 use super::{Coordinated, Goal};
 use crate::nav::{DistanceField, PathFollower};
-use crate::planner::{Knowledge, TeamView};
+use crate::planner::view::{Knowledge, TeamView};
 use crate::sim::arena::Arena;
 use crate::sim::{AGENT_RADIUS, Physics, Pose, wrap_angle};
 use crate::tracker::{Confidence, Tracker};

@@ -4,8 +4,8 @@
 
 use ::postgres::{Client, Statement};
 
-use super::db;
-use crate::store::StoreError;
+use super::convert::db;
+use crate::store::backend::StoreError;
 
 /// The schema, one migration a step: step i takes version i to i + 1.
 const MIGRATIONS: &[&str] = &[

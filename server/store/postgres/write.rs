@@ -1,11 +1,11 @@
-//! A batch's writes as PostgreSQL statements: each [`Write`](crate::store::Write) encoded
+//! A batch's writes as PostgreSQL statements: each [`Write`](crate::store::backend::Write) encoded
 //! before the transaction begins, applied in it, and the eviction that follows a finish.
 
 use ::postgres::Transaction;
 
-use super::big;
+use super::convert::big;
 use super::schema::Statements;
-use crate::store::{Ended, Retention, StoreError};
+use crate::store::backend::{Ended, Retention, StoreError};
 
 /// A write, encoded before its transaction begins.
 pub(super) enum Change<'a> {
@@ -30,8 +30,10 @@ pub(super) enum Change<'a> {
 }
 
 impl<'a> Change<'a> {
-    pub(super) fn of(w: &'a crate::store::Write) -> Option<Result<Change<'a>, StoreError>> {
-        use crate::store::Write;
+    pub(super) fn of(
+        w: &'a crate::store::backend::Write,
+    ) -> Option<Result<Change<'a>, StoreError>> {
+        use crate::store::backend::Write;
         Some(match w {
             Write::Begin {
                 id,
@@ -45,10 +47,10 @@ impl<'a> Change<'a> {
                     .map(|settings| Change::Begin {
                         id,
                         map: &arena.def.name,
-                        hash: crate::store::map_key(&document),
+                        hash: crate::store::backend::map_key(&document),
                         document,
                         settings,
-                        started_at: crate::store::unix_ms(*started_at),
+                        started_at: crate::store::backend::unix_ms(*started_at),
                     })
             }
             Write::Append {

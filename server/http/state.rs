@@ -1,0 +1,30 @@
+//! [`AppState`]: what every handler shares.
+
+use std::sync::Arc;
+
+use crate::fleet::Fleet;
+use crate::game::Registry;
+use crate::http::limits;
+use crate::service::{Pool, Service};
+
+/// What every handler shares.
+#[derive(Debug, Clone)]
+pub struct AppState {
+    pub registry: Arc<Registry>,
+    pub limits: Arc<limits::AddressLimits>,
+    /// The blocking pool that validates and builds maps and worlds: one job per core.
+    pub pool: Pool,
+    /// This node's part in a fleet (`--fleet`), if it is in one.
+    pub fleet: Option<Arc<Fleet>>,
+}
+
+impl AppState {
+    /// What the use cases work with.
+    pub fn service(&self) -> Service<'_> {
+        Service {
+            registry: &self.registry,
+            pool: &self.pool,
+            fleet: self.fleet.as_deref(),
+        }
+    }
+}
