@@ -6,8 +6,10 @@ use std::sync::Arc;
 
 use tokio::sync::{mpsc, oneshot};
 
-use super::view::{Clock, Joined};
-use super::{Answer, Hub, MatchError, Reading, Request, Seat, Sight};
+use super::error::MatchError;
+use super::hub::{Hub, Seat};
+use super::task::{Answer, Reading, Request};
+use super::view::{Clock, Joined, Sight};
 use crate::access::{ClientKey, Owner};
 use crate::game::admission::Price;
 use lasertag_core::world::{FinishReason, HumanInput, WorldInput};

@@ -7,7 +7,9 @@
 
 pub mod admission;
 pub mod delay;
+pub mod error;
 mod handle;
+pub mod hub;
 pub mod record;
 pub mod replay;
 pub mod showcase;
@@ -15,11 +17,11 @@ mod task;
 pub mod view;
 
 use std::collections::BTreeMap;
-use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, RwLock, Weak};
 use std::time::Duration;
 
-use tokio::sync::{oneshot, watch};
+use tokio::sync::watch;
 use tokio_util::sync::CancellationToken;
 
 use crate::access::{ClientKey, Owner};
@@ -27,194 +29,15 @@ use crate::config::Config;
 use crate::game::admission::{NoRoom, Price};
 use crate::maps::MapStore;
 use crate::metrics::Metrics;
-use lasertag_core::sim::Physics;
-use lasertag_core::sim::arena::Arena;
-use lasertag_core::world::{FinishReason, HumanInput, InputError, World, WorldInput};
-use view::{Frame, Joined, MatchMeta, Summary};
+use lasertag_core::world::{FinishReason, World};
+use view::MatchMeta;
 
 pub use crate::access::random_id;
+pub use error::MatchError;
 pub use handle::MatchHandle;
-pub use task::{Reading, TaskSettings, spawn_match};
-
-/// Why a match refused a request (`http` turns each into a status).
-#[derive(Debug, Clone, PartialEq, thiserror::Error)]
-pub enum MatchError {
-    /// A change from outside the world refused (an unknown agent, an order it cannot take).
-    #[error(transparent)]
-    Input(#[from] InputError),
-    /// A robot index the match does not have.
-    #[error("{0}")]
-    NoRobot(String),
-    /// A request the match cannot take as it is (a name it cannot seat, …).
-    #[error("{0}")]
-    Invalid(String),
-    /// Stepping asked of a match that runs in real time.
-    #[error("match {id} runs in real time; {what} works only on manual-clock matches")]
-    Realtime { id: String, what: &'static str },
-    /// A step asked while another is running.
-    #[error("match {0} is already stepping")]
-    Stepping(String),
-    #[error("match {0} has finished")]
-    Finished(String),
-    /// Every seat a person could take is taken (or the server's per-match limit is met).
-    #[error("{0}")]
-    Full(String),
-    /// The asking client holds as much of the match as it may.
-    #[error("{0}")]
-    Quota(String),
-    /// A token that names no player of the match.
-    #[error("{0}")]
-    NotAPlayer(String),
-    #[error("match {0} has ended")]
-    Gone(String),
-}
-
-/// Whether a reader may see a match's truth as it is now, or only as long ago as the match
-/// holds it back (see [`delay`]).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Sight {
-    /// The owner, the operator, or the server itself.
-    Live,
-    /// Everybody else.
-    Public,
-}
-
-/// What a match's task does with the match once it has done what was asked: reads it (the
-/// caller's conversion, run on the task) or tells why it refused.
-pub type Answer = Box<dyn FnOnce(Result<&mut Reading<'_>, MatchError>) + Send>;
-
-/// What a handler may ask of a match task.
-pub enum Request {
-    /// Read the match as a reader with `sight` may see it.
-    Read { sight: Sight, answer: Answer },
-    /// One change from outside (an opponent's or a robot's order), applied at once.
-    Apply {
-        input: WorldInput,
-        reply: oneshot::Sender<Result<(), MatchError>>,
-    },
-    /// A step of a manual-clock match: every input of `inputs` (all or none), then `ticks`
-    /// ticks; the answer reads the match live once the last has run. `what` names the
-    /// request in refusals (`step`, `act`).
-    Step {
-        inputs: Vec<WorldInput>,
-        ticks: u64,
-        what: &'static str,
-        answer: Answer,
-    },
-    Join {
-        name: String,
-        /// Who asks (for the rule of one unplayed hold per client).
-        client: Option<ClientKey>,
-        reply: oneshot::Sender<Result<Joined, MatchError>>,
-    },
-    /// A WebSocket connection wants to play the slot `token` belongs to.
-    Connect {
-        token: String,
-        reply: oneshot::Sender<Result<Seat, MatchError>>,
-    },
-    /// A seated connection's keys (ignored unless `generation` is the slot's current one):
-    /// numbered ones are queued and applied one per tick; others hold until the next.
-    Input {
-        slot: usize,
-        generation: u64,
-        input: HumanInput,
-        seq: Option<u64>,
-    },
-    /// End the match for this reason (deleted, or the server is shutting down) and its task.
-    Stop(FinishReason),
-}
-
-impl Request {
-    /// Whether answering it may change what listings show (seats, orders, steps).
-    fn changes_listing(&self) -> bool {
-        !matches!(self, Request::Input { .. } | Request::Read { .. })
-    }
-
-    /// Whether it counts as a client's activity (keys do not: a connected player is
-    /// counted already).
-    fn is_activity(&self) -> bool {
-        !matches!(self, Request::Input { .. })
-    }
-
-    /// Whether it changes the match (what keeps a manual match alive).
-    fn is_change(&self) -> bool {
-        matches!(self, Request::Apply { .. } | Request::Step { .. })
-    }
-}
-
-impl std::fmt::Debug for Request {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        match self {
-            Request::Read { sight, .. } => f.debug_struct("Read").field("sight", sight).finish(),
-            Request::Apply { input, .. } => f.debug_struct("Apply").field("input", input).finish(),
-            Request::Step { ticks, what, .. } => f
-                .debug_struct("Step")
-                .field("what", what)
-                .field("ticks", ticks)
-                .finish(),
-            Request::Join { name, .. } => f.debug_struct("Join").field("name", name).finish(),
-            Request::Connect { .. } => f.write_str("Connect"),
-            Request::Input { slot, seq, .. } => f
-                .debug_struct("Input")
-                .field("slot", slot)
-                .field("seq", seq)
-                .finish(),
-            Request::Stop(reason) => f.debug_tuple("Stop").field(reason).finish(),
-        }
-    }
-}
-
-/// A connection's place at a match: the opponent slot it plays.
-#[derive(Debug)]
-pub struct Seat {
-    pub slot: usize,
-    pub opponent_id: String,
-    pub name: String,
-    pub generation: u64,
-    /// Resolves when a newer connection with the same token takes the seat. Dropping it
-    /// (the connection ended) tells the task that the player has gone.
-    pub kicked: oneshot::Receiver<()>,
-}
-
-/// What viewers of a match share: the latest published frame, the one spectators may see,
-/// the arena (for line of sight) and the count of spectators.
-#[derive(Debug, Clone)]
-pub struct Hub {
-    /// The match as it is now (players filter it to their own line of sight).
-    pub frames: watch::Receiver<Arc<Frame>>,
-    /// What spectators see: `frames` again, or `delay_ticks` behind when people play.
-    pub spectate: watch::Receiver<Arc<Frame>>,
-    pub delay_ticks: u64,
-    /// How its agents move (players are told how, and predict their own motion).
-    pub physics: Arc<Physics>,
-    /// The match's summary as of its latest frame (what listings show).
-    pub summary: watch::Receiver<Arc<Summary>>,
-    pub arena: Arc<Arena>,
-    pub spectators: Arc<AtomicUsize>,
-}
-
-impl Hub {
-    /// Counts one more spectator unless there are `max` already; the count falls back when
-    /// the returned guard is dropped.
-    pub fn add_spectator(&self, max: usize) -> Option<SpectatorSeat> {
-        self.spectators
-            .fetch_update(Ordering::AcqRel, Ordering::Acquire, |n| {
-                (n < max).then_some(n + 1)
-            })
-            .ok()
-            .map(|_| SpectatorSeat(self.spectators.clone()))
-    }
-}
-
-/// A spectator counted in its match's [`Hub`] for as long as it lives.
-#[derive(Debug)]
-pub struct SpectatorSeat(Arc<AtomicUsize>);
-
-impl Drop for SpectatorSeat {
-    fn drop(&mut self) {
-        self.0.fetch_sub(1, Ordering::AcqRel);
-    }
-}
+pub use hub::{Hub, Seat, SpectatorSeat};
+pub use task::{Answer, Reading, Request, TaskSettings, spawn_match};
+pub use view::Sight;
 
 type Matches = RwLock<BTreeMap<String, MatchHandle>>;
 

@@ -414,6 +414,16 @@ pub fn thin(points: &[Point2<f32>], weights: &[f32], k: usize) -> Vec<[i32; 2]> 
     out
 }
 
+/// Whether a reader may see a match's truth as it is now, or only as long ago as the match
+/// holds it back (see [`delay`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Sight {
+    /// The owner, the operator, or the server itself.
+    Live,
+    /// Everybody else.
+    Public,
+}
+
 /// How a match's clock runs: 20 Hz of real time, or a tick only when asked.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Clock {

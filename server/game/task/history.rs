@@ -13,23 +13,6 @@ use lasertag_core::world::{FinishReason, MatchStatus};
 /// How often a running match's inputs go to the store: what a crash may lose.
 pub(super) const FLUSH_EVERY: Duration = Duration::from_secs(1);
 
-/// Where a match stands with the store.
-#[derive(Debug)]
-pub(super) struct StoreProgress {
-    /// The store has the match's start.
-    begun: bool,
-    last_flush: Instant,
-}
-
-impl Default for StoreProgress {
-    fn default() -> Self {
-        StoreProgress {
-            begun: false,
-            last_flush: Instant::now(),
-        }
-    }
-}
-
 impl MatchTask {
     /// Sends the match's start, unless the store has it.
     fn store_begin(&mut self) -> bool {

@@ -10,8 +10,12 @@
 //! (orders, observations, environment steps) in `robots.rs`; what goes to the history (the
 //! store and replays) in `history.rs`.
 //!
-//! Long file: one match task's loop, its messages and its clean-up rules share the
-//! task's state.
+//! What the task takes is a [`Request`]; a read or a finished step lends the reader a
+//! [`Reading`], a view of the task that follows the reader's `Sight`. Both live here because
+//! a `Reading` borrows the very task that makes it.
+//!
+//! Long file: one match task's loop, its messages, the readings it lends and its clean-up
+//! rules share the task's state.
 
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Arc, OnceLock};
@@ -20,22 +24,27 @@ use std::time::{Duration, Instant};
 use tokio::sync::{mpsc, oneshot, watch};
 
 mod history;
-mod reading;
 mod seats;
 mod step;
-pub use reading::Reading;
 use seats::Player;
 use tokio::time::MissedTickBehavior;
 use tracing::Instrument;
 
 use crate::access::{ClientKey, same_secret};
-use crate::game::delay::HeldBack;
+use std::borrow::Cow;
+
+use crate::access::random_id;
+use crate::game::delay::{HeldBack, HeldBelief};
+use crate::game::error::MatchError;
+use crate::game::hub::{Hub, Seat};
 use crate::game::record::Recording;
+use crate::game::view::Sight;
 use crate::game::view::{BELIEF_EVERY, Clock, Frame, Joined, MatchMeta, SeatView, Stats, Summary};
-use crate::game::{Answer, Hub, MatchError, Request, Seat, random_id};
 use crate::metrics::{Metrics, Refusal, TickHistograms};
+use lasertag_core::sim::AgentId;
 use lasertag_core::sim::TICK_HZ;
 use lasertag_core::world::{Control, FinishReason, HumanInput, InputError, StepMark, WorldInput};
+use lasertag_core::world::{Event, RobotObservation, RobotOrderError};
 use lasertag_core::world::{MatchConfig, MatchStatus, World};
 
 /// Ticks over which overruns are counted, and how many of them may overrun before the match
@@ -61,6 +70,210 @@ struct PendingStep {
     /// The events logged before the step began (its answer reads those after).
     since: u64,
     answer: Answer,
+}
+
+/// What a match's task does with the match once it has done what was asked: reads it (the
+/// caller's conversion, run on the task) or tells why it refused.
+pub type Answer = Box<dyn FnOnce(Result<&mut Reading<'_>, MatchError>) + Send>;
+
+/// What a handler may ask of a match task.
+pub enum Request {
+    /// Read the match as a reader with `sight` may see it.
+    Read { sight: Sight, answer: Answer },
+    /// One change from outside (an opponent's or a robot's order), applied at once.
+    Apply {
+        input: WorldInput,
+        reply: oneshot::Sender<Result<(), MatchError>>,
+    },
+    /// A step of a manual-clock match: every input of `inputs` (all or none), then `ticks`
+    /// ticks; the answer reads the match live once the last has run. `what` names the
+    /// request in refusals (`step`, `act`).
+    Step {
+        inputs: Vec<WorldInput>,
+        ticks: u64,
+        what: &'static str,
+        answer: Answer,
+    },
+    Join {
+        name: String,
+        /// Who asks (for the rule of one unplayed hold per client).
+        client: Option<ClientKey>,
+        reply: oneshot::Sender<Result<Joined, MatchError>>,
+    },
+    /// A WebSocket connection wants to play the slot `token` belongs to.
+    Connect {
+        token: String,
+        reply: oneshot::Sender<Result<Seat, MatchError>>,
+    },
+    /// A seated connection's keys (ignored unless `generation` is the slot's current one):
+    /// numbered ones are queued and applied one per tick; others hold until the next.
+    Input {
+        slot: usize,
+        generation: u64,
+        input: HumanInput,
+        seq: Option<u64>,
+    },
+    /// End the match for this reason (deleted, or the server is shutting down) and its task.
+    Stop(FinishReason),
+}
+
+impl Request {
+    /// Whether answering it may change what listings show (seats, orders, steps).
+    pub(crate) fn changes_listing(&self) -> bool {
+        !matches!(self, Request::Input { .. } | Request::Read { .. })
+    }
+
+    /// Whether it counts as a client's activity (keys do not: a connected player is
+    /// counted already).
+    pub(crate) fn is_activity(&self) -> bool {
+        !matches!(self, Request::Input { .. })
+    }
+
+    /// Whether it changes the match (what keeps a manual match alive).
+    pub(crate) fn is_change(&self) -> bool {
+        matches!(self, Request::Apply { .. } | Request::Step { .. })
+    }
+}
+
+impl std::fmt::Debug for Request {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Request::Read { sight, .. } => f.debug_struct("Read").field("sight", sight).finish(),
+            Request::Apply { input, .. } => f.debug_struct("Apply").field("input", input).finish(),
+            Request::Step { ticks, what, .. } => f
+                .debug_struct("Step")
+                .field("what", what)
+                .field("ticks", ticks)
+                .finish(),
+            Request::Join { name, .. } => f.debug_struct("Join").field("name", name).finish(),
+            Request::Connect { .. } => f.write_str("Connect"),
+            Request::Input { slot, seq, .. } => f
+                .debug_struct("Input")
+                .field("slot", slot)
+                .field("seq", seq)
+                .finish(),
+            Request::Stop(reason) => f.debug_tuple("Stop").field(reason).finish(),
+        }
+    }
+}
+
+/// A match as a reader with some [`Sight`] may see it (see the module docs).
+pub struct Reading<'a> {
+    task: &'a mut MatchTask,
+    sight: Sight,
+    /// The events logged before the step this answers (for a plain read: all of them).
+    since: u64,
+}
+
+impl<'a> Reading<'a> {
+    fn new(task: &'a mut MatchTask, sight: Sight, since: u64) -> Reading<'a> {
+        Reading { task, sight, since }
+    }
+
+    /// What is held back from this reader: nothing for the owner, nor once the match is
+    /// over (then nothing is left to hide).
+    fn held(&self) -> Option<&HeldBack> {
+        match self.sight {
+            Sight::Live => None,
+            Sight::Public if self.task.world.status == MatchStatus::Finished => None,
+            Sight::Public => self.task.held.as_ref(),
+        }
+    }
+
+    pub fn meta(&self) -> &MatchMeta {
+        &self.task.meta
+    }
+
+    pub fn config(&self) -> &MatchConfig {
+        &self.task.config
+    }
+
+    /// The match as listings show it, now (nothing in it is held back).
+    pub fn summary(&self) -> Summary {
+        Summary::of(&self.task.world, &self.task.meta, &self.task.config)
+    }
+
+    /// How the task keeps up.
+    pub fn stats(&self) -> Stats {
+        self.task.stats()
+    }
+
+    /// The newest frame this reader may see: the world as it is now for a live reader
+    /// (whatever changes what a frame shows publishes one), the one shown to spectators for
+    /// the public.
+    pub fn frame(&mut self) -> Arc<Frame> {
+        if let Some(held) = self.held() {
+            return held.shown().clone();
+        }
+        self.task.refresh_frame();
+        self.task.frames.borrow().clone()
+    }
+
+    /// Robot `robot`'s belief as this reader may see it, or the team's merged one when
+    /// `None`.
+    pub fn belief(&self, robot: Option<usize>) -> Result<Cow<'_, HeldBelief>, MatchError> {
+        let belief = match self.held() {
+            Some(held) => held.belief(robot).map(Cow::Borrowed),
+            None => HeldBelief::of(&self.task.world, robot).map(Cow::Owned),
+        };
+        belief.ok_or_else(|| {
+            MatchError::NoRobot(format!(
+                "robot: no robot r{} in this match (it has {})",
+                robot.unwrap_or_default(),
+                self.task.world.robots.len()
+            ))
+        })
+    }
+
+    /// The events after `since` that this reader may see, oldest first.
+    pub fn events(&self, since: u64) -> &[Event] {
+        let shown = self.held().map_or(u64::MAX, HeldBack::shown_seq);
+        let events = self.task.world.events_since(since);
+        let end = events.partition_point(|e| e.seq <= shown);
+        &events[..end]
+    }
+
+    /// The events logged since the step this answers began (none for a plain read).
+    pub fn stepped_events(&self) -> &[Event] {
+        self.task.world.events_since(self.since)
+    }
+
+    /// The world as it is now, to a reader who may see it live.
+    pub fn live(&self) -> Option<&World> {
+        (self.sight == Sight::Live).then_some(&self.task.world)
+    }
+
+    /// What robot `robot` knows now. It is no frame's: whether a reader may have it while
+    /// people play is the caller's rule (its owner only, until the match ends).
+    pub fn observation(&self, robot: usize) -> Result<RobotObservation<'_>, MatchError> {
+        self.task.world.observation(robot).ok_or_else(|| {
+            MatchError::Input(InputError::Robot(RobotOrderError::UnknownRobot(
+                AgentId::Robot(robot).to_string(),
+            )))
+        })
+    }
+
+    /// Whether the match has ended.
+    pub fn finished(&self) -> bool {
+        self.task.world.status == MatchStatus::Finished
+    }
+}
+
+/// Where a match stands with the store.
+#[derive(Debug)]
+pub(super) struct StoreProgress {
+    /// The store has the match's start.
+    pub(super) begun: bool,
+    pub(super) last_flush: Instant,
+}
+
+impl Default for StoreProgress {
+    fn default() -> Self {
+        StoreProgress {
+            begun: false,
+            last_flush: Instant::now(),
+        }
+    }
 }
 
 /// What a match task needs from the shell besides its world.
@@ -149,7 +362,7 @@ pub fn spawn_match(
     let mut task = MatchTask {
         recording: Recording::default(),
         archived: false,
-        store: history::StoreProgress::default(),
+        store: StoreProgress::default(),
         started_at: std::time::SystemTime::now(),
         players: (0..world.opponents.len()).map(|_| None).collect(),
         finished_at: None,
@@ -212,7 +425,7 @@ struct MatchTask {
     /// Whether the finished match went to the history already.
     archived: bool,
     /// What the store has of the match.
-    store: history::StoreProgress,
+    store: StoreProgress,
     started_at: std::time::SystemTime,
     /// When the world was first seen finished (for the clean-up grace).
     finished_at: Option<Instant>,

@@ -3,8 +3,9 @@
 
 use std::sync::atomic::Ordering;
 
-use super::{MatchTask, PendingStep, Reading};
-use crate::game::{Answer, MatchError, Sight};
+use super::{Answer, MatchTask, PendingStep, Reading};
+use crate::game::error::MatchError;
+use crate::game::view::Sight;
 use lasertag_core::world::{MatchStatus, WorldInput};
 
 impl MatchTask {
