@@ -13,6 +13,7 @@
 pub mod bounds;
 pub mod compact;
 pub mod fleet;
+mod refusal;
 pub mod replay_ws;
 pub mod replays;
 pub mod robots;
@@ -45,16 +46,7 @@ use lasertag_core::sim::{AgentId, TICK_HZ};
 use lasertag_core::world::{ControlKind, FinishReason, MatchConfig, Placement};
 use lasertag_core::world::{EventKind, MatchStatus, Side, World};
 
-/// A request part that was refused: the JSON path of what is wrong, and why.
-pub use lasertag_core::settings::FieldError as Invalid;
-
-/// `Invalid` at `field`.
-pub fn invalid(field: impl Into<String>, message: impl Into<String>) -> Invalid {
-    Invalid {
-        field: field.into(),
-        message: message.into(),
-    }
-}
+pub use refusal::{Invalid, invalid};
 
 /// Deserialises with serde, naming the JSON path of whatever is wrong (`root` when it is
 /// the whole document).

@@ -424,16 +424,6 @@ fn no_project_history_in_code_or_docs() {
     assert!(bad.is_empty(), "history in the text:\n{}", bad.join("\n"));
 }
 
-/// Import circles between files inside `server/game/`, `server/protocol/` and
-/// `server/http/` that are still to be broken: each entry one circle as
-/// [`no_file_imports_itself_through_other_files`] prints it. Remove an entry when its circle
-/// is gone (the test says which); remove the list when it is empty.
-const KNOWN_CIRCLES_TO_REMOVE: &[&str] = &[
-    "server/http/limits.rs -> server/http/state.rs -> server/http/limits.rs",
-    "server/protocol.rs -> server/protocol/bounds.rs -> server/protocol.rs",
-    "server/protocol.rs -> server/protocol/state.rs -> server/protocol/fleet.rs -> server/protocol.rs",
-];
-
 /// The files every crate of the workspace starts from: the libraries, the binary, each
 /// integration test, benchmark, example and fuzz target.
 fn crate_roots() -> Vec<PathBuf> {
@@ -483,27 +473,14 @@ fn no_file_imports_itself_through_other_files() {
         let graph = imports::file_graph(&crate_root, &code_of);
         found.extend(imports::circles(&graph, &root()));
     }
-    let circles: Vec<&String> = found
-        .iter()
-        .filter(|c| !KNOWN_CIRCLES_TO_REMOVE.contains(&c.as_str()))
-        .collect();
-    let gone: Vec<&&str> = KNOWN_CIRCLES_TO_REMOVE
-        .iter()
-        .filter(|c| !found.contains(**c))
-        .collect();
     assert!(
-        circles.is_empty(),
+        found.is_empty(),
         "files that import themselves through other files (move what they share into a \
          file below them, or pass it down):\n{}",
-        circles
+        found
             .iter()
             .map(|c| c.as_str())
             .collect::<Vec<_>>()
             .join("\n")
-    );
-    assert!(
-        gone.is_empty(),
-        "circles in KNOWN_CIRCLES_TO_REMOVE that are gone: remove them from the list:\n{}",
-        gone.iter().map(|c| **c).collect::<Vec<_>>().join("\n")
     );
 }

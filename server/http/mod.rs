@@ -12,6 +12,7 @@ mod handlers;
 pub mod limits;
 mod openapi;
 mod players;
+mod rate_limit;
 mod replay_ws;
 mod replays;
 mod robots;
@@ -121,7 +122,7 @@ fn router(registry: Arc<Registry>, web_dir: PathBuf, fleet: Option<Arc<Fleet>>) 
     }
     let act = act.layer(axum::middleware::from_fn_with_state(
         state.clone(),
-        limits::rate_limit,
+        rate_limit::rate_limit,
     ));
     let mut router = Router::new()
         .nest("/api", api)
@@ -144,7 +145,7 @@ fn router(registry: Arc<Registry>, web_dir: PathBuf, fleet: Option<Arc<Fleet>>) 
         // Outside compression and the routes: a refused request costs almost nothing.
         .layer(axum::middleware::from_fn_with_state(
             state.clone(),
-            limits::rate_limit,
+            rate_limit::rate_limit,
         ));
     router = router.layer(TraceLayer::new_for_http()).merge(act);
     if in_fleet {

@@ -12,7 +12,7 @@ use lasertag_core::settings::{Kind, Range};
 use utoipa::openapi::RefOr;
 use utoipa::openapi::schema::{KnownFormat, ObjectBuilder, Schema, SchemaFormat, SchemaType, Type};
 
-use super::{Invalid, invalid};
+use super::refusal::{Invalid, invalid};
 
 /// One bounded number of a request.
 #[derive(Debug, Clone, Copy, PartialEq)]

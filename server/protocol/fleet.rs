@@ -10,27 +10,13 @@
 use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
 
-use crate::protocol::MatchSummary;
+use crate::protocol::state::MatchSummary;
+pub use crate::protocol::state::NodeRef;
 
 /// The version of [`NodeRecord`]'s layout; a reader skips records of another version, so a
 /// fleet can be upgraded one node at a time (old and new nodes ignore each other's matches
 /// until all run the same version, and keep serving their own).
 pub const RECORD_FORMAT: u32 = 1;
-
-/// The node that hosts a match: `node` in listings when the server runs in a fleet.
-#[derive(Debug, Clone, PartialEq, Eq, Serialize, ToSchema)]
-pub struct NodeRef {
-    /// The node's id (`--node-id`).
-    pub id: String,
-    /// Where clients reach it (`--public-url`): its API is under `<url>/api`, its
-    /// WebSockets under `<url>/ws`.
-    pub url: String,
-    /// Whether it is the node that answered.
-    pub local: bool,
-    /// Whether it is shutting down: it takes no new matches; its running ones go on until
-    /// they end or the drain ends them.
-    pub draining: bool,
-}
 
 /// What a node writes to the directory each heartbeat (one key, expiring unless renewed).
 /// `M` is a match summary: this node's own when written, a JSON object when read.

@@ -61,7 +61,22 @@ pub struct MatchSummary {
     /// The node that hosts the match, when the server runs in a fleet (`--fleet`); absent
     /// otherwise. Its API and WebSocket are at `node.url`.
     #[serde(skip_serializing_if = "Option::is_none")]
-    pub node: Option<super::fleet::NodeRef>,
+    pub node: Option<NodeRef>,
+}
+
+/// The node that hosts a match: `node` in listings when the server runs in a fleet.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, ToSchema)]
+pub struct NodeRef {
+    /// The node's id (`--node-id`).
+    pub id: String,
+    /// Where clients reach it (`--public-url`): its API is under `<url>/api`, its
+    /// WebSockets under `<url>/ws`.
+    pub url: String,
+    /// Whether it is the node that answered.
+    pub local: bool,
+    /// Whether it is shutting down: it takes no new matches; its running ones go on until
+    /// they end or the drain ends them.
+    pub draining: bool,
 }
 
 /// Caveats about a match: settings that were accepted but do nothing as asked.
