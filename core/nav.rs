@@ -4,7 +4,9 @@
 //! step costs 12 and 17 per 12ths of a cell, √2 within 0.2%): one run answers "how far is every reachable point" (used to score
 //! candidate destinations by travel time) and "what is the path to this one" (predecessor
 //! links, then string-pulled with [`smooth`] so agents walk straight lines, not staircases).
-//! [`PathFollower`] walks a path waypoint by waypoint.
+//! [`path_within`] finds one path with its work bounded (it stops at the goal and gives up
+//! past a budget), for orders given from outside. [`PathFollower`] walks a path waypoint by
+//! waypoint.
 
 use nalgebra::Point2;
 
@@ -51,11 +53,7 @@ impl DistanceField {
         start: usize,
         avoid: &[(Point2<f32>, f32)],
     ) -> DistanceField {
-        const STRAIGHT: u32 = 12;
-        const DIAGONAL: u32 = 17;
-        const RING: usize = DIAGONAL as usize + 1;
-        let n = grid.len();
-        let open: Vec<bool> = (0..n)
+        let open: Vec<bool> = (0..grid.len())
             .map(|idx| {
                 grid.passable(idx) && {
                     let c = grid.centre(idx);
@@ -63,74 +61,10 @@ impl DistanceField {
                 }
             })
             .collect();
-        let mut units = vec![u32::MAX; n];
-        let mut prev = vec![NONE; n];
-        let mut buckets: Vec<Vec<u32>> = vec![Vec::new(); RING];
-        units[start] = 0;
-        buckets[0].push(start as u32);
-        let mut pending = 1usize;
-        let (cols, rows) = (grid.cols, grid.rows);
-        let mut d: u32 = 0;
-        while pending > 0 {
-            let slot = d as usize % RING;
-            let cells = std::mem::take(&mut buckets[slot]);
-            pending -= cells.len();
-            for &idx in &cells {
-                let idx = idx as usize;
-                if units[idx] != d {
-                    continue; // a stale entry: reached sooner by another way
-                }
-                let (r, c) = (idx / cols, idx % cols);
-                let (up, down) = (r + 1 < rows, r > 0);
-                let (right, left) = (c + 1 < cols, c > 0);
-                // Straight neighbours first; a diagonal needs both straight ones it passes
-                // between to be open (no corner cutting).
-                let e = right && open[idx + 1];
-                let w = left && open[idx - 1];
-                let nn = up && open[idx + cols];
-                let s = down && open[idx - cols];
-                let mut relax = |to: usize, cost: u32, buckets: &mut Vec<Vec<u32>>| {
-                    let nd = d + cost;
-                    if nd < units[to] {
-                        units[to] = nd;
-                        prev[to] = idx as u32;
-                        buckets[nd as usize % RING].push(to as u32);
-                        pending += 1;
-                    }
-                };
-                if e {
-                    relax(idx + 1, STRAIGHT, &mut buckets);
-                }
-                if w {
-                    relax(idx - 1, STRAIGHT, &mut buckets);
-                }
-                if nn {
-                    relax(idx + cols, STRAIGHT, &mut buckets);
-                }
-                if s {
-                    relax(idx - cols, STRAIGHT, &mut buckets);
-                }
-                if nn && e && open[idx + cols + 1] {
-                    relax(idx + cols + 1, DIAGONAL, &mut buckets);
-                }
-                if nn && w && open[idx + cols - 1] {
-                    relax(idx + cols - 1, DIAGONAL, &mut buckets);
-                }
-                if s && e && open[idx - cols + 1] {
-                    relax(idx - cols + 1, DIAGONAL, &mut buckets);
-                }
-                if s && w && open[idx - cols - 1] {
-                    relax(idx - cols - 1, DIAGONAL, &mut buckets);
-                }
-            }
-            // Hand the emptied bucket's allocation back for reuse.
-            let mut cells = cells;
-            cells.clear();
-            if buckets[slot].is_empty() {
-                buckets[slot] = cells;
-            }
-            d += 1;
-        }
+        // Unbounded and with no goal, the search settles every reachable cell.
+        let (units, prev) = match dial(grid, start, &open, None, &mut u64::MAX.clone()) {
+            Ok(search) | Err(Exhausted(search)) => search,
+        };
         let scale = grid.cell / STRAIGHT as f32;
         let dist = units
             .iter()
@@ -213,6 +147,158 @@ impl DistanceField {
     }
 }
 
+const STRAIGHT: u32 = 12;
+const DIAGONAL: u32 = 17;
+
+/// Travel units (twelfths of a cell) and predecessors of one search.
+type Search = (Vec<u32>, Vec<u32>);
+
+/// A bounded search ran out of work (what it had settled so far).
+#[derive(Debug)]
+struct Exhausted(Search);
+
+/// Dial's algorithm from `start` over the `open` cells. With a `goal` it stops once the goal
+/// is settled: every cell on the goal's shortest path was settled before it, and a cell's
+/// predecessor changes only on a strictly shorter way, so the path is the one a full search
+/// finds. Each settled cell takes one unit of `work`; none left, it gives up.
+fn dial(
+    grid: &ClearanceGrid,
+    start: usize,
+    open: &[bool],
+    goal: Option<usize>,
+    work: &mut u64,
+) -> Result<Search, Exhausted> {
+    const RING: usize = DIAGONAL as usize + 1;
+    let n = grid.len();
+    let mut units = vec![u32::MAX; n];
+    let mut prev = vec![NONE; n];
+    let mut buckets: Vec<Vec<u32>> = vec![Vec::new(); RING];
+    units[start] = 0;
+    buckets[0].push(start as u32);
+    let mut pending = 1usize;
+    let (cols, rows) = (grid.cols, grid.rows);
+    let mut d: u32 = 0;
+    while pending > 0 {
+        let slot = d as usize % RING;
+        let cells = std::mem::take(&mut buckets[slot]);
+        pending -= cells.len();
+        for &idx in &cells {
+            let idx = idx as usize;
+            if units[idx] != d {
+                continue; // a stale entry: reached sooner by another way
+            }
+            if goal == Some(idx) {
+                return Ok((units, prev));
+            }
+            if *work == 0 {
+                return Err(Exhausted((units, prev)));
+            }
+            *work -= 1;
+            let (r, c) = (idx / cols, idx % cols);
+            let (up, down) = (r + 1 < rows, r > 0);
+            let (right, left) = (c + 1 < cols, c > 0);
+            // Straight neighbours first; a diagonal needs both straight ones it passes
+            // between to be open (no corner cutting).
+            let e = right && open[idx + 1];
+            let w = left && open[idx - 1];
+            let nn = up && open[idx + cols];
+            let s = down && open[idx - cols];
+            let mut relax = |to: usize, cost: u32, buckets: &mut Vec<Vec<u32>>| {
+                let nd = d + cost;
+                if nd < units[to] {
+                    units[to] = nd;
+                    prev[to] = idx as u32;
+                    buckets[nd as usize % RING].push(to as u32);
+                    pending += 1;
+                }
+            };
+            if e {
+                relax(idx + 1, STRAIGHT, &mut buckets);
+            }
+            if w {
+                relax(idx - 1, STRAIGHT, &mut buckets);
+            }
+            if nn {
+                relax(idx + cols, STRAIGHT, &mut buckets);
+            }
+            if s {
+                relax(idx - cols, STRAIGHT, &mut buckets);
+            }
+            if nn && e && open[idx + cols + 1] {
+                relax(idx + cols + 1, DIAGONAL, &mut buckets);
+            }
+            if nn && w && open[idx + cols - 1] {
+                relax(idx + cols - 1, DIAGONAL, &mut buckets);
+            }
+            if s && e && open[idx - cols + 1] {
+                relax(idx - cols + 1, DIAGONAL, &mut buckets);
+            }
+            if s && w && open[idx - cols - 1] {
+                relax(idx - cols - 1, DIAGONAL, &mut buckets);
+            }
+        }
+        // Hand the emptied bucket's allocation back for reuse.
+        let mut cells = cells;
+        cells.clear();
+        if buckets[slot].is_empty() {
+            buckets[slot] = cells;
+        }
+        d += 1;
+    }
+    Ok((units, prev))
+}
+
+/// Units of [`path_within`]'s work that setting a search up over a grid of `cells` takes
+/// (its tables are filled once per search; a cell set up costs about an eighth of one
+/// settled).
+pub fn search_setup_work(cells: usize) -> u64 {
+    cells as u64 / 8 + 1
+}
+
+/// A search ran out of its budget of work.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+#[error("the path search ran out of its budget")]
+pub struct OverBudget;
+
+/// Takes `units` of `work`, or none when fewer are left.
+fn charge(work: &mut u64, units: u64) -> Result<(), OverBudget> {
+    *work = work.checked_sub(units).ok_or(OverBudget)?;
+    Ok(())
+}
+
+/// The smoothed path from `from` to the centre of `goal`, as
+/// `DistanceField::from_point(grid, from)?.path_to(grid, from, goal)` finds it, with its
+/// work bounded: the set-up ([`search_setup_work`]), each cell the search settles before
+/// it reaches the goal and each point string pulling tests take one unit of `work`.
+/// `Ok(None)` when no path exists; [`OverBudget`] when the work would exceed what is left.
+pub fn path_within(
+    grid: &ClearanceGrid,
+    from: Point2<f32>,
+    goal: usize,
+    work: &mut u64,
+) -> Result<Option<Vec<Point2<f32>>>, OverBudget> {
+    let Some(start) = grid.nearest_passable(from, (1.0 / grid.cell).ceil() as usize + 2) else {
+        return Ok(None);
+    };
+    charge(work, search_setup_work(grid.len()))?;
+    let open: Vec<bool> = (0..grid.len()).map(|idx| grid.passable(idx)).collect();
+    let (units, prev) = dial(grid, start, &open, Some(goal), work).map_err(|_| OverBudget)?;
+    if units.get(goal).is_none_or(|&u| u == u32::MAX) {
+        return Ok(None);
+    }
+    let mut cells = vec![goal];
+    let mut at = goal;
+    while at != start {
+        at = prev[at] as usize;
+        cells.push(at);
+    }
+    cells.reverse();
+    let mut pts = Vec::with_capacity(cells.len() + 1);
+    pts.push(from);
+    pts.extend(cells.iter().map(|&c| grid.centre(c)));
+    smooth_within(grid, &pts, work).map(Some)
+}
+
 /// Cells of narrow passages: passable cells with no cell of clearance `half_width` or more
 /// within `reach` metres (a square window). A cell's own clearance is not enough: shortest
 /// paths hug corners, so every path through a wide room would pass low-clearance cells, but
@@ -254,8 +340,17 @@ pub fn segment_passable(grid: &ClearanceGrid, a: Point2<f32>, b: Point2<f32>) ->
 /// String-pulls a path: keeps only the waypoints needed for straight, passable legs.
 /// The first point (the agent's own position) is always kept, even if it is off the grid.
 pub fn smooth(grid: &ClearanceGrid, pts: &[Point2<f32>]) -> Vec<Point2<f32>> {
+    smooth_within(grid, pts, &mut u64::MAX.clone()).unwrap_or_else(|_| pts.to_vec())
+}
+
+/// [`smooth`], each point it tests taking one unit of `work`.
+fn smooth_within(
+    grid: &ClearanceGrid,
+    pts: &[Point2<f32>],
+    work: &mut u64,
+) -> Result<Vec<Point2<f32>>, OverBudget> {
     if pts.len() <= 2 {
-        return pts.to_vec();
+        return Ok(pts.to_vec());
     }
     let mut out = vec![pts[0]];
     let mut anchor = 1; // the first grid point; legs are checked from grid points only
@@ -263,7 +358,7 @@ pub fn smooth(grid: &ClearanceGrid, pts: &[Point2<f32>]) -> Vec<Point2<f32>> {
     while anchor < pts.len() - 1 {
         let mut far = anchor + 1;
         for j in (anchor + 1..pts.len()).rev() {
-            if segment_passable(grid, pts[anchor], pts[j]) {
+            if segment_passable_within(grid, pts[anchor], pts[j], work)? {
                 far = j;
                 break;
             }
@@ -272,10 +367,29 @@ pub fn smooth(grid: &ClearanceGrid, pts: &[Point2<f32>]) -> Vec<Point2<f32>> {
         anchor = far;
     }
     // Drop the first grid point when the agent can go straight past it.
-    if out.len() > 2 && segment_passable(grid, out[0], out[2]) {
+    if out.len() > 2 && segment_passable_within(grid, out[0], out[2], work)? {
         out.remove(1);
     }
-    out
+    Ok(out)
+}
+
+/// [`segment_passable`], each point tested taking one unit of `work`.
+fn segment_passable_within(
+    grid: &ClearanceGrid,
+    a: Point2<f32>,
+    b: Point2<f32>,
+    work: &mut u64,
+) -> Result<bool, OverBudget> {
+    let len = (b - a).norm();
+    let steps = (len / (grid.cell * 0.5)).ceil().max(1.0) as usize;
+    for k in 0..=steps {
+        charge(work, 1)?;
+        let p = a + (b - a) * (k as f32 / steps as f32);
+        if !grid.cell_of(p).is_some_and(|c| grid.passable(c)) {
+            return Ok(false);
+        }
+    }
+    Ok(true)
 }
 
 /// Walks a path of waypoints.
@@ -425,6 +539,35 @@ mod tests {
         let a = Arena::new(def);
         let f = DistanceField::from_point(&a.grid, Point2::new(1.0, 1.0)).unwrap();
         assert!(!f.reachable(a.grid.cell_of(Point2::new(9.0, 1.0)).unwrap()));
+    }
+
+    #[test]
+    fn a_bounded_search_finds_the_full_searchs_path_or_gives_up() {
+        let a = two_rooms();
+        let g = &a.grid;
+        let starts = [(1.0, 1.0), (4.5, 5.5), (9.5, 0.5), (2.0, 3.0)];
+        let goals = [(9.0, 1.0), (6.0, 5.0), (1.0, 5.5), (4.0, 1.0), (2.1, 3.0)];
+        for &(fx, fy) in &starts {
+            let from = Point2::new(fx, fy);
+            let field = DistanceField::from_point(g, from).unwrap();
+            for &(gx, gy) in &goals {
+                let goal = g.cell_of(Point2::new(gx, gy)).unwrap();
+                let full = field.path_to(g, from, goal);
+                let mut work = u64::MAX;
+                assert_eq!(path_within(g, from, goal, &mut work), Ok(full));
+                // A goal near the start settles a few cells, not the grid.
+                let used = u64::MAX - work;
+                if (gx - fx).abs() + (gy - fy).abs() < 0.5 {
+                    assert!(used < g.len() as u64 / 4, "{used}");
+                }
+            }
+        }
+        let goal = g.cell_of(Point2::new(9.0, 1.0)).unwrap();
+        let mut work = 1_000;
+        assert_eq!(
+            path_within(g, Point2::new(1.0, 1.0), goal, &mut work),
+            Err(OverBudget)
+        );
     }
 
     #[test]

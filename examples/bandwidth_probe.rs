@@ -37,7 +37,7 @@ struct Args {
     /// Map of the match.
     #[arg(long, default_value = "office")]
     map: String,
-    /// Seed of the match and of the player's keys.
+    /// Seed of the player's keys (people may join the match: the server chooses its seed).
     #[arg(long, default_value_t = 1)]
     seed: u64,
     /// Directory of map files.
@@ -78,7 +78,7 @@ async fn run(args: Args) -> Result<(), String> {
         &http,
         &format!("{base}/api/matches"),
         json!({"map": args.map, "robots": 2, "opponents": 4, "opponent_control": "bot",
-            "bots_joinable": true, "seed": args.seed, "time_limit_s": args.seconds,
+            "bots_joinable": true, "time_limit_s": args.seconds,
             "spectator_delay_s": 0}),
     )
     .await?;

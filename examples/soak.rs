@@ -119,14 +119,14 @@ async fn create_match(
     let map = MAPS[(k as usize) % MAPS.len()];
     // Bots: 2 robots hunt 3 evading bots that people may take over. Humans: 4 human slots
     // (an empty slot stands still), so the robots have something to do even when nobody
-    // plays. Long time limits: matches end when the robots win, not by the clock.
+    // plays. Long time limits: matches end when the robots win, not by the clock. People
+    // may join both, so the server chooses their (secret) seeds.
     let body = if humans {
         json!({"map": map, "robots": 2, "opponents": 4, "opponent_control": "human",
-               "planner": "coordinated", "seed": k, "time_limit_s": 3600.0})
+               "planner": "coordinated", "time_limit_s": 3600.0})
     } else {
         json!({"map": map, "robots": 2, "opponents": 3, "opponent_bot": "evade",
-               "bots_joinable": true, "planner": "coordinated", "seed": k,
-               "time_limit_s": 3600.0})
+               "bots_joinable": true, "planner": "coordinated", "time_limit_s": 3600.0})
     };
     let r = http
         .post(format!("{base}/api/matches"))
@@ -427,6 +427,7 @@ async fn run(args: Args) -> Result<bool, String> {
     // test of one machine. The rest (message rate, sizes, graces) are the defaults.
     let config = lasertag::config::Config {
         max_connections_per_address: usize::MAX,
+        max_seats_per_address: usize::MAX,
         max_matches_per_address: usize::MAX,
         client_budget_share: 1.0,
         requests_per_s: 1e6,

@@ -9,8 +9,6 @@
 //! A finished [`Track`] is recorded ([`Record`]) as what the aggregates read: its mean and
 //! its seconds.
 
-use nalgebra::Point2;
-
 use crate::record::{Fields, Line, Record};
 use lasertag_core::sim::TICK_HZ;
 use lasertag_core::tracker::estimate::tracking_quality;
@@ -19,13 +17,11 @@ use lasertag_core::world::World;
 
 /// GOSPA of the team's (merged) belief against the untagged opponents, default `c` and `p`.
 pub fn measure(world: &World) -> Gospa {
-    let truth: Vec<Point2<f32>> = world
-        .opponents
-        .iter()
-        .filter(|o| !o.tagged)
-        .map(|o| o.pose.pos)
-        .collect();
-    tracking_quality(&world.team.merged_belief(), &truth, Params::default())
+    tracking_quality(
+        &world.team.merged_belief(),
+        &world.untagged_opponents(),
+        Params::default(),
+    )
 }
 
 /// GOSPA and its parts as plain numbers, to be summed and averaged.

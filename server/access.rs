@@ -1,7 +1,8 @@
 //! Who a match or an uploaded map belongs to: the secret its creator was given, and the
-//! client it came from (for per-client quotas).
+//! client it came from (for per-client quotas); the token bucket those quotas' rates use.
 
 use std::net::{IpAddr, Ipv6Addr};
+use std::time::{Duration, Instant};
 
 /// One client for quotas and rate limits: an IPv4 address, or an IPv6 /64. A single
 /// IPv6 subscriber is usually handed a whole /64, so keying on the full address would give
@@ -23,6 +24,66 @@ impl ClientKey {
                     )))
                 }
             },
+        }
+    }
+}
+
+/// A token bucket: `capacity` units at once, refilled at `rate` per second. One bucket
+/// type serves every rate the server keeps (requests and WebSocket messages per client,
+/// path-search work per client and server-wide).
+#[derive(Debug, Clone)]
+pub struct Bucket {
+    units: f64,
+    capacity: f64,
+    rate: f64,
+    last: Instant,
+}
+
+impl Bucket {
+    pub fn new(capacity: f64, rate: f64) -> Bucket {
+        Bucket {
+            units: capacity,
+            capacity,
+            rate,
+            last: Instant::now(),
+        }
+    }
+
+    /// Adds what the rate gave since the last refill, up to the capacity.
+    pub fn refill(&mut self, now: Instant) {
+        self.units = (self.units + (now - self.last).as_secs_f64() * self.rate).min(self.capacity);
+        self.last = now;
+    }
+
+    /// Seconds until `units` are there (0 when they are), as of the last refill.
+    pub fn wait_s(&self, units: f64) -> f64 {
+        ((units - self.units) / self.rate).max(0.0)
+    }
+
+    /// Takes `units` without looking: for a caller that checked [`Bucket::wait_s`] on this
+    /// bucket and another before taking from both.
+    pub fn spend(&mut self, units: f64) {
+        self.units -= units;
+    }
+
+    /// How long since it was last refilled (last used).
+    pub fn idle(&self, now: Instant) -> Duration {
+        now - self.last
+    }
+
+    /// Whether it is full (as of the last refill): nothing to remember about its client.
+    pub fn is_full(&self) -> bool {
+        self.units >= self.capacity
+    }
+
+    /// Takes one unit if there is one; otherwise says how long until there will be.
+    pub fn take(&mut self) -> Result<(), Duration> {
+        self.refill(Instant::now());
+        if self.units >= 1.0 {
+            self.spend(1.0);
+            Ok(())
+        } else {
+            Err(Duration::from_secs_f64(self.wait_s(1.0)))
         }
     }
 }
@@ -72,6 +133,17 @@ pub fn random_id(bytes: usize) -> String {
         panic!("the operating system's random number generator failed");
     }
     buf.iter().map(|b| format!("{b:02x}")).collect()
+}
+
+/// A fresh secret seed for a match people may join, from the operating system's random
+/// source: 63 bits, so that clients that read integers as signed 64-bit ones hold it.
+pub fn random_seed() -> u64 {
+    let mut buf = [0u8; 8];
+    if getrandom::fill(&mut buf).is_err() {
+        // A guessable seed would let anyone rebuild the match: no limping on.
+        panic!("the operating system's random number generator failed");
+    }
+    u64::from_le_bytes(buf) >> 1
 }
 
 /// Compares secrets in time independent of where they differ.

@@ -40,6 +40,21 @@ pub mod defaults {
     pub const JOIN_HOLD: &str = "10";
     pub const MAX_HOLDS_PER_ADDRESS: usize = 1;
     pub const CLIENT_BUDGET_SHARE: f64 = 0.25;
+    pub const MAX_COMMAND_WORK: u64 = 2_000_000;
+    pub const COMMAND_WORK_PER_S: f64 = 20e6;
+
+    /// Replays re-simulated at once: half the cores (at least one), so that replays leave
+    /// the others to matches and to building them.
+    pub fn replay_jobs() -> usize {
+        let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+        cores.div_ceil(2)
+    }
+    pub const MAX_EXPORTS: usize = 2;
+    pub const MAX_EXPORTS_PER_ADDRESS: usize = 1;
+    pub const EXPORT_STALL: &str = "30";
+    pub const EXPORT_BUDGET: &str = "300";
+    pub const MAX_TCP_PER_ADDRESS: usize = 256;
+    pub const MAX_SEATS_PER_ADDRESS: usize = 2;
 
     /// Tick milliseconds all matches together may be priced at: 80% of every core's 50 ms
     /// at 20 Hz.
@@ -214,19 +229,41 @@ pub struct Config {
     #[arg(long, env = "LASERTAG_CLIENT_BUDGET_SHARE", default_value_t = defaults::CLIENT_BUDGET_SHARE,
           value_parser = share)]
     pub client_budget_share: f64,
+    /// Units of path search (a grid cell searched, a point of a path tested; about 25 ns
+    /// each) the robots' waypoints of one command or `act` may take; an order that needs
+    /// more is refused with 400. Each waypoint searches up to the whole navigation grid
+    /// (10 cm cells, 400,000 at most), so on the largest maps only a few fit.
+    #[arg(long, env = "LASERTAG_MAX_COMMAND_WORK", default_value_t = defaults::MAX_COMMAND_WORK,
+          value_parser = clap::value_parser!(u64).range(1..))]
+    pub max_command_work: u64,
+    /// Units of path search per second that robots' waypoints may take server-wide (one
+    /// client: its `client-budget-share` of it). A command is charged its waypoints × twice
+    /// its map's grid cells (at most `max-command-work`) before it runs; past the server's
+    /// rate 503, past a client's 429, until the budget refills.
+    #[arg(long, env = "LASERTAG_COMMAND_WORK_PER_S", default_value_t = defaults::COMMAND_WORK_PER_S,
+          value_parser = positive)]
+    pub command_work_per_s: f64,
+    /// Replays re-simulated at once (their own pool, apart from the one that builds
+    /// matches; default: half the cores). A replay read that finds them busy for 2 s is
+    /// refused with 503; a client may have twice its `client-budget-share` of them in
+    /// flight (at least 2), then 429.
+    #[arg(long, env = "LASERTAG_REPLAY_JOBS", default_value_t = defaults::replay_jobs(),
+          value_parser = clap::value_parser!(u64).range(1..).map(|v| v as usize))]
+    pub replay_jobs: usize,
     /// Milliseconds past which one tick of a match counts as an overrun (reported in
     /// `lasertag_tick_overruns_total` and the log); a match whose ticks overran in half of
     /// its last 200 ends with reason `overloaded`, so that it cannot starve the others.
     #[arg(long, env = "LASERTAG_TICK_OVERRUN_MS", default_value_t = defaults::TICK_OVERRUN_MS,
           value_parser = positive)]
     pub tick_overrun_ms: f64,
-    /// Seconds a slot joined with `POST …/players` is held for a WebSocket to play it; then
-    /// it is freed.
+    /// Seconds a slot joined with `POST …/players` is held for a WebSocket to play it (to
+    /// send its first input); a slot not played by then is freed, its connection closed.
     #[arg(long = "join-hold-s", value_name = "SECONDS", env = "LASERTAG_JOIN_HOLD_S",
           default_value = defaults::JOIN_HOLD, value_parser = seconds)]
     pub join_hold: Duration,
     /// Slots of one match that one client (an IPv4 address, or an IPv6 /64) may hold
-    /// without playing them; more joins are refused with 429 until one is played or lapses.
+    /// without playing them (connected or not, no input sent yet); more joins are refused
+    /// with 429 until one is played or lapses.
     #[arg(long, env = "LASERTAG_MAX_HOLDS_PER_ADDRESS", default_value_t = defaults::MAX_HOLDS_PER_ADDRESS,
           value_parser = clap::value_parser!(u64).range(1..).map(|v| v as usize))]
     pub max_holds_per_address: usize,
@@ -237,6 +274,39 @@ pub struct Config {
     #[arg(long = "drain-s", value_name = "SECONDS", env = "LASERTAG_DRAIN_S",
           default_value = defaults::DRAIN, value_parser = seconds)]
     pub drain: Duration,
+    /// Replay exports (`GET /api/replays/{id}/export`) streaming at once; more are refused
+    /// with 503.
+    #[arg(long, env = "LASERTAG_MAX_EXPORTS", default_value_t = defaults::MAX_EXPORTS,
+          value_parser = clap::value_parser!(u64).range(1..).map(|v| v as usize))]
+    pub max_exports: usize,
+    /// Of those, the exports one client (an IPv4 address, or an IPv6 /64) may stream at
+    /// once; more are refused with 429.
+    #[arg(long, env = "LASERTAG_MAX_EXPORTS_PER_ADDRESS", default_value_t = defaults::MAX_EXPORTS_PER_ADDRESS,
+          value_parser = clap::value_parser!(u64).range(1..).map(|v| v as usize))]
+    pub max_exports_per_address: usize,
+    /// Seconds an export waits for a client that stops reading; then it ends with a last
+    /// line saying it is incomplete and the `from_tick` to resume from.
+    #[arg(long = "export-stall-s", value_name = "SECONDS", env = "LASERTAG_EXPORT_STALL_S",
+          default_value = defaults::EXPORT_STALL, value_parser = seconds)]
+    pub export_stall: Duration,
+    /// Seconds one export may stream in all (a slow reader holds an export slot no longer);
+    /// then it ends as an incomplete export does, to be resumed with `from_tick`.
+    #[arg(long = "export-budget-s", value_name = "SECONDS", env = "LASERTAG_EXPORT_BUDGET_S",
+          default_value = defaults::EXPORT_BUDGET, value_parser = seconds)]
+    pub export_budget: Duration,
+    /// TCP connections (HTTP and WebSocket alike) open at once from one client (an IPv4
+    /// address, or an IPv6 /64); past it a new connection is closed as soon as it is
+    /// accepted. Kept well below `--max-connections`, so other clients always find room.
+    #[arg(long, env = "LASERTAG_MAX_TCP_PER_ADDRESS", default_value_t = defaults::MAX_TCP_PER_ADDRESS,
+          value_parser = clap::value_parser!(u64).range(1..).map(|v| v as usize))]
+    pub max_tcp_per_address: usize,
+    /// Opponent slots one client (an IPv4 address, or an IPv6 /64) may hold over all
+    /// matches at once, played or not; more joins are refused with 429. With the showcases
+    /// that start when every one is full, it keeps a few addresses from taking every seat
+    /// people are invited to.
+    #[arg(long, env = "LASERTAG_MAX_SEATS_PER_ADDRESS", default_value_t = defaults::MAX_SEATS_PER_ADDRESS,
+          value_parser = clap::value_parser!(u64).range(1..).map(|v| v as usize))]
+    pub max_seats_per_address: usize,
 }
 
 impl Default for Config {
@@ -271,10 +341,19 @@ impl Default for Config {
             memory_budget_mb: defaults::MEMORY_BUDGET_MB,
             tick_budget_ms: defaults::tick_budget_ms(),
             client_budget_share: defaults::CLIENT_BUDGET_SHARE,
+            max_command_work: defaults::MAX_COMMAND_WORK,
+            command_work_per_s: defaults::COMMAND_WORK_PER_S,
+            replay_jobs: defaults::replay_jobs(),
             tick_overrun_ms: defaults::TICK_OVERRUN_MS,
             join_hold: secs(defaults::JOIN_HOLD),
             max_holds_per_address: defaults::MAX_HOLDS_PER_ADDRESS,
             drain: secs(defaults::DRAIN),
+            max_exports: defaults::MAX_EXPORTS,
+            max_exports_per_address: defaults::MAX_EXPORTS_PER_ADDRESS,
+            export_stall: secs(defaults::EXPORT_STALL),
+            export_budget: secs(defaults::EXPORT_BUDGET),
+            max_tcp_per_address: defaults::MAX_TCP_PER_ADDRESS,
+            max_seats_per_address: defaults::MAX_SEATS_PER_ADDRESS,
         }
     }
 }

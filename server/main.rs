@@ -190,6 +190,10 @@ fn healthcheck(mut addr: SocketAddr, timeout: Duration) -> Result<(), String> {
 const SHUTDOWN_BUDGET: Duration = Duration::from_millis(4000);
 
 async fn serve(args: ServeArgs) -> Result<(), String> {
+    // Before anything opens a file: every connection holds a descriptor.
+    let open_files = lasertag::http::raise_open_files_limit();
+    tracing::info!(?open_files, "open files limit");
+    lasertag::http::trim_memory_periodically();
     let maps = MapStore::load_dir(&args.maps).map_err(|e| format!("loading maps: {e}"))?;
     tracing::info!(maps = maps.len(), dir = %args.maps.display(), "maps loaded");
     tracing::info!(config = ?args.config, "settings");
@@ -217,10 +221,7 @@ async fn serve(args: ServeArgs) -> Result<(), String> {
         Some(fleet) => lasertag::http::app_in_fleet(registry.clone(), args.web, fleet.clone()),
         None => lasertag::http::app(registry.clone(), args.web),
     };
-    let limits = lasertag::http::ConnectionLimits {
-        max_connections: registry.config.max_connections,
-        header_read_timeout: registry.config.header_read_timeout,
-    };
+    let limits = lasertag::http::ConnectionLimits::of(&registry);
     // Under Agones, Ready once listening; Health, the matches counter and Allocated after.
     #[cfg(feature = "agones")]
     let sidecar = lasertag::agones::Sidecar::from_env();

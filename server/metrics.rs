@@ -45,10 +45,12 @@ pub enum Refusal {
     Forbidden,
     /// A request priced past a per-request limit (400) or the server's budgets (503).
     Budget,
+    /// A TCP connection past the per-address cap, closed as soon as it was accepted.
+    TcpPerAddress,
 }
 
 impl Refusal {
-    pub const ALL: [Refusal; 16] = [
+    pub const ALL: [Refusal; 17] = [
         Refusal::RateLimited,
         Refusal::ConnectionsPerAddress,
         Refusal::MatchesFull,
@@ -65,6 +67,7 @@ impl Refusal {
         Refusal::Unauthorized,
         Refusal::Forbidden,
         Refusal::Budget,
+        Refusal::TcpPerAddress,
     ];
 
     pub fn label(self) -> &'static str {
@@ -85,6 +88,7 @@ impl Refusal {
             Refusal::Unauthorized => "unauthorized",
             Refusal::Forbidden => "forbidden",
             Refusal::Budget => "budget",
+            Refusal::TcpPerAddress => "tcp_per_address",
         }
     }
 }

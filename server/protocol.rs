@@ -26,7 +26,8 @@ pub mod ws;
 pub use state::{
     Belief, ConfidenceState, DetectionDto, EventDto, Events, MatchState, MatchStats, MatchSummary,
     OpponentState, PoseDto, RobotState, Role, belief, belief_of, event, finish_reason, notes,
-    read_belief, read_events, read_state, read_stats, read_summary, state, stats, summary,
+    owners_summary, read_belief, read_events, read_state, read_stats, read_summary, state, stats,
+    summary,
 };
 
 use serde::de::DeserializeOwned;
@@ -220,7 +221,8 @@ pub struct CreateMatch {
     #[schema(schema_with = settings::coordination_request)]
     pub coordination: Option<Overrides<coordinated::Settings>>,
     pub clock: Option<Clock>,
-    /// 0..=18446744073709551615 (default 0).
+    /// 0..=18446744073709551615 (default 0). Only for a match people may not join: one
+    /// they may join gets a secret seed the server chooses (400 when one is given).
     #[serde(default, deserialize_with = "schema::opt_seed")]
     #[schema(schema_with = schema::seed)]
     pub seed: Option<u64>,
@@ -262,6 +264,9 @@ pub struct MatchRequest {
     pub config: MatchConfig,
     pub clock: Clock,
     pub bots_joinable: bool,
+    /// Whether people may play it (`view::people_may_play`): its seed is the server's to
+    /// choose, and secret.
+    pub people: bool,
     /// Ticks the truth is held back (0 when no person may play).
     pub spectator_delay_ticks: u64,
 }
@@ -362,12 +367,22 @@ impl CreateMatch {
         };
         let bots_joinable = self.bots_joinable.unwrap_or(false);
         let delay_s = bounds::SPECTATOR_DELAY_S.number(self.spectator_delay_s)?;
-        let people = bots_joinable || config.opponent_control == ControlKind::Human;
+        let people = crate::game::view::people_may_play(&config, bots_joinable);
+        if people && self.seed.is_some() {
+            return Err(refused(
+                "seed",
+                "a match people may join (opponent_control human, or bots_joinable) gets a \
+                 secret seed that the server chooses, so that nobody can rebuild it while it \
+                 runs; leave seed out (it is shown with the replay once the match has ended)"
+                    .to_string(),
+            ));
+        }
         Ok(MatchRequest {
             map: self.map,
             config,
             clock: self.clock.unwrap_or(Clock::Realtime),
             bots_joinable,
+            people,
             spectator_delay_ticks: if people {
                 (delay_s * TICK_HZ as f64).round() as u64
             } else {

@@ -82,6 +82,18 @@ pub fn seed() -> RefOr<Schema> {
         .into()
 }
 
+/// `seed` of a match summary: a u64, or null while it is secret.
+pub fn seed_shown() -> RefOr<Schema> {
+    ObjectBuilder::new()
+        .schema_type(SchemaType::from_iter([Type::Integer, Type::Null]))
+        .minimum(Some(0u64))
+        .maximum(Some(u64::MAX))
+        .description(Some(
+            "The match's seed; null while a match people may join runs (only its owner and the operator see it then), shown to everyone once it has ended.",
+        ))
+        .into()
+}
+
 /// A map's name: what `maps::validate` allows.
 pub const MAP_NAME_PATTERN: &str = "^[a-z0-9_-]{1,64}$";
 

@@ -312,15 +312,15 @@ async fn every_error_class_is_answered_and_nothing_running_is_disturbed() {
 
     // Unknown ids and routes.
     assert_error(&server.get("/api/matches/nope").await, 404, "nope");
-    // A change is refused for want of a token before the match is looked up.
-    assert_error(&server.delete("/api/matches/nope").await, 401, "nope");
+    // That a match exists is public: an unknown one is a 404 before any token is asked for.
+    assert_error(&server.delete("/api/matches/nope").await, 404, "nope");
     assert_error(&server.get("/api/matches/nope/belief").await, 404, "nope");
     assert_error(&server.get("/api/matches/nope/events").await, 404, "nope");
     assert_error(
         &server
             .post("/api/matches/nope/step", &json!({"ticks": 1}))
             .await,
-        401,
+        404,
         "nope",
     );
     assert_error(&server.get("/api/maps/nope").await, 404, "nope");
@@ -424,6 +424,23 @@ async fn every_error_class_is_answered_and_nothing_running_is_disturbed() {
         409,
         "no free",
     );
+    // A player's name is checked as sent, as the schema's pattern does: a control character
+    // at either end is refused, not trimmed away.
+    let seats = server
+        .create_match(json!({"map": "office", "clock": "manual", "opponent_control": "human"}))
+        .await;
+    for name in ["alice\t", "\u{7f}bob", "\n", ""] {
+        assert_error(
+            &server
+                .post(
+                    &format!("/api/matches/{seats}/players"),
+                    &json!({ "name": name }),
+                )
+                .await,
+            400,
+            "name",
+        );
+    }
 
     // A 2 MiB body.
     let huge = format!(
@@ -461,7 +478,7 @@ async fn every_error_class_is_answered_and_nothing_running_is_disturbed() {
             .as_array()
             .unwrap()
             .len(),
-        3
+        4
     );
     assert_eq!(
         server.get("/api/maps").await.body.as_array().unwrap().len(),

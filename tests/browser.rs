@@ -76,7 +76,7 @@ async fn play_and_spectate_in_headless_chromium() {
     assert_eq!(rows, json!(1));
     b.eval("document.getElementById('name').value = 'tester'")
         .await;
-    save(&mut b, "screenshot-lobby.png").await;
+    save(&mut b, "lobby.png").await;
     b.eval("document.getElementById('showcase-watch').click()")
         .await;
     // People may play the showcase, so spectators see it 30 s late (its first frame, this
@@ -109,7 +109,7 @@ async fn play_and_spectate_in_headless_chromium() {
         px["particles"].as_u64().unwrap() > 100,
         "belief drawn: {px}"
     );
-    save(&mut b, "screenshot-spectator.png").await;
+    save(&mut b, "spectator.png").await;
     // B switches the belief off: no particle is drawn any more.
     b.tap("KeyB", Duration::from_millis(50)).await;
     b.wait_for(
@@ -180,7 +180,7 @@ async fn play_and_spectate_in_headless_chromium() {
     let before = state(&s, &id).await["opponents"][0].clone();
     b.key("KeyW", true).await;
     tokio::time::sleep(Duration::from_millis(500)).await;
-    save(&mut b, "screenshot-player.png").await;
+    save(&mut b, "player.png").await;
     tokio::time::sleep(Duration::from_millis(300)).await;
     b.key("KeyW", false).await;
     tokio::time::sleep(Duration::from_millis(200)).await;
@@ -209,13 +209,14 @@ async fn play_and_spectate_in_headless_chromium() {
     // 3. Get tagged: a coordinated robot 9 m down the corridor, facing away, searches, finds
     // the player standing still and tags it (within seconds: the corridor behind it is the
     // nearest unseen space). A random (baseline) searcher made this depend on the seed.
-    // Should a robot ever tag the empty slot before the page has joined, try another seed.
+    // Should a robot ever tag the empty slot before the page has joined, try another match
+    // (people may join it: the server chooses its secret seed).
     let mut ended = None;
-    for seed in [4, 7, 0, 2] {
+    for _ in 0..4 {
         let id = s
             .create_match(json!({"map": "office", "robots": 1, "opponents": 1,
                 "opponent_control": "human", "planner": "coordinated", "time_limit_s": 120,
-                "seed": seed, "robot_starts": [[12.0, 8.0, 0.0]],
+                "robot_starts": [[12.0, 8.0, 0.0]],
                 "opponent_starts": [[3.0, 8.0]]}))
             .await;
         b.navigate(&format!("{base}/#/play/{id}")).await;
@@ -250,7 +251,7 @@ async fn play_and_spectate_in_headless_chromium() {
         .eval("document.getElementById('end-text').textContent")
         .await;
     assert!(text.as_str().unwrap().contains("tagged"), "{text}");
-    save(&mut b, "screenshot-end.png").await;
+    save(&mut b, "end.png").await;
     // The end screen opens the replay from the player's own view (tried again while the
     // match becomes a replay).
     b.eval("document.getElementById('end-watch').click()").await;
@@ -299,13 +300,15 @@ async fn over_a_slow_network_a_key_moves_the_players_disc_at_once() {
     tokio::time::sleep(Duration::from_millis(600)).await;
     b.key("KeyW", false).await;
     // Once the server's answers are in (a round trip and a bit), they agree with where the
-    // page had put it.
+    // page had put it. An input that reaches the server after its tick (a busy machine
+    // running three browsers) finds the last keys held for that tick, as the protocol says:
+    // one tick of travel (1 m/s × 50 ms) is the most a correction may be.
     tokio::time::sleep(Duration::from_millis(800)).await;
     let worst = b
         .eval("Math.max(0, ...(__lasertag.corrections || []))")
         .await;
     assert!(
-        worst.as_f64().unwrap() < 0.05,
+        worst.as_f64().unwrap() <= 0.05 + 1e-9,
         "corrections up to {worst} m"
     );
 }
@@ -393,7 +396,7 @@ async fn history_and_replays_in_headless_chromium() {
     finished(
         &s,
         json!({"map": "maze", "robots": 2, "opponents": 1, "clock": "manual",
-            "opponent_control": "human", "time_limit_s": 60, "seed": 1}),
+            "opponent_control": "human", "time_limit_s": 60}),
         1200,
         Some("ada"),
     )
@@ -429,7 +432,7 @@ async fn history_and_replays_in_headless_chromium() {
         .eval("document.getElementById('history-table').textContent")
         .await;
     assert!(names.as_str().unwrap().contains("ada"), "{names}");
-    save(&mut b, "screenshot-history.png").await;
+    save(&mut b, "history.png").await;
     b.eval("document.querySelector('#history-table tbody tr button.watch').click()")
         .await;
 
@@ -472,7 +475,7 @@ async fn history_and_replays_in_headless_chromium() {
     b.eval("document.querySelector('#replay-speeds [data-speed=\"2\"]').click()")
         .await;
     b.wait_for("__lasertag.speed === 2", 5).await;
-    save(&mut b, "screenshot-replay.png").await;
+    save(&mut b, "replay.png").await;
     // B hides the belief, as in the game.
     b.tap("KeyB", Duration::from_millis(50)).await;
     b.wait_for(

@@ -17,7 +17,7 @@ use serde_json::{Value, json};
 /// end. Returns its id.
 async fn finished_match(s: &TestServer, more: Value) -> String {
     let mut request = json!({"map": "office", "robots": 2, "opponents": 1, "clock": "manual",
-            "opponent_control": "human", "spectator_delay_s": 0, "time_limit_s": 8, "seed": 5});
+            "opponent_control": "human", "spectator_delay_s": 0, "time_limit_s": 8});
     if let (Some(r), Some(m)) = (request.as_object_mut(), more.as_object()) {
         r.extend(m.clone());
     }

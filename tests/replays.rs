@@ -139,7 +139,7 @@ async fn a_replay_follows_a_player_over_the_websocket() {
     let id = s
         .create_match(
             json!({"map": "office", "robots": 1, "opponents": 2, "clock": "manual",
-            "opponent_control": "human", "spectator_delay_s": 0, "seed": 11}),
+            "opponent_control": "human", "spectator_delay_s": 0}),
         )
         .await;
     let (_, token) = s.join(&id, "ada").await;
@@ -209,11 +209,14 @@ async fn a_replay_follows_a_player_over_the_websocket() {
         .text()
         .await
         .unwrap();
-    let lines: Vec<Value> = text
+    let mut lines: Vec<Value> = text
         .lines()
         .map(|l| serde_json::from_str(l).unwrap())
         .collect();
     let last = states.last().unwrap()["tick"].as_u64().unwrap();
+    // The last line says the export is whole.
+    let end = lines.pop().unwrap();
+    assert_eq!(end, json!({"complete": true, "lines": last / 10 + 1}));
     assert_eq!(lines.len() as u64, last / 10 + 1, "{text:.300}");
     for line in lines.iter().step_by(4) {
         let tick = line["tick"].as_u64().unwrap();

@@ -149,11 +149,13 @@ async fn commands_are_checked_and_an_act_applies_all_or_none() {
         .await;
     assert_error(&r, 409, "api");
     // What the robots of a match people play know shows where they are: the owner's.
-    let people = api_match(
-        &s,
-        json!({"opponent_control": "human", "clock": "realtime"}),
-    )
-    .await;
+    // (Without a seed: the server chooses a secret one for a match people may join.)
+    let people = s
+        .create_match(
+            json!({"map": duel_map(), "robots": 2, "opponents": 1, "planner": "api",
+            "opponent_control": "human", "clock": "realtime"}),
+        )
+        .await;
     let path = format!("/api/matches/{people}/robots/r0/observation");
     assert_error(&s.get_as(&path, None).await, 403, "owner");
     assert_eq!(s.get(&path).await.status, 200);

@@ -484,3 +484,111 @@ fn no_file_imports_itself_through_other_files() {
             .join("\n")
     );
 }
+
+/// Each crate's features as `cargo tree -f '{p} {f}'` prints them, with `extra` arguments
+/// (`-e no-dev` for the plain build).
+fn features_of_every_crate(extra: &[&str]) -> BTreeSet<(String, String)> {
+    let out = Command::new(env!("CARGO"))
+        .current_dir(root())
+        .args([
+            "tree",
+            "--offline",
+            "--prefix",
+            "none",
+            "--format",
+            "{p}|{f}",
+        ])
+        .args(extra)
+        .output()
+        .expect("cargo tree runs");
+    assert!(
+        out.status.success(),
+        "cargo tree: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8_lossy(&out.stdout)
+        .lines()
+        .filter_map(|l| l.split_once('|'))
+        .map(|(p, f)| (p.to_string(), f.trim_end_matches(" (*)").to_string()))
+        .collect()
+}
+
+/// A crate that both the build and the tests, examples or benchmarks use has the same
+/// features in both (Cargo.toml, "Shared with the dev-dependencies"): otherwise
+/// `cargo test` and `cargo build --examples` compile it, and every crate above it up to the
+/// server, a second time.
+#[test]
+fn the_tests_reuse_the_builds_crates() {
+    let build = features_of_every_crate(&["-e", "no-dev"]);
+    let all = features_of_every_crate(&[]);
+    let in_build: BTreeSet<&str> = build.iter().map(|(p, _)| p.as_str()).collect();
+    let differ: Vec<String> = all
+        .iter()
+        .filter(|pf| in_build.contains(pf.0.as_str()) && !build.contains(*pf))
+        .map(|(p, f)| format!("{p}: [{f}] with the dev-dependencies"))
+        .collect();
+    assert!(
+        differ.is_empty(),
+        "features that only the dev-dependencies turn on:\n{}",
+        differ.join("\n")
+    );
+}
+
+/// The project's markdown pages: the README, ARCHITECTURE.md and every `.md` under `docs/`,
+/// `deploy/` and `python/`.
+fn markdown_pages() -> Vec<PathBuf> {
+    fn walk(dir: &Path, out: &mut Vec<PathBuf>) {
+        let Ok(entries) = std::fs::read_dir(dir) else {
+            return;
+        };
+        for p in entries.flatten().map(|e| e.path()) {
+            if p.is_dir() {
+                walk(&p, out);
+            } else if p.extension().is_some_and(|x| x == "md") {
+                out.push(p);
+            }
+        }
+    }
+    let mut pages = vec![root().join("README.md"), root().join("ARCHITECTURE.md")];
+    for dir in ["docs", "deploy", "python"] {
+        walk(&root().join(dir), &mut pages);
+    }
+    pages.sort();
+    pages
+}
+
+/// Every relative link and picture in the markdown (`[text](target)`, `![alt](target)`)
+/// names a file or folder that exists, so moving a page or a picture cannot leave a dead
+/// link behind. Web addresses and in-page anchors are not checked.
+#[test]
+fn every_relative_link_in_the_docs_resolves() {
+    let mut dead = Vec::new();
+    for page in markdown_pages() {
+        let text = read(&page);
+        let mut in_code = false;
+        for (i, line) in text.lines().enumerate() {
+            if line.trim_start().starts_with("```") {
+                in_code = !in_code;
+            }
+            if in_code {
+                continue;
+            }
+            let mut rest = line;
+            while let Some(at) = rest.find("](") {
+                rest = &rest[at + 2..];
+                let Some(end) = rest.find(')') else { break };
+                let target = rest[..end].split('#').next().unwrap_or("");
+                let target = target.split_whitespace().next().unwrap_or("");
+                rest = &rest[end..];
+                if target.is_empty() || target.contains("://") || target.starts_with("mailto:") {
+                    continue;
+                }
+                let dir = page.parent().unwrap_or(Path::new("."));
+                if !dir.join(target).exists() {
+                    dead.push(format!("{}:{}: {target}", relative(&page), i + 1));
+                }
+            }
+        }
+    }
+    assert!(dead.is_empty(), "links to nothing:\n{}", dead.join("\n"));
+}

@@ -103,7 +103,9 @@ async function refreshLobby() {
     return;
   }
   debug.matches = matches.length;
-  const show = matches.find((m) => m.id.startsWith("showcase-") && m.status === "running");
+  // Several showcases run while people fill them: offer one with a free slot.
+  const shows = matches.filter((m) => m.id.startsWith("showcase-") && m.status === "running");
+  const show = shows.find((m) => m.free_slots > 0) || shows[0];
   $("showcase").hidden = !show;
   if (show) {
     $("showcase-text").textContent =

@@ -50,6 +50,8 @@ export function feedLine(text, cls) {
  * is out of sight. */
 export function addBeam(beams, e, snap, segs) {
   if (!snap) return;
+  // A player hears of shots out of its sight late: the shooter has moved on since.
+  if (snap.tick - e.tick > 2) return;
   const all = [...snap.robots, ...snap.opponents];
   const from = all.find((a) => a.id === e.by);
   if (!from) return; // out of sight

@@ -2,10 +2,26 @@
 // the laser's reach and field of view, the tag's range, the agents' radius. Fetched once, when
 // the page loads, before anything that draws a match runs (a module's top-level await).
 
+// A busy server (429, 503) or a dropped connection is asked again a few times, backing off;
+// if it never answers, the page says so instead of staying blank (nothing can be drawn
+// without the rules).
 async function load() {
-  const r = await fetch("/api/rules");
-  if (!r.ok) throw new Error(`GET /api/rules: ${r.status}`);
-  return r.json();
+  let why = "";
+  for (const wait of [0, 500, 1000, 2000, 4000]) {
+    if (wait) await new Promise((done) => setTimeout(done, wait));
+    try {
+      const r = await fetch("/api/rules");
+      if (r.ok) return await r.json();
+      why = `the server answered ${r.status}`;
+    } catch (e) {
+      why = `the server could not be reached (${e.message})`;
+    }
+  }
+  const note = document.createElement("p");
+  note.setAttribute("role", "alert");
+  note.textContent = `This page needs the game's rules (GET /api/rules), and ${why}. Reload to try again.`;
+  document.body.prepend(note);
+  throw new Error(`GET /api/rules: ${why}`);
 }
 
 export const rules = await load();

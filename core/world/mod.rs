@@ -76,6 +76,10 @@ pub struct World {
     rng_bots: ChaCha8Rng,
     rng_odometry: ChaCha8Rng,
     rng_localise: ChaCha8Rng,
+    /// The path-search work robots' orders may take (`set_route_budget`), and what is left
+    /// of it: limits of the shell, no part of the match.
+    route_budget: u64,
+    route_work: u64,
 }
 
 /// How far back a person's shot may be judged (500 ms at 20 Hz): what a player 300 ms away
@@ -197,6 +201,8 @@ impl World {
             rng_bots: stream(config.seed, STREAM_BOTS),
             rng_odometry: stream(config.seed, STREAM_ODOMETRY),
             rng_localise,
+            route_budget: u64::MAX,
+            route_work: u64::MAX,
             arena,
             config,
         };
@@ -233,6 +239,15 @@ impl World {
 
     pub fn robot_frozen(&self, i: usize) -> bool {
         self.tick < self.robots[i].frozen_until
+    }
+
+    /// Where the untagged opponents are: the truth a belief about them is measured against.
+    pub fn untagged_opponents(&self) -> Vec<Point2<f32>> {
+        self.opponents
+            .iter()
+            .filter(|o| !o.tagged)
+            .map(|o| o.pose.pos)
+            .collect()
     }
 
     /// Advances the match by one tick (see the module docs for the stages).

@@ -11,7 +11,7 @@
 //! radio delivered of its teammates. The referee's truth stays out.
 
 use super::*;
-use crate::nav::{DistanceField, PathFollower, steer};
+use crate::nav::{PathFollower, path_within, steer};
 
 /// Waypoints one order may carry: each is a path search over the navigation grid.
 pub const MAX_ROBOT_WAYPOINTS: usize = 16;
@@ -50,6 +50,10 @@ pub enum RobotOrderError {
     OutOfRange { field: &'static str, value: f32 },
     #[error("waypoints: {0} points, at most {MAX_ROBOT_WAYPOINTS}")]
     TooManyWaypoints(usize),
+    #[error(
+        "waypoints[{index}]: finding the way there would take more than this server's budget of {budget} units of path search per request (each waypoint searches the map's grid: give fewer or nearer waypoints)"
+    )]
+    OverBudget { index: usize, budget: u64 },
     #[error("waypoints[{index}]: [{x}, {y}] {why}")]
     BadWaypoint {
         index: usize,
@@ -130,9 +134,19 @@ impl World {
         Ok(())
     }
 
+    /// Bounds the path search of the orders applied from now on: together they may take
+    /// `units` of work (see `nav::path_within`) until the next call; an order past it is
+    /// refused ([`RobotOrderError::OverBudget`]) and changes nothing. The path an accepted
+    /// order gets does not depend on the budget, so a replay needs none. Unbounded until
+    /// set.
+    pub fn set_route_budget(&mut self, units: u64) {
+        self.route_budget = units;
+        self.route_work = units;
+    }
+
     /// A path through `points` from where robot `index` believes it is, around walls.
     fn plan_route(
-        &self,
+        &mut self,
         index: usize,
         points: &[Point2<f32>],
     ) -> Result<Vec<Point2<f32>>, RobotOrderError> {
@@ -160,8 +174,11 @@ impl World {
             let goal = grid
                 .nearest_passable(*p, rings)
                 .ok_or_else(|| bad("is not within 0.5 m of free space"))?;
-            let leg = DistanceField::from_point(grid, from)
-                .and_then(|field| field.path_to(grid, from, goal))
+            let leg = path_within(grid, from, goal, &mut self.route_work)
+                .map_err(|_| RobotOrderError::OverBudget {
+                    index: k,
+                    budget: self.route_budget,
+                })?
                 .ok_or_else(|| bad("cannot be reached from the point before it"))?;
             path.extend(leg.into_iter().skip(1));
             if grid.cell_of(*p).is_some_and(|c| c == goal) {

@@ -4,7 +4,7 @@
 use std::collections::BTreeMap;
 use std::time::{Duration, Instant};
 
-use crate::harness::{Ctx, error_text, joined, ms_since, send, shorten};
+use crate::harness::{Ctx, empty_map, error_text, joined, ms_since, r3, send, shorten};
 use serde_json::{Value, json};
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::net::TcpStream;
@@ -20,9 +20,20 @@ pub(crate) enum Class {
     StrangerDelete,
     Wallhack,
     LobbyStall,
+    CommandCost,
+    InputsGrowth,
+    SeedOracle,
+    EventsFog,
+    SlowExport,
+    ConnFlood,
+    SeatHold,
+    IdleSpectators,
+    ReplayCost,
+    ReplayMemory,
+    DiskMaps,
 }
 
-pub(crate) const CLASSES: [Class; 10] = [
+pub(crate) const CLASSES: [Class; 21] = [
     Class::Slivers(64),
     Class::Slivers(256),
     Class::ExpensiveMatch,
@@ -33,6 +44,17 @@ pub(crate) const CLASSES: [Class; 10] = [
     Class::StrangerDelete,
     Class::Wallhack,
     Class::LobbyStall,
+    Class::CommandCost,
+    Class::InputsGrowth,
+    Class::SeedOracle,
+    Class::EventsFog,
+    Class::SlowExport,
+    Class::ConnFlood,
+    Class::SeatHold,
+    Class::IdleSpectators,
+    Class::ReplayCost,
+    Class::ReplayMemory,
+    Class::DiskMaps,
 ];
 
 impl Class {
@@ -47,6 +69,26 @@ impl Class {
             Class::StrangerDelete => "stranger-delete".into(),
             Class::Wallhack => "wallhack".into(),
             Class::LobbyStall => "lobby-stall".into(),
+            Class::CommandCost => "command-cost".into(),
+            Class::InputsGrowth => "inputs-growth".into(),
+            Class::SeedOracle => "seed-oracle".into(),
+            Class::EventsFog => "events-fog".into(),
+            Class::SlowExport => "slow-export".into(),
+            Class::ConnFlood => "conn-flood".into(),
+            Class::SeatHold => "seat-hold".into(),
+            Class::IdleSpectators => "idle-spectators".into(),
+            Class::ReplayCost => "replay-cost".into(),
+            Class::ReplayMemory => "replay-memory".into(),
+            Class::DiskMaps => "disk-maps".into(),
+        }
+    }
+
+    /// Flags the class's server starts with besides the probe's own: every class runs the
+    /// defaults but `disk-maps`, which asks for a small history to see it held.
+    pub(crate) fn server_flags(self) -> &'static [&'static str] {
+        match self {
+            Class::DiskMaps => &["--keep-mb", "1"],
+            _ => &[],
         }
     }
 }
@@ -57,6 +99,17 @@ pub(crate) struct Outcome {
     pub(crate) status: String,
     pub(crate) request_ms: Option<f64>,
     pub(crate) note: String,
+}
+
+impl Outcome {
+    /// A report of `doors.rs`'s classes.
+    fn of((status, request_ms, note): crate::doors::Report) -> Outcome {
+        Outcome {
+            status,
+            request_ms,
+            note,
+        }
+    }
 }
 
 pub(crate) async fn attack(class: Class, ctx: &Ctx) -> Result<Outcome, String> {
@@ -74,12 +127,37 @@ pub(crate) async fn attack(class: Class, ctx: &Ctx) -> Result<Outcome, String> {
         Class::StrangerDelete => stranger_delete(ctx).await,
         Class::Wallhack => wallhack(ctx).await,
         Class::LobbyStall => lobby_stall(ctx).await,
+        Class::CommandCost => outcome(crate::costs::command_cost(ctx).await?),
+        Class::InputsGrowth => outcome(crate::costs::inputs_growth(ctx).await?),
+        Class::SeedOracle => crate::fair::seed_oracle(ctx).await.map(Outcome::from),
+        Class::EventsFog => crate::fair::events_fog(ctx).await.map(Outcome::from),
+        Class::SlowExport => crate::doors::slow_export(ctx).await.map(Outcome::of),
+        Class::ConnFlood => crate::doors::conn_flood(ctx).await.map(Outcome::of),
+        Class::SeatHold => crate::doors::seat_hold(ctx).await.map(Outcome::of),
+        Class::IdleSpectators => crate::doors::idle_spectators(ctx).await.map(Outcome::of),
+        Class::ReplayCost => crate::history::replay_cost(ctx).await.map(Outcome::of),
+        Class::ReplayMemory => crate::history::replay_memory(ctx).await.map(Outcome::of),
+        Class::DiskMaps => crate::history::disk_maps(ctx).await.map(Outcome::of),
     }
 }
 
-/// Rounds to a millimetre, as a map author writes coordinates.
-pub(crate) fn r3(x: f64) -> f64 {
-    (x * 1000.0).round() / 1000.0
+impl From<crate::fair::Found> for Outcome {
+    fn from(f: crate::fair::Found) -> Outcome {
+        Outcome {
+            status: f.status,
+            request_ms: f.request_ms,
+            note: f.note,
+        }
+    }
+}
+
+/// A class's statuses, time and note as its outcome.
+fn outcome((status, ms, note): (String, f64, String)) -> Result<Outcome, String> {
+    Ok(Outcome {
+        status,
+        request_ms: Some(ms),
+        note,
+    })
 }
 
 /// 500 m, `n` thin obstacles from near (10, 20) to (470, 480): the shape `tests/hostile.rs`
@@ -98,11 +176,6 @@ pub(crate) fn slivers(n: usize) -> Value {
         .collect();
     json!({"name": "slivers", "width": 500.0, "height": 500.0, "obstacles": obstacles,
            "robot_spawns": [[2.0, 2.0, 0.0]], "opponent_spawns": [[498.0, 2.0]]})
-}
-
-pub(crate) fn empty_map(side: f64) -> Value {
-    json!({"name": "big", "width": side, "height": side, "obstacles": [],
-           "robot_spawns": [[2.0, 2.0, 0.0]], "opponent_spawns": [[side - 2.0, side - 2.0]]})
 }
 
 /// The shipped office with `n` landmarks spread over it (the R2 low-discrepancy sequence),

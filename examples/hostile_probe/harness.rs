@@ -3,7 +3,9 @@
 
 use std::collections::VecDeque;
 use std::net::SocketAddr;
+use std::path::{Path, PathBuf};
 use std::process::Stdio;
+use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
@@ -27,6 +29,8 @@ pub(crate) struct Server {
     pub(crate) pid: u32,
     pub(crate) addr: SocketAddr,
     pub(crate) version: String,
+    /// The history's directory (`--data-dir`), the probe's own, removed with the server.
+    pub(crate) data_dir: PathBuf,
 }
 
 pub(crate) fn remember(tail: &Tail, line: String) {
@@ -53,13 +57,26 @@ pub(crate) fn serving_addr(line: &str) -> Option<SocketAddr> {
 }
 
 impl Server {
-    pub(crate) async fn start(args: &Args) -> Result<Server, String> {
+    /// Starts `<server> serve` with `extra` flags after the probe's own, a fresh data
+    /// directory of its own (under the system's temporary directory) and every other setting
+    /// at its default.
+    pub(crate) async fn start(args: &Args, extra: &[&str]) -> Result<Server, String> {
+        static STARTED: AtomicUsize = AtomicUsize::new(0);
+        let data_dir = std::env::temp_dir().join(format!(
+            "hostile-probe-{}-{}",
+            std::process::id(),
+            STARTED.fetch_add(1, Ordering::Relaxed)
+        ));
+        let _ = std::fs::remove_dir_all(&data_dir);
         let mut cmd = Command::new(&args.server);
         cmd.arg("serve")
             .args(["--addr", "127.0.0.1:0", "--maps"])
             .arg(&args.maps)
             .arg("--web")
-            .arg(&args.web);
+            .arg(&args.web)
+            .arg("--data-dir")
+            .arg(&data_dir)
+            .args(extra);
         for (key, _) in std::env::vars_os() {
             if key.to_string_lossy().starts_with("LASERTAG_") {
                 cmd.env_remove(key);
@@ -106,6 +123,7 @@ impl Server {
             pid,
             addr,
             version: String::new(),
+            data_dir,
         };
         let http = reqwest::Client::new();
         let deadline = Instant::now() + Duration::from_secs(10);
@@ -134,7 +152,23 @@ impl Server {
     pub(crate) async fn kill(&mut self) {
         let _ = self.child.start_kill();
         let _ = tokio::time::timeout(Duration::from_secs(5), self.child.wait()).await;
+        let _ = std::fs::remove_dir_all(&self.data_dir);
     }
+}
+
+/// Bytes of the files in a directory and its subdirectories (what the history takes on disk).
+pub(crate) fn dir_bytes(dir: &Path) -> u64 {
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return 0;
+    };
+    entries
+        .flatten()
+        .map(|e| match e.metadata() {
+            Ok(m) if m.is_dir() => dir_bytes(&e.path()),
+            Ok(m) => m.len(),
+            Err(_) => 0,
+        })
+        .sum()
 }
 
 /// Resident memory of a process, KiB.
@@ -230,6 +264,9 @@ pub(crate) struct Ctx {
     pub(crate) http: reqwest::Client,
     pub(crate) addr: SocketAddr,
     pub(crate) bystander: String,
+    /// The server process's id (for its memory) and its history's directory.
+    pub(crate) pid: u32,
+    pub(crate) data_dir: PathBuf,
     /// When a class that runs until something happens gives up and reports what it saw.
     pub(crate) give_up: Instant,
 }
@@ -425,4 +462,19 @@ pub(crate) fn bystander_figures(
     }
     gap = gap.max(to.duration_since(last_advance));
     (Some(b.1 > a.1), rate, Some(gap.as_secs_f64() * 1e3))
+}
+
+// ---------------------------------------------------------------------------------------
+// Maps the classes share.
+// ---------------------------------------------------------------------------------------
+
+/// Rounds to a millimetre, as a map author writes coordinates.
+pub(crate) fn r3(x: f64) -> f64 {
+    (x * 1000.0).round() / 1000.0
+}
+
+/// An open square floor of `side` metres, a robot and an opponent in opposite corners.
+pub(crate) fn empty_map(side: f64) -> Value {
+    serde_json::json!({"name": "big", "width": side, "height": side, "obstacles": [],
+           "robot_spawns": [[2.0, 2.0, 0.0]], "opponent_spawns": [[side - 2.0, side - 2.0]]})
 }

@@ -14,7 +14,7 @@
 //! the server's `serving http://…` log line. It creates a bystander (a real-time match with idle
 //! robots on `office`), then sends the class's requests while it watches from outside:
 //! - the server's resident memory (`VmRSS` in `/proc/<pid>/status`): before the attack, the
-//!   peak (sampled every 50 ms) and after it (2 s after its last answer);
+//!   peak (sampled every 50 ms) and after it (6 s after its last answer);
 //! - the bystander's tick (`GET /api/matches/{id}` every 100 ms): whether it advanced, its
 //!   ticks per second, and the longest time it did not advance (the sampling alone makes that
 //!   100–150 ms);
@@ -42,15 +42,52 @@
 //! - `stranger-delete`: `DELETE` of someone else's match without `Authorization`;
 //! - `wallhack`: the public state of a match a person plays, against its live tick;
 //! - `lobby-stall`: `GET /api/matches` timed again and again while a manual match (8 idle
-//!   robots, 8 bots, warehouse) steps 20,000 ticks in one request.
+//!   robots, 8 bots, warehouse) steps 20,000 ticks in one request;
+//! - `seed-oracle`: a headless copy of a match people may join, made from its listing (its
+//!   settings and seed), stepped to the live tick: how far its robots are from the live ones
+//!   (and whether the showcase's seed is listed);
+//! - `events-fog`: a player alone in one room while a robot tags another opponent in the
+//!   next: the shots and tags out of its sight that reached its socket before spectators
+//!   saw them;
+//! - `slow-export`: three exports of a 6,000-tick replay whose readers stop for 35 s (two from
+//!   127.0.0.2, one from .3), a visitor's export from .4 5 s later, then what the slow ones
+//!   got in the end (lines, and the last line: complete, or where to resume);
+//! - `conn-flood`: 1,000 connections from 127.0.0.2, each half a header: how many the server
+//!   closed at once, and `/api/health` from .3;
+//! - `seat-hold`: for 30 s three addresses (.2 to .4) take every showcase seat they can and
+//!   play each (one input), while every 2 s a visitor (each from its own address, .10 and
+//!   up) joins a showcase with room;
+//! - `idle-spectators`: once the showcase is 30 s old (its spectators see it that late), 60
+//!   spectator sockets from each of four addresses (.2 to .5) on it, reading nothing; a
+//!   visitor from .7 tries to watch once a second for 30 s (run with `--timeout-s 120`);
+//! - `command-cost`: sixteen waypoints between the far corners of a 500 m map, sent again and
+//!   again to a manual match whose robots take orders (each a grid search);
+//! - `inputs-growth`: commands of 1,000 waypoints to an API-driven opponent until the match
+//!   refuses them;
+//! - `replay-cost`: strangers (127.0.0.2 to .5) read two 6,000-tick replays at their end and
+//!   middle (each read a re-simulation) while a visitor creates a match every 300 ms;
+//! - `replay-memory`: the biggest of a few big matches the server admits (a large open map,
+//!   many agents, a lossy radio, a fine merge grid), stepped 1,000 ticks, ended and read twice
+//!   by a stranger: the memory the reads take and leave;
+//! - `disk-maps`: thirty matches on ~185 KB inline maps, each ended, against `--keep-mb 1`:
+//!   the data directory's largest and last size.
 //!
 //! "request ms" is the wall time of the class's main request (for `match-table`, all 100; for
-//! `slowloris`, the newcomer's request after 15 s; for `wallhack`, the first public read).
+//! `slowloris`, the newcomer's request after 15 s; for `wallhack`, the first public read; for
+//! `slow-export`, the visitor's export; for `conn-flood`, the health request; for
+//! `idle-spectators`, the time until the visitor got in; for `replay-cost`, the slowest
+//! creation; for `replay-memory`, the two reads; for `disk-maps`, the whole stream).
+//!
+//! Every server gets a data directory of its own under the system's temporary directory
+//! (removed with it); "data KiB after" is its size after the class.
 //!
 //! Output: a Markdown table on stdout (one row per class), or JSON with `--json`; progress on
 //! stderr.
 //!
-//! `harness.rs` starts and watches a server process; `classes.rs` holds the requests.
+//! `harness.rs` starts and watches a server process; `classes.rs` holds the requests,
+//! `fair.rs` those of fair play, `doors.rs` those of the classes that take a door's share
+//! from other clients, `costs.rs` those that cost on a match's own thread, `history.rs`
+//! those of replays and the history on disk.
 
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
@@ -83,10 +120,15 @@ pub(crate) struct Args {
 
 /// How long the watchers keep watching after a class's last answer: memory a request left
 /// behind, and a bystander slowed by what was admitted.
-pub(crate) const SETTLE: Duration = Duration::from_secs(2);
+/// Long enough for a server that hands freed memory back every 5 s to have done so once.
+pub(crate) const SETTLE: Duration = Duration::from_secs(6);
 
 mod classes;
+mod costs;
+mod doors;
+mod fair;
 mod harness;
+mod history;
 
 use classes::*;
 use harness::*;
@@ -106,6 +148,8 @@ struct Row {
     longest_gap_ms: Option<f64>,
     health_max_ms: Option<f64>,
     health_failed: u32,
+    /// The history's directory after the class (KiB).
+    data_kib: Option<f64>,
     server_exit: Option<String>,
     seconds: f64,
 }
@@ -116,7 +160,7 @@ async fn measure(args: &Args, class: Class, version: &mut Option<String>) -> Row
         class: class.name(),
         ..Row::default()
     };
-    let mut server = match Server::start(args).await {
+    let mut server = match Server::start(args, class.server_flags()).await {
         Ok(s) => s,
         Err(e) => {
             row.outcome.status = "no server".into();
@@ -133,6 +177,8 @@ async fn measure(args: &Args, class: Class, version: &mut Option<String>) -> Row
             .unwrap_or_default(),
         addr: server.addr,
         bystander: String::new(),
+        pid: server.pid,
+        data_dir: server.data_dir.clone(),
         give_up: Instant::now(),
     };
     match ctx
@@ -198,6 +244,7 @@ async fn measure(args: &Args, class: Class, version: &mut Option<String>) -> Row
         bystander_figures(first, &watch.ticks, from, to);
     row.health_max_ms = (watch.health_max_ms > 0.0).then_some(watch.health_max_ms);
     row.health_failed = watch.health_failed;
+    row.data_kib = Some(dir_bytes(&server.data_dir) as f64 / 1024.0);
     row.server_exit = server.exited();
     server.kill().await;
     row.seconds = started.elapsed().as_secs_f64();
@@ -225,12 +272,12 @@ fn notes(r: &Row) -> String {
 
 fn markdown(rows: &[Row]) -> String {
     let mut out = String::from(
-        "| class | status | request ms | RSS MiB before / peak / after | bystander ticked | bystander ticks/s | longest bystander gap ms | health max ms | notes |\n|---|---|---|---|---|---|---|---|---|\n",
+        "| class | status | request ms | RSS MiB before / peak / after | bystander ticked | bystander ticks/s | longest bystander gap ms | health max ms | data KiB after | notes |\n|---|---|---|---|---|---|---|---|---|---|\n",
     );
     for r in rows {
         let [b, p, a] = r.rss_mib;
         out += &format!(
-            "| {} | {} | {} | {} / {} / {} | {} | {} | {} | {} | {} |\n",
+            "| {} | {} | {} | {} / {} / {} | {} | {} | {} | {} | {} | {} |\n",
             r.class,
             r.outcome.status,
             num(r.outcome.request_ms),
@@ -245,6 +292,7 @@ fn markdown(rows: &[Row]) -> String {
             num(r.ticks_per_s),
             num(r.longest_gap_ms),
             num(r.health_max_ms),
+            num(r.data_kib),
             notes(r).replace('|', "\\|"),
         );
     }
@@ -261,6 +309,7 @@ fn to_json(rows: &[Row]) -> Value {
                    "bystander_ticked": r.bystander_ticked, "bystander_ticks_per_s": r.ticks_per_s,
                    "bystander_longest_gap_ms": r.longest_gap_ms,
                    "health_max_ms": r.health_max_ms, "health_failed": r.health_failed,
+                   "data_kib_after": r.data_kib,
                    "server_exit": r.server_exit, "note": r.outcome.note, "seconds": r.seconds})
         })
         .collect();

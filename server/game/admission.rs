@@ -130,6 +130,18 @@ pub fn map(def: &MapDef) -> Price {
     }
 }
 
+/// Bytes of the orders from outside a match with `config` may record (bounded, kept for its
+/// replay): none when it takes none.
+fn recorded_orders(config: &MatchConfig) -> f64 {
+    let takes_orders = config.planner == lasertag_core::planner::PlannerKind::Api
+        || config.opponent_control == lasertag_core::world::ControlKind::Api;
+    if takes_orders {
+        crate::game::record::MAX_ORDER_BYTES as f64
+    } else {
+        0.0
+    }
+}
+
 /// The price of a match with `config` on a map of `def`'s size (the map's own price is
 /// separate: charged once for a stored map, with the match for an inline one).
 pub fn match_on(def: &MapDef, config: &MatchConfig) -> Price {
@@ -146,8 +158,10 @@ pub fn match_on(def: &MapDef, config: &MatchConfig) -> Price {
     let landmarks = def.landmarks.len() as f64;
     let per_copy =
         cells * 4.0 + merge_cells * BYTES_PER_MERGE_CELL + particles * BYTES_PER_PARTICLE;
-    let memory =
-        MATCH_BASE_BYTES + robots * (BYTES_PER_ROBOT + landmarks * 8.0) + copies * per_copy;
+    let memory = MATCH_BASE_BYTES
+        + robots * (BYTES_PER_ROBOT + landmarks * 8.0)
+        + copies * per_copy
+        + recorded_orders(config);
     let localising = if config.localisation { robots } else { 0.0 };
     Price {
         memory: memory as u64,
@@ -159,6 +173,18 @@ pub fn match_on(def: &MapDef, config: &MatchConfig) -> Price {
             + copies * particles * TICK_MS_PER_PARTICLE
             + localising * landmarks * TICK_MS_PER_LANDMARK,
     }
+}
+
+/// Bytes of a copy of a world besides what its settings scale (measured: about 300 KB for
+/// the default match on `office`, the arena shared and not copied).
+const WORLD_COPY_BASE_BYTES: f64 = 400e3;
+
+/// The bytes of one copy of a match's world with `config` on `def` (a replay's keyframe, a
+/// replay socket's cursor): the match's price without what a running match keeps besides
+/// its world (queues, frames), the arena shared.
+pub fn world_copy(def: &MapDef, config: &MatchConfig) -> u64 {
+    let kept = match_on(def, config).memory as f64 - MATCH_BASE_BYTES - recorded_orders(config);
+    (kept.max(0.0) + WORLD_COPY_BASE_BYTES) as u64
 }
 
 /// Bytes of a held frame besides its robots, opponents and belief points (the frame, its

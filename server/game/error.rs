@@ -33,4 +33,21 @@ pub enum MatchError {
     NotAPlayer(String),
     #[error("match {0} has ended")]
     Gone(String),
+    /// The match has recorded as many orders from outside as it may.
+    #[error(transparent)]
+    RecordingFull(#[from] crate::game::record::RecordingFull),
+    /// The client's share of the server's path-search work is taken for now.
+    #[error(
+        "{client} has used its share of this server's path search for robots' waypoints ({rate} units a second); try again in {wait_s:.1} s, or give fewer waypoints"
+    )]
+    WorkShare {
+        client: crate::access::ClientKey,
+        rate: u64,
+        wait_s: f64,
+    },
+    /// The server's path-search work is taken for now.
+    #[error(
+        "this server's path search for robots' waypoints ({rate} units a second) is taken; try again in {wait_s:.1} s"
+    )]
+    WorkBusy { rate: u64, wait_s: f64 },
 }

@@ -6,6 +6,7 @@
 //! only when asked, in chunks between which it keeps answering other requests.
 
 pub mod admission;
+pub mod background;
 pub mod delay;
 pub mod error;
 mod handle;
@@ -15,6 +16,7 @@ pub mod replay;
 pub mod showcase;
 mod task;
 pub mod view;
+pub mod work;
 
 use std::collections::BTreeMap;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -32,10 +34,10 @@ use crate::metrics::Metrics;
 use lasertag_core::world::{FinishReason, World};
 use view::MatchMeta;
 
-pub use crate::access::random_id;
+pub use crate::access::{random_id, random_seed};
 pub use error::MatchError;
 pub use handle::MatchHandle;
-pub use hub::{Hub, Seat, SpectatorSeat};
+pub use hub::{Hub, Seat, SeatLedger, SpectatorSeat};
 pub use task::{Answer, Reading, Request, TaskSettings, spawn_match};
 pub use view::Sight;
 
@@ -59,6 +61,10 @@ pub struct Registry {
     next_order: AtomicU64,
     /// Finished matches, for replay.
     pub history: Arc<replay::History>,
+    /// The path search robots' orders may take, server-wide and per client.
+    pub work: work::WorkBudget,
+    /// The seats each client holds over every match.
+    pub seats: Arc<SeatLedger>,
 }
 
 /// Counts an open WebSocket connection until dropped.
@@ -259,7 +265,10 @@ impl Registry {
                 max_players: self.config.max_players_per_match,
                 join_hold: self.config.join_hold,
                 max_holds: self.config.max_holds_per_address,
+                seats: self.seats.clone(),
+                max_seats: self.config.max_seats_per_address,
                 tick_overrun: Duration::from_secs_f64(self.config.tick_overrun_ms / 1e3),
+                max_command_work: self.config.max_command_work,
                 metrics: self.metrics.clone(),
                 history: self.history.clone(),
                 on_exit: Box::new(on_exit),

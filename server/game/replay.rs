@@ -5,7 +5,10 @@
 //! the state and belief a replay shows at tick N are what the live endpoints showed. To reach
 //! any tick quickly, the re-simulation keeps copies of the world (keyframes) at regular
 //! ticks as it passes them; a later seek starts from the nearest one before it. At most
-//! [`MAX_KEYFRAMES`] are kept, so a long match gets them farther apart rather than more.
+//! [`MAX_KEYFRAMES`] are kept, and no more than fit in [`KEYFRAME_BYTES`] (each priced as a
+//! copy of the world, `admission::world_copy`), so a long match or a big world gets them
+//! farther apart rather than more; a world too big for the budget keeps none (every seek
+//! re-simulates from the start, on the replays' bounded pool).
 //!
 //! Re-simulating is real work (a whole match, the first time): callers run it off the async
 //! workers.
@@ -17,6 +20,7 @@ use std::time::SystemTime;
 use lasertag_core::sim::arena::Arena;
 use lasertag_core::world::{MatchConfig, MatchStatus, SetupError, Side, World, WorldInput};
 
+use crate::game::admission::{self, world_copy};
 use crate::game::view::{Clock, MatchMeta};
 use crate::store::codec::StoredSettings;
 use crate::store::{Listed, Store, StoreError, Write};
@@ -25,6 +29,17 @@ use crate::store::{Listed, Store, StoreError, Write};
 pub const MAX_KEYFRAMES: u64 = 120;
 /// The closest keyframes may be (ticks): a seek then re-simulates at most this many.
 pub const MIN_KEYFRAME_SPACING: u64 = 50;
+/// Bytes one replay's keyframes may take; [`OPEN_REPLAYS`] keep theirs at once.
+pub const KEYFRAME_BYTES: u64 = 64_000_000;
+
+/// Ticks between keyframes of a match of `last_tick` ticks whose world copies take `bytes`
+/// each, or `None` when not even one fits in the budget.
+fn keyframe_spacing(last_tick: u64, bytes: u64) -> Option<u64> {
+    let fit = (KEYFRAME_BYTES / bytes.max(1)).min(MAX_KEYFRAMES);
+    // The start is a keyframe too.
+    let between = fit.checked_sub(1).filter(|n| *n > 0)?;
+    Some(MIN_KEYFRAME_SPACING.max(last_tick.div_ceil(between)))
+}
 
 /// A finished match, replayable.
 #[derive(Debug)]
@@ -46,7 +61,8 @@ pub struct Replay {
     arena: Arc<Arena>,
     config: MatchConfig,
     inputs: Arc<[(u64, WorldInput)]>,
-    spacing: u64,
+    /// Ticks between keyframes; `None`: the world is too big to keep copies of.
+    spacing: Option<u64>,
     /// Worlds at multiples of `spacing`, in tick order (the start is always first).
     keyframes: Mutex<Vec<World>>,
 }
@@ -93,6 +109,7 @@ impl Replay {
                 }
                 names
             });
+        let spacing = keyframe_spacing(last_tick, world_copy(&arena.def, &config));
         Replay {
             meta,
             last_tick,
@@ -105,9 +122,14 @@ impl Replay {
             arena,
             config,
             inputs: inputs.into(),
-            spacing: MIN_KEYFRAME_SPACING.max(last_tick.div_ceil(MAX_KEYFRAMES)),
+            spacing,
             keyframes: Mutex::new(Vec::new()),
         }
+    }
+
+    /// Bytes of its recorded inputs.
+    fn inputs_bytes(&self) -> u64 {
+        (self.inputs.len() * std::mem::size_of::<(u64, WorldInput)>()) as u64
     }
 
     /// A replay read back from the store.
@@ -149,12 +171,17 @@ impl Replay {
             ended_at: at(l.ended_at_ms.unwrap_or(l.started_at_ms)),
             reason: l.reason.as_deref().and_then(crate::store::codec::reason_of),
             complete: l.complete,
-            spacing: MIN_KEYFRAME_SPACING.max(l.ticks.div_ceil(MAX_KEYFRAMES)),
+            spacing: keyframe_spacing(l.ticks, world_copy(&arena.def, &config)),
             arena,
             config,
             inputs: inputs.into(),
             keyframes: Mutex::new(Vec::new()),
         })
+    }
+
+    /// Bytes of one copy of this replay's world: a cursor, or a keyframe (the arena shared).
+    pub fn world_bytes(&self) -> u64 {
+        world_copy(&self.arena.def, &self.config)
     }
 
     /// The match's settings and map.
@@ -185,7 +212,10 @@ impl Replay {
                 break;
             }
             world.step();
-            if world.tick.is_multiple_of(self.spacing) {
+            if self
+                .spacing
+                .is_some_and(|every| world.tick.is_multiple_of(every))
+            {
                 self.keep_keyframe(&world);
             }
         }
@@ -196,6 +226,9 @@ impl Replay {
     /// The lock is held only for the copy: seeks and [`Replay::prepare`] re-simulate side
     /// by side.
     fn nearest(&self, tick: u64) -> Result<World, ReplayError> {
+        if self.spacing.is_none() {
+            return Ok(World::new(self.arena.clone(), self.config.clone())?);
+        }
         let mut keyframes = self.keyframes.lock().unwrap_or_else(|e| e.into_inner());
         if keyframes.is_empty() {
             keyframes.push(World::new(self.arena.clone(), self.config.clone())?);
@@ -267,9 +300,14 @@ impl Replay {
 pub const HISTORY_CAPACITY: usize = 1000;
 /// Finished matches kept in memory beside a store (the rest are loaded when opened).
 const CACHED_WITH_STORE: usize = 32;
+/// Bytes the finished matches kept in memory may take, their arenas priced as admission
+/// prices a map: a stream of matches on large inline maps would otherwise keep 32 (or, with
+/// no store, a thousand) arenas that nobody pays for once their matches end. The newest is
+/// kept whatever its size; the store, when there is one, still has the others.
+pub const CACHED_BYTES: u64 = 128 << 20;
 /// Replays whose keyframes are kept (the most recently opened): the rest are re-simulated
 /// when opened again, so memory stays bounded whatever people open.
-const OPEN_REPLAYS: usize = 4;
+pub const OPEN_REPLAYS: usize = 4;
 
 /// The finished matches a server keeps for replay: the newest in memory, all of them in the
 /// store when it has one.
@@ -338,14 +376,14 @@ impl History {
         }
     }
 
-    /// Keeps `replay` in memory, forgetting the oldest past the capacity (the store, if
-    /// any, has it from the match's own writes).
+    /// Keeps `replay` in memory, forgetting the oldest past the capacity or past
+    /// [`CACHED_BYTES`] (the store, if any, has it from the match's own writes).
     pub fn keep(&self, replay: Replay) -> Arc<Replay> {
         let replay = Arc::new(replay);
         let mut r = self.replays.lock().unwrap_or_else(|e| e.into_inner());
         r.retain(|x| x.meta.id != replay.meta.id);
         r.push_back(replay.clone());
-        while r.len() > self.capacity {
+        while r.len() > self.capacity || (r.len() > 1 && kept_bytes(&r) > CACHED_BYTES) {
             r.pop_front();
         }
         replay
@@ -391,22 +429,45 @@ impl History {
     }
 }
 
-/// Fills in `replay`'s keyframes on a blocking thread, so that the seeks after its first
+/// What keeping `replays` in memory costs: their recorded inputs, and each arena once
+/// (priced as admission prices a map; the replays of a stored map share one). Keyframes
+/// have their own budget.
+fn kept_bytes(replays: &VecDeque<Arc<Replay>>) -> u64 {
+    let mut arenas = std::collections::HashSet::new();
+    replays
+        .iter()
+        .map(|r| {
+            let arena = if arenas.insert(Arc::as_ptr(&r.arena)) {
+                admission::map(&r.arena.def).memory
+            } else {
+                0
+            };
+            arena + r.inputs_bytes()
+        })
+        .sum()
+}
+
+/// Fills in `replay`'s keyframes on a background thread (`background`), so that the seeks after its first
 /// opening are short wherever they land. One at a time: a replay opened while another is
 /// being prepared re-simulates only as its seeks go (still correct, slower at first).
 fn prepare_in_background(replay: Arc<Replay>) {
     static PREPARING: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
     use std::sync::atomic::Ordering;
-    let Ok(runtime) = tokio::runtime::Handle::try_current() else {
+    // Only in a server (a runtime is running): a program that opens replays by itself
+    // seeks them as it goes.
+    if tokio::runtime::Handle::try_current().is_err() {
         return;
-    };
+    }
     if PREPARING.swap(true, Ordering::AcqRel) {
         return;
     }
-    runtime.spawn_blocking(move || {
+    let spawned = crate::game::background::spawn("replay-prepare", move || {
         replay.prepare();
         PREPARING.store(false, Ordering::Release);
     });
+    if spawned.is_err() {
+        PREPARING.store(false, Ordering::Release);
+    }
 }
 
 /// Why the history could not answer.
@@ -439,65 +500,4 @@ impl Replay {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::maps::MapStore;
-    use lasertag_core::world::{ControlKind, HumanInput};
-
-    /// A two-minute office match with a person's keys changing now and then.
-    fn recorded() -> Replay {
-        let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
-        let maps = MapStore::load_dir(&root.join("maps")).expect("shipped maps");
-        let arena = maps.get("office").expect("office").arena.clone();
-        let config = MatchConfig {
-            opponent_control: ControlKind::Human,
-            seed: 3,
-            ..MatchConfig::default()
-        };
-        let mut world = World::new(arena.clone(), config.clone()).expect("world");
-        let mut inputs = Vec::new();
-        for t in 0..400u64 {
-            if t.is_multiple_of(37) {
-                let input = WorldInput::Keys {
-                    slot: 0,
-                    input: HumanInput {
-                        forward: if t.is_multiple_of(74) { 1.0 } else { -0.5 },
-                        turn: 0.3,
-                        ..HumanInput::default()
-                    },
-                };
-                world.apply(&input).expect("keys");
-                inputs.push((world.tick, input));
-            }
-            world.step();
-        }
-        let meta = MatchMeta {
-            id: "m".into(),
-            map: "office".into(),
-            clock: Clock::Manual,
-            players: 0,
-            spectators: 0,
-            free_slots: 0,
-            bots_joinable: false,
-            spectator_delay_ticks: 0,
-        };
-        Replay::of(&world, meta, arena, config, inputs, SystemTime::now())
-    }
-
-    #[test]
-    fn a_cursor_played_forward_meets_every_seek() {
-        let replay = recorded();
-        let mut cursor = replay.cursor(100).expect("cursor");
-        let mut steps = 0;
-        while replay.advance(&mut cursor) {
-            steps += 1;
-            let tick = cursor.world().tick;
-            if tick.is_multiple_of(23) || tick == replay.last_tick {
-                let seek = replay.world_at(tick).expect("seek");
-                assert_eq!(seek.digest(), cursor.world().digest(), "tick {tick}");
-            }
-        }
-        assert_eq!(steps, replay.last_tick - 100);
-        assert!(!replay.advance(&mut cursor));
-    }
-}
+mod tests;

@@ -1,11 +1,15 @@
 //! The showcase: a real-time match that is always running, so that anyone who opens the
 //! server sees play at once. When it ends, a fresh one (new seed) starts a few seconds later.
+//! People may take its bots, so its seed is secret, drawn from the operating system's random
+//! source (see `view::people_may_play`).
+//! While people hold every slot of every running showcase, another starts beside them (at
+//! most [`MAX_SHOWCASES`]), so that a visitor always finds a free one.
 
 use std::sync::Arc;
 use std::time::Duration;
 
 use crate::game::view::{Clock, MatchMeta};
-use crate::game::{Registry, random_id};
+use crate::game::{Registry, random_id, random_seed};
 use lasertag_core::bots::BotKind;
 use lasertag_core::planner::PlannerKind;
 use lasertag_core::sim::TICK_HZ;
@@ -17,7 +21,7 @@ const SHOWCASE_MAP: &str = "office";
 /// How long a finished showcase stays up (so its end can be seen) before the next starts.
 const LINGER: Duration = Duration::from_secs(10);
 
-async fn start(registry: &Registry, round: u64) -> Option<String> {
+async fn start(registry: &Registry) -> Option<String> {
     let arena = {
         let maps = registry.maps.read().unwrap_or_else(|e| e.into_inner());
         maps.get(SHOWCASE_MAP)
@@ -33,7 +37,7 @@ async fn start(registry: &Registry, round: u64) -> Option<String> {
         opponent_control: ControlKind::Bot,
         opponent_bot: BotKind::Evade,
         planner: PlannerKind::Coordinated,
-        seed: round,
+        seed: random_seed(),
         ..MatchConfig::default()
     };
     let map = arena.def.name.clone();
@@ -58,32 +62,75 @@ async fn start(registry: &Registry, round: u64) -> Option<String> {
     Some(registry.start(world, meta).id)
 }
 
-/// Keeps one showcase match running for as long as the server runs.
+/// Most showcases at once: each one more starts only when every running one has no free
+/// slot, so a few addresses holding seats (at most `--max-seats-per-address` each) cannot
+/// lock a visitor out unless they fill them all.
+pub const MAX_SHOWCASES: usize = 6;
+
+/// One showcase the keeper started, and when spectators saw it end.
+struct Round {
+    id: String,
+    finished_at: Option<tokio::time::Instant>,
+}
+
+/// Keeps one showcase match running for as long as the server runs, and another beside it
+/// while every running one is full (people hold all its slots), up to [`MAX_SHOWCASES`].
 pub async fn keep_running(registry: Arc<Registry>) {
-    let mut round = 0;
-    let Some(mut id) = start(&registry, round).await else {
+    let Some(first) = start(&registry).await else {
         tracing::warn!("no map to run a showcase match on");
         return;
     };
+    let mut rounds = vec![Round {
+        id: first,
+        finished_at: None,
+    }];
     loop {
         tokio::time::sleep(Duration::from_secs(2)).await;
         if registry.draining.is_cancelled() {
             return; // no new showcase while the server drains or stops
         }
-        let finished = match registry.get(&id) {
-            // Finished as spectators see it: they watch the end before the next round.
-            Some(h) => h.hub.spectate.borrow().status == MatchStatus::Finished,
-            None => true, // deleted by someone: bring it back
-        };
-        if finished {
-            tokio::time::sleep(LINGER).await;
-            registry.remove(&id).await;
-            if registry.draining.is_cancelled() {
-                return;
+        let now = tokio::time::Instant::now();
+        let mut full = 0;
+        for r in &mut rounds {
+            let (finished, free) = match registry.get(&r.id) {
+                // Finished as spectators see it: they watch the end before the next round.
+                Some(h) => (
+                    h.hub.spectate.borrow().status == MatchStatus::Finished,
+                    h.hub.summary.borrow().meta.free_slots,
+                ),
+                None => (true, 0), // deleted by someone: bring it back
+            };
+            if finished {
+                r.finished_at.get_or_insert(now);
+            } else if free == 0 {
+                full += 1;
             }
-            round += 1;
-            match start(&registry, round).await {
-                Some(new) => id = new,
+        }
+        // Ended ones go once their end has been seen.
+        let mut gone = Vec::new();
+        rounds.retain(|r| {
+            let stay = r.finished_at.is_none_or(|t| now - t < LINGER);
+            if !stay {
+                gone.push(r.id.clone());
+            }
+            stay
+        });
+        for id in gone {
+            registry.remove(&id).await;
+        }
+        if registry.draining.is_cancelled() {
+            return;
+        }
+        let running = rounds.iter().filter(|r| r.finished_at.is_none()).count();
+        // A fresh round when none runs or lingers; another beside the running ones when
+        // all are full.
+        let wanted = rounds.is_empty() || (running > 0 && full == running);
+        if wanted && rounds.len() < MAX_SHOWCASES {
+            match start(&registry).await {
+                Some(id) => rounds.push(Round {
+                    id,
+                    finished_at: None,
+                }),
                 None => return,
             }
         }

@@ -15,6 +15,9 @@
 //! Every frame also measures the team's belief against the truth ([`TrackingFrame`], GOSPA). It
 //! is computed here, where the truth is shown anyway, and never in the core's tick: it reads
 //! the world and changes nothing in the match.
+//!
+//! Long file: a frame and who may see what of it (a player's line of sight, and the events
+//! that follow the same rule, [`event_seen`]) belong in one place, so that one rule holds.
 
 use std::any::Any;
 use std::sync::{Arc, OnceLock};
@@ -23,9 +26,9 @@ use nalgebra::Point2;
 
 use lasertag_core::localise::Localiser;
 use lasertag_core::planner::PlannerKind;
-use lasertag_core::sim::Pose;
 use lasertag_core::sim::arena::Arena;
 use lasertag_core::sim::sensors::Detection;
+use lasertag_core::sim::{AgentId, Pose};
 use lasertag_core::tracker::estimate::tracking_quality;
 use lasertag_core::tracker::gospa::{Gospa, Params};
 use lasertag_core::tracker::{Confidence, Role};
@@ -141,15 +144,9 @@ pub struct TrackingFrame {
 impl TrackingFrame {
     /// The measurement for `roles` (the team's merged belief) in `world`.
     pub fn of(world: &World, roles: &[Role]) -> TrackingFrame {
-        let truth: Vec<Point2<f32>> = world
-            .opponents
-            .iter()
-            .filter(|o| !o.tagged)
-            .map(|o| o.pose.pos)
-            .collect();
         let params = Params::default();
         TrackingFrame {
-            gospa: tracking_quality(roles, &truth, params),
+            gospa: tracking_quality(roles, &world.untagged_opponents(), params),
             params,
         }
     }
@@ -334,6 +331,49 @@ pub struct Visible {
     pub opponents: Vec<bool>,
 }
 
+impl Visible {
+    /// A view that holds nobody (a player whose opponent has just been tagged).
+    pub fn nothing() -> Visible {
+        Visible {
+            robots: Vec::new(),
+            opponents: Vec::new(),
+        }
+    }
+
+    fn sees(&self, agent: AgentId) -> bool {
+        let flags = match agent {
+            AgentId::Robot(_) => &self.robots,
+            AgentId::Opponent(_) => &self.opponents,
+        };
+        flags.get(agent.index()).copied().unwrap_or(false)
+    }
+}
+
+/// Whether the person playing opponent `slot` is told of `event` as it happens, `visible`
+/// being [`visible_to`] of the frame the event comes with (the rule its snapshots follow):
+/// it took part (its own shot or tag, or it was hit), or every agent the event names is in
+/// its view (an opponent a robot's shot tags has just left the arena: the shot counts, as
+/// seen when its shooter is). Seats and the end are public and go live; the robots' belief
+/// splitting or merging is not something it saw. Everything else reaches it as late as
+/// spectators get it.
+pub fn event_seen(event: &Event, visible: &Visible, slot: usize) -> bool {
+    let me = AgentId::Opponent(slot);
+    let seen = |agents: &[AgentId]| agents.contains(&me) || agents.iter().all(|a| visible.sees(*a));
+    match &event.kind {
+        EventKind::Shot { by, hit: None } => seen(&[*by]),
+        EventKind::Shot { by, hit: Some(hit) } => match (by, hit) {
+            (AgentId::Robot(_), AgentId::Opponent(_)) if *hit != me => seen(&[*by]),
+            _ => seen(&[*by, *hit]),
+        },
+        EventKind::Tag { by, target } => *target == me || seen(&[*by]),
+        EventKind::RobotTagged { by, target } => seen(&[*by, *target]),
+        EventKind::RoleSplit { .. } | EventKind::RoleMerge { .. } => false,
+        EventKind::PlayerJoined { .. }
+        | EventKind::PlayerLeft { .. }
+        | EventKind::Finished { .. } => true,
+    }
+}
+
 /// The team's (merged) belief, thinned for display (see the module docs).
 pub fn belief_view(world: &World) -> BeliefView {
     belief_view_of(world.tick, &world.team.merged_belief())
@@ -467,6 +507,14 @@ pub struct MatchMeta {
     pub spectator_delay_ticks: u64,
 }
 
+/// Whether people may play a match: human opponent slots, or bot opponents people may take
+/// over (`bots_joinable`, the showcase). Such a match shows its truth `spectator_delay_s`
+/// late and keeps its seed secret while it runs: a match is a pure function of its
+/// settings, seed and inputs, so a public seed would let anyone rebuild it live.
+pub fn people_may_play(config: &MatchConfig, bots_joinable: bool) -> bool {
+    bots_joinable || config.opponent_control == ControlKind::Human
+}
+
 /// A match as listings show it, published with every frame so that a listing never waits
 /// on the match's task.
 #[derive(Debug, Clone)]
@@ -500,6 +548,13 @@ impl Summary {
             planner: world.team.kind(),
             config: config.clone(),
         }
+    }
+
+    /// Whether its seed is kept from everybody but its owner and the operator now: while a
+    /// match people may play runs (see [`people_may_play`]).
+    pub fn seed_secret(&self) -> bool {
+        self.status == MatchStatus::Running
+            && people_may_play(&self.config, self.meta.bots_joinable)
     }
 }
 

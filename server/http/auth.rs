@@ -51,17 +51,11 @@ impl Bearer {
         matches!((&self.0, admin), (Some(t), Some(a)) if same_secret(&a.0, t))
     }
 
-    /// Lets the request change `what` (e.g. "match 3f2a…") when it carries the owner's token
-    /// or the admin token: 401 without a token, 403 with another one. The token is checked
-    /// before the thing is looked up (`owner` is `None` when there is no such thing), so
-    /// only the operator learns from a change request whether something exists: the owner
-    /// of a match that has gone gets 403, like anyone whose token opens nothing there.
-    pub fn may_change(
-        &self,
-        state: &AppState,
-        owner: Option<&Owner>,
-        what: &str,
-    ) -> Result<(), ApiError> {
+    /// Lets the request change `what` (e.g. "match 3f2a…"), owned by `owner`, when it carries
+    /// the owner's token or the admin token: 401 without a token, 403 with another one. The
+    /// caller has found the thing first: that it exists is public (a `GET` says so), so an
+    /// unknown one is a 404 for everybody, whatever the token.
+    pub fn may_change(&self, state: &AppState, owner: &Owner, what: &str) -> Result<(), ApiError> {
         let metrics = &state.registry.metrics;
         let Some(token) = &self.0 else {
             metrics.refuse(Refusal::Unauthorized);
@@ -72,17 +66,24 @@ impl Bearer {
                 ),
             ));
         };
-        if opens(state, owner, token) {
+        if opens(state, Some(owner), token) {
             return Ok(());
         }
         metrics.refuse(Refusal::Forbidden);
-        let message = match owner {
-            Some(o) if o.token.is_none() => {
-                format!("authorization: only the operator may change {what}")
-            }
-            _ => format!("authorization: that is not the owner_token of {what}"),
+        let message = if owner.token.is_none() {
+            format!("authorization: only the operator may change {what}")
+        } else {
+            format!("authorization: that is not the owner_token of {what}")
         };
         Err(ApiError::new(StatusCode::FORBIDDEN, message))
+    }
+
+    /// Whether this request carries `owner`'s token or the admin token (what shows a match's
+    /// secret seed in the listing; a token that opens nothing there is no error).
+    pub fn opens(&self, state: &AppState, owner: &Owner) -> bool {
+        self.0
+            .as_deref()
+            .is_some_and(|token| opens(state, Some(owner), token))
     }
 
     /// How a read of `what` (owned by `owner`) sees it: live with the owner's or the admin

@@ -8,12 +8,12 @@ use crate::game::MatchError;
 use crate::game::admission::NoRoom;
 use crate::game::replay::HistoryError;
 use crate::protocol::ErrorBody;
-use crate::service::PoolError;
 use crate::service::admit::OverLimit;
 use crate::service::maps::MapsError;
 use crate::service::matches::CreateError;
 use crate::service::players::StatsError;
 use crate::service::replays::ReplaysError;
+use crate::service::{PoolError, ReplayBusy};
 use lasertag_core::world::{InputError, OrderError, RobotOrderError};
 
 #[derive(Debug, Clone, PartialEq)]
@@ -52,8 +52,10 @@ impl From<MatchError> for ApiError {
             MatchError::Realtime { .. }
             | MatchError::Stepping(_)
             | MatchError::Finished(_)
-            | MatchError::Full(_) => StatusCode::CONFLICT,
-            MatchError::Quota(_) => StatusCode::TOO_MANY_REQUESTS,
+            | MatchError::Full(_)
+            | MatchError::RecordingFull(_) => StatusCode::CONFLICT,
+            MatchError::Quota(_) | MatchError::WorkShare { .. } => StatusCode::TOO_MANY_REQUESTS,
+            MatchError::WorkBusy { .. } => StatusCode::SERVICE_UNAVAILABLE,
             MatchError::NotAPlayer(_) => StatusCode::UNAUTHORIZED,
         };
         ApiError::new(status, e.to_string())
@@ -187,6 +189,14 @@ impl From<ReplaysError> for ApiError {
                 ApiError::not_found(e.to_string())
             }
             ReplaysError::Replay(_) => ApiError::bad_request(e.to_string()),
+            ReplaysError::Busy(busy) => {
+                let status = match busy {
+                    ReplayBusy::Client { .. } => StatusCode::TOO_MANY_REQUESTS,
+                    ReplayBusy::Server { .. } => StatusCode::SERVICE_UNAVAILABLE,
+                    ReplayBusy::Failed(_) => StatusCode::INTERNAL_SERVER_ERROR,
+                };
+                ApiError::new(status, busy.to_string())
+            }
         }
     }
 }

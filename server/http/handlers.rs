@@ -26,16 +26,12 @@ use crate::service::matches::{self, Created};
 use lasertag_core::sim::AgentId;
 use lasertag_core::world::WorldInput;
 
-/// The match `id` for a request that changes it: the token is checked first (see
-/// [`Bearer::may_change`]), then whether the match exists.
+/// The match `id` for a request that changes it: 404 when there is no such match (its
+/// existence is public), then the token is checked (see [`Bearer::may_change`]).
 pub(super) fn owned(state: &AppState, bearer: &Bearer, id: &str) -> Result<MatchHandle, ApiError> {
-    let handle = state.registry.get(id);
-    bearer.may_change(
-        state,
-        handle.as_ref().map(|h| &*h.owner),
-        &format!("match {id}"),
-    )?;
-    handle.ok_or_else(|| ApiError::not_found(format!("no match {id}")))
+    let handle = find(state, id)?;
+    bearer.may_change(state, &handle.owner, &format!("match {id}"))?;
+    Ok(handle)
 }
 
 /// The match `id` for a read of its truth, and how the reader sees it (see
@@ -103,18 +99,21 @@ pub async fn delete_map(
     bearer: Bearer,
     Path(name): Path<String>,
 ) -> Result<StatusCode, ApiError> {
-    let stored = maps::stored(state.service(), &name);
-    let owner = stored.as_ref().map(|m| &m.owner);
-    bearer.may_change(&state, owner, &format!("map {name:?}"))?;
+    let stored = maps::stored(state.service(), &name)
+        .ok_or_else(|| maps::MapsError::NotFound(name.clone()))?;
+    bearer.may_change(&state, &stored.owner, &format!("map {name:?}"))?;
     maps::delete(state.service(), &name, stored)?;
     Ok(StatusCode::NO_CONTENT)
 }
 
 #[utoipa::path(get, path = "/api/matches",
-    description = "This server's matches; in a fleet (`--fleet`), every node's, each with the `node` that hosts it.",
-    responses((status = 200, body = [MatchSummary])))]
-pub async fn list_matches(State(state): State<AppState>) -> Json<Vec<Listed>> {
-    Json(matches::list(state.service()))
+    description = "This server's matches; in a fleet (`--fleet`), every node's, each with the `node` that hosts it. The secret seed of a running match people may join is null, except with its owner_token or the admin token.",
+    security((), ("owner_token" = [])),
+    responses((status = 200, body = [MatchSummary]), (status = 401, body = ErrorBody)))]
+pub async fn list_matches(State(state): State<AppState>, bearer: Bearer) -> Json<Vec<Listed>> {
+    Json(matches::list(state.service(), |owner| {
+        bearer.opens(&state, owner)
+    }))
 }
 
 #[utoipa::path(post, path = "/api/matches", request_body = CreateMatch,
@@ -181,9 +180,7 @@ pub async fn delete_match(
     bearer: Bearer,
     Path(id): Path<String>,
 ) -> Result<StatusCode, ApiError> {
-    let handle = state.registry.get(&id);
-    let owner = handle.as_ref().map(|h| &*h.owner);
-    bearer.may_change(&state, owner, &format!("match {id}"))?;
+    owned(&state, &bearer, &id)?;
     if state.registry.remove(&id).await {
         Ok(StatusCode::NO_CONTENT)
     } else {

@@ -36,9 +36,9 @@ use tower_http::trace::TraceLayer;
 
 use crate::fleet::Fleet;
 use crate::game::Registry;
-use crate::service::Pool;
+use crate::service::{Pool, ReplayPool};
 pub use error::ApiError;
-pub use serve::{ConnectionLimits, serve};
+pub use serve::{ConnectionLimits, raise_open_files_limit, serve, trim_memory_periodically};
 pub use state::AppState;
 
 /// The whole HTTP surface: the API under `/api`, WebSockets under `/ws`, metrics at
@@ -60,10 +60,15 @@ fn router(registry: Arc<Registry>, web_dir: PathBuf, fleet: Option<Arc<Fleet>>) 
     let max_body = registry.config.max_body_bytes;
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
     let in_fleet = fleet.is_some();
+    let replays = ReplayPool::new(
+        registry.config.replay_jobs,
+        registry.config.client_budget_share,
+    );
     let state = AppState {
         registry,
         limits: Arc::default(),
         pool: Pool::new(cores),
+        replays,
         fleet,
     };
     let api = Router::new()

@@ -4,7 +4,7 @@
 //! A connection holds a [`Cursor`] into the replay and moves it forward one tick per step
 //! (`speed × 20` ticks a second; above 1× each snapshot covers several ticks, so a page gets
 //! at most 20 a second), or jumps with a seek. Stepping and seeking re-simulate the match,
-//! which is blocking work: each runs on the bounded blocking pool (`admit::off_workers`),
+//! which is blocking work: each runs on the replays' own bounded pool (`admit::off_workers`),
 //! the cursor moved into the job and back. A slow pool makes playback slower, never a burst.
 //!
 //! What is sent is what the live sockets sent: the spectators' snapshot (or, with `?as=o0`,
@@ -14,18 +14,22 @@
 //! socket ([`crate::http::socket`]); seeks past [`SEEKS_PER_S`] are coalesced (only the latest waiting one is shown).
 
 use std::collections::HashMap;
+use std::net::IpAddr;
 use std::sync::Arc;
 use std::time::Duration;
 
 use axum::extract::State;
 use axum::extract::ws::Message;
+use axum::http::StatusCode;
 use axum::response::Response;
 use tokio::time::Instant;
 
+use crate::game::admission;
 use crate::game::replay::{Cursor, Replay};
 use crate::game::view::BELIEF_EVERY;
 use crate::http::admit::off_workers;
 use crate::http::error::ApiError;
+use crate::http::limits::{CURSOR_BYTES, CursorHold, CursorsFull};
 use crate::http::replays::find;
 use crate::http::socket::{self, Asked, End, Manner, Socket};
 use crate::http::state::AppState;
@@ -57,6 +61,7 @@ pub async fn upgrade(
     socket::only_params(&query, &["tick", "speed", "as", "format"])?;
     let replay = find(&state, &id).await?;
     let options = Options::of(&query, &replay)?;
+    let cursor = hold_cursor(&state, ip, &replay)?;
     let admitted = socket::admit(&state, ip, ws)?;
     let span = tracing::info_span!("replay_ws", replay_id = %id, %ip);
     let manner = Manner {
@@ -65,9 +70,34 @@ pub async fn upgrade(
         error: common::error_with_message,
     };
     let app = state.clone();
-    Ok(admitted.open(&state, manner, span, move |sock| {
-        Viewer::new(sock, app, replay, options).run()
+    Ok(admitted.open(&state, manner, span, move |sock| async move {
+        let _cursor = cursor;
+        Viewer::new(sock, app, replay, options).run().await
     }))
+}
+
+/// Counts the copy of the match's world the socket will play from against its client's
+/// share of [`CURSOR_BYTES`] and the server's whole.
+fn hold_cursor(state: &AppState, ip: IpAddr, replay: &Replay) -> Result<CursorHold, ApiError> {
+    let bytes = replay.world_bytes();
+    let share = (CURSOR_BYTES as f64 * state.registry.config.client_budget_share) as u64;
+    state
+        .limits
+        .open_cursor(ip, bytes, CURSOR_BYTES, share.max(bytes))
+        .map_err(|full| {
+            let (status, whose, most) = match full {
+                CursorsFull::Client => (StatusCode::TOO_MANY_REQUESTS, "this client's", share),
+                CursorsFull::Server => (StatusCode::SERVICE_UNAVAILABLE, "this server's", CURSOR_BYTES),
+            };
+            ApiError::new(
+                status,
+                format!(
+                    "replays: this replay's socket would hold {} and take {whose} open replay sockets past {}; close one or try again later",
+                    admission::mb(bytes),
+                    admission::mb(most)
+                ),
+            )
+        })
 }
 
 /// What the query asked for, checked before the upgrade.

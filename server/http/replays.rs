@@ -7,8 +7,10 @@ use std::sync::Arc;
 use axum::Json;
 use axum::extract::{Path, Query, State};
 
+use crate::access::ClientKey;
 use crate::game::replay::Replay;
 use crate::http::error::ApiError;
+use crate::http::limits::ClientIp;
 use crate::http::state::AppState;
 use crate::protocol::replays::{ReplayDetail, ReplayListed};
 use crate::protocol::{Belief, ErrorBody, MatchState};
@@ -59,34 +61,44 @@ pub async fn list(
 }
 
 #[utoipa::path(get, path = "/api/replays/{id}", params(("id" = String, Path)),
-    responses((status = 200, body = ReplayDetail), (status = 404, body = ErrorBody)))]
+    responses((status = 200, body = ReplayDetail), (status = 404, body = ErrorBody),
+              (status = 429, body = ErrorBody, description = "this client has its share of the replays' pool in flight"), (status = 503, body = ErrorBody, description = "the replays' pool is busy")))]
 pub async fn detail(
     State(state): State<AppState>,
+    ClientIp(ip): ClientIp,
     Path(id): Path<String>,
 ) -> Result<Json<ReplayDetail>, ApiError> {
     let r = find(&state, &id).await?;
-    Ok(Json(replays::detail(state.service(), r).await?))
+    let client = Some(ClientKey::of(ip));
+    Ok(Json(replays::detail(state.service(), client, r).await?))
 }
 
 #[utoipa::path(get, path = "/api/replays/{id}/state",
     params(("id" = String, Path), ("tick" = u64, Query, description = "a tick of the match, 0 to its last")),
-    responses((status = 200, body = MatchState), (status = 400, body = ErrorBody), (status = 404, body = ErrorBody, description = "no such replay, or a tick past its end")))]
+    responses((status = 200, body = MatchState), (status = 400, body = ErrorBody), (status = 404, body = ErrorBody, description = "no such replay, or a tick past its end"),
+              (status = 429, body = ErrorBody, description = "this client has its share of the replays' pool in flight"), (status = 503, body = ErrorBody, description = "the replays' pool is busy")))]
 pub async fn state_at(
     State(state): State<AppState>,
+    ClientIp(ip): ClientIp,
     Path(id): Path<String>,
     Query(query): Query<HashMap<String, String>>,
 ) -> Result<Json<MatchState>, ApiError> {
     let r = find(&state, &id).await?;
     let tick = replays::tick(&r, number(&query, "tick", u64::MAX, None)?)?;
-    Ok(Json(replays::state_at(state.service(), r, tick).await?))
+    let client = Some(ClientKey::of(ip));
+    Ok(Json(
+        replays::state_at(state.service(), client, r, tick).await?,
+    ))
 }
 
 #[utoipa::path(get, path = "/api/replays/{id}/belief",
     params(("id" = String, Path), ("tick" = u64, Query, description = "a tick of the match, 0 to its last"),
            ("robot" = Option<String>, Query, description = "a robot id: that robot's own belief")),
-    responses((status = 200, body = Belief), (status = 400, body = ErrorBody), (status = 404, body = ErrorBody)))]
+    responses((status = 200, body = Belief), (status = 400, body = ErrorBody), (status = 404, body = ErrorBody),
+              (status = 429, body = ErrorBody, description = "this client has its share of the replays' pool in flight"), (status = 503, body = ErrorBody, description = "the replays' pool is busy")))]
 pub async fn belief_at(
     State(state): State<AppState>,
+    ClientIp(ip): ClientIp,
     Path(id): Path<String>,
     Query(query): Query<HashMap<String, String>>,
 ) -> Result<Json<Belief>, ApiError> {
@@ -104,6 +116,6 @@ pub async fn belief_at(
         },
     };
     Ok(Json(
-        replays::belief_at(state.service(), r, tick, robot).await?,
+        replays::belief_at(state.service(), Some(ClientKey::of(ip)), r, tick, robot).await?,
     ))
 }

@@ -6,17 +6,37 @@ use axum::extract::{Path, State};
 use axum::http::{StatusCode, header};
 use axum::response::{IntoResponse, Response};
 
+use crate::access::ClientKey;
+use crate::game::MatchHandle;
 use crate::game::Sight;
+use crate::game::work::RequestBound;
 use crate::http::auth::Bearer;
 use crate::http::body::JsonBody;
 use crate::http::error::ApiError;
 use crate::http::handlers::{owned, readable};
+use crate::http::limits::ClientIp;
 use crate::http::state::AppState;
 use crate::protocol::ErrorBody;
 use crate::protocol::robots::{
     self, ActRequest, ActResponse, Observation, RobotCommand, robot_index,
 };
 use lasertag_core::world::{MatchStatus, WorldInput};
+
+/// Charges the path search `inputs` may take to the server's and the client's budgets of
+/// it (`game::work`) before the match runs them; the operator pays no client's share.
+fn charge(
+    state: &AppState,
+    bearer: &Bearer,
+    ip: std::net::IpAddr,
+    handle: &MatchHandle,
+    inputs: &[WorldInput],
+) -> Result<(), ApiError> {
+    let registry = &state.registry;
+    let bound = RequestBound(registry.config.max_command_work);
+    let work = bound.work(inputs, handle.hub.arena.grid.len());
+    let client = (!bearer.is_admin(state)).then(|| ClientKey::of(ip));
+    Ok(registry.work.take(&registry.config, client, work)?)
+}
 
 /// The index of robot `rid`, or a 404 naming it.
 fn robot(id: &str, rid: &str) -> Result<usize, ApiError> {
@@ -30,17 +50,22 @@ fn robot(id: &str, rid: &str) -> Result<usize, ApiError> {
     security(("owner_token" = [])),
     responses((status = 204), (status = 400, body = ErrorBody), (status = 401, body = ErrorBody),
               (status = 403, body = ErrorBody), (status = 404, body = ErrorBody),
-              (status = 409, body = ErrorBody, description = "the match's robots are not driven from outside")))]
+              (status = 409, body = ErrorBody, description = "the match's robots are not driven from outside"),
+              (status = 429, body = ErrorBody, description = "this client's share of the path search for waypoints is taken for now"),
+              (status = 503, body = ErrorBody, description = "the server's path search for waypoints is taken for now")))]
 pub async fn command(
     State(state): State<AppState>,
     bearer: Bearer,
+    ClientIp(ip): ClientIp,
     Path((id, rid)): Path<(String, String)>,
     JsonBody(body): JsonBody<RobotCommand>,
 ) -> Result<StatusCode, ApiError> {
     let handle = owned(&state, &bearer, &id)?;
     let order = body.order("")?;
     let robot = robot(&id, &rid)?;
-    handle.apply(WorldInput::Robot { robot, order }).await?;
+    let input = WorldInput::Robot { robot, order };
+    charge(&state, &bearer, ip, &handle, std::slice::from_ref(&input))?;
+    handle.apply(input).await?;
     Ok(StatusCode::NO_CONTENT)
 }
 
@@ -79,20 +104,24 @@ pub async fn observation(
     security(("owner_token" = [])),
     responses((status = 200, body = ActResponse), (status = 400, body = ErrorBody), (status = 401, body = ErrorBody),
               (status = 403, body = ErrorBody), (status = 404, body = ErrorBody),
-              (status = 409, body = ErrorBody, description = "a real-time match, one already stepping, or robots not driven from outside")))]
+              (status = 409, body = ErrorBody, description = "a real-time match, one already stepping, or robots not driven from outside"),
+              (status = 429, body = ErrorBody, description = "this client's share of the path search for waypoints is taken for now"),
+              (status = 503, body = ErrorBody, description = "the server's path search for waypoints is taken for now")))]
 pub async fn act(
     State(state): State<AppState>,
     bearer: Bearer,
+    ClientIp(ip): ClientIp,
     Path(id): Path<String>,
     JsonBody(body): JsonBody<ActRequest>,
 ) -> Result<Response, ApiError> {
     let handle = owned(&state, &bearer, &id)?;
     let scans = body.scans;
     let (orders, ticks) = body.orders()?;
-    let inputs = orders
+    let inputs: Vec<WorldInput> = orders
         .into_iter()
         .map(|(robot, order)| WorldInput::Robot { robot, order })
         .collect();
+    charge(&state, &bearer, ip, &handle, &inputs)?;
     let mut answer = handle.step("act", inputs, ticks, robots::read_act).await?;
     answer.encode_scans(scans);
     // Written into a buffer of about the answer's size (axum's `Json` starts at 128 bytes

@@ -5,6 +5,16 @@
 //!   itself, so it outlives the HTTP upgrade). At the cap the loop stops accepting and new
 //!   clients wait in the kernel's backlog, as mini-redis does, rather than being accepted
 //!   only to be dropped.
+//! - A cap on open connections per client (an IPv4 address or an IPv6 /64): one over it is
+//!   closed as soon as it is accepted, before hyper sees a byte, and counted
+//!   (`lasertag_refused_total{reason="tcp_per_address"}`). Accepting it costs a moment of
+//!   one file descriptor; leaving it in the backlog would let one client keep every other
+//!   one waiting behind it. The per-client cap sits well below the server's, so others find
+//!   room (`/api/health` keeps answering while one address floods).
+//! - The server's cap never exceeds the file descriptors the process may open, less a
+//!   reserve for its files, database and match runtimes, so `accept` never runs out of them;
+//!   [`raise_open_files_limit`] lifts the soft limit to the hard one at start.
+//! - [`trim_memory_periodically`] hands freed memory back to the operating system.
 //! - A header read timeout: a connection that starts a request and does not finish its
 //!   header in time, or sits idle between keep-alive requests that long, is closed. Without
 //!   it a client sending half a header held its socket forever.
@@ -14,8 +24,10 @@
 //! Each request carries the peer's `ConnectInfo<SocketAddr>`, as with
 //! `into_make_service_with_connect_info`.
 
+use std::collections::HashMap;
+use std::net::IpAddr;
 use std::pin::Pin;
-use std::sync::Arc;
+use std::sync::{Arc, Mutex};
 use std::task::{Context, Poll};
 use std::time::Duration;
 
@@ -30,13 +42,168 @@ use tokio::net::{TcpListener, TcpStream};
 use tokio::sync::{OwnedSemaphorePermit, Semaphore, watch};
 use tower::ServiceExt;
 
+use crate::access::ClientKey;
+use crate::game::Registry;
+use crate::metrics::Refusal;
+
+/// File descriptors kept out of the connection cap: the store's files, logs, maps and the
+/// runtimes of real-time matches need some too.
+const FD_RESERVE: u64 = 512;
+
 /// What the accept loop enforces.
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone)]
 pub struct ConnectionLimits {
     /// Connections open at once, WebSockets included.
     pub max_connections: usize,
+    /// Connections open at once from one client.
+    pub max_per_address: usize,
     /// Time to send a request's header, and most time idle between requests.
     pub header_read_timeout: Duration,
+    /// Where refused connections are counted.
+    pub registry: Option<Arc<Registry>>,
+}
+
+impl ConnectionLimits {
+    /// The limits of `registry`'s config, the server's cap lowered to what the process's
+    /// file descriptors allow.
+    pub fn of(registry: &Arc<Registry>) -> ConnectionLimits {
+        let config = &registry.config;
+        let mut max_connections = config.max_connections;
+        if let Some(files) = open_files_limit() {
+            let room = files.saturating_sub(FD_RESERVE).max(1);
+            if (max_connections as u64) > room {
+                tracing::warn!(
+                    max_connections,
+                    open_files = files,
+                    "fewer file descriptors than --max-connections needs: at most {room} connections"
+                );
+                max_connections = room as usize;
+            }
+        }
+        ConnectionLimits {
+            max_connections,
+            max_per_address: config.max_tcp_per_address,
+            header_read_timeout: config.header_read_timeout,
+            registry: Some(registry.clone()),
+        }
+    }
+}
+
+/// The soft limit of open files (`RLIMIT_NOFILE`), where the platform has one.
+#[cfg(unix)]
+// `rlim_t` is `u64` on Linux, not on every unix.
+#[allow(clippy::unnecessary_cast)]
+fn open_files_limit() -> Option<u64> {
+    let mut lim = libc::rlimit {
+        rlim_cur: 0,
+        rlim_max: 0,
+    };
+    // SAFETY: getrlimit writes one `rlimit` through a valid pointer to a local.
+    let ok = unsafe { libc::getrlimit(libc::RLIMIT_NOFILE, &mut lim) } == 0;
+    (ok && lim.rlim_cur != libc::RLIM_INFINITY).then_some(lim.rlim_cur as u64)
+}
+
+#[cfg(not(unix))]
+fn open_files_limit() -> Option<u64> {
+    None
+}
+
+/// Raises the soft limit of open files to the hard one (a process may, without
+/// privileges): the soft default, often 1024, is what a flood of half-sent requests
+/// exhausted. Answers the soft limit in force afterwards.
+#[cfg(unix)]
+pub fn raise_open_files_limit() -> Option<u64> {
+    let mut lim = libc::rlimit {
+        rlim_cur: 0,
+        rlim_max: 0,
+    };
+    // SAFETY: getrlimit and setrlimit read and write one `rlimit`, a local.
+    unsafe {
+        if libc::getrlimit(libc::RLIMIT_NOFILE, &mut lim) != 0 {
+            return None;
+        }
+        if lim.rlim_cur < lim.rlim_max {
+            let raised = libc::rlimit {
+                rlim_cur: lim.rlim_max,
+                rlim_max: lim.rlim_max,
+            };
+            if libc::setrlimit(libc::RLIMIT_NOFILE, &raised) != 0 {
+                tracing::warn!(
+                    soft = lim.rlim_cur,
+                    hard = lim.rlim_max,
+                    "could not raise the open files limit"
+                );
+            }
+        }
+    }
+    open_files_limit()
+}
+
+#[cfg(not(unix))]
+pub fn raise_open_files_limit() -> Option<u64> {
+    None
+}
+
+/// How often freed memory is handed back to the operating system.
+const TRIM_EVERY: Duration = Duration::from_secs(5);
+
+/// Hands the memory the allocator keeps free back to the operating system every
+/// [`TRIM_EVERY`], off the async workers. glibc's allocator keeps what a large request,
+/// an ended match or an evicted replay freed (the process's resident size stays at its
+/// peak); `malloc_trim` returns it, so the server's size follows what it holds. Does
+/// nothing with other allocators.
+pub fn trim_memory_periodically() {
+    #[cfg(all(target_os = "linux", target_env = "gnu"))]
+    tokio::spawn(async {
+        let mut every = tokio::time::interval(TRIM_EVERY);
+        every.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+        loop {
+            every.tick().await;
+            // SAFETY: malloc_trim takes a padding size and touches only the allocator's
+            // own free lists.
+            let _ = tokio::task::spawn_blocking(|| unsafe { libc::malloc_trim(0) }).await;
+        }
+    });
+}
+
+/// Open connections per client, and the guard that counts one.
+#[derive(Debug, Default)]
+struct PerAddress(Mutex<HashMap<ClientKey, usize>>);
+
+impl PerAddress {
+    fn open(self: &Arc<Self>, ip: IpAddr, max: usize) -> Option<AddressSlot> {
+        let client = ClientKey::of(ip);
+        let mut map = self.0.lock().unwrap_or_else(|e| e.into_inner());
+        let n = map.entry(client).or_default();
+        if *n >= max {
+            return None;
+        }
+        *n += 1;
+        Some(AddressSlot {
+            counts: self.clone(),
+            client,
+        })
+    }
+}
+
+/// One open connection of a client; uncounted when dropped (the entry goes at zero, so
+/// the map holds only clients with connections).
+#[derive(Debug)]
+struct AddressSlot {
+    counts: Arc<PerAddress>,
+    client: ClientKey,
+}
+
+impl Drop for AddressSlot {
+    fn drop(&mut self) {
+        let mut map = self.counts.0.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some(n) = map.get_mut(&self.client) {
+            *n = n.saturating_sub(1);
+            if *n == 0 {
+                map.remove(&self.client);
+            }
+        }
+    }
 }
 
 /// Serves `app` on `listener` until `shutdown` resolves, then waits for the connections
@@ -49,6 +216,7 @@ pub async fn serve(
     shutdown: impl Future<Output = ()> + Send + 'static,
 ) -> std::io::Result<()> {
     let permits = Arc::new(Semaphore::new(limits.max_connections));
+    let per_address = Arc::<PerAddress>::default();
     // Dropped to tell connections to shut down gracefully; `closed_rx` counts them.
     let (signal_tx, signal_rx) = watch::channel(());
     let (closed_tx, closed_rx) = watch::channel(());
@@ -75,6 +243,14 @@ pub async fn serve(
             },
             () = &mut shutdown => break,
         };
+        let Some(slot) = per_address.open(peer.ip(), limits.max_per_address) else {
+            // Over its client's cap: closed at once, its permit back for someone else.
+            drop(stream);
+            if let Some(registry) = &limits.registry {
+                registry.metrics.refuse(Refusal::TcpPerAddress);
+            }
+            continue;
+        };
         let _ = stream.set_nodelay(true);
         let service = app
             .clone()
@@ -85,6 +261,7 @@ pub async fn serve(
         let io = TokioIo::new(Counted {
             stream,
             _permit: permit,
+            _slot: slot,
         });
         let conn = builder
             .serve_connection(io, TowerToHyperService::new(service))
@@ -130,10 +307,12 @@ async fn accept_error(e: std::io::Error) {
     tokio::time::sleep(Duration::from_secs(1)).await;
 }
 
-/// A TCP stream that holds one of the connection permits for as long as it is open.
+/// A TCP stream that holds one of the connection permits, and its client's count, for as
+/// long as it is open.
 struct Counted {
     stream: TcpStream,
     _permit: OwnedSemaphorePermit,
+    _slot: AddressSlot,
 }
 
 impl AsyncRead for Counted {

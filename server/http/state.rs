@@ -5,7 +5,7 @@ use std::sync::Arc;
 use crate::fleet::Fleet;
 use crate::game::Registry;
 use crate::http::limits;
-use crate::service::{Pool, Service};
+use crate::service::{Pool, ReplayPool, Service};
 
 /// What every handler shares.
 #[derive(Debug, Clone)]
@@ -14,6 +14,8 @@ pub struct AppState {
     pub limits: Arc<limits::AddressLimits>,
     /// The blocking pool that validates and builds maps and worlds: one job per core.
     pub pool: Pool,
+    /// The replays' own pool (`Config::replay_jobs`).
+    pub replays: ReplayPool,
     /// This node's part in a fleet (`--fleet`), if it is in one.
     pub fleet: Option<Arc<Fleet>>,
 }
@@ -24,6 +26,7 @@ impl AppState {
         Service {
             registry: &self.registry,
             pool: &self.pool,
+            replays: &self.replays,
             fleet: self.fleet.as_deref(),
         }
     }

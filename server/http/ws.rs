@@ -5,10 +5,17 @@
 //! costs the tick nothing and the other clients nothing. Events are never skipped for a
 //! client that keeps up; one that fell behind gets the missing ones from the match's log.
 //!
+//! A player's socket is live and fogged: its snapshots hold what its opponent has in line of
+//! sight ([`visible_to`]), and its events follow the same rule ([`event_seen`]): what it saw
+//! or took part in comes at once, the rest as late as spectators get it, from the
+//! spectators' frames. The belief it may switch on is the one spectators see, as late.
+//!
 //! What a client sends is size-capped, parsed strictly, and rate-limited by a token bucket,
 //! as on every socket ([`crate::http::socket`]); which compact snapshot carries what is the
 //! connection's [`Schedule`].
 
+use std::collections::VecDeque;
+use std::sync::Arc;
 use std::time::Duration;
 
 use axum::extract::State;
@@ -17,7 +24,7 @@ use axum::http::StatusCode;
 use axum::response::Response;
 
 use crate::config::Config;
-use crate::game::view::{BELIEF_EVERY, Frame, visible_to};
+use crate::game::view::{BELIEF_EVERY, Frame, Visible, event_seen, visible_to};
 use crate::game::{MatchHandle, Seat, Sight, SpectatorSeat};
 use crate::http::error::ApiError;
 use crate::http::socket::schedule::Schedule;
@@ -26,11 +33,14 @@ use crate::http::state::AppState;
 use crate::metrics::Refusal;
 use crate::protocol::socket::{self as common, Limits};
 use crate::protocol::ws::{self as wire, ClientMessage, Welcome};
-use lasertag_core::world::HumanInput;
 use lasertag_core::world::MatchStatus;
+use lasertag_core::world::{Event, HumanInput};
 
 /// How long a closing connection waits for the client's close reply.
 const CLOSE_DRAIN: Duration = Duration::from_secs(3);
+/// How often a spectator's socket is pinged: a client that reads answers, so the hub
+/// knows who does not (`game::hub::SPECTATOR_SILENT`) even while nothing else is sent.
+const SPECTATOR_PING: Duration = Duration::from_secs(2);
 
 pub async fn upgrade(
     State(state): State<AppState>,
@@ -73,10 +83,26 @@ pub async fn upgrade(
         error: common::error,
     };
     let config = cfg.clone();
+    // A spectator that does not read is told to go when a newcomer needs its place: its
+    // task ends at once, wherever it waits (most likely in a send that cannot finish).
+    let dropped = match &seat {
+        Seated::Spectator(s) => Some(s.watcher.dropped.clone()),
+        Seated::Player(_) => None,
+    };
     Ok(admitted.open(&state, manner, span, move |sock| {
         let mut connection = Connection::new(sock, handle, seat, config);
         connection.compact = compact;
-        connection.run()
+        async move {
+            match dropped {
+                None => connection.run().await,
+                Some(dropped) => tokio::select! {
+                    () = connection.run() => {}
+                    () = dropped.cancelled() => {
+                        tracing::info!("spectator dropped: it read nothing, and a newcomer took its place");
+                    }
+                },
+            }
+        }
     }))
 }
 
@@ -99,8 +125,16 @@ struct Connection {
     compact: bool,
     schedule: Schedule,
     last_seq: u64,
+    /// A player's: events up to this `seq` have come, live or as late as spectators get
+    /// them, ...
+    held_seq: u64,
+    /// ... and these later ones (oldest first) came live, as it saw them.
+    sent_live: VecDeque<u64>,
+    /// A player's: the latest spectators' frame with a belief (what its overlay shows).
+    held_belief: Option<Arc<Frame>>,
     finished_sent: bool,
-    _spectator: Option<SpectatorSeat>,
+    /// A spectator's place in the count, and what the hub knows of its sending.
+    spectator: Option<SpectatorSeat>,
 }
 
 impl Connection {
@@ -119,8 +153,11 @@ impl Connection {
             handle,
             config,
             last_seq: 0,
+            held_seq: 0,
+            sent_live: VecDeque::new(),
+            held_belief: None,
             finished_sent: false,
-            _spectator: spectator,
+            spectator,
         }
     }
 
@@ -167,6 +204,15 @@ impl Connection {
         };
         self.sock.text(wire::welcome(&welcome)).await?;
         self.last_seq = frame.last_seq;
+        // A player also follows the spectators' frames: the events it did not see, and the
+        // belief, come from there.
+        let mut held = (!self.watching).then(|| hub.spectate.clone());
+        if let Some(h) = held.as_mut() {
+            let shown = h.borrow_and_update().clone();
+            // What happened before it connected is history, not news.
+            self.held_seq = frame.last_seq;
+            self.keep_belief(&shown);
+        }
         self.deliver(&frame, false).await?;
         let shutdown = self.sock.shutdown().clone();
         // The receiver is moved out so the loop can borrow `self` mutably; it lives until
@@ -175,8 +221,13 @@ impl Connection {
             .seat
             .as_mut()
             .map(|s| std::mem::replace(&mut s.kicked, dummy_receiver()));
+        let mut ping = tokio::time::interval(SPECTATOR_PING);
+        ping.reset();
         loop {
             tokio::select! {
+                _ = ping.tick(), if self.spectator.is_some() => {
+                    self.ping().await?;
+                }
                 changed = frames.changed() => {
                     if changed.is_err() {
                         // The match's task has ended (deleted, cleaned up, or the server is
@@ -193,13 +244,34 @@ impl Connection {
                     if !self.watching && !self.finished_sent && self.tagged(&frame) {
                         // Its opponent has left the arena: the player now watches, as
                         // spectators do (as late as they do, or a tagged player could tell
-                        // the others where everyone is).
+                        // the others where everyone is). Their events it has not had yet
+                        // come with their frames.
                         self.watching = true;
+                        self.last_seq = self.held_seq;
+                        held = None;
                         frames = self.handle.hub.spectate.clone();
                         frames.mark_changed();
                     }
                 }
+                changed = async {
+                    match held.as_mut() {
+                        Some(h) => h.changed().await,
+                        None => std::future::pending().await,
+                    }
+                } => match changed {
+                    Ok(()) => {
+                        let shown = held.as_mut().map(|h| h.borrow_and_update().clone());
+                        if let Some(shown) = shown {
+                            self.deliver_held(&shown).await?;
+                        }
+                    }
+                    // The task has ended; `frames` will say so.
+                    Err(_) => held = None,
+                },
                 msg = self.sock.recv() => {
+                    if let (Some(s), Some(Ok(_))) = (&self.spectator, &msg) {
+                        s.watcher.heard();
+                    }
                     if let Some(m) = self.sock.read(msg, ClientMessage::parse).await? {
                         self.on_message(m).await?;
                     }
@@ -218,9 +290,7 @@ impl Connection {
                         None => std::future::pending().await,
                     }
                 } => match kick {
-                    Ok(()) => {
-                        return Err(End::policy("another connection took over this player"));
-                    }
+                    Ok(reason) => return Err(End::policy(reason)),
                     Err(_) => kicked = None, // the task ended; `frames` will say so
                 },
             }
@@ -245,81 +315,209 @@ impl Connection {
     }
 
     /// Sends a frame's snapshot, the events since the last one sent, and `finished` once.
+    /// A spectator's hub sees how long that takes: one stuck in it does not read.
     async fn deliver(&mut self, frame: &Frame, with_events: bool) -> Result<(), End> {
-        if self.compact {
-            self.deliver_compact(frame).await?;
-        } else {
-            self.deliver_json(frame).await?;
+        if let Some(s) = &self.spectator {
+            s.watcher.sending(true);
         }
-        self.deliver_events(frame, with_events).await
+        let sent = self.deliver_parts(frame, with_events).await;
+        if let Some(s) = &self.spectator {
+            s.watcher.sending(false);
+        }
+        sent
     }
 
-    /// The compact snapshot of `frame` (see `protocol::compact`).
-    async fn deliver_compact(&mut self, frame: &Frame) -> Result<(), End> {
-        use crate::protocol::compact;
-        let finished = frame.status == MatchStatus::Finished;
-        let wanted = self.belief && frame.belief.is_some();
-        let mut parts = self.schedule.parts(frame.tick, finished, wanted);
-        let visible = match &self.seat {
-            Some(seat) if !self.watching => {
-                visible_to(frame, &self.handle.hub.arena, seat.slot).map(|v| (seat.slot, v))
-            }
+    /// A ping (a spectator's: the client answers as it reads), its sending seen by the hub.
+    async fn ping(&mut self) -> Result<(), End> {
+        if let Some(s) = &self.spectator {
+            s.watcher.sending(true);
+        }
+        let sent = self.sock.send(Message::Ping(Default::default())).await;
+        if let Some(s) = &self.spectator {
+            s.watcher.sending(false);
+        }
+        sent
+    }
+
+    async fn deliver_parts(&mut self, frame: &Frame, with_events: bool) -> Result<(), End> {
+        // What a player sees of the live frame; `None` for a spectator, or a player watching.
+        let sight = match &self.seat {
+            Some(seat) if !self.watching => Some((
+                seat.slot,
+                visible_to(frame, &self.handle.hub.arena, seat.slot),
+            )),
             _ => None,
         };
-        let whole = match &visible {
-            None => wire::spectator_compact(frame, parts.belief, parts.slow),
-            Some((slot, v)) => {
-                // A player's own view has no slow parts: they stay due.
-                parts.slow = false;
-                compact::snapshot(frame, Some(*slot), Some(v), parts.belief, false).into()
-            }
-        };
+        let ended = frame.status == MatchStatus::Finished;
+        match &sight {
+            // Its opponent was tagged in this frame: the player watches from the next one
+            // on, late, and this live frame shows it nothing (unless the match has ended:
+            // then nothing is hidden).
+            Some((_, None)) if !ended => {}
+            Some((slot, Some(v))) => self.deliver_player(frame, *slot, v).await?,
+            _ if self.compact => self.deliver_compact(frame).await?,
+            _ => self.deliver_json(frame).await?,
+        }
+        let sight = sight.map(|(slot, v)| (slot, v.unwrap_or_else(Visible::nothing)));
+        self.deliver_events(frame, with_events, sight.as_ref())
+            .await
+    }
+
+    /// A spectator's snapshot of `frame`, compact (see `protocol::compact`).
+    async fn deliver_compact(&mut self, frame: &Frame) -> Result<(), End> {
+        let finished = frame.status == MatchStatus::Finished;
+        let wanted = self.belief && frame.belief.is_some();
+        let parts = self.schedule.parts(frame.tick, finished, wanted);
+        let whole = wire::spectator_compact(frame, parts.belief, parts.slow);
         let bytes = self.schedule.sent(frame.tick, parts, whole);
         self.sock.count_snapshot(bytes.len());
         self.sock.send(Message::Binary(bytes)).await
     }
 
-    /// The JSON snapshot of `frame`.
+    /// A spectator's snapshot of `frame`, as JSON.
     async fn deliver_json(&mut self, frame: &Frame) -> Result<(), End> {
-        let snapshot = match &self.seat {
-            Some(_) if self.watching => wire::spectator_snapshot(frame, self.belief),
-            None => wire::spectator_snapshot(frame, self.belief),
-            Some(seat) => match visible_to(frame, &self.handle.hub.arena, seat.slot) {
-                Some(v) => wire::player_snapshot(frame, &seat.opponent_id, &v, self.belief),
-                // Its opponent was tagged and left the arena: the player now spectates.
-                None => wire::spectator_snapshot(frame, self.belief),
-            },
-        };
+        let snapshot = wire::spectator_snapshot(frame, self.belief);
         self.sock.count_snapshot(snapshot.len());
         self.sock.text(snapshot).await
     }
 
-    /// The events since the last one sent, and `finished` once.
-    async fn deliver_events(&mut self, frame: &Frame, with_events: bool) -> Result<(), End> {
+    /// A player's snapshot of the live `frame`: what `visible` holds, and the belief
+    /// spectators see when switched on.
+    async fn deliver_player(&mut self, frame: &Frame, slot: usize, v: &Visible) -> Result<(), End> {
+        let Some(seat) = &self.seat else {
+            return Ok(());
+        };
+        let held = self.held_belief.as_deref().filter(|_| self.belief);
+        if self.compact {
+            use crate::protocol::compact;
+            let finished = frame.status == MatchStatus::Finished;
+            let mut parts = self.schedule.parts(frame.tick, finished, held.is_some());
+            // A player's own view has no slow parts: they stay due.
+            parts.slow = false;
+            let belief = held
+                .and_then(|f| f.belief.as_deref())
+                .filter(|_| parts.belief);
+            let whole = compact::snapshot(frame, Some(slot), Some(v), belief, false).into();
+            let bytes = self.schedule.sent(frame.tick, parts, whole);
+            self.sock.count_snapshot(bytes.len());
+            self.sock.send(Message::Binary(bytes)).await
+        } else {
+            // On the live frames' belief ticks, as spectators get theirs.
+            let belief = held.filter(|_| frame.belief.is_some());
+            let snapshot = wire::player_snapshot(frame, &seat.opponent_id, v, belief);
+            self.sock.count_snapshot(snapshot.len());
+            self.sock.text(snapshot).await
+        }
+    }
+
+    /// The events since the last one sent, and `finished` once. A player (`sight`: its slot
+    /// and what it sees in `frame`) gets those it saw now; the others come with the
+    /// spectators' frames ([`Connection::deliver_held`]).
+    async fn deliver_events(
+        &mut self,
+        frame: &Frame,
+        with_events: bool,
+        sight: Option<&(usize, Visible)>,
+    ) -> Result<(), End> {
         if with_events && frame.last_seq > self.last_seq {
+            let mut events = Vec::new();
             if self.last_seq < frame.since_seq {
                 // Frames were skipped while this client was slow: fetch what it missed.
-                let since = self.last_seq;
-                let missed = self
-                    .handle
-                    .read(Sight::Live, move |r| Ok(r.events(since).to_vec()))
-                    .await
-                    .unwrap_or_default();
-                for e in missed.iter().filter(|e| e.seq <= frame.since_seq) {
-                    self.sock.text(wire::event(e)).await?;
-                }
+                events = self.logged(self.last_seq, frame.since_seq).await;
             }
             let last = self.last_seq;
-            for e in frame.events.iter().filter(|e| e.seq > last) {
-                self.sock.text(wire::event(e)).await?;
+            events.extend(frame.events.iter().filter(|e| e.seq > last).cloned());
+            for e in &events {
+                match sight {
+                    Some((slot, v)) => {
+                        if event_seen(e, v, *slot) {
+                            self.sock.text(wire::event(e)).await?;
+                            self.sent_live.push_back(e.seq);
+                        }
+                    }
+                    None => {
+                        // A player gone over to watching has had some of these live.
+                        if !self.already_sent(e.seq) {
+                            self.sock.text(wire::event(e)).await?;
+                        }
+                    }
+                }
             }
             self.last_seq = frame.last_seq;
         }
         if frame.status == MatchStatus::Finished && !self.finished_sent {
+            if sight.is_some() {
+                self.deliver_unseen(frame.last_seq).await?;
+            }
             self.finished_sent = true;
             self.sock.text(wire::finished(frame)).await?;
         }
         Ok(())
+    }
+
+    /// Whether event `seq` came live already (and forgets those before it).
+    fn already_sent(&mut self, seq: u64) -> bool {
+        while self.sent_live.front().is_some_and(|s| *s < seq) {
+            self.sent_live.pop_front();
+        }
+        self.sent_live.front() == Some(&seq)
+    }
+
+    /// A player's share of a spectators' frame: the events up to it that it did not see
+    /// live, and its belief.
+    async fn deliver_held(&mut self, shown: &Arc<Frame>) -> Result<(), End> {
+        self.keep_belief(shown);
+        if shown.last_seq <= self.held_seq {
+            return Ok(());
+        }
+        let mut events = Vec::new();
+        if self.held_seq < shown.since_seq {
+            // Released several frames at once, or skipped: the rest from the match's log.
+            events = self.logged(self.held_seq, shown.since_seq).await;
+        }
+        let last = self.held_seq;
+        events.extend(shown.events.iter().filter(|e| e.seq > last).cloned());
+        self.send_unseen(&events).await?;
+        self.held_seq = shown.last_seq;
+        Ok(())
+    }
+
+    /// A player's events after `held_seq` up to `last` that it has not had: once the match
+    /// has ended nothing is hidden, so they come before `finished`.
+    async fn deliver_unseen(&mut self, last: u64) -> Result<(), End> {
+        if last > self.held_seq {
+            let events = self.logged(self.held_seq, last).await;
+            self.send_unseen(&events).await?;
+            self.held_seq = last;
+        }
+        Ok(())
+    }
+
+    /// `events` (in order), but those that came live.
+    async fn send_unseen(&mut self, events: &[Event]) -> Result<(), End> {
+        for e in events {
+            if !self.already_sent(e.seq) {
+                self.sock.text(wire::event(e)).await?;
+            }
+        }
+        Ok(())
+    }
+
+    /// The match's events after `since` up to `last`, from its log.
+    async fn logged(&mut self, since: u64, last: u64) -> Vec<Event> {
+        let missed = self
+            .handle
+            .read(Sight::Live, move |r| Ok(r.events(since).to_vec()))
+            .await
+            .unwrap_or_default();
+        missed.into_iter().filter(|e| e.seq <= last).collect()
+    }
+
+    /// Keeps `shown`, a spectators' frame, when it carries a belief: a player's overlay.
+    fn keep_belief(&mut self, shown: &Arc<Frame>) {
+        if shown.belief.is_some() {
+            self.held_belief = Some(shown.clone());
+        }
     }
 
     async fn on_message(&mut self, msg: ClientMessage) -> Result<(), End> {
@@ -366,6 +564,6 @@ impl Connection {
     }
 }
 
-fn dummy_receiver() -> tokio::sync::oneshot::Receiver<()> {
+fn dummy_receiver() -> tokio::sync::oneshot::Receiver<&'static str> {
     tokio::sync::oneshot::channel().1
 }

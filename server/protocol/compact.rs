@@ -86,19 +86,19 @@ impl Out {
 }
 
 /// The compact form of `frame` for a viewer: everything (`visible` is `None`), or what the
-/// player of slot `you` sees; with the belief when `belief` (and this frame carries one),
-/// and with the scans and clouds when `slow` (spectators). Each connection decides when
-/// those are due ([`SLOW_EVERY`], [`BELIEF_COMPACT_EVERY`]).
+/// player of slot `you` sees; with `belief` when given (the frame's own for spectators, the
+/// one spectators see for a player), and with the scans and clouds when `slow`
+/// (spectators). Each connection decides when those are due ([`SLOW_EVERY`],
+/// [`BELIEF_COMPACT_EVERY`]).
 pub fn snapshot(
     frame: &Frame,
     you: Option<usize>,
     visible: Option<&Visible>,
-    belief: bool,
+    belief: Option<&BeliefView>,
     slow: bool,
 ) -> Vec<u8> {
     let spectator = visible.is_none();
     let slow = spectator && slow;
-    let belief = belief.then_some(frame.belief.as_deref()).flatten();
     let mut o = Out(Vec::with_capacity(256));
     let mut flags = 0u8;
     if spectator {

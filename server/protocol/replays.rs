@@ -16,6 +16,18 @@ pub struct ExportLine<'a> {
     pub belief: Option<&'a Belief>,
 }
 
+/// The last line of every export: whether it is complete (`lines` lines were sent) and, when
+/// the server cut it short, why and the tick to resume from (`?from_tick=`).
+#[derive(Debug, Serialize)]
+pub struct ExportEnd<'a> {
+    pub complete: bool,
+    pub lines: u64,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub from_tick: Option<u64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub reason: Option<&'a str>,
+}
+
 /// A finished match as `GET /api/replays` lists it.
 #[derive(Debug, Clone, Serialize, ToSchema)]
 pub struct ReplayListed {

@@ -45,7 +45,11 @@ pub struct MatchSummary {
     /// The robots' localisers (what they weigh when `localisation` is on).
     #[schema(schema_with = settings::localiser_echo)]
     pub localiser: Echo<localise::Settings>,
-    pub seed: u64,
+    /// The seed; null while a match people may join runs, except to its owner and the
+    /// operator (the match is a pure function of its settings, seed and inputs: a public
+    /// seed would let anyone rebuild it live). Shown to everyone once it has ended.
+    #[schema(schema_with = crate::schema::seed_shown)]
+    pub seed: Option<u64>,
     pub players: usize,
     /// WebSocket spectators connected now.
     pub spectators: usize,
@@ -95,8 +99,18 @@ pub fn notes(c: &MatchConfig) -> Vec<String> {
     notes
 }
 
-/// A match as listings show it.
+/// A match as listings show it to everybody: a secret seed is null (see
+/// [`view::Summary::seed_secret`]).
 pub fn summary(s: &view::Summary) -> MatchSummary {
+    summary_showing(s, !s.seed_secret())
+}
+
+/// A match as its owner and the operator see it, and as a replay shows it: with its seed.
+pub fn owners_summary(s: &view::Summary) -> MatchSummary {
+    summary_showing(s, true)
+}
+
+fn summary_showing(s: &view::Summary, seed: bool) -> MatchSummary {
     let c = &*s.config;
     let meta = &s.meta;
     MatchSummary {
@@ -126,7 +140,7 @@ pub fn summary(s: &view::Summary) -> MatchSummary {
         radio: Echo(c.radio.clone()),
         odometry: Echo(c.physics.odometry),
         localiser: Echo(c.localiser.clone()),
-        seed: c.seed,
+        seed: seed.then_some(c.seed),
         players: meta.players,
         spectators: meta.spectators,
         free_slots: meta.free_slots,
@@ -523,9 +537,9 @@ pub fn read_state(r: &mut Reading<'_>) -> Result<MatchState, MatchError> {
     Ok(state(&frame, r.meta(), r.config()))
 }
 
-/// The match as listings show it, now.
+/// The match as its owner sees it (its seed included), now.
 pub fn read_summary(r: &mut Reading<'_>) -> Result<MatchSummary, MatchError> {
-    Ok(summary(&r.summary()))
+    Ok(owners_summary(&r.summary()))
 }
 
 /// How the match's task keeps up.

@@ -372,7 +372,7 @@ fn cached<T: Clone>(cell: Option<&OnceLock<T>>, make: impl FnOnce() -> T) -> T {
     }
 }
 
-/// Appends `"belief": …` to a serialised snapshot object.
+/// Appends `"belief": …`, the belief `frame` carries, to a serialised snapshot object.
 fn with_belief(mut snapshot: String, frame: &Frame) -> String {
     if let Some(b) = &frame.belief {
         let belief = cached(cache(frame).map(|c| &c.belief), || belief_json(b));
@@ -408,17 +408,26 @@ pub fn spectator_compact(frame: &Frame, belief: bool, slow: bool) -> axum::body:
     let belief = belief && frame.belief.is_some();
     cached(
         cache(frame).map(|c| &c.compact[belief as usize * 2 + slow as usize]),
-        || crate::protocol::compact::snapshot(frame, None, None, belief, slow).into(),
+        || {
+            let belief = frame.belief.as_deref().filter(|_| belief);
+            crate::protocol::compact::snapshot(frame, None, None, belief, slow).into()
+        },
     )
 }
 
-/// A player's snapshot: what its opponent sees, plus the belief when switched on.
-pub fn player_snapshot(frame: &Frame, you: &str, visible: &Visible, belief: bool) -> Utf8Bytes {
+/// A player's snapshot: what its opponent sees, plus the belief that `belief` (a frame
+/// carrying one) holds, when given: on a live socket the one spectators see, as late as
+/// they see it.
+pub fn player_snapshot(
+    frame: &Frame,
+    you: &str,
+    visible: &Visible,
+    belief: Option<&Frame>,
+) -> Utf8Bytes {
     let json = snapshot_json(frame, Some(you), Some(visible));
-    Utf8Bytes::from(if belief {
-        with_belief(json, frame)
-    } else {
-        json
+    Utf8Bytes::from(match belief {
+        Some(b) => with_belief(json, b),
+        None => json,
     })
 }
 

@@ -146,12 +146,7 @@ pub fn stored(service: Service<'_>, name: &str) -> Option<StoredMap> {
 
 /// Removes `stored`, the map `name` as [`stored`] found it: not a shipped map, nor one a
 /// running match plays on.
-pub fn delete(
-    service: Service<'_>,
-    name: &str,
-    stored: Option<StoredMap>,
-) -> Result<(), MapsError> {
-    let stored = stored.ok_or_else(|| MapsError::NotFound(name.to_string()))?;
+pub fn delete(service: Service<'_>, name: &str, stored: StoredMap) -> Result<(), MapsError> {
     if stored.owner.token.is_none() {
         return Err(MapsError::Shipped(name.to_string()));
     }

@@ -73,15 +73,24 @@ pub enum Created<R> {
 }
 
 /// The lobby: this server's matches and, in a fleet, every other node's from the fleet's
-/// last read of the directory (never a wait on Redis).
-pub fn list(service: Service<'_>) -> Vec<Listed> {
+/// last read of the directory (never a wait on Redis). The secret seeds of this server's
+/// matches show only where `opens` the match's owner (the caller holds its token or the
+/// admin token).
+pub fn list(service: Service<'_>, opens: impl Fn(&Owner) -> bool) -> Vec<Listed> {
     // Published summaries, not a question to each task: a match busy stepping thousands of
     // ticks must not hold up the lobby.
     let local: Vec<MatchSummary> = service
         .registry
         .all()
         .iter()
-        .map(|h| protocol::summary(&h.hub.summary.borrow()))
+        .map(|h| {
+            let summary = h.hub.summary.borrow();
+            if opens(&h.owner) {
+                protocol::owners_summary(&summary)
+            } else {
+                protocol::summary(&summary)
+            }
+        })
         .collect();
     match service.fleet {
         Some(fleet) => fleet.listing(local),
@@ -111,7 +120,11 @@ pub async fn create<R>(
         return Ok(Created::Elsewhere(moved));
     }
     let registry = service.registry;
-    let req = body.validate()?;
+    let mut req = body.validate()?;
+    if req.people {
+        // Secret until the match ends: nothing public lets a stranger rebuild it live.
+        req.config.seed = crate::game::random_seed();
+    }
     within_match_limits(service, &req.config)?;
     // Refused before anything is built; `try_start` checks again under the lock.
     registry.has_room(client)?;

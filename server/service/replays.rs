@@ -1,13 +1,14 @@
 //! The history's use cases: the finished matches, one replay, and its state and belief at
-//! any tick, re-simulated (and loaded from the store) on the blocking pool.
+//! any tick, re-simulated (and loaded from the store) on the replays' own bounded pool.
 
 use std::sync::Arc;
 
+use crate::access::ClientKey;
 use crate::game::replay::{HistoryError, Replay, ReplayError};
 use crate::game::view::{Frame, Summary};
 use crate::protocol::replays::{ReplayDetail, ReplayListed};
 use crate::protocol::{self, Belief, MatchState, Winner};
-use crate::service::{PoolError, Service};
+use crate::service::{PoolError, ReplayBusy, Service};
 use crate::store::Listed;
 use lasertag_core::world::World;
 
@@ -29,6 +30,9 @@ pub enum ReplaysError {
     History(#[from] HistoryError),
     #[error(transparent)]
     Pool(#[from] PoolError),
+    /// The replays' pool is busy, or the client has its share of it in flight.
+    #[error(transparent)]
+    Busy(#[from] ReplayBusy),
 }
 
 /// A finished match as lists show it.
@@ -75,8 +79,8 @@ pub async fn find(service: Service<'_>, id: &str) -> Result<Arc<Replay>, Replays
         None => {
             let key = id.to_string();
             service
-                .pool
-                .run("loading the replay", move || history.load(&key))
+                .replays
+                .run(None, "loading the replay", move || history.load(&key))
                 .await??
         }
     };
@@ -94,21 +98,31 @@ pub fn tick(r: &Replay, tick: u64) -> Result<u64, ReplaysError> {
     Ok(tick)
 }
 
-/// The world of `r` at `tick`, re-simulated on the blocking pool.
-async fn world_at(service: Service<'_>, r: Arc<Replay>, tick: u64) -> Result<World, ReplaysError> {
+/// The world of `r` at `tick`, re-simulated on the replays' pool for `client`.
+async fn world_at(
+    service: Service<'_>,
+    client: Option<ClientKey>,
+    r: Arc<Replay>,
+    tick: u64,
+) -> Result<World, ReplaysError> {
     service.registry.history.opened(&r);
     Ok(service
-        .pool
-        .run("replaying the match", move || r.world_at(tick))
+        .replays
+        .run(client, "replaying the match", move || r.world_at(tick))
         .await??)
 }
 
 /// `r`'s listing, settings and events.
-pub async fn detail(service: Service<'_>, r: Arc<Replay>) -> Result<ReplayDetail, ReplaysError> {
-    let world = world_at(service, r.clone(), r.last_tick).await?;
+pub async fn detail(
+    service: Service<'_>,
+    client: Option<ClientKey>,
+    r: Arc<Replay>,
+) -> Result<ReplayDetail, ReplaysError> {
+    let world = world_at(service, client, r.clone(), r.last_tick).await?;
     Ok(ReplayDetail {
         listed: listed(&r.listed()),
-        settings: protocol::summary(&Summary::of(
+        // The match has ended: its seed is everyone's now.
+        settings: protocol::owners_summary(&Summary::of(
             &world,
             &r.meta,
             &std::sync::Arc::new(world.config.clone()),
@@ -120,10 +134,11 @@ pub async fn detail(service: Service<'_>, r: Arc<Replay>) -> Result<ReplayDetail
 /// The state of `r` at `tick` (one of its ticks, see [`tick`]).
 pub async fn state_at(
     service: Service<'_>,
+    client: Option<ClientKey>,
     r: Arc<Replay>,
     tick: u64,
 ) -> Result<MatchState, ReplaysError> {
-    let world = world_at(service, r.clone(), tick).await?;
+    let world = world_at(service, client, r.clone(), tick).await?;
     let frame = Frame::build(&world, &[], 0, 0, true);
     Ok(protocol::state(&frame, &r.meta, r.config()))
 }
@@ -131,10 +146,11 @@ pub async fn state_at(
 /// The team's belief in `r` at `tick`, or with `robot` that robot's own.
 pub async fn belief_at(
     service: Service<'_>,
+    client: Option<ClientKey>,
     r: Arc<Replay>,
     tick: u64,
     robot: Option<usize>,
 ) -> Result<Belief, ReplaysError> {
-    let world = world_at(service, r, tick).await?;
+    let world = world_at(service, client, r, tick).await?;
     protocol::belief_of(&world, robot).ok_or(ReplaysError::NoRobot)
 }

@@ -296,40 +296,78 @@ pub fn totals(conn: &Connection) -> Result<(u64, u64), StoreError> {
     .map_err(db)
 }
 
-/// Deletes the oldest ended matches until at most `max_matches` and `max_bytes` remain, and
-/// the maps no match uses any more. Answers how many matches went.
+/// Bytes of the database file in use: its pages less the free ones (what the file shrinks
+/// to once `vacuum` gives those back), indexes, maps and every match included.
+fn used_bytes(conn: &Connection) -> Result<u64, StoreError> {
+    let pragma = |name: &str| -> Result<u64, StoreError> {
+        conn.query_row(&format!("PRAGMA {name}"), [], |r| r.get::<_, i64>(0))
+            .map(|v| v.max(0) as u64)
+            .map_err(db)
+    };
+    let pages = pragma("page_count")?.saturating_sub(pragma("freelist_count")?);
+    Ok(pages * pragma("page_size")?)
+}
+
+/// Deletes the oldest ended matches, and each one's map when no other match uses it, until
+/// at most `max_matches` are left and the database uses at most `max_bytes` of the file
+/// system (its real size: stored maps, running matches and SQLite's own pages count too).
+/// Answers how many matches went.
 pub fn evict(conn: &Connection, max_matches: u64, max_bytes: u64) -> Result<u64, StoreError> {
-    let (mut count, mut bytes) = totals(conn)?;
+    let (mut count, _) = totals(conn)?;
     let mut evicted = 0;
-    while count > max_matches || bytes > max_bytes {
-        let oldest: Option<(i64, i64)> = conn
+    while count > max_matches || used_bytes(conn)? > max_bytes {
+        let oldest: Option<(i64, String)> = conn
             .query_row(
-                "SELECT seq, bytes FROM matches WHERE ended_at IS NOT NULL ORDER BY seq LIMIT 1",
+                "SELECT seq, map_hash FROM matches WHERE ended_at IS NOT NULL ORDER BY seq LIMIT 1",
                 [],
                 |r| Ok((r.get(0)?, r.get(1)?)),
             )
             .optional()
             .map_err(db)?;
-        let Some((seq, b)) = oldest else { break };
+        let Some((seq, map_hash)) = oldest else { break };
         conn.execute("DELETE FROM matches WHERE seq = ?1", [seq])
             .map_err(db)?;
-        count -= 1;
-        bytes = bytes.saturating_sub(b as u64);
-        evicted += 1;
-    }
-    if evicted > 0 {
         conn.execute(
-            "DELETE FROM maps WHERE hash NOT IN (SELECT map_hash FROM matches)",
-            [],
+            "DELETE FROM maps WHERE hash = ?1
+             AND NOT EXISTS (SELECT 1 FROM matches WHERE map_hash = ?1)",
+            [&map_hash],
         )
         .map_err(db)?;
+        count -= 1;
+        evicted += 1;
     }
     Ok(evicted)
 }
 
+/// Bytes of the shared-memory index SQLite keeps beside a database in WAL mode.
+const SHM_BYTES: u64 = 32 * 1024;
+
+/// Keeps the write-ahead log, beside the database in the data directory, to a twentieth of
+/// the history's bytes (at least 16 pages): checkpoints that often, and the log cut back to
+/// that size after each. Answers the bytes the log and the shared memory may take, which
+/// the database leaves them of the history's bytes.
+fn bound_wal(conn: &Connection, max_bytes: u64) -> Result<u64, StoreError> {
+    let page: i64 = conn
+        .query_row("PRAGMA page_size", [], |r| r.get(0))
+        .map_err(db)?;
+    let wal = (max_bytes / 20).min(i64::MAX as u64) as i64;
+    let pages = (wal / page.max(1)).max(16);
+    conn.execute_batch(&format!(
+        "PRAGMA wal_autocheckpoint = {pages}; PRAGMA journal_size_limit = {};",
+        pages * page
+    ))
+    .map_err(db)?;
+    Ok((pages * page) as u64 + SHM_BYTES)
+}
+
 /// Gives the pages of deleted rows back to the file system (outside a transaction).
 pub fn vacuum(conn: &Connection) -> Result<(), StoreError> {
-    conn.execute_batch("PRAGMA incremental_vacuum;").map_err(db)
+    // The pragma yields a row for every page it gives back and frees the next one only when
+    // stepped again: read it to the end (`execute_batch` steps once, freeing one page).
+    let mut stmt = conn.prepare("PRAGMA incremental_vacuum").map_err(db)?;
+    let mut rows = stmt.query([]).map_err(db)?;
+    while rows.next().map_err(db)?.is_some() {}
+    Ok(())
 }
 
 const STATS: &str = "SELECT name, COUNT(*), SUM(won), SUM(tags), MAX(survived_ticks) FROM players";
@@ -394,14 +432,19 @@ pub fn leaders(
 pub struct Sqlite {
     conn: Connection,
     retention: Retention,
+    /// Of `retention.max_bytes`, what the write-ahead log and shared memory may take.
+    beside: u64,
 }
 
 impl Sqlite {
     /// The writer's connection: creates and migrates the database.
     pub fn open(dir: &Path, retention: Retention) -> Result<Sqlite, StoreError> {
+        let conn = open(dir)?;
+        let beside = bound_wal(&conn, retention.max_bytes)?;
         Ok(Sqlite {
-            conn: open(dir)?,
+            conn,
             retention,
+            beside,
         })
     }
 
@@ -410,6 +453,7 @@ impl Sqlite {
         Ok(Sqlite {
             conn: open_reader(dir)?,
             retention,
+            beside: 0,
         })
     }
 
@@ -424,6 +468,7 @@ impl backend::Backend for Sqlite {
         let now = backend::unix_ms(std::time::SystemTime::now());
         let tx = self.conn.transaction().map_err(db)?;
         let mut finished = false;
+        let mut begun = false;
         for w in batch {
             // One write that fails (a match whose start was never stored) costs only itself:
             // SQLite undoes the failed statement, not the transaction.
@@ -434,6 +479,7 @@ impl backend::Backend for Sqlite {
                     settings,
                     started_at,
                 } => {
+                    begun = true;
                     let document = crate::maps::import::to_json(&crate::maps::to_file(&arena.def));
                     serde_json::to_string(settings)
                         .map_err(|e| StoreError::Database(e.to_string()))
@@ -472,14 +518,24 @@ impl backend::Backend for Sqlite {
                 tracing::warn!("history: {e}");
             }
         }
-        let evicted = if finished {
-            evict(&tx, self.retention.max_matches, self.retention.max_bytes)?
+        // A match's start stores its map, its end may leave the history past its bounds.
+        let evicted = if finished || begun {
+            let bytes = self.retention.max_bytes.saturating_sub(self.beside);
+            evict(&tx, self.retention.max_matches, bytes)?
         } else {
             0
         };
         tx.commit().map_err(db)?;
         if evicted > 0 {
             vacuum(&self.conn)?;
+        }
+        if finished || evicted > 0 {
+            // The log holds what this batch wrote (a map can be larger than its bound):
+            // written back and cut to nothing, unless a reader is in the way (then at the
+            // next checkpoint).
+            self.conn
+                .query_row("PRAGMA wal_checkpoint(TRUNCATE)", [], |_| Ok(()))
+                .map_err(db)?;
         }
         Ok(())
     }

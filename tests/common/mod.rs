@@ -60,6 +60,8 @@ pub fn test_config() -> Config {
         max_matches_per_address: 1000,
         max_maps_per_address: 1000,
         max_holds_per_address: 1000,
+        max_seats_per_address: 1000,
+        max_exports_per_address: 1000,
         client_budget_share: 1.0,
         ..Config::default()
     }
@@ -70,10 +72,22 @@ pub struct Reply {
     pub body: Value,
 }
 
+/// The operator's token of [`TestServer::with_admin`].
+pub const ADMIN: &str = "operator-secret-0123456789";
+
 impl TestServer {
     /// The app of `lasertag::http::app` with the shipped maps, on 127.0.0.1:0, without a showcase.
     pub async fn start() -> TestServer {
         TestServer::start_with(test_config()).await
+    }
+
+    /// [`TestServer::start`] with an operator whose token is [`ADMIN`].
+    pub async fn with_admin() -> TestServer {
+        TestServer::start_with(Config {
+            admin_token: Some(lasertag::config::Secret(ADMIN.into())),
+            ..test_config()
+        })
+        .await
     }
 
     /// Like [`TestServer::start`], with other settings (e.g. a short reconnect grace, tiny
@@ -114,10 +128,7 @@ impl TestServer {
         let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
         let addr = listener.local_addr().unwrap();
         // As the binary serves it: its accept loop, with the peer's address on each request.
-        let limits = lasertag::http::ConnectionLimits {
-            max_connections: registry.config.max_connections,
-            header_read_timeout: registry.config.header_read_timeout,
-        };
+        let limits = lasertag::http::ConnectionLimits::of(&registry);
         tokio::spawn(lasertag::http::serve(
             listener,
             app,

@@ -289,12 +289,17 @@ pub struct TaskSettings {
     pub idle_manual_after: Duration,
     /// People who may hold a slot at once.
     pub max_players: usize,
-    /// How long a slot joined but never connected to is held.
+    /// How long a slot joined but never played (no input from a connection) is held.
     pub join_hold: Duration,
     /// Such slots one client may hold at once.
     pub max_holds: usize,
+    /// The seats of every client over all matches, and how many one may hold.
+    pub seats: Arc<crate::game::hub::SeatLedger>,
+    pub max_seats: usize,
     /// A tick that takes longer overruns (see [`OVERRUN_WINDOW`]).
     pub tick_overrun: Duration,
+    /// The path search one request's robot orders may take (`Config::max_command_work`).
+    pub max_command_work: u64,
     pub metrics: Metrics,
     /// Where the match goes for replay once it has finished.
     pub history: Arc<crate::game::replay::History>,
@@ -341,6 +346,7 @@ pub fn spawn_match(
         summary,
         arena: world.arena.clone(),
         spectators: Arc::new(AtomicUsize::new(0)),
+        watchers: Default::default(),
     };
     let span = tracing::info_span!("match", id = %meta.id);
     // A manual-clock match computes only when asked, so it runs on the runtime of the
@@ -393,6 +399,20 @@ pub fn spawn_match(
     task.store_flush(true);
     handle.spawn(task.run(rx).instrument(span));
     (tx, hub)
+}
+
+/// Runs `f`, which may search paths for milliseconds (`heavy`), without holding up the
+/// other tasks of this runtime's worker: on a multi-threaded runtime the worker hands its
+/// queue to another thread first. How much such work runs at all is bounded by
+/// `game::work`.
+pub(super) fn off_the_workers<R>(heavy: bool, f: impl FnOnce() -> R) -> R {
+    let threaded = tokio::runtime::Handle::try_current()
+        .is_ok_and(|h| h.runtime_flavor() == tokio::runtime::RuntimeFlavor::MultiThread);
+    if heavy && threaded {
+        tokio::task::block_in_place(f)
+    } else {
+        f()
+    }
 }
 
 /// The runtime real-time match tasks run on: threads of their own, so that a tick is never
@@ -584,6 +604,15 @@ impl MatchTask {
         Ok(())
     }
 
+    /// Bounds the path search of the robot orders among `inputs` by what their request
+    /// was charged (`game::work`), and says whether there is any.
+    fn budget_routes(&mut self, inputs: &[WorldInput]) -> bool {
+        let bound = crate::game::work::RequestBound(self.settings.max_command_work);
+        let work = bound.work(inputs, self.world.arena.grid.len());
+        self.world.set_route_budget(work);
+        work > 0
+    }
+
     /// One tick of the world, its team's halves timed into the metrics.
     fn step(&mut self) {
         self.feed_inputs();
@@ -618,7 +647,15 @@ impl MatchTask {
                 answer(Ok(&mut Reading::new(self, sight, since)));
             }
             Request::Apply { input, reply } => {
-                let _ = reply.send(self.apply(input).map_err(MatchError::Input));
+                let one = std::slice::from_ref(&input);
+                let result = match self.recording.room_for(one) {
+                    Err(full) => Err(full.into()),
+                    Ok(()) => {
+                        let searches = self.budget_routes(one);
+                        off_the_workers(searches, || self.apply(input)).map_err(MatchError::Input)
+                    }
+                };
+                let _ = reply.send(result);
             }
             Request::Step {
                 inputs,
@@ -820,6 +857,9 @@ impl MatchTask {
             return Some("abandoned");
         }
         let mut changed = false;
+        // Told once the slot is free and published: a client that hears of the lapse and
+        // looks at the lobby finds the slot there.
+        let mut kicks = Vec::new();
         for slot in 0..self.players.len() {
             let Some(p) = self.players[slot].as_mut() else {
                 continue;
@@ -830,18 +870,19 @@ impl MatchTask {
                 p.away_since = Some(now);
                 tracing::info!(player = %p.name, slot, "player dropped");
             }
-            let grace = if p.ever_connected {
-                self.settings.reconnect_grace
-            } else {
-                self.settings.join_hold
-            };
-            let gone = p.away_since.is_some_and(|t| now - t >= grace);
+            // A slot nobody has played lapses `join_hold` after the join, connected or
+            // not; a played one `reconnect_grace` after its player dropped.
+            let lapsed = !p.played && now - p.joined_at >= self.settings.join_hold;
+            let gone = lapsed
+                || p.away_since
+                    .is_some_and(|t| now - t >= self.settings.reconnect_grace);
             if dropped {
                 self.set_keys(slot, HumanInput::default());
                 changed = true;
             }
-            if gone && let Some(p) = self.players[slot].take() {
-                tracing::info!(player = %p.name, slot, "player slot freed");
+            if gone && let Some(mut p) = self.players[slot].take() {
+                kicks.extend(p.kick.take());
+                tracing::info!(player = %p.name, slot, lapsed, "player slot freed");
                 let name = p.name.to_string();
                 let _ = self.apply(WorldInput::Unseat { slot, name });
                 changed = true;
@@ -849,6 +890,9 @@ impl MatchTask {
         }
         if changed {
             self.publish();
+        }
+        for kick in kicks {
+            let _ = kick.send("the slot lapsed: it was held without being played");
         }
         None
     }

@@ -18,13 +18,18 @@ pub(super) struct Player {
     pub(super) generation: u64,
     /// Held while a connection plays this slot: its receiver is dropped when the
     /// connection ends (so the task notices), and sending on it closes an older connection.
-    pub(super) kick: Option<oneshot::Sender<()>>,
+    pub(super) kick: Option<oneshot::Sender<&'static str>>,
     /// Since when nobody plays this slot (joined but not connected yet, or dropped).
     pub(super) away_since: Option<Instant>,
-    /// Whether a connection ever played it: until then the slot is only held, briefly.
-    pub(super) ever_connected: bool,
-    /// Who joined (for the one-unconnected-hold-per-client rule).
+    /// When it was joined: a slot not played `join_hold` later lapses.
+    pub(super) joined_at: Instant,
+    /// Whether a connection ever sent an input for it: until then the slot is only held,
+    /// briefly, connected or not (an idle socket plays nothing).
+    pub(super) played: bool,
+    /// Who joined (for the few-unplayed-holds-per-client rule).
     pub(super) client: Option<ClientKey>,
+    /// Its place in the seats its client holds over all matches.
+    pub(super) _ledger: Option<crate::game::hub::LedgerSeat>,
     /// Numbered inputs not applied yet, oldest first, one per tick.
     pub(super) inputs: std::collections::VecDeque<(u64, HumanInput)>,
     /// The `seq` of the newest numbered input received, and of the last applied.
@@ -79,6 +84,7 @@ impl MatchTask {
         else {
             return;
         };
+        p.played = true;
         match seq {
             None => self.set_keys(slot, input),
             // Late or repeated: already applied or queued.
@@ -119,11 +125,13 @@ impl MatchTask {
         client: Option<ClientKey>,
     ) -> Result<Joined, MatchError> {
         let id = &self.meta.id;
-        // The length counts what was sent, as the OpenAPI schema (`maxLength`) does; the
-        // name kept is trimmed.
+        // The length and the characters are checked on what was sent, as the OpenAPI
+        // schema (`maxLength`, `pattern`) does: a tab at the end is refused, not trimmed
+        // away. The name kept is trimmed.
         let sent = name.chars().count();
+        let control = name.chars().any(char::is_control);
         let name = name.trim().to_string();
-        if name.is_empty() || sent > 32 || name.chars().any(char::is_control) {
+        if name.is_empty() || sent > 32 || control {
             return Err(MatchError::Invalid(
                 "name: must be 1 to 32 printable characters".into(),
             ));
@@ -145,7 +153,7 @@ impl MatchTask {
                 .players
                 .iter()
                 .flatten()
-                .filter(|p| p.client == Some(c) && !p.ever_connected)
+                .filter(|p| p.client == Some(c) && !p.played)
                 .count();
             if held >= self.settings.max_holds {
                 self.settings.metrics.refuse(Refusal::ClientQuota);
@@ -158,6 +166,19 @@ impl MatchTask {
         let slot = (0..self.players.len())
             .find(|&i| self.slot_free(i))
             .ok_or_else(|| MatchError::Full(format!("match {id} has no free opponent slot")))?;
+        // Over every match too: a client takes at most a few seats at once.
+        let ledger = match client {
+            Some(c) => match self.settings.seats.take(c, self.settings.max_seats) {
+                Ok(seat) => Some(seat),
+                Err(held) => {
+                    self.settings.metrics.refuse(Refusal::ClientQuota);
+                    return Err(MatchError::Quota(format!(
+                        "{c} holds {held} slot(s) on this server, its most; leave one first"
+                    )));
+                }
+            },
+            None => None,
+        };
         let player = Player {
             id: random_id(8),
             name: name.as_str().into(),
@@ -165,8 +186,10 @@ impl MatchTask {
             generation: 0,
             kick: None,
             away_since: Some(Instant::now()),
-            ever_connected: false,
+            joined_at: Instant::now(),
+            played: false,
             client,
+            _ledger: ledger,
             inputs: Default::default(),
             received: 0,
             applied: 0,
@@ -196,11 +219,10 @@ impl MatchTask {
             return Err(MatchError::NotAPlayer("token: slot was freed".into()));
         };
         if let Some(old) = p.kick.take() {
-            let _ = old.send(());
+            let _ = old.send("another connection took over this player");
         }
         let (kick, kicked) = oneshot::channel();
         p.kick = Some(kick);
-        p.ever_connected = true;
         p.generation += 1;
         // A new connection numbers its inputs from 1 again.
         p.inputs.clear();

@@ -30,7 +30,12 @@ impl MatchTask {
         if pending.is_some() {
             return answer(Err(MatchError::Stepping(id.clone())));
         }
-        if let Err(e) = self.world.apply_all(&inputs) {
+        if let Err(full) = self.recording.room_for(&inputs) {
+            return answer(Err(full.into()));
+        }
+        let searches = self.budget_routes(&inputs);
+        let world = &mut self.world;
+        if let Err(e) = super::off_the_workers(searches, || world.apply_all(&inputs)) {
             return answer(Err(MatchError::Input(e)));
         }
         for input in inputs {

@@ -100,9 +100,10 @@ pub fn show(replay: &Replay, world: &World, show: Show) -> Shown {
             &frame,
             &AgentId::Opponent(*slot).to_string(),
             v,
-            belief,
+            belief.then_some(&frame),
         )),
         (Some((slot, v)), true) => {
+            let belief = frame.belief.as_deref().filter(|_| belief);
             Message::Binary(compact::snapshot(&frame, Some(*slot), Some(v), belief, false).into())
         }
     };

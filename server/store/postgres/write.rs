@@ -91,7 +91,10 @@ pub(super) fn apply(
             started_at,
         } => {
             tx.execute(&st.begin_map, &[hash, map, document])?;
-            let bytes = settings.len() as i64;
+            // Each match counts its map's document as well (a map several matches share is
+            // counted with each, so the history errs towards keeping less): stored maps
+            // weigh in retention as they do on disk.
+            let bytes = (settings.len() + document.len()) as i64;
             let added = tx.execute(
                 &st.begin_match,
                 &[id, &writer, map, hash, settings, started_at, &bytes],

@@ -144,3 +144,79 @@ fn a_newer_schema_is_refused_and_an_unfinished_match_becomes_incomplete() {
     assert!(matches!(open(&d), Err(StoreError::NewerSchema { .. })));
     let _ = std::fs::remove_dir_all(&d);
 }
+
+/// Bytes of the files in `d` (the database, its write-ahead log and shared memory).
+fn dir_bytes(d: &std::path::Path) -> u64 {
+    std::fs::read_dir(d)
+        .map(|entries| {
+            entries
+                .filter_map(|e| e.ok()?.metadata().ok())
+                .map(|m| m.len())
+                .sum()
+        })
+        .unwrap_or(0)
+}
+
+#[test]
+fn retention_holds_the_data_directory_to_its_bytes_with_large_maps() {
+    use lasertag_core::sim::arena::{Arena, MapDef};
+    use nalgebra::Point2;
+    let d = dir("map-bytes");
+    let max_bytes = 1 << 20;
+    let mut db = Sqlite::open(
+        &d,
+        Retention {
+            max_matches: 10_000,
+            max_bytes,
+        },
+    )
+    .expect("open");
+    for k in 0..16 {
+        // About 150 KB of map document each, every map its own.
+        let squares: Vec<Vec<Point2<f32>>> = (0..1200)
+            .map(|i| {
+                let (x, y) = (
+                    1.0 + (i % 40) as f32 + k as f32 * 0.001,
+                    1.0 + (i / 40) as f32,
+                );
+                vec![
+                    Point2::new(x, y),
+                    Point2::new(x + 0.2, y),
+                    Point2::new(x + 0.2, y + 0.2),
+                    Point2::new(x, y + 0.2),
+                ]
+            })
+            .collect();
+        let arena = std::sync::Arc::new(Arena::new(MapDef {
+            name: format!("big{k}"),
+            width: 42.0,
+            height: 32.0,
+            obstacles: squares,
+            robot_spawns: vec![[0.5, 0.5, 0.0]],
+            opponent_spawns: vec![Point2::new(41.5, 31.5)],
+            landmarks: vec![],
+        }));
+        let mut writes = a_match(&format!("m{k}"), 20, "ada", true);
+        if let Write::Begin { arena: a, .. } = &mut writes[0] {
+            *a = arena;
+        }
+        // As a server writes: the start (with its map) in one batch, the rest in later ones.
+        db.write(&writes[..1]).expect("write the start");
+        db.write(&writes[1..]).expect("write the rest");
+        let on_disk = dir_bytes(&d);
+        assert!(
+            on_disk <= max_bytes,
+            "after {k} matches: {on_disk} bytes on disk: {:?}",
+            std::fs::read_dir(&d)
+                .map(|es| es
+                    .filter_map(|e| e.ok())
+                    .map(|e| (e.file_name(), e.metadata().map(|m| m.len()).unwrap_or(0)))
+                    .collect::<Vec<_>>())
+                .unwrap_or_default()
+        );
+    }
+    // The newest is kept; the oldest went.
+    assert!(db.load("m15").expect("load").is_some());
+    assert!(db.load("m0").expect("load").is_none());
+    let _ = std::fs::remove_dir_all(&d);
+}

@@ -1,0 +1,130 @@
+//! The replay's keyframes and the history's byte budget.
+
+use super::*;
+use crate::maps::MapStore;
+use lasertag_core::world::{ControlKind, HumanInput};
+
+/// A two-minute office match with a person's keys changing now and then.
+fn recorded() -> Replay {
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+    let maps = MapStore::load_dir(&root.join("maps")).expect("shipped maps");
+    let arena = maps.get("office").expect("office").arena.clone();
+    let config = MatchConfig {
+        opponent_control: ControlKind::Human,
+        seed: 3,
+        ..MatchConfig::default()
+    };
+    let mut world = World::new(arena.clone(), config.clone()).expect("world");
+    let mut inputs = Vec::new();
+    for t in 0..400u64 {
+        if t.is_multiple_of(37) {
+            let input = WorldInput::Keys {
+                slot: 0,
+                input: HumanInput {
+                    forward: if t.is_multiple_of(74) { 1.0 } else { -0.5 },
+                    turn: 0.3,
+                    ..HumanInput::default()
+                },
+            };
+            world.apply(&input).expect("keys");
+            inputs.push((world.tick, input));
+        }
+        world.step();
+    }
+    let meta = MatchMeta {
+        id: "m".into(),
+        map: "office".into(),
+        clock: Clock::Manual,
+        players: 0,
+        spectators: 0,
+        free_slots: 0,
+        bots_joinable: false,
+        spectator_delay_ticks: 0,
+    };
+    Replay::of(&world, meta, arena, config, inputs, SystemTime::now())
+}
+
+/// `r` under another id (sharing its arena and inputs).
+fn renamed(r: &Replay, id: &str) -> Replay {
+    Replay {
+        meta: MatchMeta {
+            id: id.into(),
+            ..r.meta.clone()
+        },
+        last_tick: r.last_tick,
+        winner: r.winner,
+        players: r.players.clone(),
+        started_at: r.started_at,
+        ended_at: r.ended_at,
+        reason: r.reason,
+        complete: r.complete,
+        arena: r.arena.clone(),
+        config: r.config.clone(),
+        inputs: r.inputs.clone(),
+        spacing: r.spacing,
+        keyframes: Mutex::new(Vec::new()),
+    }
+}
+
+/// `r` on an arena of its own (a copy of its map), as a match on an inline map has.
+fn on_own_arena(r: &Replay, id: &str) -> Replay {
+    Replay {
+        arena: Arc::new(Arena::new(r.arena.def.clone())),
+        ..renamed(r, id)
+    }
+}
+
+#[test]
+fn the_replays_kept_in_memory_fit_in_their_byte_budget() {
+    let first = recorded();
+    let each = admission::map(&first.arena.def).memory + first.inputs_bytes();
+    let fit = (CACHED_BYTES / each) as usize;
+    assert!(fit < 40, "{each} bytes each");
+    let history = History::new(HISTORY_CAPACITY);
+    for k in 0..fit + 5 {
+        history.keep(on_own_arena(&first, &format!("m{k}")));
+    }
+    let kept = history.replays.lock().unwrap().len();
+    assert_eq!(kept, fit.max(1), "{each} bytes each");
+    // The newest stay, the oldest went.
+    assert!(history.get(&format!("m{}", fit + 4)).is_some());
+    assert!(history.get("m0").is_none());
+    // Replays on one stored map pay for its arena once.
+    let shared = History::new(HISTORY_CAPACITY);
+    for k in 0..CACHED_WITH_STORE + 5 {
+        shared.keep(renamed(&first, &format!("s{k}")));
+    }
+    assert_eq!(shared.replays.lock().unwrap().len(), CACHED_WITH_STORE + 5);
+}
+
+#[test]
+fn keyframes_fit_in_their_byte_budget() {
+    // An office match's world: many keyframes, never closer than the least spacing.
+    assert_eq!(keyframe_spacing(1_000, 400_000), Some(MIN_KEYFRAME_SPACING));
+    let every = keyframe_spacing(100_000, 1_000_000).unwrap();
+    assert!(
+        (100_000 / every + 1) * 1_000_000 <= KEYFRAME_BYTES,
+        "{every}"
+    );
+    // A world bigger than the budget keeps none.
+    assert_eq!(keyframe_spacing(6_000, KEYFRAME_BYTES), None);
+    let replay = recorded();
+    assert!(replay.spacing.is_some());
+}
+
+#[test]
+fn a_cursor_played_forward_meets_every_seek() {
+    let replay = recorded();
+    let mut cursor = replay.cursor(100).expect("cursor");
+    let mut steps = 0;
+    while replay.advance(&mut cursor) {
+        steps += 1;
+        let tick = cursor.world().tick;
+        if tick.is_multiple_of(23) || tick == replay.last_tick {
+            let seek = replay.world_at(tick).expect("seek");
+            assert_eq!(seek.digest(), cursor.world().digest(), "tick {tick}");
+        }
+    }
+    assert_eq!(steps, replay.last_tick - 100);
+    assert!(!replay.advance(&mut cursor));
+}
