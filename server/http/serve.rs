@@ -147,12 +147,29 @@ pub fn raise_open_files_limit() -> Option<u64> {
 /// How often freed memory is handed back to the operating system.
 const TRIM_EVERY: Duration = Duration::from_secs(5);
 
+/// Largest block the allocator takes from its own heaps rather than mapping it alone, and
+/// the free space at a heap's top it keeps rather than handing back at once (bytes).
+#[cfg(all(target_os = "linux", target_env = "gnu"))]
+const KEEP_FREED_BYTES: libc::c_int = 32 << 20;
+
 /// Hands the memory the allocator keeps free back to the operating system every
-/// [`TRIM_EVERY`], off the async workers. glibc's allocator keeps what a large request,
-/// an ended match or an evicted replay freed (the process's resident size stays at its
-/// peak); `malloc_trim` returns it, so the server's size follows what it holds. Does
-/// nothing with other allocators.
+/// [`TRIM_EVERY`], off the async workers, and only then. glibc's allocator keeps what a
+/// large request, an ended match or an evicted replay freed (the process's resident size
+/// stays at its peak); `malloc_trim` returns it, so the server's size follows what it holds.
+///
+/// Left to itself, glibc also hands a thread heap's free top back on every `free` past
+/// 128 KiB (`madvise`), and maps blocks past its threshold alone: the planner's distance
+/// fields (a few hundred KiB each, several per tick and match) were then returned and
+/// faulted back in zeroed pages every time, and each return interrupts every other core
+/// (a TLB shootdown): a fifth of all CPU at 100 matches (docs/performance.md). So freed
+/// blocks stay in the heaps until the next trim. Does nothing with other allocators.
 pub fn trim_memory_periodically() {
+    #[cfg(all(target_os = "linux", target_env = "gnu"))]
+    // SAFETY: mallopt only sets the allocator's thresholds; called before the work it tunes.
+    unsafe {
+        libc::mallopt(libc::M_MMAP_THRESHOLD, KEEP_FREED_BYTES);
+        libc::mallopt(libc::M_TRIM_THRESHOLD, KEEP_FREED_BYTES);
+    }
     #[cfg(all(target_os = "linux", target_env = "gnu"))]
     tokio::spawn(async {
         let mut every = tokio::time::interval(TRIM_EVERY);
