@@ -53,14 +53,7 @@ impl DistanceField {
         start: usize,
         avoid: &[(Point2<f32>, f32)],
     ) -> DistanceField {
-        let open: Vec<bool> = (0..grid.len())
-            .map(|idx| {
-                grid.passable(idx) && {
-                    let c = grid.centre(idx);
-                    avoid.iter().all(|(p, r)| (c - p).norm_squared() >= r * r)
-                }
-            })
-            .collect();
+        let open = OpenCells::new(grid, avoid);
         // Unbounded and with no goal, the search settles every reachable cell.
         let (units, prev) = match dial(grid, start, &open, None, &mut u64::MAX.clone()) {
             Ok(search) | Err(Exhausted(search)) => search,
@@ -157,6 +150,61 @@ type Search = (Vec<u32>, Vec<u32>);
 #[derive(Debug)]
 struct Exhausted(Search);
 
+/// The cells a search may enter: passable and outside every disc to avoid. Held with a closed
+/// border one cell wide around the grid, so that every cell the search settles has all eight
+/// neighbours in the table: the search then needs no bounds checks, and no division to find
+/// a cell's row and column (the two took about half of its time).
+struct OpenCells {
+    /// Columns plus the border's two.
+    stride: usize,
+    open: Vec<bool>,
+}
+
+impl OpenCells {
+    fn new(grid: &ClearanceGrid, avoid: &[(Point2<f32>, f32)]) -> OpenCells {
+        let (cols, rows) = (grid.cols, grid.rows);
+        let stride = cols + 2;
+        let mut open = vec![false; stride * (rows + 2)];
+        for r in 0..rows {
+            let row = &mut open[(r + 1) * stride + 1..][..cols];
+            for (c, o) in row.iter_mut().enumerate() {
+                *o = grid.passable(r * cols + c);
+            }
+        }
+        let mut cells = OpenCells { stride, open };
+        for &(p, radius) in avoid {
+            cells.close_disc(grid, p, radius);
+        }
+        cells
+    }
+
+    /// Closes the cells whose centre lies inside the disc: those of its bounding box (a cell
+    /// wider on each side, against rounding) that fail `|centre − p|² ≥ radius²`. Only the
+    /// box is tested: no centre outside it can pass.
+    fn close_disc(&mut self, grid: &ClearanceGrid, p: Point2<f32>, radius: f32) {
+        let (cols, rows) = (grid.cols, grid.rows);
+        let span = |lo: f32, hi: f32, n: usize| -> (usize, usize) {
+            if !(lo.is_finite() && hi.is_finite()) {
+                return (0, n - 1); // no box to trust: test them all
+            }
+            let first = (lo / grid.cell - 1.5).floor().clamp(0.0, (n - 1) as f32) as usize;
+            let last = (hi / grid.cell + 0.5).ceil().clamp(0.0, (n - 1) as f32) as usize;
+            (first, last)
+        };
+        let (c0, c1) = span(p.x - radius, p.x + radius, cols);
+        let (r0, r1) = span(p.y - radius, p.y + radius, rows);
+        for r in r0..=r1 {
+            for c in c0..=c1 {
+                let idx = r * cols + c;
+                let outside = (grid.centre(idx) - p).norm_squared() >= radius * radius;
+                if !outside {
+                    self.open[(r + 1) * self.stride + c + 1] = false;
+                }
+            }
+        }
+    }
+}
+
 /// Dial's algorithm from `start` over the `open` cells. With a `goal` it stops once the goal
 /// is settled: every cell on the goal's shortest path was settled before it, and a cell's
 /// predecessor changes only on a strictly shorter way, so the path is the one a full search
@@ -164,26 +212,30 @@ struct Exhausted(Search);
 fn dial(
     grid: &ClearanceGrid,
     start: usize,
-    open: &[bool],
+    open: &OpenCells,
     goal: Option<usize>,
     work: &mut u64,
 ) -> Result<Search, Exhausted> {
     const RING: usize = DIAGONAL as usize + 1;
     let n = grid.len();
+    let cols = grid.cols;
+    let stride = open.stride;
+    let open = &open.open[..];
     let mut units = vec![u32::MAX; n];
     let mut prev = vec![NONE; n];
-    let mut buckets: Vec<Vec<u32>> = vec![Vec::new(); RING];
+    // Each entry: a cell's index in the grid and in the bordered table.
+    let mut buckets: Vec<Vec<(u32, u32)>> = vec![Vec::new(); RING];
     units[start] = 0;
-    buckets[0].push(start as u32);
+    let bordered = |idx: usize| (idx / cols + 1) * stride + idx % cols + 1;
+    buckets[0].push((start as u32, bordered(start) as u32));
     let mut pending = 1usize;
-    let (cols, rows) = (grid.cols, grid.rows);
     let mut d: u32 = 0;
     while pending > 0 {
         let slot = d as usize % RING;
         let cells = std::mem::take(&mut buckets[slot]);
         pending -= cells.len();
-        for &idx in &cells {
-            let idx = idx as usize;
+        for &(idx, at) in &cells {
+            let (idx, at) = (idx as usize, at as usize);
             if units[idx] != d {
                 continue; // a stale entry: reached sooner by another way
             }
@@ -194,47 +246,46 @@ fn dial(
                 return Err(Exhausted((units, prev)));
             }
             *work -= 1;
-            let (r, c) = (idx / cols, idx % cols);
-            let (up, down) = (r + 1 < rows, r > 0);
-            let (right, left) = (c + 1 < cols, c > 0);
             // Straight neighbours first; a diagonal needs both straight ones it passes
-            // between to be open (no corner cutting).
-            let e = right && open[idx + 1];
-            let w = left && open[idx - 1];
-            let nn = up && open[idx + cols];
-            let s = down && open[idx - cols];
-            let mut relax = |to: usize, cost: u32, buckets: &mut Vec<Vec<u32>>| {
-                let nd = d + cost;
-                if nd < units[to] {
-                    units[to] = nd;
-                    prev[to] = idx as u32;
-                    buckets[nd as usize % RING].push(to as u32);
-                    pending += 1;
-                }
-            };
+            // between to be open (no corner cutting). The border is closed, so a cell at the
+            // grid's edge finds no neighbour beyond it.
+            let e = open[at + 1];
+            let w = open[at - 1];
+            let nn = open[at + stride];
+            let s = open[at - stride];
+            let mut relax =
+                |to: usize, to_at: usize, cost: u32, buckets: &mut Vec<Vec<(u32, u32)>>| {
+                    let nd = d + cost;
+                    if nd < units[to] {
+                        units[to] = nd;
+                        prev[to] = idx as u32;
+                        buckets[nd as usize % RING].push((to as u32, to_at as u32));
+                        pending += 1;
+                    }
+                };
             if e {
-                relax(idx + 1, STRAIGHT, &mut buckets);
+                relax(idx + 1, at + 1, STRAIGHT, &mut buckets);
             }
             if w {
-                relax(idx - 1, STRAIGHT, &mut buckets);
+                relax(idx - 1, at - 1, STRAIGHT, &mut buckets);
             }
             if nn {
-                relax(idx + cols, STRAIGHT, &mut buckets);
+                relax(idx + cols, at + stride, STRAIGHT, &mut buckets);
             }
             if s {
-                relax(idx - cols, STRAIGHT, &mut buckets);
+                relax(idx - cols, at - stride, STRAIGHT, &mut buckets);
             }
-            if nn && e && open[idx + cols + 1] {
-                relax(idx + cols + 1, DIAGONAL, &mut buckets);
+            if nn && e && open[at + stride + 1] {
+                relax(idx + cols + 1, at + stride + 1, DIAGONAL, &mut buckets);
             }
-            if nn && w && open[idx + cols - 1] {
-                relax(idx + cols - 1, DIAGONAL, &mut buckets);
+            if nn && w && open[at + stride - 1] {
+                relax(idx + cols - 1, at + stride - 1, DIAGONAL, &mut buckets);
             }
-            if s && e && open[idx - cols + 1] {
-                relax(idx - cols + 1, DIAGONAL, &mut buckets);
+            if s && e && open[at - stride + 1] {
+                relax(idx - cols + 1, at - stride + 1, DIAGONAL, &mut buckets);
             }
-            if s && w && open[idx - cols - 1] {
-                relax(idx - cols - 1, DIAGONAL, &mut buckets);
+            if s && w && open[at - stride - 1] {
+                relax(idx - cols - 1, at - stride - 1, DIAGONAL, &mut buckets);
             }
         }
         // Hand the emptied bucket's allocation back for reuse.
@@ -281,7 +332,7 @@ pub fn path_within(
         return Ok(None);
     };
     charge(work, search_setup_work(grid.len()))?;
-    let open: Vec<bool> = (0..grid.len()).map(|idx| grid.passable(idx)).collect();
+    let open = OpenCells::new(grid, &[]);
     let (units, prev) = dial(grid, start, &open, Some(goal), work).map_err(|_| OverBudget)?;
     if units.get(goal).is_none_or(|&u| u == u32::MAX) {
         return Ok(None);
@@ -529,6 +580,37 @@ mod tests {
         // is, over about its wall's thickness and a little either side.
         assert_eq!((wide_door, wide_room, tight_room), (0.0, 0.0, 0.0));
         assert!(tight_door > 0.15 && tight_door < 1.5, "{tight_door}");
+    }
+
+    #[test]
+    fn the_bordered_table_opens_what_testing_every_cell_opens() {
+        let arena = two_rooms();
+        let grid = &arena.grid;
+        let discs = [
+            vec![],
+            vec![(Point2::new(2.0, 1.0), 0.6)],
+            // At the grid's corner, past its edge, of no size, and two overlapping.
+            vec![(Point2::new(0.0, 0.0), 1.0), (Point2::new(10.3, 4.2), 0.75)],
+            vec![(Point2::new(5.0, 1.5), 0.0), (Point2::new(-3.0, 1.0), 3.2)],
+            vec![(Point2::new(4.0, 2.0), 0.5), (Point2::new(4.3, 2.1), 0.5)],
+        ];
+        for avoid in &discs {
+            let table = OpenCells::new(grid, avoid);
+            for idx in 0..grid.len() {
+                let c = grid.centre(idx);
+                let want = grid.passable(idx)
+                    && avoid.iter().all(|(p, r)| (c - p).norm_squared() >= r * r);
+                let (row, col) = (idx / grid.cols, idx % grid.cols);
+                let got = table.open[(row + 1) * table.stride + col + 1];
+                assert_eq!(got, want, "cell {idx} with {avoid:?}");
+            }
+            // The border stays closed.
+            let rows = grid.rows + 2;
+            for r in 0..rows {
+                assert!(!table.open[r * table.stride]);
+                assert!(!table.open[r * table.stride + table.stride - 1]);
+            }
+        }
     }
 
     #[test]

@@ -60,6 +60,9 @@ struct Args {
     /// Directory of map files.
     #[arg(long, default_value = "maps")]
     maps: PathBuf,
+    /// Snapshot format the clients ask for: `json` or `compact` (the game page's).
+    #[arg(long, default_value = "json", value_parser = ["json", "compact"])]
+    format: String,
     /// The history's data directory (default: a new one under the system's temporary
     /// directory, removed at the end).
     #[arg(long)]
@@ -150,6 +153,7 @@ async fn client(
     until: Instant,
     seed: u64,
     counts: Arc<Counts>,
+    compact: bool,
 ) {
     let mut rng = ChaCha8Rng::seed_from_u64(seed ^ (k as u64).wrapping_mul(0x9e37_79b9_7f4a_7c15));
     let http = reqwest::Client::new();
@@ -195,7 +199,7 @@ async fn client(
         };
         let session = Duration::from_millis(rng.random_range(2_000..60_000));
         let end = (Instant::now() + session).min(until);
-        let kept = session_run(addr, &id, token.as_deref(), end, &mut rng, &counts).await;
+        let kept = session_run(addr, &id, token.as_deref(), end, &mut rng, &counts, compact).await;
         if kept && let Some(token) = token {
             seat = Some((id, token));
         }
@@ -221,10 +225,16 @@ async fn session_run(
     end: Instant,
     rng: &mut ChaCha8Rng,
     counts: &Counts,
+    compact: bool,
 ) -> bool {
+    let format = if compact {
+        "format=compact"
+    } else {
+        "format=json"
+    };
     let url = match token {
-        Some(t) => format!("ws://{addr}/ws/matches/{id}?token={t}"),
-        None => format!("ws://{addr}/ws/matches/{id}"),
+        Some(t) => format!("ws://{addr}/ws/matches/{id}?token={t}&{format}"),
+        None => format!("ws://{addr}/ws/matches/{id}?{format}"),
     };
     let Ok((ws, _)) =
         tokio_tungstenite::connect_async_with_config(url, Some(lean_client()), true).await
@@ -262,6 +272,10 @@ async fn session_run(
                             .entry(kind)
                             .or_default() += 1;
                     }
+                }
+                // A compact snapshot (the only binary message).
+                Some(Ok(Message::Binary(_))) => {
+                    counts.snapshots.fetch_add(1, Ordering::Relaxed);
                 }
                 Some(Ok(Message::Close(_))) | None | Some(Err(_)) => {
                     counts.closed_by_server.fetch_add(1, Ordering::Relaxed);
@@ -426,8 +440,14 @@ async fn run(args: Args) -> Result<bool, String> {
     let maps =
         lasertag::maps::MapStore::load_dir(&args.maps).map_err(|e| format!("loading maps: {e}"))?;
     // Every client comes from 127.0.0.1: lift the per-address caps that would refuse a load
-    // test of one machine. The rest (message rate, sizes, graces) are the defaults.
+    // test of one machine, and the tick and memory budgets, which admission prices below
+    // what the soak runs at its largest (100 matches). The rest (message rate, sizes,
+    // graces) are the defaults. The allocator policy is the server's `main`'s.
+    lasertag::http::trim_memory_periodically();
     let config = lasertag::config::Config {
+        max_matches: 1_000,
+        tick_budget_ms: 1e6,
+        memory_budget_mb: 1 << 20,
         max_connections_per_address: usize::MAX,
         max_seats_per_address: usize::MAX,
         max_matches_per_address: usize::MAX,
@@ -489,6 +509,7 @@ async fn run(args: Args) -> Result<bool, String> {
                 until,
                 args.seed,
                 counts.clone(),
+                args.format == "compact",
             ))
         })
         .collect();

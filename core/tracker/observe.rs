@@ -51,6 +51,14 @@ pub(super) fn would_be_seen(
     }
     let forward = dx * cos + dy * sin;
     let lateral = -dx * sin + dy * cos;
+    let half = laser.fov / 2.0;
+    // Behind the robot, with a field of view of at most π: outside it, so the arctangent is
+    // not needed. Exactly the answer the test below gives: there `fast_atan2` is at least
+    // π/2 plus one rounding step once |forward| exceeds a millionth of |lateral| (nearer
+    // the side, rounding could make it π/2 itself, so those go the long way).
+    if half <= std::f32::consts::FRAC_PI_2 && forward < -1e-6 * lateral.abs() {
+        return false;
+    }
     let bearing = fast_atan2(lateral, forward);
     let d = d2.sqrt();
     // The bearings the disc of radius `reach` around `p` spans (all of them when it holds
@@ -62,7 +70,6 @@ pub(super) fn would_be_seen(
     } else {
         (reach / d).asin()
     };
-    let half = laser.fov / 2.0;
     if bearing.abs() + spread > half {
         return false;
     }

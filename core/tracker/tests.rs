@@ -392,3 +392,18 @@ fn a_merge_weighs_each_cloud_by_the_opponents_it_stands_for() {
         );
     }
 }
+
+#[test]
+fn behind_the_robot_the_fast_arctangent_is_past_a_right_angle() {
+    // would_be_seen skips the arctangent there: it must be what the test would have said.
+    use std::f32::consts::FRAC_PI_2;
+    let mut rng = ChaCha8Rng::seed_from_u64(5);
+    for k in 0..200_000 {
+        let lateral: f32 = (rng.random::<f32>() - 0.5) * 20.0;
+        // From just past the threshold to far behind, on a log scale.
+        let share = 10f32.powf(-5.9 + 6.0 * rng.random::<f32>());
+        let forward = -(1e-6 + share) * lateral.abs().max(1e-3);
+        let b = fast_atan2(lateral, forward);
+        assert!(b.abs() > FRAC_PI_2, "#{k}: ({forward}, {lateral}) gave {b}");
+    }
+}
