@@ -74,12 +74,20 @@ const BYTES_PER_PARTICLE: f64 = 24.0;
 /// Per cell of the merge histogram, twice (the tracker's grid and the histograms it
 /// fills when it checks roles for a merge).
 const BYTES_PER_MERGE_CELL: f64 = 16.0;
+// A match's tick is priced at its p99: the heavy ticks are the planner's turns, each a
+// distance field over the whole grid for one robot (one turn a tick at most), on top of every
+// robot's sensing and localising and the tracker's particles. Fitted to the p99 of seeded
+// matches on every shipped map and a spread of settings (`examples/admission_calibration.rs`,
+// docs/results/admission_calibration.csv); `tests/admission_calibration.rs` holds every
+// price there within 1.5× of its measured p99.
 /// Milliseconds per tick whatever the settings.
-const TICK_BASE_MS: f64 = 0.3;
-/// Per robot and clearance cell: its planner's distance field over the grid.
-const TICK_MS_PER_ROBOT_CELL: f64 = 8e-6;
+const TICK_BASE_MS: f64 = 0.025;
+/// Per clearance cell: the distance field of the planner's turn.
+const TICK_MS_PER_CELL: f64 = 1e-5;
+/// Per robot: its scan, localiser and share of planning.
+const TICK_MS_PER_ROBOT: f64 = 0.475;
 /// Per tracker particle and tracker copy.
-const TICK_MS_PER_PARTICLE: f64 = 1.5e-4;
+const TICK_MS_PER_PARTICLE: f64 = 7e-5;
 /// Per landmark and localising robot.
 const TICK_MS_PER_LANDMARK: f64 = 4e-4;
 
@@ -169,10 +177,43 @@ pub fn match_on(def: &MapDef, config: &MatchConfig) -> Price {
         // the map's price.
         build_s: 0.01 + copies * (merge_cells + particles) * 20e-9,
         tick_ms: TICK_BASE_MS
-            + robots * cells * TICK_MS_PER_ROBOT_CELL
+            + cells * TICK_MS_PER_CELL
+            + robots * TICK_MS_PER_ROBOT
             + copies * particles * TICK_MS_PER_PARTICLE
             + localising * landmarks * TICK_MS_PER_LANDMARK,
     }
+}
+
+/// The settings the tick prices are fitted to and checked against on every shipped map: the
+/// API's default match, the load test's, a large team, an imperfect radio (a tracker per
+/// robot), few particles, and the baseline planner; against `evade` bots, placed at random.
+pub fn calibration_settings() -> Vec<(&'static str, MatchConfig)> {
+    use lasertag_core::bots::BotKind;
+    use lasertag_core::planner::PlannerKind;
+    use lasertag_core::world::Placement;
+    let base = |robots, opponents| MatchConfig {
+        robots,
+        opponents,
+        opponent_bot: BotKind::Evade,
+        planner: PlannerKind::Coordinated,
+        placement: Placement::Random,
+        ..MatchConfig::default()
+    };
+    let mut radio = base(2, 3);
+    radio.radio.latency_ticks = 4;
+    radio.radio.loss = 0.2;
+    let mut light = base(2, 3);
+    light.tracker.particles_per_role = 250;
+    let mut baseline = base(2, 3);
+    baseline.planner = PlannerKind::Baseline;
+    vec![
+        ("default_2r_1o", base(2, 1)),
+        ("loadtest_2r_3o", base(2, 3)),
+        ("large_4r_8o", base(4, 8)),
+        ("radio_2r_3o", radio),
+        ("light_2r_3o_250p", light),
+        ("baseline_2r_3o", baseline),
+    ]
 }
 
 /// Bytes of a copy of a world besides what its settings scale (measured: about 300 KB for
