@@ -240,9 +240,14 @@ async fn an_expensive_match_is_priced_and_refused_before_it_is_built() {
         )
         .await;
     assert_error(&r, 400, "limit of 512 MB per request");
-    // Eight robots on a big map: cheap in memory, too slow a tick.
+    // Eight robots on a big map, each with its own tracker of 40,000 particles behind a
+    // lossy radio: cheap in memory, too slow a tick.
     let r = s
-        .post("/api/matches", &json!({"map": big, "robots": 8}))
+        .post(
+            "/api/matches",
+            &json!({"map": big, "robots": 8, "opponents": 8, "radio": {"loss": 0.5},
+                    "tracker": {"particles_per_role": 5000}}),
+        )
         .await;
     assert_error(&r, 400, "ms per match");
     unharmed(&s, &live, t0).await;
