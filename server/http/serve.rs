@@ -14,7 +14,8 @@
 //! - The server's cap never exceeds the file descriptors the process may open, less a
 //!   reserve for its files, database and match runtimes, so `accept` never runs out of them;
 //!   [`raise_open_files_limit`] lifts the soft limit to the hard one at start.
-//! - [`trim_memory_periodically`] hands freed memory back to the operating system.
+//! - [`trim_memory_periodically`] hands freed memory back to the operating system, every 5 s
+//!   and only then.
 //! - A header read timeout: a connection that starts a request and does not finish its
 //!   header in time, or sits idle between keep-alive requests that long, is closed. Without
 //!   it a client sending half a header held its socket forever.
