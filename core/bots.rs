@@ -125,6 +125,9 @@ fn wander_path(
     fallback.and_then(|cell| field.path_to(grid, from, cell))
 }
 
+/// How far a fleeing bot looks for a place to run to (metres of travel).
+const FLEE_REACH: f32 = 15.0;
+
 /// A path to the best of a sample of reachable cells: far from the threats, out of their sight,
 /// and not too far to run.
 fn flee_path(
@@ -134,14 +137,15 @@ fn flee_path(
     rng: &mut impl RngExt,
 ) -> Option<Vec<Point2<f32>>> {
     let grid = &arena.grid;
-    let field = DistanceField::from_point(grid, from)?;
+    // Only cells within the reach are ever chosen: the field need not go further.
+    let field = DistanceField::from_point_within(grid, from, FLEE_REACH)?;
     let mut best: Option<(f32, usize)> = None;
     let mut tries = 0;
     let mut found = 0;
     while found < 60 && tries < 2_000 {
         tries += 1;
         let cell = rng.random_range(0..grid.len());
-        if !field.reachable(cell) || field.dist[cell] > 15.0 {
+        if !field.reachable(cell) || field.dist[cell] > FLEE_REACH {
             continue;
         }
         found += 1;

@@ -35,6 +35,34 @@ impl DistanceField {
         DistanceField::from_cell_avoiding(grid, start, &[])
     }
 
+    /// The field from `from` out to `reach` metres of travel only: every cell within `reach`
+    /// has its distance and path exactly as [`DistanceField::from_point`] gives them; every
+    /// other cell reads as unreachable or farther than `reach`. The search stops there, so a
+    /// short reach on a big map costs a fraction of the whole field.
+    pub fn from_point_within(
+        grid: &ClearanceGrid,
+        from: Point2<f32>,
+        reach: f32,
+    ) -> Option<DistanceField> {
+        let start = grid.nearest_passable(from, (1.0 / grid.cell).ceil() as usize + 2)?;
+        let scale = grid.cell / STRAIGHT as f32;
+        // The most travel units whose distance in metres is within `reach` (the distances
+        // are `units × scale` in f32, which grows with the units: one unit more is past it).
+        let mut limit = (reach / scale).max(0.0).floor().min(u32::MAX as f32 / 2.0) as u32;
+        while limit > 0 && limit as f32 * scale > reach {
+            limit -= 1;
+        }
+        while ((limit + 1) as f32 * scale) <= reach {
+            limit += 1;
+        }
+        Some(DistanceField::search(
+            grid,
+            start,
+            &OpenCells::new(grid, &[]),
+            limit,
+        ))
+    }
+
     /// Dijkstra from `from` that also treats the discs `avoid` (centre, radius) as walls:
     /// how an agent replans around teammates that block its way.
     pub fn from_point_avoiding(
@@ -54,9 +82,13 @@ impl DistanceField {
         start: usize,
         avoid: &[(Point2<f32>, f32)],
     ) -> DistanceField {
-        let open = OpenCells::new(grid, avoid);
-        // Unbounded and with no goal, the search settles every reachable cell.
-        let (units, prev) = match dial(grid, start, &open, None, &mut u64::MAX.clone()) {
+        DistanceField::search(grid, start, &OpenCells::new(grid, avoid), u32::MAX)
+    }
+
+    /// The field over `open` of every cell up to `limit` travel units away (`u32::MAX`: all).
+    fn search(grid: &ClearanceGrid, start: usize, open: &OpenCells, limit: u32) -> DistanceField {
+        // With no goal and no bound on the work, the search settles every cell within reach.
+        let (units, prev) = match dial(grid, start, open, None, limit, &mut u64::MAX.clone()) {
             Ok(search) | Err(Exhausted(search)) => search,
         };
         let scale = grid.cell / STRAIGHT as f32;
@@ -175,7 +207,8 @@ pub fn path_within(
     };
     charge(work, search_setup_work(grid.len()))?;
     let open = OpenCells::new(grid, &[]);
-    let (units, prev) = dial(grid, start, &open, Some(goal), work).map_err(|_| OverBudget)?;
+    let (units, prev) =
+        dial(grid, start, &open, Some(goal), u32::MAX, work).map_err(|_| OverBudget)?;
     if units.get(goal).is_none_or(|&u| u == u32::MAX) {
         return Ok(None);
     }
@@ -451,6 +484,31 @@ mod tests {
             for r in 0..rows {
                 assert!(!table.open[r * table.stride]);
                 assert!(!table.open[r * table.stride + table.stride - 1]);
+            }
+        }
+    }
+
+    #[test]
+    fn a_field_within_a_reach_is_the_whole_fields_inside_it() {
+        let arena = two_rooms();
+        let grid = &arena.grid;
+        let from = Point2::new(1.0, 1.0);
+        let whole = DistanceField::from_point(grid, from).unwrap();
+        for reach in [0.0, 0.35, 3.0, 7.5, 100.0] {
+            let near = DistanceField::from_point_within(grid, from, reach).unwrap();
+            for cell in 0..grid.len() {
+                if whole.reachable(cell) && whole.dist[cell] <= reach {
+                    assert_eq!(
+                        near.dist[cell], whole.dist[cell],
+                        "cell {cell}, reach {reach}"
+                    );
+                    assert_eq!(near.cells_to(cell), whole.cells_to(cell));
+                } else {
+                    assert!(
+                        !near.reachable(cell) || near.dist[cell] > reach,
+                        "cell {cell}"
+                    );
+                }
             }
         }
     }

@@ -78,12 +78,15 @@ impl OpenCells {
 /// Dial's algorithm from `start` over the `open` cells. With a `goal` it stops once the goal
 /// is settled: every cell on the goal's shortest path was settled before it, and a cell's
 /// predecessor changes only on a strictly shorter way, so the path is the one a full search
-/// finds. Each settled cell takes one unit of `work`; none left, it gives up.
+/// finds. Each settled cell takes one unit of `work`; none left, it gives up. It also stops
+/// once every cell within `limit` units is settled: those have their final units, and every
+/// other cell holds `u32::MAX` or more than `limit`.
 pub(super) fn dial(
     grid: &ClearanceGrid,
     start: usize,
     open: &OpenCells,
     goal: Option<usize>,
+    limit: u32,
     work: &mut u64,
 ) -> Result<Search, Exhausted> {
     const RING: usize = DIAGONAL as usize + 1;
@@ -100,7 +103,7 @@ pub(super) fn dial(
     buckets[0].push((start as u32, bordered(start) as u32));
     let mut pending = 1usize;
     let mut d: u32 = 0;
-    while pending > 0 {
+    while pending > 0 && d <= limit {
         let slot = d as usize % RING;
         let cells = std::mem::take(&mut buckets[slot]);
         pending -= cells.len();
