@@ -16,6 +16,12 @@ use dial::{Exhausted, OpenCells, STRAIGHT, dial};
 
 mod dial;
 
+/// The passable cell a search from `from` starts at: the nearest within a metre and two cells
+/// (an agent pressed against a wall stands on a cell where it does not fit).
+fn start_cell(grid: &ClearanceGrid, from: Point2<f32>) -> Option<usize> {
+    grid.nearest_passable(from, (1.0 / grid.cell).ceil() as usize + 2)
+}
+
 /// Travel distances from one start cell to every reachable cell.
 #[derive(Debug, Clone)]
 pub struct DistanceField {
@@ -27,7 +33,7 @@ pub struct DistanceField {
 impl DistanceField {
     /// Dijkstra from the passable cell nearest to `from`; `None` when no passable cell is near.
     pub fn from_point(grid: &ClearanceGrid, from: Point2<f32>) -> Option<DistanceField> {
-        let start = grid.nearest_passable(from, (1.0 / grid.cell).ceil() as usize + 2)?;
+        let start = start_cell(grid, from)?;
         Some(DistanceField::from_cell(grid, start))
     }
 
@@ -44,7 +50,7 @@ impl DistanceField {
         from: Point2<f32>,
         reach: f32,
     ) -> Option<DistanceField> {
-        let start = grid.nearest_passable(from, (1.0 / grid.cell).ceil() as usize + 2)?;
+        let start = start_cell(grid, from)?;
         let scale = grid.cell / STRAIGHT as f32;
         // The most travel units whose distance in metres is within `reach` (the distances
         // are `units × scale` in f32, which grows with the units: one unit more is past it).
@@ -70,7 +76,7 @@ impl DistanceField {
         from: Point2<f32>,
         avoid: &[(Point2<f32>, f32)],
     ) -> Option<DistanceField> {
-        let start = grid.nearest_passable(from, (1.0 / grid.cell).ceil() as usize + 2)?;
+        let start = start_cell(grid, from)?;
         Some(DistanceField::from_cell_avoiding(grid, start, avoid))
     }
 
@@ -202,7 +208,7 @@ pub fn path_within(
     goal: usize,
     work: &mut u64,
 ) -> Result<Option<Vec<Point2<f32>>>, OverBudget> {
-    let Some(start) = grid.nearest_passable(from, (1.0 / grid.cell).ceil() as usize + 2) else {
+    let Some(start) = start_cell(grid, from) else {
         return Ok(None);
     };
     charge(work, search_setup_work(grid.len()))?;
