@@ -16,6 +16,8 @@
 //! - [`planner`]: the robot team's decisions (coordinated, baseline, idle).
 //! - [`bots`]: the opponents' bot behaviours (part of the environment: they may read truth).
 //! - [`world`]: one match, its tick pipeline and its event log.
+//! - [`env`]: the research environment's episodes as flat arrays (observation vectors,
+//!   rewards, episode ends) for in-process engines.
 
 pub mod settings;
 
@@ -34,3 +36,5 @@ pub mod planner;
 pub mod bots;
 
 pub mod world;
+
+pub mod env;

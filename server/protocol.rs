@@ -68,14 +68,10 @@ pub fn parse<T: DeserializeOwned>(bytes: &[u8]) -> Result<T, Invalid> {
     deserialize_at(&mut serde_json::Deserializer::from_slice(bytes), "body")
 }
 
-/// Rounds metres to a millimetre: f32 noise digits help nobody and bloat the JSON.
-fn mm(v: f32) -> f64 {
-    ((v as f64) * 1000.0).round() / 1000.0
-}
-
-fn rad(v: f32) -> f64 {
-    ((v as f64) * 10_000.0).round() / 10_000.0
-}
+// Metres to a millimetre and radians to a ten-thousandth: f32 noise digits help nobody and
+// bloat the JSON. The core's research engine rounds with the same functions, so that its
+// observations are the API's bit for bit.
+use lasertag_core::env::{mm, rad};
 
 #[derive(Debug, Serialize, ToSchema)]
 pub struct ErrorBody {

@@ -12,18 +12,10 @@ use utoipa::openapi::schema::{
 };
 use utoipa::openapi::{RefOr, schema::Ref};
 
-// The map format's limits: the validator in `maps` enforces them and the OpenAPI schema
-// states them.
-/// Most obstacle vertices a map may have, over all polygons.
-pub const MAX_VERTICES: usize = 10_000;
-/// Most vertices of one polygon: checking that it does not cross itself compares every
-/// pair of its edges.
-pub const MAX_POLYGON_VERTICES: usize = 1_000;
-/// Most robot spawns, and most opponent spawns (at least as many as a match may have agents
-/// of a side, `protocol::bounds`; spawns wrap): each is checked against every wall.
-pub const MAX_SPAWNS: usize = 64;
-/// Most landmarks: a localising robot looks for every one of them each tick.
-pub const MAX_LANDMARKS: usize = 256;
+// The map format's limits: the core's rules enforce them and the OpenAPI schema states them.
+pub use lasertag_core::sim::map_rules::{
+    MAX_LANDMARKS, MAX_POLYGON_VERTICES, MAX_SPAWNS, MAX_VERTICES,
+};
 
 /// The largest coordinate a request may give (start positions, waypoints).
 pub const MAX_COORDINATE: f64 = 1e6;

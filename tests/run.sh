@@ -30,7 +30,9 @@ cargo test --locked --workspace --all-targets
 # The Python research environment (python/, docs/research.md): its pytest suite, which starts
 # its own servers from the debug binary (`cargo test` builds it for the integration tests;
 # built here only if it is missing), in a venv of its own with the versions
-# python/constraints.txt pins (PyPI).
+# python/constraints.txt pins (PyPI). Installing the package builds its native engine
+# (native/, by maturin from PyPI, in release mode into this workspace's target/), which the
+# suite compares with the HTTP backend episode by episode.
 [ -x target/debug/lasertag ] || cargo build --locked --bin lasertag
 PY_DIR=target/python-env
 # A venv's scripts name its path in their first line: a build directory that was moved

@@ -4,12 +4,14 @@
 //! on higher floors); `crate::world::World` puts a match together.
 //!
 //! - `arena`: static geometry (ray casts, line of sight, clearance grid).
+//! - `map_rules`: the map format's rules, checked on a map as given (`MapSpec`).
 //! - `motion`: kinematics and collision resolution of disc agents.
 //! - `sensors`: laser scans and anonymous opponent detections.
 //! - `rules`: tagging, freezing, elimination.
 //! - `views`: what each candidate destination's laser would see (the planner's footprints).
 
 pub mod arena;
+pub mod map_rules;
 pub mod motion;
 pub mod rules;
 pub(crate) mod segments;

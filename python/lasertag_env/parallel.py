@@ -16,6 +16,7 @@ import numpy as np
 from gymnasium import spaces
 from pettingzoo import ParallelEnv
 
+from .args import DEFAULT_REWARDS, check_arguments, check_int, check_seed, unpack
 from .client import Client, ServerError, error_message, loads
 from .observation import ObservationLayout
 from .render import Renderer
@@ -25,20 +26,6 @@ from .server import LocalServer
 __all__ = ["LasertagParallelEnv", "parallel_env", "DEFAULT_REWARDS"]
 
 TICK_HZ = SHIPPED["tick_hz"]
-
-DEFAULT_REWARDS = {
-    # Each tag the robot makes (an opponent eliminated by its shot).
-    "tag": 1.0,
-    # Each tag any robot of the team makes, given to every robot (0: no shared credit).
-    "team_tag": 0.0,
-    # Per simulated tick (20 per second): a small cost of time, so sooner is better.
-    "tick": -0.001,
-}
-
-# Fields of POST /api/matches the environment sets itself.
-_OWN_FIELDS = {"map", "robots", "opponents", "opponent_bot", "planner", "clock", "seed"}
-_MAX_SEED = 2**63 - 1
-
 
 class LasertagParallelEnv(ParallelEnv):
     """Robots ``r0 … r{n-1}`` of a lasertag match, driven through the HTTP API.
@@ -76,30 +63,12 @@ class LasertagParallelEnv(ParallelEnv):
         packed_scans: bool = True,
     ):
         # Types here; ranges once the server has said its bounds (below).
-        for name, value in (("robots", robots), ("opponents", opponents),
-                            ("ticks_per_step", ticks_per_step)):
-            _check_int(name, value, None, None)
-        _check_seed(seed)
-        if max_steps is not None:
-            _check_int("max_steps", max_steps, 1, None)
-        if detections is not None:
-            _check_int("detections", detections, 0, None)
-        if render_mode not in (None, *self.metadata["render_modes"]):
-            raise ValueError(
-                f"render_mode {render_mode!r}: the modes are {self.metadata['render_modes']} (or None)"
-            )
-        unknown = set(rewards or {}) - set(DEFAULT_REWARDS)
-        if unknown:
-            raise ValueError(
-                f"rewards: unknown weight(s) {sorted(unknown)}; the weights are {sorted(DEFAULT_REWARDS)}"
-            )
-        clash = set(match_settings or {}) & _OWN_FIELDS
-        if clash:
-            raise ValueError(
-                f"match_settings: {sorted(clash)} are arguments of the environment, not settings"
-            )
-        if not isinstance(map, (str, dict)):
-            raise TypeError(f"map must be a map name or a map object, not {type(map).__name__}")
+        check_arguments(
+            robots=robots, opponents=opponents, ticks_per_step=ticks_per_step, seed=seed,
+            max_steps=max_steps, detections=detections, render_mode=render_mode,
+            render_modes=self.metadata["render_modes"], rewards=rewards,
+            match_settings=match_settings, map=map,
+        )
 
         self.render_mode = render_mode
         self.max_steps = max_steps
@@ -189,6 +158,7 @@ class LasertagParallelEnv(ParallelEnv):
         self.episode_seed: int | None = None
         self._renderer: Renderer | None = None
         self._ppm = pixels_per_metre
+        self._raw: dict[str, dict] = {}
 
     # -- spaces ------------------------------------------------------------------------
 
@@ -217,7 +187,7 @@ class LasertagParallelEnv(ParallelEnv):
         """
         self._check_open()
         if seed is not None:
-            _check_seed(seed)
+            check_seed(seed)
             self._seed_rng = np.random.default_rng(seed)
             match_seed = int(seed)
         elif self._first_seed is not None:
@@ -251,6 +221,7 @@ class LasertagParallelEnv(ParallelEnv):
             )
             observations[agent] = self.layout.encode(raw, i, 0.0)
             infos[agent] = {"tick": raw["tick"], "observation": raw}
+        self._raw = {a: infos[a]["observation"] for a in self.possible_agents}
         return observations, infos
 
     def step(self, actions: dict[str, Any]):
@@ -314,6 +285,7 @@ class LasertagParallelEnv(ParallelEnv):
                 info["winner"] = answer["winner"]
                 info["reason"] = finish["reason"] if finish else None
             infos[agent] = info
+        self._raw = dict(zip(self.possible_agents, raws))
         terminations = dict.fromkeys(self.possible_agents, won)
         truncations = dict.fromkeys(self.possible_agents, truncate)
         if won or truncate:
@@ -331,7 +303,7 @@ class LasertagParallelEnv(ParallelEnv):
                 parts.append(f'"{agent}":{{"forward":0,"turn":0,"tag":false}}')
                 continue
             try:
-                forward, turn, tag = _unpack(a)
+                forward, turn, tag = unpack(a)
             except (TypeError, ValueError):
                 raise ValueError(
                     f"action of {agent}: {a!r} is not three numbers (forward, turn, tag)"
@@ -341,6 +313,14 @@ class LasertagParallelEnv(ParallelEnv):
                 f'"tag":{"true" if tag > 0.5 else "false"}}}'
             )
         return ('{"commands":{' + ",".join(parts) + self._act_tail).encode()
+
+    def raw_observation(self, agent: str) -> dict:
+        """What robot ``agent`` knew after the last reset or step: the server's observation
+        object (also ``infos[agent]["observation"]``)."""
+        try:
+            return self._raw[agent]
+        except KeyError:
+            raise KeyError(f"no observation of {agent!r}: call reset()") from None
 
     # -- rendering, state and closing ------------------------------------------------------
 
@@ -431,38 +411,6 @@ class LasertagParallelEnv(ParallelEnv):
             raise ValueError(f"unknown map {name!r}; the server has {names}") from None
 
 
-def _unpack(a) -> tuple[float, float, float]:
-    # tolist() turns a numpy vector into Python floats in one call (float32 values are
-    # exact as float64, so the server gets the policy's numbers unchanged).
-    forward, turn, tag = a.tolist() if isinstance(a, np.ndarray) else a
-    forward, turn, tag = float(forward), float(turn), float(tag)
-    # Out-of-range values are clipped rather than refused (policies' outputs often stray);
-    # NaN (no comparison holds), which would make the server refuse the whole step, stands
-    # for 0.
-    if not -1.0 <= forward <= 1.0:
-        forward = 1.0 if forward > 1.0 else -1.0 if forward < -1.0 else 0.0
-    if not -1.0 <= turn <= 1.0:
-        turn = 1.0 if turn > 1.0 else -1.0 if turn < -1.0 else 0.0
-    return forward, turn, tag
-
-
-def _check_int(name: str, value, lo: int | None, hi: int | None) -> None:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
-        raise TypeError(f"{name} must be an integer, not {value!r}")
-    if lo is None:
-        return
-    if value < lo or (hi is not None and value > hi):
-        bound = f"in {lo}..={hi}" if hi is not None else f"at least {lo}"
-        raise ValueError(f"{name}: {value} must be {bound}")
-
-
-def _check_seed(seed) -> None:
-    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)):
-        raise TypeError(f"seed must be a non-negative integer, not {seed!r}")
-    if not 0 <= seed <= _MAX_SEED:
-        raise ValueError(f"seed: {seed} must be in 0..=2**63-1")
-
-
 def parallel_env(
     server: str | LocalServer | None = None,
     map: str | dict = "office",
@@ -474,32 +422,44 @@ def parallel_env(
     ticks_per_step: int = 1,
     render_mode: str | None = None,
     **kwargs,
-) -> LasertagParallelEnv:
+):
     """A PettingZoo ParallelEnv whose agents are the robots of a lasertag match.
 
-    - ``server``: None starts a local ``lasertag serve`` (stopped by ``close()``); a URL
-      uses a running server (``admin_token=``, default $LASERTAG_ADMIN_TOKEN, lifts its
-      per-address limits); a :class:`LocalServer` is shared and left running.
-    - ``map``: a map name on the server, or an inline map object (docs/map-format.md).
+    - ``server``: None (the default) steps the match in-process with the package's native
+      engine (:class:`~lasertag_env.native.NativeParallelEnv`); ``"local"`` starts a local
+      ``lasertag serve`` (stopped by ``close()``) and drives it over HTTP; a URL uses a
+      running server (``admin_token=``, default $LASERTAG_ADMIN_TOKEN, lifts its
+      per-address limits); a :class:`LocalServer` is shared and left running. Both
+      backends give the same episodes for the same seed and actions.
+    - ``map``: a map name (the shipped maps in-process, the server's maps over HTTP), or an
+      inline map object (docs/map-format.md).
     - ``robots`` agents ``r0 …``; ``opponents`` bots of kind ``opponent_bot``
-      (``wander``, ``evade``, ``idle``); both within the server's bounds (``GET /api/rules``,
+      (``wander``, ``evade``, ``idle``); both within the rules' bounds (``GET /api/rules``,
       kept as ``env.rules``).
     - ``seed``: the first episode's match seed (see ``reset``).
     - ``max_steps``: steps before truncation (None: only the match's time limit,
       ``time_limit_s``, 300 s by default); ``ticks_per_step`` ticks (``env.rules["tick_hz"]``
       to a second) per step.
     - ``render_mode``: None or ``"rgb_array"``.
-    - keywords: ``admin_token``, ``time_limit_s``, ``placement`` (``"spawns"`` or
-      ``"random"``), ``detections`` (slots in the observation, default ``opponents``),
-      ``rewards`` (weights, see ``DEFAULT_REWARDS``), ``match_settings`` (further fields of
+    - keywords: ``time_limit_s``, ``placement`` (``"spawns"`` or ``"random"``),
+      ``detections`` (slots in the observation, default ``opponents``), ``rewards``
+      (weights, see ``DEFAULT_REWARDS``), ``match_settings`` (further fields of
       ``POST /api/matches``: ``localisation``, ``tracker``, ``radio``, …),
-      ``team_tracker`` (True: the server's team tracker at its default size rather than
-      its minimum; the observations are the same), ``pixels_per_metre`` (rendering),
-      ``packed_scans`` (False: the server writes the scans as JSON numbers rather than
-      hex; the observations are the same, bit for bit, and slower to get).
+      ``team_tracker`` (True: the team tracker at its default size rather than its
+      minimum; the observations are the same), ``pixels_per_metre`` (rendering); over
+      HTTP also ``admin_token`` and ``packed_scans`` (False: the server writes the scans as
+      JSON numbers rather than hex; the observations are the same, bit for bit, and
+      slower to get).
     """
-    return LasertagParallelEnv(
-        server=server, map=map, robots=robots, opponents=opponents, seed=seed,
-        opponent_bot=opponent_bot, max_steps=max_steps, ticks_per_step=ticks_per_step,
-        render_mode=render_mode, **kwargs,
+    args = dict(
+        map=map, robots=robots, opponents=opponents, seed=seed, opponent_bot=opponent_bot,
+        max_steps=max_steps, ticks_per_step=ticks_per_step, render_mode=render_mode, **kwargs,
     )
+    if server is None:
+        from .native import NativeParallelEnv
+
+        for http_only in ("admin_token", "packed_scans"):
+            if http_only in kwargs:
+                raise TypeError(f"{http_only} is an argument of the HTTP backend (give a server)")
+        return NativeParallelEnv(**args)
+    return LasertagParallelEnv(server=None if server == "local" else server, **args)

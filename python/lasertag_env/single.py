@@ -14,7 +14,7 @@ import gymnasium
 import numpy as np
 
 from . import policies
-from .parallel import TICK_HZ, LasertagParallelEnv
+from .parallel import TICK_HZ, parallel_env
 
 __all__ = ["LasertagEnv", "single_agent_env"]
 
@@ -45,7 +45,7 @@ class LasertagEnv(gymnasium.Env):
         elif not callable(others):
             raise TypeError("others must be 'idle', 'hunter' or a callable")
         self._others = others
-        self.par = LasertagParallelEnv(render_mode=render_mode, **kwargs)
+        self.par = parallel_env(render_mode=render_mode, **kwargs)
         robots = len(self.par.possible_agents)
         if not 0 <= robot < robots:
             self.par.close()
@@ -54,22 +54,19 @@ class LasertagEnv(gymnasium.Env):
         self.render_mode = render_mode
         self.observation_space = self.par.observation_space(self.agent)
         self.action_space = self.par.action_space(self.agent)
-        self._raw: dict[str, dict] = {}
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)
         obs, infos = self.par.reset(seed=seed, options=options)
-        self._raw = {a: i["observation"] for a, i in infos.items()}
         return obs[self.agent], infos[self.agent]
 
     def step(self, action):
         actions = {self.agent: action}
         if self._others is not policies.idle:
-            for a, raw in self._raw.items():
+            for a in self.par.possible_agents:
                 if a != self.agent:
-                    actions[a] = self._others(raw)
+                    actions[a] = self._others(self.par.raw_observation(a))
         obs, rewards, terms, truncs, infos = self.par.step(actions)
-        self._raw = {a: i["observation"] for a, i in infos.items()}
         a = self.agent
         return obs[a], float(rewards[a]), bool(terms[a]), bool(truncs[a]), infos[a]
 

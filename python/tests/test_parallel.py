@@ -249,11 +249,11 @@ def test_no_server_there():
 def test_missing_binary_is_named(monkeypatch, tmp_path):
     monkeypatch.setenv("LASERTAG_BIN", str(tmp_path / "lasertag"))
     with pytest.raises(lasertag_env.BinaryNotFound, match="LASERTAG_BIN"):
-        lasertag_env.parallel_env()
+        lasertag_env.parallel_env(server="local")
 
 
 def test_own_server_starts_and_stops():
-    env = lasertag_env.parallel_env(max_steps=5)
+    env = lasertag_env.parallel_env(server="local", max_steps=5)
     own = env._owned_server
     assert own is not None and own.running()
     env.reset(seed=1)
@@ -270,7 +270,7 @@ def test_own_server_stops_at_interpreter_exit(tmp_path):
 
     script = (
         "import lasertag_env\n"
-        "env = lasertag_env.parallel_env()\n"
+        "env = lasertag_env.parallel_env(server='local')\n"
         "env.reset()\n"
         "print(env._owned_server.pid, flush=True)\n"
     )
