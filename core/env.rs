@@ -287,7 +287,8 @@ impl Episode {
         self.observe(spec, 0.0, out);
     }
 
-    fn observe(&self, spec: &EnvSpec, time_fraction: f64, out: &mut [f32]) {
+    /// Every robot's vector into `out` (robots × `layout.size()`).
+    pub fn observe(&self, spec: &EnvSpec, time_fraction: f64, out: &mut [f32]) {
         let size = spec.layout.size();
         for (i, row) in out.chunks_exact_mut(size).enumerate() {
             if let Some(o) = self.world.observation(i) {
@@ -306,6 +307,20 @@ impl Episode {
         obs: &mut [f32],
         rewards: &mut [f64],
     ) -> Outcome {
+        let (outcome, time_fraction) = self.advance(spec, actions, rewards);
+        self.observe(spec, time_fraction, obs);
+        outcome
+    }
+
+    /// The first part of [`Episode::step`] (public to time the parts apart): the actions
+    /// applied, the ticks run and the rewards written. Returns the outcome and the
+    /// episode's time fraction, which [`Episode::observe`] puts in the vectors.
+    pub fn advance(
+        &mut self,
+        spec: &EnvSpec,
+        actions: &[f32],
+        rewards: &mut [f64],
+    ) -> (Outcome, f64) {
         let inputs: Vec<WorldInput> = actions
             .chunks_exact(ACTION_SIZE)
             .take(self.world.robots.len())
@@ -360,14 +375,14 @@ impl Episode {
             None => (self.world.tick as f64 / self.limit_ticks).min(1.0),
             Some(m) => (self.steps as f64 / m as f64).min(1.0),
         };
-        self.observe(spec, time_fraction, obs);
-        Outcome {
+        let outcome = Outcome {
             tick: self.world.tick,
             terminated: won,
             truncated,
             winner: if finished { self.world.winner } else { None },
             reason,
-        }
+        };
+        (outcome, time_fraction)
     }
 }
 

@@ -12,6 +12,7 @@
 mod config;
 
 use std::sync::Arc;
+use std::time::{Duration, Instant};
 
 use numpy::{
     PyReadonlyArray2, PyReadonlyArray3, PyReadwriteArray1, PyReadwriteArray2, PyReadwriteArray3,
@@ -294,6 +295,45 @@ impl Engine {
                 });
         });
         Ok(())
+    }
+
+    /// `steps` steps of world `world` with `actions` (robots × 3), timing the ticks (with
+    /// the rewards) apart from the observation vectors: (ticks seconds, vectors seconds).
+    /// The world goes on from where it was, and starts afresh when its episode ends.
+    fn time_parts(
+        &mut self,
+        py: Python<'_>,
+        world: usize,
+        steps: usize,
+        actions: PyReadonlyArray2<'_, f32>,
+    ) -> PyResult<(f64, f64)> {
+        let robots = self.spec.config.robots;
+        let actions = actions.as_slice().map_err(value_error)?;
+        check_len("actions", actions.len(), robots * ACTION_SIZE)?;
+        let mut obs = vec![0.0; robots * self.spec.layout.size()];
+        let mut rewards = vec![0.0; robots];
+        let (arena, spec) = (&self.arena, &self.spec);
+        let n = self.slots.len();
+        let slot = self
+            .slots
+            .get_mut(world)
+            .ok_or_else(|| PyIndexError::new_err(format!("world {world}: out of range 0..{n}")))?;
+        Ok(py.detach(|| {
+            let (mut ticks, mut vectors) = (Duration::ZERO, Duration::ZERO);
+            for _ in 0..steps {
+                let t0 = Instant::now();
+                let (out, time_fraction) = slot.episode.advance(spec, actions, &mut rewards);
+                let t1 = Instant::now();
+                slot.episode.observe(spec, time_fraction, &mut obs);
+                vectors += t1.elapsed();
+                ticks += t1 - t0;
+                if out.terminated || out.truncated {
+                    slot.ended = true;
+                    step_world(arena, spec, slot, actions, &mut obs, &mut rewards);
+                }
+            }
+            (ticks.as_secs_f64(), vectors.as_secs_f64())
+        }))
     }
 
     /// World `world`'s state digest (`World::digest`): two runs agree on it only if they

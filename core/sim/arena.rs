@@ -12,7 +12,7 @@ use std::any::Any;
 use std::sync::{Arc, Mutex};
 
 use crate::sim::AGENT_RADIUS;
-use crate::sim::segments::SegmentGrid;
+use crate::sim::segments::{SegmentBins, SegmentGrid};
 
 /// A map after validation: plain data, no serialisation concerns (see `maps.rs` for the file format).
 #[derive(Debug, Clone, PartialEq)]
@@ -39,6 +39,8 @@ pub struct Arena {
     walls: Polyline,
     /// The same edges bucketed on a coarse grid, for the laser's many short ray casts.
     buckets: SegmentGrid,
+    /// The same edges binned coarsely, for a whole fan of rays from one point.
+    bins: SegmentBins,
     pub grid: ClearanceGrid,
     /// Tables derived from the map and built once (the planner's candidate views, the
     /// localiser's likelihood fields), shared by every match on it. The arena keeps them
@@ -69,10 +71,12 @@ impl Arena {
         let walls = Polyline::new(vertices, Some(indices));
         let grid = ClearanceGrid::build(&def, &walls);
         let buckets = SegmentGrid::build(def.width, def.height, &walls);
+        let bins = SegmentBins::build(def.width, def.height, &walls);
         Arena {
             def,
             walls,
             buckets,
+            bins,
             grid,
             derived: Mutex::new(Vec::new()),
         }
@@ -118,6 +122,22 @@ impl Arena {
     /// about three times faster than the general BVH query ([`Arena::cast_ray_bvh`]).
     pub fn cast_ray(&self, origin: Point2<f32>, dir: Vector2<f32>, max: f32) -> f32 {
         self.buckets.cast(origin, dir, max)
+    }
+
+    /// [`Arena::cast_ray`] for every ray of a laser's fan from `origin`, into `out`: `dirs`
+    /// are unit vectors in counter-clockwise order, each less than a half turn from the unit
+    /// vector `heading`. The same distances as one `cast_ray` a ray, bit for bit, in a
+    /// fraction of the time: each wall near the origin is tested only against the rays
+    /// within the angle it subtends.
+    pub fn cast_fan(
+        &self,
+        origin: Point2<f32>,
+        heading: Vector2<f32>,
+        dirs: &[Vector2<f32>],
+        max: f32,
+        out: &mut [f32],
+    ) {
+        self.bins.cast_fan(origin, heading, dirs, max, out)
     }
 
     /// [`Arena::cast_ray`] through parry's BVH: the reference the fast path is tested against.
@@ -172,6 +192,7 @@ impl Arena {
         // segment; the definition keeps its own copy of the vertices.
         vertices * (2 * 8 + 8 + 2 * 64)
             + self.buckets.heap_bytes()
+            + self.bins.heap_bytes()
             + self.grid.clearance.len() * std::mem::size_of::<f32>()
     }
 
@@ -539,5 +560,72 @@ mod tests {
         assert!(a.grid.passable(open));
         let near = a.grid.nearest_passable(Point2::new(5.0, 3.0), 30).unwrap();
         assert!(a.grid.passable(near));
+    }
+
+    #[test]
+    fn a_fan_cast_gives_every_ray_cast_bit_for_bit() {
+        use rand::{RngExt, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
+        // Rooms of random rectangles and thin, tilted walls; a 180° laser and a wider one.
+        for map in 0..6 {
+            let (w, h) = (
+                rng.random_range(8.0..40.0f32),
+                rng.random_range(6.0..30.0f32),
+            );
+            let mut obstacles = Vec::new();
+            for _ in 0..rng.random_range(3..40) {
+                let (x, y) = (
+                    rng.random_range(0.0..w - 1.0),
+                    rng.random_range(0.0..h - 1.0),
+                );
+                let (dx, dy) = (rng.random_range(0.1..4.0f32), rng.random_range(0.1..4.0f32));
+                let tilt = rng.random_range(-1.0..1.0f32);
+                obstacles.push(vec![
+                    Point2::new(x, y),
+                    Point2::new((x + dx).min(w), (y + tilt).clamp(0.0, h)),
+                    Point2::new((x + dx).min(w), (y + tilt + dy).clamp(0.0, h)),
+                    Point2::new(x, (y + dy).min(h)),
+                ]);
+            }
+            let a = Arena::new(MapDef {
+                name: format!("random{map}"),
+                width: w,
+                height: h,
+                obstacles,
+                robot_spawns: vec![[0.5, 0.5, 0.0]],
+                opponent_spawns: vec![Point2::new(w - 0.5, h - 0.5)],
+                landmarks: vec![],
+            });
+            for fan in 0..300 {
+                let o = Point2::new(
+                    rng.random_range(0.01..w - 0.01),
+                    rng.random_range(0.01..h - 0.01),
+                );
+                let theta = rng.random_range(-4.0..4.0f32);
+                let (n, fov) = if fan % 2 == 0 {
+                    (181, std::f32::consts::PI)
+                } else {
+                    (64, 5.5)
+                };
+                let dirs: Vec<Vector2<f32>> = (0..n)
+                    .map(|i| {
+                        let b = theta - fov / 2.0 + fov * i as f32 / (n - 1) as f32;
+                        Vector2::new(b.cos(), b.sin())
+                    })
+                    .collect();
+                let heading = Vector2::new(theta.cos(), theta.sin());
+                let mut out = vec![0.0; n];
+                a.cast_fan(o, heading, &dirs, 8.0, &mut out);
+                for (i, d) in dirs.iter().enumerate() {
+                    let want = a.cast_ray(o, *d, 8.0);
+                    assert_eq!(
+                        out[i].to_bits(),
+                        want.to_bits(),
+                        "map {map}, fan {fan}, beam {i}: {} against {want}",
+                        out[i]
+                    );
+                }
+            }
+        }
     }
 }

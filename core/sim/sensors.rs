@@ -80,12 +80,27 @@ pub fn scan(
         .filter(|(_, c)| (c - pose.pos).norm() <= max + AGENT_RADIUS)
         .copied()
         .collect();
+    let dirs: Vec<Vector2<f32>> = (0..n)
+        .map(|i| {
+            let a = pose.theta + beam_bearing(i, n, physics.laser_fov);
+            Vector2::new(a.cos(), a.sin())
+        })
+        .collect();
+    // The walls for the whole fan at once (the same distances as a cast a beam); a fan that
+    // closes the circle has no "behind" to order its beams from, so it casts beam by beam.
+    let mut walls = vec![max; n];
+    if physics.laser_fov < std::f32::consts::TAU - 1e-3 {
+        let heading = Vector2::new(pose.theta.cos(), pose.theta.sin());
+        arena.cast_fan(pose.pos, heading, &dirs, max, &mut walls);
+    } else {
+        for (w, dir) in walls.iter_mut().zip(&dirs) {
+            *w = arena.cast_ray(pose.pos, *dir, max);
+        }
+    }
     let mut ranges = Vec::with_capacity(n);
     let mut seen: Vec<usize> = Vec::new();
-    for i in 0..n {
-        let a = pose.theta + beam_bearing(i, n, physics.laser_fov);
-        let dir = Vector2::new(a.cos(), a.sin());
-        let mut best = arena.cast_ray(pose.pos, dir, max);
+    for (&dir, &wall) in dirs.iter().zip(&walls) {
+        let mut best = wall;
         let mut hit = None;
         for (id, c) in &near {
             if let Some(t) = ray_disc(pose.pos, dir, *c, AGENT_RADIUS)
