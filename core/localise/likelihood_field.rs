@@ -91,20 +91,27 @@ impl LikelihoodField {
     }
 
     /// Log-likelihood of a beam ending at (x, y).
+    #[inline]
     pub fn log_likelihood(&self, x: f32, y: f32) -> f32 {
         let fx = (x - self.origin.x) / self.step;
         let fy = (y - self.origin.y) / self.step;
-        if !(fx >= 0.0 && fy >= 0.0) {
+        // The cell and the next one each way are in the table: `floor(fx) + 1 < cols` is
+        // `fx < cols - 1` (exact in f32 for any table this size); NaN fails as well. The
+        // checked bounds make the integer conversions plain truncations.
+        let (last_col, last_row) = ((self.cols - 1) as f32, (self.rows - 1) as f32);
+        if !(fx >= 0.0 && fy >= 0.0 && fx < last_col && fy < last_row) {
             return self.log_outside;
         }
-        let (c, r) = (fx as usize, fy as usize);
-        if c + 1 >= self.cols || r + 1 >= self.rows {
-            return self.log_outside;
-        }
+        let (c, r) = (fx as u32 as usize, fy as u32 as usize);
         let (tx, ty) = (fx - c as f32, fy - r as f32);
         let i = r * self.cols + c;
-        let lo = self.log_p[i] * (1.0 - tx) + self.log_p[i + 1] * tx;
-        let hi = self.log_p[i + self.cols] * (1.0 - tx) + self.log_p[i + self.cols + 1] * tx;
+        // Two cells of this row and two of the next: two bounds checks, not four.
+        let (top, bottom) = (
+            &self.log_p[i..i + 2],
+            &self.log_p[i + self.cols..i + self.cols + 2],
+        );
+        let lo = top[0] * (1.0 - tx) + top[1] * tx;
+        let hi = bottom[0] * (1.0 - tx) + bottom[1] * tx;
         lo * (1.0 - ty) + hi * ty
     }
 

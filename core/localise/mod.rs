@@ -22,6 +22,7 @@ pub use likelihood_field::LikelihoodField;
 pub use tuning::Settings;
 
 use std::collections::HashSet;
+use std::hash::{BuildHasherDefault, Hasher};
 use std::sync::Arc;
 
 use nalgebra::{Point2, Vector2};
@@ -310,7 +311,7 @@ impl Localiser {
             cumulative.push(acc);
         }
         let s = &self.settings;
-        let mut bins: HashSet<(i32, i32, i32)> = HashSet::new();
+        let mut bins: HashSet<(i32, i32, i32), BuildHasherDefault<BinHasher>> = HashSet::default();
         let mut out: Vec<Pose> = Vec::with_capacity(s.max_particles);
         let mut needed = s.min_particles;
         while out.len() < needed.max(s.min_particles) && out.len() < s.max_particles {
@@ -418,40 +419,57 @@ impl Localiser {
 const CLUSTER_BIN: f32 = 0.5;
 
 /// Marks the particles of the cluster holding the most weight.
+///
+/// The bins are a sorted vector searched by bisection (a sorted map's order, so ties between
+/// clusters break the same way every run, without a tree's allocations): each bin's weight
+/// sums its particles in their order, clusters are numbered in key order and flooded
+/// depth-first, so every sum is taken in one fixed order.
 fn heaviest_cluster(particles: &[Pose], weights: &[f64]) -> Vec<bool> {
-    use std::collections::BTreeMap;
     let key = |p: &Pose| {
         (
             (p.pos.x / CLUSTER_BIN).floor() as i32,
             (p.pos.y / CLUSTER_BIN).floor() as i32,
         )
     };
-    // A BTreeMap, not a HashMap: ties between clusters must break the same way every run.
-    let mut bins: BTreeMap<(i32, i32), (f64, usize)> = BTreeMap::new();
-    for (p, w) in particles.iter().zip(weights) {
-        bins.entry(key(p)).or_insert((0.0, usize::MAX)).0 += w;
+    let keys: Vec<(i32, i32)> = particles.iter().map(key).collect();
+    // Particle indices by key, and within a key in particle order (a stable sort).
+    let mut order: Vec<u32> = (0..particles.len() as u32).collect();
+    order.sort_by_key(|&i| keys[i as usize]);
+    // One entry a bin: (key, weight, cluster); and each particle's bin.
+    let mut bins: Vec<((i32, i32), f64, usize)> = Vec::new();
+    let mut bin_of = vec![0u32; particles.len()];
+    for &i in &order {
+        let k = keys[i as usize];
+        if bins.last().is_none_or(|b| b.0 != k) {
+            bins.push((k, 0.0, usize::MAX));
+        }
+        let last = bins.len() - 1;
+        bins[last].1 += weights[i as usize];
+        bin_of[i as usize] = last as u32;
     }
-    let keys: Vec<(i32, i32)> = bins.keys().copied().collect();
+    let find = |bins: &[((i32, i32), f64, usize)], k: (i32, i32)| {
+        bins.binary_search_by(|b| b.0.cmp(&k)).ok()
+    };
     let mut cluster_weight: Vec<f64> = Vec::new();
-    for start in keys {
-        if bins[&start].1 != usize::MAX {
+    let mut stack = Vec::new();
+    for start in 0..bins.len() {
+        if bins[start].2 != usize::MAX {
             continue;
         }
         let id = cluster_weight.len();
         let mut weight = 0.0;
-        let mut stack = vec![start];
-        if let Some(b) = bins.get_mut(&start) {
-            b.1 = id;
-        }
-        while let Some((bx, by)) = stack.pop() {
-            weight += bins[&(bx, by)].0;
+        bins[start].2 = id;
+        stack.push(start);
+        while let Some(b) = stack.pop() {
+            weight += bins[b].1;
+            let (bx, by) = bins[b].0;
             for dx in -1..=1 {
                 for dy in -1..=1 {
-                    if let Some(b) = bins.get_mut(&(bx + dx, by + dy))
-                        && b.1 == usize::MAX
+                    if let Some(n) = find(&bins, (bx + dx, by + dy))
+                        && bins[n].2 == usize::MAX
                     {
-                        b.1 = id;
-                        stack.push((bx + dx, by + dy));
+                        bins[n].2 = id;
+                        stack.push(n);
                     }
                 }
             }
@@ -465,7 +483,34 @@ fn heaviest_cluster(particles: &[Pose], weights: &[f64]) -> Vec<bool> {
             if *w > acc.1 { (i, *w) } else { acc }
         })
         .0;
-    particles.iter().map(|p| bins[&key(p)].1 == best).collect()
+    bin_of.iter().map(|&b| bins[b as usize].2 == best).collect()
+}
+
+/// The hash of KLD-sampling's bins (FxHash's multiply and rotate). The standard SipHash
+/// resists keys an adversary chooses, which bins of the filter's own particles are not, and
+/// cost more than the rest of a particle's resampling; the set's answers (is this bin new?)
+/// do not depend on the hash. Written here because the core depends on no hashing crate.
+#[derive(Default)]
+struct BinHasher(u64);
+
+impl Hasher for BinHasher {
+    fn write(&mut self, bytes: &[u8]) {
+        for b in bytes {
+            self.write_u64(*b as u64);
+        }
+    }
+
+    fn write_i32(&mut self, v: i32) {
+        self.write_u64(v as u32 as u64);
+    }
+
+    fn write_u64(&mut self, v: u64) {
+        self.0 = (self.0.rotate_left(5) ^ v).wrapping_mul(0x517c_c1b7_2722_0a95);
+    }
+
+    fn finish(&self) -> u64 {
+        self.0
+    }
 }
 
 /// Every how many beams to use so that about `wanted` of `n` are used.
