@@ -183,6 +183,22 @@ pub fn match_config(settings: &Bound<'_, PyDict>) -> PyResult<MatchConfig> {
                 opponent_starts = points::<2>(&value, &key)?;
             }
             "localisation" => config.localisation = get(&value, &key)?,
+            // The built-in planners drive the robots and the actions are ignored: the
+            // paper's planners measured on the environment's own episodes.
+            "planner" => {
+                let name: String = get(&value, &key)?;
+                config.planner = match name.as_str() {
+                    "api" => PlannerKind::Api,
+                    "coordinated" => PlannerKind::Coordinated,
+                    "baseline" => PlannerKind::Baseline,
+                    _ => {
+                        return Err(refuse(
+                            &key,
+                            format!("{name:?}: the planners are api, coordinated, baseline"),
+                        ));
+                    }
+                };
+            }
             "tracker" => config.tracker = group(config.tracker.clone(), &value)?,
             "coordination" => config.coordination = group(config.coordination.clone(), &value)?,
             "radio" => config.radio = group(config.radio.clone(), &value)?,
@@ -193,7 +209,8 @@ pub fn match_config(settings: &Bound<'_, PyDict>) -> PyResult<MatchConfig> {
                     &key,
                     "not a setting of the in-process engine (it takes robots, opponents, \
                      opponent_bot, time_limit_s, placement, robot_starts, opponent_starts, \
-                     localisation, tracker, coordination, radio, odometry, localiser)",
+                     localisation, tracker, coordination, radio, odometry, localiser; \
+                     vector_env also planner)",
                 ));
             }
         }

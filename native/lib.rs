@@ -185,18 +185,25 @@ impl Engine {
 
     /// Every world's next episode, its vectors into `obs` (worlds × robots × size). The
     /// seeds come from each world's stream; `seed` starts the streams over (world `w`'s
-    /// first episode then has seed `seed + w`).
-    #[pyo3(signature = (obs, seed=None))]
+    /// first episode then has seed `seed + w`), and `seeds` gives each world's first seed
+    /// itself (its later ones come from a stream seeded by it).
+    #[pyo3(signature = (obs, seed=None, seeds=None))]
     fn reset_all(
         &mut self,
         mut obs: PyReadwriteArray3<'_, f32>,
         seed: Option<u64>,
+        seeds: Option<Vec<u64>>,
     ) -> PyResult<()> {
         let out = obs.as_slice_mut().map_err(value_error)?;
         let per_world = self.spec.config.robots * self.spec.layout.size();
         check_len("obs", out.len(), per_world * self.slots.len())?;
-        if let Some(base) = seed {
-            for (i, slot) in self.slots.iter_mut().enumerate() {
+        if let Some(seeds) = &seeds {
+            check_len("seeds", seeds.len(), self.slots.len())?;
+        }
+        for (i, slot) in self.slots.iter_mut().enumerate() {
+            if let Some(seeds) = &seeds {
+                slot.seeds = EpisodeSeeds::new(seeds[i], 0);
+            } else if let Some(base) = seed {
                 slot.seeds = EpisodeSeeds::new(base, i as u64);
             }
         }
@@ -297,19 +304,26 @@ impl Engine {
         Ok(())
     }
 
-    /// `steps` steps of world `world` with `actions` (robots × 3), timing the ticks (with
-    /// the rewards) apart from the observation vectors: (ticks seconds, vectors seconds).
-    /// The world goes on from where it was, and starts afresh when its episode ends.
+    /// `steps` steps of world `world`, step `k` with `actions[k % len]` (each robots × 3),
+    /// timing the ticks (with the rewards) apart from the observation vectors: (ticks
+    /// seconds, vectors seconds). The world goes on from where it was, and starts afresh
+    /// when its episode ends.
     fn time_parts(
         &mut self,
         py: Python<'_>,
         world: usize,
         steps: usize,
-        actions: PyReadonlyArray2<'_, f32>,
+        actions: PyReadonlyArray3<'_, f32>,
     ) -> PyResult<(f64, f64)> {
         let robots = self.spec.config.robots;
         let actions = actions.as_slice().map_err(value_error)?;
-        check_len("actions", actions.len(), robots * ACTION_SIZE)?;
+        let per_step = robots * ACTION_SIZE;
+        if actions.is_empty() || actions.len() % per_step != 0 {
+            return Err(PyValueError::new_err(format!(
+                "actions: {} values, a multiple of {per_step} (steps × robots × 3) is needed",
+                actions.len()
+            )));
+        }
         let mut obs = vec![0.0; robots * self.spec.layout.size()];
         let mut rewards = vec![0.0; robots];
         let (arena, spec) = (&self.arena, &self.spec);
@@ -320,16 +334,16 @@ impl Engine {
             .ok_or_else(|| PyIndexError::new_err(format!("world {world}: out of range 0..{n}")))?;
         Ok(py.detach(|| {
             let (mut ticks, mut vectors) = (Duration::ZERO, Duration::ZERO);
-            for _ in 0..steps {
+            for a in actions.chunks_exact(per_step).cycle().take(steps) {
                 let t0 = Instant::now();
-                let (out, time_fraction) = slot.episode.advance(spec, actions, &mut rewards);
+                let (out, time_fraction) = slot.episode.advance(spec, a, &mut rewards);
                 let t1 = Instant::now();
                 slot.episode.observe(spec, time_fraction, &mut obs);
                 vectors += t1.elapsed();
                 ticks += t1 - t0;
                 if out.terminated || out.truncated {
                     slot.ended = true;
-                    step_world(arena, spec, slot, actions, &mut obs, &mut rewards);
+                    step_world(arena, spec, slot, a, &mut obs, &mut rewards);
                 }
             }
             (ticks.as_secs_f64(), vectors.as_secs_f64())

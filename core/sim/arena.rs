@@ -3,6 +3,9 @@
 //!
 //! An `Arena` is built once per map from a validated [`MapDef`] and shared (`Arc`) by every
 //! match on that map: it never changes while a match runs.
+//!
+//! Long file: each fast path (the segment grid's ray cast, the fan cast, the clearance grid)
+//! sits beside the test that pins it to its reference, bit for bit.
 
 use nalgebra::{Point2, Vector2};
 use parry2d::query::{PointQuery, Ray, RayCast};

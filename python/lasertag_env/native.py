@@ -63,7 +63,7 @@ class _Setup:
 
     def __init__(self, *, worlds, map, robots, opponents, seed, opponent_bot, max_steps,
                  ticks_per_step, render_mode, render_modes, time_limit_s, placement,
-                 detections, rewards, match_settings, team_tracker):
+                 detections, rewards, match_settings, team_tracker, planner="api"):
         check_arguments(
             robots=robots, opponents=opponents, ticks_per_step=ticks_per_step, seed=seed,
             max_steps=max_steps, detections=detections, render_mode=render_mode,
@@ -80,6 +80,8 @@ class _Setup:
         settings: dict[str, Any] = {
             "robots": robots, "opponents": opponents, "opponent_bot": opponent_bot,
         }
+        if planner != "api":
+            settings["planner"] = planner
         if time_limit_s is not None:
             settings["time_limit_s"] = time_limit_s
         if placement is not None:
@@ -331,7 +333,9 @@ class LasertagVectorEnv(VectorEnv):
     a :class:`NativeParallelEnv` or on a server.
 
     ``copy=False`` returns the engine's own arrays (no copy per step; the next step
-    overwrites them).
+    overwrites them). ``planner="coordinated"`` or ``"baseline"`` has the paper's planners
+    drive the robots instead of the actions (which are then ignored): their episodes,
+    rewards and capture times in the same harness as a learned policy's.
     """
 
     metadata = {
@@ -356,6 +360,7 @@ class LasertagVectorEnv(VectorEnv):
         match_settings: dict | None = None,
         team_tracker: bool = False,
         copy: bool = True,
+        planner: str = "api",
     ):
         if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) or num_envs < 1:
             raise ValueError(f"num_envs: {num_envs!r} must be a positive integer")
@@ -364,7 +369,7 @@ class LasertagVectorEnv(VectorEnv):
             opponent_bot=opponent_bot, max_steps=max_steps, ticks_per_step=ticks_per_step,
             render_mode=None, render_modes=[], time_limit_s=time_limit_s,
             placement=placement, detections=detections, rewards=rewards,
-            match_settings=match_settings, team_tracker=team_tracker,
+            match_settings=match_settings, team_tracker=team_tracker, planner=planner,
         )
         self._engine = self._setup.engine
         self.layout = self._setup.layout
@@ -392,11 +397,28 @@ class LasertagVectorEnv(VectorEnv):
         """Each world's current episode seed."""
         return self._engine.seeds
 
-    def reset(self, *, seed: int | None = None, options: dict | None = None):
-        if seed is not None:
+    def reset(self, *, seed: int | list[int] | None = None, options: dict | None = None):
+        """Starts every world's next episode. ``seed``: an int starts the seed streams over
+        (world ``w``'s episode gets ``seed + w``); a list gives each world's seed (one per
+        world, not per entry); None goes on with each world's stream (the constructor's
+        ``seed`` the first time)."""
+        seeds = None
+        if isinstance(seed, (list, tuple, np.ndarray)):
+            seeds = [int(s) for s in seed]
+            if len(seeds) != self.num_worlds:
+                raise ValueError(
+                    f"seed: {len(seeds)} seeds, one per world is {self.num_worlds}"
+                )
+            for s in seeds:
+                check_seed(s)
+            base = None
+        elif seed is not None:
             check_seed(seed)
             self._seed = int(seed)
-        self._engine.reset_all(self._obs, self._seed if seed is not None or not self._reset_done else None)
+            base = self._seed
+        else:
+            base = None if self._reset_done else self._seed
+        self._engine.reset_all(self._obs, base, seeds)
         self._reset_done = True
         obs = self._obs.reshape(self.num_envs, -1)
         return (obs.copy() if self.copy else obs), {}

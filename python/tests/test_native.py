@@ -200,3 +200,26 @@ def test_bad_arguments_are_refused_clearly():
     env.reset(seed=1)
     with pytest.raises(ValueError, match="action of r1"):
         env.step({"r0": [0, 0, 0], "r1": [1.0, 0.5]})
+
+
+def test_a_seed_per_world_and_the_papers_planners_in_the_same_harness():
+    v = lasertag_env.vector_env(3, planner="coordinated", ticks_per_step=4, max_steps=400)
+    v.reset(seed=[5, 5, 9])
+    assert v.episode_seeds == [5, 5, 9]
+    zero = np.zeros((v.num_envs, 3), np.float32)
+    ended_at = [None] * 3
+    for k in range(400):
+        _, _, term, trunc, _ = v.step(zero)
+        for w in range(3):
+            if ended_at[w] is None and (term[2 * w] or trunc[2 * w]):
+                ended_at[w] = (k, bool(term[2 * w]))
+        if all(ended_at):
+            break
+    # The coordinated robots capture the wanderer on their own (the actions are ignored),
+    # the same way for the same seed.
+    assert all(e is not None and e[1] for e in ended_at), ended_at
+    assert ended_at[0] == ended_at[1]
+    with pytest.raises(ValueError, match="seed: 2 seeds, one per world is 3"):
+        v.reset(seed=[1, 2])
+    with pytest.raises(ValueError, match="planner"):
+        lasertag_env.vector_env(1, planner="clever")
