@@ -115,6 +115,141 @@ impl LikelihoodField {
         lo * (1.0 - ty) + hi * ty
     }
 
+    /// For each pose `(x, y, sin θ, cos θ)`, the sum of [`LikelihoodField::log_likelihood`]
+    /// over the beam end points `local` (in the robot's frame) carried into the world by
+    /// that pose, added in the order of `local`, into `out`.
+    ///
+    /// The localiser's hot loop (particles × beams lookups). On a CPU with AVX2 it runs
+    /// eight poses a lane each: the same operations in the same order on every lane (IEEE
+    /// single precision, no fused multiply-add, truncating conversions of in-range values),
+    /// so the sums are the scalar loop's bit for bit (a test compares them).
+    pub fn beam_sums(&self, poses: &[[f32; 4]], local: &[(f32, f32)], out: &mut [f32]) {
+        let n = poses.len().min(out.len());
+        let mut done = 0;
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx2") {
+            done = n - n % 8;
+            // SAFETY: the CPU has AVX2 (checked above), and `beam_sums_avx2` reads the
+            // table only at indices it has bounds-checked lane by lane.
+            unsafe { self.beam_sums_avx2(&poses[..done], local, &mut out[..done]) };
+        }
+        self.beam_sums_scalar(&poses[done..n], local, &mut out[done..n]);
+    }
+
+    pub(super) fn beam_sums_scalar(
+        &self,
+        poses: &[[f32; 4]],
+        local: &[(f32, f32)],
+        out: &mut [f32],
+    ) {
+        for ([px, py, s, c], l) in poses.iter().zip(out) {
+            let mut sum = 0.0f32;
+            for &(lx, ly) in local {
+                let x = px + c * lx - s * ly;
+                let y = py + s * lx + c * ly;
+                sum += self.log_likelihood(x, y);
+            }
+            *l = sum;
+        }
+    }
+
+    /// [`LikelihoodField::beam_sums_scalar`] eight poses at a time (`poses.len()` a multiple
+    /// of 8).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    unsafe fn beam_sums_avx2(&self, poses: &[[f32; 4]], local: &[(f32, f32)], out: &mut [f32]) {
+        use std::arch::x86_64::*;
+        let cols = self.cols as i32;
+        let table = self.log_p.as_ptr();
+        let ox = _mm256_set1_ps(self.origin.x);
+        let oy = _mm256_set1_ps(self.origin.y);
+        let step = _mm256_set1_ps(self.step);
+        let zero = _mm256_setzero_ps();
+        let one = _mm256_set1_ps(1.0);
+        let last_col = _mm256_set1_ps((self.cols - 1) as f32);
+        let last_row = _mm256_set1_ps((self.rows - 1) as f32);
+        let outside = _mm256_set1_ps(self.log_outside);
+        let vcols = _mm256_set1_epi32(cols);
+        let next_row = _mm256_set1_epi32(cols + 1);
+        for (group, sums) in poses.chunks_exact(8).zip(out.chunks_exact_mut(8)) {
+            let lane = |k: usize| -> __m256 {
+                let v: [f32; 8] = std::array::from_fn(|i| group[i][k]);
+                // SAFETY: an unaligned load of eight floats from a local array.
+                unsafe { _mm256_loadu_ps(v.as_ptr()) }
+            };
+            let (px, py, sn, cs) = (lane(0), lane(1), lane(2), lane(3));
+            let mut sum = zero;
+            for &(lx, ly) in local {
+                let (lx, ly) = (_mm256_set1_ps(lx), _mm256_set1_ps(ly));
+                // x = px + c * lx - s * ly;  y = py + s * lx + c * ly (left to right).
+                let x = _mm256_sub_ps(
+                    _mm256_add_ps(px, _mm256_mul_ps(cs, lx)),
+                    _mm256_mul_ps(sn, ly),
+                );
+                let y = _mm256_add_ps(
+                    _mm256_add_ps(py, _mm256_mul_ps(sn, lx)),
+                    _mm256_mul_ps(cs, ly),
+                );
+                let fx = _mm256_div_ps(_mm256_sub_ps(x, ox), step);
+                let fy = _mm256_div_ps(_mm256_sub_ps(y, oy), step);
+                // The scalar bounds check, lane by lane (ordered compares: NaN is outside).
+                let inside = _mm256_and_ps(
+                    _mm256_and_ps(
+                        _mm256_cmp_ps::<_CMP_GE_OQ>(fx, zero),
+                        _mm256_cmp_ps::<_CMP_GE_OQ>(fy, zero),
+                    ),
+                    _mm256_and_ps(
+                        _mm256_cmp_ps::<_CMP_LT_OQ>(fx, last_col),
+                        _mm256_cmp_ps::<_CMP_LT_OQ>(fy, last_row),
+                    ),
+                );
+                // Outside lanes convert 0 (their values are replaced below).
+                let fx = _mm256_and_ps(fx, inside);
+                let fy = _mm256_and_ps(fy, inside);
+                let c = _mm256_cvttps_epi32(fx);
+                let r = _mm256_cvttps_epi32(fy);
+                let tx = _mm256_sub_ps(fx, _mm256_cvtepi32_ps(c));
+                let ty = _mm256_sub_ps(fy, _mm256_cvtepi32_ps(r));
+                let i = _mm256_add_epi32(_mm256_mullo_epi32(r, vcols), c);
+                // SAFETY: an inside lane's cell and the next one each way are in the table
+                // (the check above); outside lanes are masked off and read nothing.
+                let (t0, t1, b0, b1) = unsafe {
+                    (
+                        _mm256_mask_i32gather_ps::<4>(zero, table, i, inside),
+                        _mm256_mask_i32gather_ps::<4>(
+                            zero,
+                            table,
+                            _mm256_add_epi32(i, _mm256_set1_epi32(1)),
+                            inside,
+                        ),
+                        _mm256_mask_i32gather_ps::<4>(
+                            zero,
+                            table,
+                            _mm256_add_epi32(i, vcols),
+                            inside,
+                        ),
+                        _mm256_mask_i32gather_ps::<4>(
+                            zero,
+                            table,
+                            _mm256_add_epi32(i, next_row),
+                            inside,
+                        ),
+                    )
+                };
+                let one_tx = _mm256_sub_ps(one, tx);
+                let lo = _mm256_add_ps(_mm256_mul_ps(t0, one_tx), _mm256_mul_ps(t1, tx));
+                let hi = _mm256_add_ps(_mm256_mul_ps(b0, one_tx), _mm256_mul_ps(b1, tx));
+                let v = _mm256_add_ps(
+                    _mm256_mul_ps(lo, _mm256_sub_ps(one, ty)),
+                    _mm256_mul_ps(hi, ty),
+                );
+                sum = _mm256_add_ps(sum, _mm256_blendv_ps(outside, v, inside));
+            }
+            // SAFETY: an unaligned store of eight floats into a chunk of eight.
+            unsafe { _mm256_storeu_ps(sums.as_mut_ptr(), sum) };
+        }
+    }
+
     /// Can a robot's centre be at (x, y)?
     pub fn open(&self, x: f32, y: f32) -> bool {
         if !(x >= 0.0 && y >= 0.0) {

@@ -269,18 +269,25 @@ impl Localiser {
             .collect();
         let sr2 = 2.0 * self.settings.landmark_range_sigma.powi(2);
         let sb2 = 2.0 * self.settings.landmark_bearing_sigma.powi(2);
-        self.particles
+        // The beams' sums for every particle at once (the field's vectorised loop), then
+        // each particle's landmarks after its beams, in the order a particle at a time
+        // would add them.
+        let poses: Vec<[f32; 4]> = self
+            .particles
             .iter()
             .map(|p| {
+                let (s, c) = p.theta.sin_cos();
+                [p.pos.x, p.pos.y, s, c]
+            })
+            .collect();
+        let mut beams = vec![0.0f32; poses.len()];
+        self.field.beam_sums(&poses, &local, &mut beams);
+        self.particles
+            .iter()
+            .zip(beams)
+            .map(|(p, mut l)| {
                 if !self.field.open(p.pos.x, p.pos.y) {
                     return -1e3; // inside a wall: nearly impossible, but keeps the sum finite
-                }
-                let (s, c) = p.theta.sin_cos();
-                let mut l = 0.0f32;
-                for &(lx, ly) in &local {
-                    let x = p.pos.x + c * lx - s * ly;
-                    let y = p.pos.y + s * lx + c * ly;
-                    l += self.field.log_likelihood(x, y);
                 }
                 for sight in obs.landmarks {
                     let Some(m) = self.landmarks.get(sight.id) else {
