@@ -54,13 +54,7 @@ impl SegmentGrid {
 
     /// The index of per-cell lists, packed into one vector with offsets.
     fn packed(cell: f32, cols: usize, rows: usize, per_cell: Vec<Vec<[Point2<f32>; 2]>>) -> Self {
-        let mut starts = Vec::with_capacity(cols * rows + 1);
-        let mut items = Vec::new();
-        for segs in per_cell {
-            starts.push(items.len() as u32);
-            items.extend(segs);
-        }
-        starts.push(items.len() as u32);
+        let (starts, items) = pack(per_cell);
         SegmentGrid {
             cell,
             cols,
@@ -152,6 +146,19 @@ impl SegmentGrid {
     }
 }
 
+/// Per-cell lists as one vector of items and the offsets where each cell's list starts
+/// (cell `c` is `items[starts[c]..starts[c + 1]]`).
+fn pack<T>(per_cell: Vec<Vec<T>>) -> (Vec<u32>, Vec<T>) {
+    let mut starts = Vec::with_capacity(per_cell.len() + 1);
+    let mut items = Vec::new();
+    for list in per_cell {
+        starts.push(items.len() as u32);
+        items.extend(list);
+    }
+    starts.push(items.len() as u32);
+    (starts, items)
+}
+
 /// The cells a segment passes through, slightly grown: for each row of its bounding box,
 /// the columns where the part of the segment inside that row (padded by a millimetre)
 /// lies. Conservative, so a ray that hits the segment finds it in the cell of the hit;
@@ -237,13 +244,7 @@ impl SegmentBins {
             segments.push([seg.a, seg.b]);
             first_cell.push([c0 as u32, r0 as u32]);
         }
-        let mut starts = Vec::with_capacity(cols * rows + 1);
-        let mut items = Vec::new();
-        for list in per_cell {
-            starts.push(items.len() as u32);
-            items.extend(list);
-        }
-        starts.push(items.len() as u32);
+        let (starts, items) = pack(per_cell);
         SegmentBins {
             cell,
             cols,

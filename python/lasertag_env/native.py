@@ -19,16 +19,15 @@ import json
 from typing import Any
 
 import numpy as np
-from gymnasium import spaces
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
-from pettingzoo import ParallelEnv
 
 from . import _native
 from .args import DEFAULT_REWARDS, check_arguments, check_seed, unpack
 from .observation import ObservationLayout
 from .render import Renderer
 from .rules import SHIPPED, check_bound
+from .team import TeamEnv, action_space
 
 __all__ = ["NativeParallelEnv", "LasertagVectorEnv", "vector_env", "shipped_map", "SHIPPED_MAPS"]
 
@@ -45,16 +44,6 @@ def shipped_map(name: str) -> dict:
         return json.loads(_MAP_TEXT[name])
     except KeyError:
         raise ValueError(f"unknown map {name!r}; the shipped maps are {list(SHIPPED_MAPS)}") from None
-
-
-def _action_space() -> spaces.Box:
-    # forward and turn are fractions of the top speed and turn rate (counter-clockwise
-    # positive); tag fires when above 0.5.
-    return spaces.Box(
-        np.array([-1.0, -1.0, 0.0], dtype=np.float32),
-        np.array([1.0, 1.0, 1.0], dtype=np.float32),
-        dtype=np.float32,
-    )
 
 
 class _Setup:
@@ -122,7 +111,7 @@ class _Setup:
         }
 
 
-class NativeParallelEnv(ParallelEnv):
+class NativeParallelEnv(TeamEnv):
     """Robots ``r0 … r{n-1}`` of a lasertag match stepped in-process.
 
     The arguments are :func:`lasertag_env.parallel_env`'s without ``server``,
@@ -130,13 +119,6 @@ class NativeParallelEnv(ParallelEnv):
     no raw ``observation`` (ask :meth:`raw_observation`), ``last_events`` stays empty, and
     :meth:`truth` gives poses and scans rather than the server's whole state.
     """
-
-    metadata = {
-        "name": "lasertag_v0",
-        "render_modes": ["rgb_array"],
-        "render_fps": TICK_HZ,
-        "is_parallelizable": True,
-    }
 
     def __init__(
         self,
@@ -167,53 +149,27 @@ class NativeParallelEnv(ParallelEnv):
         self.rules = self._setup.rules
         self.map_def = self._setup.map_def
         self.rewards = self._setup.rewards
-        self.layout = self._setup.layout
+        self._init_team(robots, self._setup.layout, seed)
         self.render_mode = render_mode
         self.max_steps = max_steps
         self.ticks_per_step = ticks_per_step
-        self.possible_agents = [f"r{i}" for i in range(robots)]
         self.agents: list[str] = []
-        self._obs_spaces = {a: self.layout.space() for a in self.possible_agents}
-        self._act_spaces = {a: _action_space() for a in self.possible_agents}
         # The engine's arrays, allocated once: it writes observations and rewards here.
         self._obs = np.zeros((robots, self.layout.size), dtype=np.float32)
         self._act = np.zeros((robots, 3), dtype=np.float32)
         self._rew = np.zeros(robots, dtype=np.float64)
-        self._seed_rng = np.random.default_rng(seed)
-        self._first_seed: int | None = seed
         self.tick = 0
         self.steps = 0
         self.last_events: list[dict] = []
-        self.episode_seed: int | None = None
         self._started = False
         self._closed = False
         self._renderer: Renderer | None = None
         self._ppm = pixels_per_metre
 
-    def observation_space(self, agent: str) -> spaces.Box:
-        try:
-            return self._obs_spaces[agent]
-        except KeyError:
-            raise KeyError(f"no agent {agent!r}; the agents are {self.possible_agents}") from None
-
-    def action_space(self, agent: str) -> spaces.Box:
-        try:
-            return self._act_spaces[agent]
-        except KeyError:
-            raise KeyError(f"no agent {agent!r}; the agents are {self.possible_agents}") from None
-
     def reset(self, seed: int | None = None, options: dict | None = None):
         """A fresh match; seeds as the HTTP backend's ``reset`` (the same sequence)."""
         self._check_open()
-        if seed is not None:
-            check_seed(seed)
-            self._seed_rng = np.random.default_rng(seed)
-            match_seed = int(seed)
-        elif self._first_seed is not None:
-            match_seed = self._first_seed
-        else:
-            match_seed = int(self._seed_rng.integers(0, 2**31))
-        self._first_seed = None
+        match_seed = self._match_seed(seed)
         self._engine.reset(0, match_seed, self._obs)
         self._started = True
         self.episode_seed = match_seed
@@ -379,7 +335,7 @@ class LasertagVectorEnv(VectorEnv):
         self.num_envs = self.num_worlds * robots
         self.copy = copy
         self.single_observation_space = self.layout.space()
-        self.single_action_space = _action_space()
+        self.single_action_space = action_space()
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
         self.action_space = batch_space(self.single_action_space, self.num_envs)
         self.agent_ids = [(w, f"r{r}") for w in range(self.num_worlds) for r in range(robots)]

@@ -12,34 +12,24 @@ from __future__ import annotations
 import os
 from typing import Any
 
-import numpy as np
-from gymnasium import spaces
-from pettingzoo import ParallelEnv
-
-from .args import DEFAULT_REWARDS, check_arguments, check_int, check_seed, unpack
+from .args import DEFAULT_REWARDS, check_arguments, unpack
 from .client import Client, ServerError, error_message, loads
 from .observation import ObservationLayout
 from .render import Renderer
 from .rules import SHIPPED, check_bound, fetch
 from .server import LocalServer
+from .team import TeamEnv
 
 __all__ = ["LasertagParallelEnv", "parallel_env", "DEFAULT_REWARDS"]
 
 TICK_HZ = SHIPPED["tick_hz"]
 
-class LasertagParallelEnv(ParallelEnv):
+class LasertagParallelEnv(TeamEnv):
     """Robots ``r0 … r{n-1}`` of a lasertag match, driven through the HTTP API.
 
     See :func:`parallel_env` for the arguments, and docs/research.md for the spaces,
     rewards and episode ends.
     """
-
-    metadata = {
-        "name": "lasertag_v0",
-        "render_modes": ["rgb_array"],
-        "render_fps": TICK_HZ,
-        "is_parallelizable": True,
-    }
 
     def __init__(
         self,
@@ -127,24 +117,10 @@ class LasertagParallelEnv(ParallelEnv):
             self._create["tracker"] = {"particles_per_role": 10}
         self._create.update(match_settings or {})
 
-        self.possible_agents = [f"r{i}" for i in range(robots)]
-        self.layout = ObservationLayout(
+        self._init_team(robots, ObservationLayout(
             robots, opponents if detections is None else detections,
             self.map_def["width"], self.map_def["height"], self.rules,
-        )
-        self._obs_spaces = {a: self.layout.space() for a in self.possible_agents}
-        # forward and turn are fractions of the top speed and turn rate (counter-clockwise
-        # positive); tag fires when above 0.5.
-        self._act_spaces = {
-            a: spaces.Box(
-                np.array([-1.0, -1.0, 0.0], dtype=np.float32),
-                np.array([1.0, 1.0, 1.0], dtype=np.float32),
-                dtype=np.float32,
-            )
-            for a in self.possible_agents
-        }
-        self._seed_rng = np.random.default_rng(seed)
-        self._first_seed: int | None = seed
+        ), seed)
         self._owner: str | None = None
         self._act_path = ""
         # The end of every act body: ticks, and packed scans when the server offers them
@@ -155,26 +131,9 @@ class LasertagParallelEnv(ParallelEnv):
         self.tick = 0
         self.steps = 0
         self.last_events: list[dict] = []
-        self.episode_seed: int | None = None
         self._renderer: Renderer | None = None
         self._ppm = pixels_per_metre
         self._raw: dict[str, dict] = {}
-
-    # -- spaces ------------------------------------------------------------------------
-
-    # The same space object every time for an agent (PettingZoo's API test checks it, and
-    # seeding a space must stick), one per agent so that each samples its own stream.
-    def observation_space(self, agent: str) -> spaces.Box:
-        try:
-            return self._obs_spaces[agent]
-        except KeyError:
-            raise KeyError(f"no agent {agent!r}; the agents are {self.possible_agents}") from None
-
-    def action_space(self, agent: str) -> spaces.Box:
-        try:
-            return self._act_spaces[agent]
-        except KeyError:
-            raise KeyError(f"no agent {agent!r}; the agents are {self.possible_agents}") from None
 
     # -- episodes ----------------------------------------------------------------------
 
@@ -186,15 +145,7 @@ class LasertagParallelEnv(ParallelEnv):
         sequence of unseeded resets is reproducible too. ``options`` is not used.
         """
         self._check_open()
-        if seed is not None:
-            check_seed(seed)
-            self._seed_rng = np.random.default_rng(seed)
-            match_seed = int(seed)
-        elif self._first_seed is not None:
-            match_seed = self._first_seed
-        else:
-            match_seed = int(self._seed_rng.integers(0, 2**31))
-        self._first_seed = None
+        match_seed = self._match_seed(seed)
         self._delete_match()
         try:
             summary = self._client.call("POST", "/api/matches", {**self._create, "seed": match_seed})

@@ -11,7 +11,6 @@ from __future__ import annotations
 from typing import Any, Callable
 
 import gymnasium
-import numpy as np
 
 from . import policies
 from .parallel import TICK_HZ, parallel_env

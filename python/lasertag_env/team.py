@@ -1,0 +1,75 @@
+"""What both backends' PettingZoo environments are alike in: the agents, their spaces and
+the sequence of match seeds. :class:`~lasertag_env.parallel.LasertagParallelEnv` (HTTP)
+and :class:`~lasertag_env.native.NativeParallelEnv` (in-process) build on it, which is
+what keeps their episodes the same for the same seeds."""
+
+from __future__ import annotations
+
+import numpy as np
+from gymnasium import spaces
+from pettingzoo import ParallelEnv
+
+from .args import check_seed
+from .observation import ObservationLayout
+from .rules import SHIPPED
+
+__all__ = ["TeamEnv", "action_space"]
+
+
+def action_space() -> spaces.Box:
+    """A robot's action: forward and turn as fractions of the top speed and turn rate
+    (counter-clockwise positive), and tag, which fires above 0.5."""
+    return spaces.Box(
+        np.array([-1.0, -1.0, 0.0], dtype=np.float32),
+        np.array([1.0, 1.0, 1.0], dtype=np.float32),
+        dtype=np.float32,
+    )
+
+
+class TeamEnv(ParallelEnv):
+    """Robots ``r0 … r{n-1}`` as PettingZoo agents."""
+
+    metadata = {
+        "name": "lasertag_v0",
+        "render_modes": ["rgb_array"],
+        "render_fps": SHIPPED["tick_hz"],
+        "is_parallelizable": True,
+    }
+
+    def _init_team(self, robots: int, layout: ObservationLayout, seed: int) -> None:
+        self.possible_agents = [f"r{i}" for i in range(robots)]
+        self.layout = layout
+        self._obs_spaces = {a: layout.space() for a in self.possible_agents}
+        self._act_spaces = {a: action_space() for a in self.possible_agents}
+        self._seed_rng = np.random.default_rng(seed)
+        self._first_seed: int | None = seed
+        self.episode_seed: int | None = None
+
+    # The same space object every time for an agent (PettingZoo's API test checks it, and
+    # seeding a space must stick), one per agent so that each samples its own stream.
+    def observation_space(self, agent: str) -> spaces.Box:
+        try:
+            return self._obs_spaces[agent]
+        except KeyError:
+            raise KeyError(f"no agent {agent!r}; the agents are {self.possible_agents}") from None
+
+    def action_space(self, agent: str) -> spaces.Box:
+        try:
+            return self._act_spaces[agent]
+        except KeyError:
+            raise KeyError(f"no agent {agent!r}; the agents are {self.possible_agents}") from None
+
+    def _match_seed(self, seed: int | None) -> int:
+        """The next episode's match seed: ``seed`` when given (which also seeds the draws
+        after it); else the constructor's seed the first time; else a draw from a generator
+        seeded by the last seed given, so unseeded resets are reproducible too."""
+        if seed is not None:
+            check_seed(seed)
+            self._seed_rng = np.random.default_rng(seed)
+            match_seed = int(seed)
+        elif self._first_seed is not None:
+            match_seed = self._first_seed
+        else:
+            match_seed = int(self._seed_rng.integers(0, 2**31))
+        self._first_seed = None
+        return match_seed
