@@ -317,6 +317,7 @@ impl Localiser {
             acc += w;
             cumulative.push(acc);
         }
+        let draw = CumulativeSearch::new(&cumulative);
         let s = &self.settings;
         let mut bins: HashSet<(i32, i32, i32), BuildHasherDefault<BinHasher>> = HashSet::default();
         let mut out: Vec<Pose> = Vec::with_capacity(s.max_particles);
@@ -326,7 +327,7 @@ impl Localiser {
                 self.random_pose(obs, rng)
             } else {
                 let u = rng.random::<f64>() * acc;
-                let k = cumulative.partition_point(|c| *c < u);
+                let k = draw.first_reaching(u);
                 let q = self.particles[k.min(self.particles.len() - 1)];
                 Pose::new(
                     q.pos.x + gaussian(rng, s.roughen_xy),
@@ -491,6 +492,61 @@ fn heaviest_cluster(particles: &[Pose], weights: &[f64]) -> Vec<bool> {
         })
         .0;
     bin_of.iter().map(|&b| bins[b as usize].2 == best).collect()
+}
+
+/// The first index of a non-decreasing cumulative sum whose value reaches `u`, in about one
+/// step: a guide table (Chen and Asau's) holds, for each of as many equal slices of the sum
+/// as there are entries, the first index reaching the slice's start; a search begins at the
+/// slice before `u`'s and walks on. The answer is `partition_point(|c| c < u)`'s exactly (a
+/// test compares them); a bisection per draw was about a twentieth of an update (`perf`).
+struct CumulativeSearch<'a> {
+    cumulative: &'a [f64],
+    guide: Vec<u32>,
+    /// Slices per unit of the sum.
+    scale: f64,
+}
+
+impl<'a> CumulativeSearch<'a> {
+    fn new(cumulative: &'a [f64]) -> CumulativeSearch<'a> {
+        let n = cumulative.len();
+        let total = cumulative.last().copied().unwrap_or(0.0);
+        let scale = if total > 0.0 && total.is_finite() {
+            n as f64 / total
+        } else {
+            0.0
+        };
+        let mut guide = Vec::with_capacity(n);
+        let mut i = 0;
+        for j in 0..n {
+            let start = j as f64 / scale;
+            while i < n && cumulative[i] < start {
+                i += 1;
+            }
+            guide.push(i as u32);
+        }
+        CumulativeSearch {
+            cumulative,
+            guide,
+            scale,
+        }
+    }
+
+    fn first_reaching(&self, u: f64) -> usize {
+        let slice = (u * self.scale).floor();
+        // The slice before `u`'s starts at or below `u` whatever the rounding (and a NaN or
+        // a sum of zero starts at the beginning).
+        let start = if slice >= 1.0 {
+            let j = (slice as usize - 1).min(self.guide.len().saturating_sub(1));
+            self.guide[j] as usize
+        } else {
+            0
+        };
+        let mut i = start;
+        while i < self.cumulative.len() && self.cumulative[i] < u {
+            i += 1;
+        }
+        i
+    }
 }
 
 /// The hash of KLD-sampling's bins (FxHash's multiply and rotate). The standard SipHash

@@ -276,3 +276,39 @@ fn the_vectorised_beam_sums_are_the_scalar_ones_bit_for_bit() {
     });
     assert_eq!(slow[0].to_bits(), by_hand.to_bits());
 }
+
+#[test]
+fn the_guide_table_finds_what_bisection_finds() {
+    use rand::RngExt;
+    let mut rng = ChaCha8Rng::seed_from_u64(9);
+    for case in 0..200 {
+        let n = rng.random_range(1..600);
+        // Weights as a filter has them: mostly tiny, a few heavy, some exactly zero.
+        let weights: Vec<f64> = (0..n)
+            .map(|_| match rng.random_range(0..10) {
+                0 => 0.0,
+                1 => rng.random_range(0.0..1.0),
+                _ => rng.random_range(0.0..1e-6),
+            })
+            .collect();
+        let mut acc = 0.0;
+        let cumulative: Vec<f64> = weights
+            .iter()
+            .map(|w| {
+                acc += w;
+                acc
+            })
+            .collect();
+        let search = CumulativeSearch::new(&cumulative);
+        let mut probes: Vec<f64> = (0..300).map(|_| rng.random::<f64>() * acc).collect();
+        probes.extend(cumulative.iter().copied());
+        probes.extend([0.0, acc, acc * 1.5, -1.0, f64::NAN]);
+        for u in probes {
+            assert_eq!(
+                search.first_reaching(u),
+                cumulative.partition_point(|c| *c < u),
+                "case {case}, u = {u}"
+            );
+        }
+    }
+}
