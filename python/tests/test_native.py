@@ -223,3 +223,15 @@ def test_a_seed_per_world_and_the_papers_planners_in_the_same_harness():
         v.reset(seed=[1, 2])
     with pytest.raises(ValueError, match="planner"):
         lasertag_env.vector_env(1, planner="clever")
+
+
+def test_the_engine_carries_every_shipped_map_as_the_server_reads_it():
+    import json
+    import pathlib
+
+    maps = pathlib.Path(__file__).resolve().parents[2] / "maps"
+    files = {p.stem: json.loads(p.read_text()) for p in maps.glob("*.json")}
+    # native/lib.rs names the files it builds in: a map added to maps/ must be added there.
+    assert set(lasertag_env.SHIPPED_MAPS) == set(files)
+    for name, text in files.items():
+        assert lasertag_env.shipped_map(name) == text
