@@ -47,6 +47,16 @@ struct Slot {
     ended: bool,
 }
 
+impl Slot {
+    /// Its episode (just put in place) begins: `seed` noted, its robots' first vectors
+    /// into `obs`.
+    fn begin(&mut self, seed: u64, spec: &EnvSpec, obs: &mut [f32]) {
+        self.seed = seed;
+        self.ended = false;
+        self.episode.observe_start(spec, obs);
+    }
+}
+
 /// A vector of lasertag worlds on one map, driven by a policy's actions.
 #[pyclass(module = "lasertag_env._native")]
 struct Engine {
@@ -175,11 +185,9 @@ impl Engine {
             self.spec.config.robots * self.spec.layout.size(),
         )?;
         let episode = Episode::new(self.arena.clone(), &self.spec, seed).map_err(value_error)?;
-        episode.observe_start(&self.spec, out);
-        let slot = self.slot(world)?;
+        let slot = slot_mut(&mut self.slots, world)?;
         slot.episode = episode;
-        slot.seed = seed;
-        slot.ended = false;
+        slot.begin(seed, &self.spec, out);
         Ok(())
     }
 
@@ -211,9 +219,7 @@ impl Engine {
             let seed = slot.seeds.draw();
             slot.episode =
                 Episode::new(self.arena.clone(), &self.spec, seed).map_err(value_error)?;
-            slot.seed = seed;
-            slot.ended = false;
-            slot.episode.observe_start(&self.spec, rows);
+            slot.begin(seed, &self.spec, rows);
         }
         Ok(())
     }
@@ -246,10 +252,7 @@ impl Engine {
         let rewards = rewards.as_slice_mut().map_err(value_error)?;
         check_len("rewards", rewards.len(), robots)?;
         let spec = &self.spec;
-        let slot = self
-            .slots
-            .get_mut(world)
-            .ok_or_else(|| PyIndexError::new_err(format!("world {world}: out of range")))?;
+        let slot = slot_mut(&mut self.slots, world)?;
         let out = py.detach(|| slot.episode.step(spec, actions, obs, rewards));
         slot.ended = out.terminated || out.truncated;
         Ok((
@@ -327,11 +330,7 @@ impl Engine {
         let mut obs = vec![0.0; robots * self.spec.layout.size()];
         let mut rewards = vec![0.0; robots];
         let (arena, spec) = (&self.arena, &self.spec);
-        let n = self.slots.len();
-        let slot = self
-            .slots
-            .get_mut(world)
-            .ok_or_else(|| PyIndexError::new_err(format!("world {world}: out of range 0..{n}")))?;
+        let slot = slot_mut(&mut self.slots, world)?;
         Ok(py.detach(|| {
             let (mut ticks, mut vectors) = (Duration::ZERO, Duration::ZERO);
             for a in actions.chunks_exact(per_step).cycle().take(steps) {
@@ -455,19 +454,20 @@ impl Engine {
 }
 
 impl Engine {
-    fn slot(&mut self, world: usize) -> PyResult<&mut Slot> {
-        let n = self.slots.len();
-        self.slots
-            .get_mut(world)
-            .ok_or_else(|| PyIndexError::new_err(format!("world {world}: out of range 0..{n}")))
-    }
-
     fn get(&self, world: usize) -> PyResult<&Slot> {
         let n = self.slots.len();
-        self.slots
-            .get(world)
-            .ok_or_else(|| PyIndexError::new_err(format!("world {world}: out of range 0..{n}")))
+        self.slots.get(world).ok_or_else(|| no_world(world, n))
     }
+}
+
+/// World `world` of `slots`, to change.
+fn slot_mut(slots: &mut [Slot], world: usize) -> PyResult<&mut Slot> {
+    let n = slots.len();
+    slots.get_mut(world).ok_or_else(|| no_world(world, n))
+}
+
+fn no_world(world: usize, worlds: usize) -> PyErr {
+    PyIndexError::new_err(format!("world {world}: out of range 0..{worlds}"))
 }
 
 /// One world's step in a vector: its episode's, or its next episode's start when the last
@@ -487,9 +487,7 @@ fn step_world(
         if let Ok(episode) = Episode::new(arena.clone(), spec, seed) {
             slot.episode = episode;
         }
-        slot.seed = seed;
-        slot.ended = false;
-        slot.episode.observe_start(spec, obs);
+        slot.begin(seed, spec, obs);
         rewards.fill(0.0);
         return (false, false);
     }
