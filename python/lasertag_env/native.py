@@ -23,7 +23,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from . import _native
-from .args import DEFAULT_REWARDS, check_arguments, check_seed, unpack
+from .args import DEFAULT_REWARDS, check_arguments, check_seed
 from .observation import ObservationLayout
 from .render import Renderer
 from .rules import SHIPPED, check_bound
@@ -187,20 +187,12 @@ class NativeParallelEnv(TeamEnv):
         if not self.agents:
             raise RuntimeError("the episode has ended (or never began): call reset()")
         act = self._act
-        for i, agent in enumerate(self.possible_agents):
-            a = actions.get(agent)
+        for i, (_, a) in enumerate(self._team_actions(actions)):
             if a is None:
                 act[i] = 0.0
-                continue
-            try:
-                forward, turn, tag = unpack(a)
-            except (TypeError, ValueError):
-                raise ValueError(
-                    f"action of {agent}: {a!r} is not three numbers (forward, turn, tag)"
-                ) from None
-            act[i, 0] = forward
-            act[i, 1] = turn
-            act[i, 2] = 1.0 if tag > 0.5 else 0.0
+            else:
+                forward, turn, fires = a
+                act[i] = (forward, turn, 1.0 if fires else 0.0)
         tick, won, truncate, winner, reason, tags = self._engine.step(
             0, act, self._obs, self._rew
         )

@@ -12,7 +12,7 @@ from __future__ import annotations
 import os
 from typing import Any
 
-from .args import DEFAULT_REWARDS, check_arguments, unpack
+from .args import DEFAULT_REWARDS, check_arguments
 from .client import Client, ServerError, error_message, loads
 from .observation import ObservationLayout
 from .render import Renderer
@@ -248,20 +248,14 @@ class LasertagParallelEnv(TeamEnv):
         # values, and repr(float) round-trips, so the server applies exactly the float32
         # the policy chose (it reads f64 and keeps f32).
         parts = []
-        for agent in self.possible_agents:
-            a = actions.get(agent)
+        for agent, a in self._team_actions(actions):
             if a is None:
                 parts.append(f'"{agent}":{{"forward":0,"turn":0,"tag":false}}')
                 continue
-            try:
-                forward, turn, tag = unpack(a)
-            except (TypeError, ValueError):
-                raise ValueError(
-                    f"action of {agent}: {a!r} is not three numbers (forward, turn, tag)"
-                ) from None
+            forward, turn, fires = a
             parts.append(
                 f'"{agent}":{{"forward":{forward!r},"turn":{turn!r},'
-                f'"tag":{"true" if tag > 0.5 else "false"}}}'
+                f'"tag":{"true" if fires else "false"}}}'
             )
         return ('{"commands":{' + ",".join(parts) + self._act_tail).encode()
 

@@ -9,7 +9,7 @@ import numpy as np
 from gymnasium import spaces
 from pettingzoo import ParallelEnv
 
-from .args import check_seed
+from .args import check_seed, unpack
 from .observation import ObservationLayout
 from .rules import SHIPPED
 
@@ -73,3 +73,20 @@ class TeamEnv(ParallelEnv):
             match_seed = int(self._seed_rng.integers(0, 2**31))
         self._first_seed = None
         return match_seed
+
+    def _team_actions(self, actions: dict):
+        """Each agent in order with its action as (forward, turn, fires), clipped as
+        :func:`~lasertag_env.args.unpack` does, or None for an agent left out (it stands
+        still); a ValueError names the agent whose action is not three numbers."""
+        for agent in self.possible_agents:
+            a = actions.get(agent)
+            if a is None:
+                yield agent, None
+                continue
+            try:
+                forward, turn, tag = unpack(a)
+            except (TypeError, ValueError):
+                raise ValueError(
+                    f"action of {agent}: {a!r} is not three numbers (forward, turn, tag)"
+                ) from None
+            yield agent, (forward, turn, tag > 0.5)
