@@ -37,7 +37,14 @@ const SERVER_FLOORS: &[&str] = &[
 ];
 
 /// The only crates the core may depend on: geometry, seeded randomness and typed errors.
-const CORE_DEPENDENCIES: &[&str] = &["nalgebra", "parry2d", "rand", "rand_chacha", "thiserror"];
+const CORE_DEPENDENCIES: &[&str] = &[
+    "nalgebra",
+    "parry2d",
+    "rand",
+    "rand_chacha",
+    "rand_distr",
+    "thiserror",
+];
 
 /// Crates that must not appear anywhere in the core's dependency tree.
 const CORE_FORBIDDEN_CRATES: &[&str] = &[

@@ -140,14 +140,16 @@ pub fn wrap_angle(a: f32) -> f32 {
     a
 }
 
-/// One draw from N(0, σ²) by the Box–Muller transform (keeps us to the `rand` crate alone).
+/// One draw from N(0, σ²), by the ziggurat method (`rand_distr`'s standard normal): most
+/// draws are one 64-bit number and a table look-up, where the Box–Muller transform spends
+/// a logarithm, a square root and a cosine on each, and noise is drawn per beam, per
+/// particle and per tick.
 pub fn gaussian(rng: &mut impl RngExt, sigma: f32) -> f32 {
     if sigma == 0.0 {
         return 0.0;
     }
-    let u1: f32 = rng.random::<f32>().max(f32::MIN_POSITIVE);
-    let u2: f32 = rng.random();
-    sigma * (-2.0 * u1.ln()).sqrt() * (std::f32::consts::TAU * u2).cos()
+    let z: f32 = rng.sample(rand_distr::StandardNormal);
+    sigma * z
 }
 
 /// Which agent: robots and opponents are numbered separately (`r0`, `o0`).
