@@ -101,6 +101,7 @@ fn meta(id: &str) -> MatchMeta {
         free_slots: 0,
         bots_joinable: false,
         spectator_delay_ticks: 0,
+        head_start_ticks: 0,
     }
 }
 

@@ -124,6 +124,7 @@ async fn the_servers_own_matches_change_only_for_the_operator() {
         free_slots: 0,
         bots_joinable: true,
         spectator_delay_ticks: 0,
+        head_start_ticks: 0,
     };
     s.registry.start(world, meta);
     let (_, someone) = create(&s, json!({"map": "office"})).await;

@@ -252,6 +252,14 @@ async fn play_and_spectate_in_headless_chromium() {
         .await;
     assert!(text.as_str().unwrap().contains("tagged"), "{text}");
     save(&mut b, "end.png").await;
+    // The end screen copies a link to the replay's last moment, from the player's view.
+    b.eval("document.getElementById('end-share').click()").await;
+    let link = b.wait_for("__lasertag.sharedLink", 5).await;
+    let link = link.as_str().unwrap();
+    assert!(
+        link.contains(&format!("#/replay/{ended}?t=")) && link.contains("pov=o0"),
+        "{link}"
+    );
     // The end screen opens the replay from the player's own view (tried again while the
     // match becomes a replay).
     b.eval("document.getElementById('end-watch').click()").await;
@@ -501,8 +509,44 @@ async fn history_and_replays_in_headless_chromium() {
     b.eval("document.getElementById('replay-view').click()")
         .await;
     b.wait_for(
-        "__lasertag.view === 'full' && __lasertag.snapView === 'spectator' && location.hash.endsWith('view=full')",
+        "__lasertag.view === 'full' && __lasertag.snapView === 'spectator' && location.hash.includes('pov=full')",
         10,
+    )
+    .await;
+
+    // A link to a moment: paused at tick 100 in the full view with the belief off, copied,
+    // then opened from elsewhere, lands at that moment, paused, in that view, belief off.
+    b.eval("document.getElementById('replay-play').click()")
+        .await;
+    b.wait_for("__lasertag.playing === false", 5).await;
+    scrub(&mut b, 100).await;
+    if b.eval("__lasertag.belief").await == json!(true) {
+        b.tap("KeyB", Duration::from_millis(50)).await;
+    }
+    b.wait_for("__lasertag.belief === false", 5).await;
+    b.eval("delete __lasertag.sharedLink").await;
+    b.eval("document.getElementById('replay-share').click()")
+        .await;
+    let link = b.wait_for("__lasertag.sharedLink", 5).await;
+    let link = link.as_str().unwrap().to_string();
+    assert!(
+        link.ends_with(&format!("#/replay/{maze}?t=5&pov=full&belief=0&as=o0")),
+        "{link}"
+    );
+    b.navigate(&format!("{base}/#/history")).await;
+    b.wait_for("__lasertag.page === 'history'", 10).await;
+    b.navigate(&link).await;
+    b.wait_for(
+        &format!("__lasertag.page === 'replay' && __lasertag.replayId === '{maze}' && __lasertag.lastTick === 100 && __lasertag.playing === false && __lasertag.view === 'full' && __lasertag.belief === false && __lasertag.drawn"),
+        20,
+    )
+    .await;
+    // And from the player's view with the belief on, at 2.5 s.
+    b.navigate(&format!("{base}/#/replay/{maze}?t=2.5&pov=o0&belief=1"))
+        .await;
+    b.wait_for(
+        &format!("__lasertag.replayId === '{maze}' && __lasertag.lastTick === 50 && __lasertag.playing === false && __lasertag.view === 'o0' && __lasertag.snapView === 'player' && __lasertag.belief === true"),
+        20,
     )
     .await;
 

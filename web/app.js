@@ -1,5 +1,6 @@
 // The page: a lobby (#/), and a match to watch (#/watch/<id>) or play (#/play/<id>); past
-// matches (#/history), a replay (#/replay/<id>, `?as=o0` for that player's view) and the
+// matches (#/history), a replay (#/replay/<id>; `?pov=o0&t=83.5&belief=1`: a player's view, a
+// moment, the belief) and the
 // leaderboard (#/leaderboard, #/player/<name>).
 // Plain ES modules, no build step, nothing fetched from anywhere but this server and, when it
 // runs in a fleet, the other nodes its listing names (a match is played on its own node).
@@ -211,8 +212,16 @@ async function route() {
   if (replaying) {
     $("lobby").hidden = true;
     $("game").hidden = false;
+    // A shared link: `pov` (an opponent's id, or "full"), `t` (seconds), `belief` (0 or 1).
+    const pov = params.get("pov");
+    const t = Number.parseFloat(params.get("t"));
+    const belief = params.get("belief");
     game = new Replay({
-      id: decodeURIComponent(id), as: params.get("as"), full: params.get("view") === "full",
+      id: decodeURIComponent(id),
+      as: pov && pov !== "full" ? pov : params.get("as"),
+      full: pov === "full" || params.get("view") === "full",
+      t: Number.isFinite(t) && t >= 0 ? t : null,
+      belief: belief === "1" ? true : belief === "0" ? false : null,
       base: homes.get(decodeURIComponent(id)) || "",
     });
     return;

@@ -3,7 +3,7 @@
 
 import { segments, visibility } from "./geometry.js";
 import { draw, fit } from "./render.js";
-import { addBeam, between, feedLine, fmtTime, legend } from "./hud.js";
+import { addBeam, between, copyLink, feedLine, fmtTime, legend, replayLink } from "./hud.js";
 import { Predictor } from "./predict.js";
 import { PageSocket, socketUrl } from "./socket.js";
 
@@ -36,8 +36,8 @@ export class Game {
     this.canvas = $("arena");
     this.ctx = this.canvas.getContext("2d");
     this.snaps = [];
-    this.offset = null;
-    this.lateness = []; // recent arrivals' lateness (ms) against the steadiest one
+    this.offset = null; // the steadiest recent arrival's time less its tick's (ms)
+    this.arrivals = []; // recent arrivals' times less their ticks' (ms)
     this.delayTicks = MAX_DELAY_TICKS / 2;
     this.beams = [];
     this.names = {};
@@ -136,6 +136,10 @@ export class Game {
     debug.you = w.you;
     debug.role = w.role;
     debug.delay = w.spectator_delay_s;
+    // A delayed match younger than its delay has only its first frame to show yet: say when
+    // it starts to move rather than leave a still picture.
+    this.viewStartsAt = w.view_starts_in_s > 0 ? performance.now() + w.view_starts_in_s * 1000 : null;
+    debug.viewStartsIn = w.view_starts_in_s || 0;
     if (w.belief !== this.beliefOn) this.send({ type: "belief", on: this.beliefOn });
     // A (re)connection numbers its inputs from 1 again, and predicts only as a player.
     this.seq = 0;
@@ -157,16 +161,21 @@ export class Game {
     if (this.snaps.length && s.tick < this.snaps[this.snaps.length - 1].tick) {
       // Time went back (a tagged player now watches as late as spectators): start over.
       this.snaps = [];
-      this.offset = sample;
-      this.lateness = [];
+      this.offset = null;
+      this.arrivals = [];
     }
-    // The offset follows the earliest arrivals (least delayed), drifting up slowly.
-    this.offset = this.offset === null ? sample : Math.min(this.offset + 0.5, sample);
-    this.lateness.push(sample - this.offset);
-    if (this.lateness.length > JITTER_WINDOW) this.lateness.shift();
+    // Jitter is how much later than the steadiest arrival of the last few seconds the
+    // arrivals come (their 95th percentile against their minimum), measured within the
+    // window only: a stream that stood still and then started (a delayed view before its
+    // delay was over, a paused tab) is a schedule, not the network, and leaves the window.
+    this.arrivals.push(sample);
+    if (this.arrivals.length > JITTER_WINDOW) this.arrivals.shift();
+    const sorted = [...this.arrivals].sort((a, b) => a - b);
     // Draw as late as 95% of arrivals need, so interpolation seldom runs out of snapshots.
-    const sorted = [...this.lateness].sort((a, b) => a - b);
-    const jitter = sorted[Math.floor(0.95 * (sorted.length - 1))];
+    const jitter = sorted[Math.floor(0.95 * (sorted.length - 1))] - sorted[0];
+    // The time base follows the earliest arrivals, drifting up slowly, and never lags the
+    // window's earliest (after a schedule's jump it catches up within the window).
+    this.offset = this.offset === null ? sample : Math.max(Math.min(this.offset + 0.5, sample), sorted[0]);
     this.delayTicks = Math.max(MIN_DELAY_TICKS, Math.min(MAX_DELAY_TICKS, (jitter + MARGIN_MS) / TICK_MS));
     debug.jitterMs = jitter;
     debug.delayMs = this.delayTicks * TICK_MS;
@@ -241,7 +250,13 @@ export class Game {
     // The replay from this player's own view: how the robots found it (see replay.js).
     const watch = $("end-watch");
     watch.hidden = this.role !== "player" || !this.you;
-    watch.onclick = () => (location.hash = `#/replay/${encodeURIComponent(this.matchId)}?as=${this.you}`);
+    watch.onclick = () => (location.hash = `#/replay/${encodeURIComponent(this.matchId)}?pov=${this.you}`);
+    // The replay's last moment, from this page's point of view.
+    const share = $("end-share");
+    share.textContent = "Copy replay link";
+    share.onclick = () => copyLink(replayLink(this.matchId, {
+      seconds: f.time_s, pov: this.role === "player" ? this.you : "full", belief: this.beliefOn,
+    }), share);
     $("end-title").textContent = won + you;
     $("end-text").textContent = why[0].toUpperCase() + why.slice(1) + ".";
     $("end").hidden = false;
@@ -327,6 +342,20 @@ export class Game {
     return { snap: b, ...between(a, b, (t - a.tick) / (b.tick - a.tick)) };
   }
 
+  /** Over a delayed view that has not started yet: when it will. */
+  countdown(now) {
+    if (this.viewStartsAt === null || this.viewStartsAt === undefined) return;
+    const latest = this.snaps[this.snaps.length - 1];
+    if (latest && latest.tick > 0) {
+      this.viewStartsAt = null;
+      $("hud-status").textContent = "";
+      return;
+    }
+    const left = Math.max(0, Math.ceil((this.viewStartsAt - now) / 1000));
+    $("hud-status").textContent =
+      `people are playing, so spectators see this match ${this.delay}: it starts to move in ${left} s (everyone at their starts until then)`;
+  }
+
   frame(now) {
     if (!this.map) return;
     const v = fit(this.canvas, this.map);
@@ -349,12 +378,14 @@ export class Game {
       if (me) debug.own = { x: me.x, y: me.y, theta: me.theta };
       if (me) visible = visibility(this.segs, me.x, me.y);
     }
+    this.countdown(now);
     this.beams = this.beams.filter((b) => now - b.t0 < 450);
     const counts = draw(this.ctx, v, {
       map: this.map, segs: this.segs, you: this.you, robots, opponents, visible,
       belief: this.beliefOn ? this.belief : null, beams: this.beams, now,
     });
     debug.drawn = counts;
+    debug.drawnAgents = [...robots, ...opponents].map((a) => [a.id, +a.x.toFixed(2), +a.y.toFixed(2)]);
     debug.frames = (debug.frames || 0) + 1;
   }
 }

@@ -1,6 +1,6 @@
 // What the live page (game.js) and the replay page (replay.js) show alike around the
 // arena: times as m:ss, the legend of the robots' belief, the tag feed, a shot's laser beam,
-// and agents moved between two snapshots.
+// agents moved between two snapshots, and links to a replay's moment.
 
 import { castRay, angleDiff } from "./geometry.js";
 import { roleColor } from "./render.js";
@@ -76,4 +76,26 @@ export function between(a, b, f) {
     return { ...q, x: p.x + (q.x - p.x) * f, y: p.y + (q.y - p.y) * f, theta: p.theta + angleDiff(p.theta, q.theta) * f };
   });
   return { robots: move(a.robots, b.robots), opponents: move(a.opponents, b.opponents) };
+}
+
+/** The address of replay `id` at `seconds` into it, from `pov` (an opponent's id for what
+ * that player saw, "full" for everything) with the robots' belief on or off; `as` keeps the
+ * player a full view may switch back to. Opening it lands there, paused (see replay.js). */
+export function replayLink(id, { seconds, pov, belief, as }) {
+  const q = new URLSearchParams({ t: String(+seconds.toFixed(2)), pov: pov || "full", belief: belief ? "1" : "0" });
+  if (as && (pov || "full") === "full") q.set("as", as);
+  return `${location.origin}${location.pathname}#/replay/${encodeURIComponent(id)}?${q}`;
+}
+
+/** Copies `url` for the person to paste (and keeps it where tests read it); where the page
+ * may not write the clipboard, the button's status line shows the address instead. */
+export async function copyLink(url, status) {
+  const debug = (window.__lasertag = window.__lasertag || {});
+  debug.sharedLink = url;
+  try {
+    await navigator.clipboard.writeText(url);
+    status.textContent = "link copied";
+  } catch {
+    status.textContent = url;
+  }
 }

@@ -1,11 +1,12 @@
-// A finished match played back (#/replay/<id>; `?as=o0` for that player's own view): the
+// A finished match played back (#/replay/<id>; `?pov=o0` for that player's own view, `t=83.5`
+// to open paused at that moment, `belief=1` with the robots' belief): the
 // replay socket (/ws/replays/<id>, docs/api.md; socket.js), the arena drawn by render.js exactly as a
 // live match is, and the controls: play and pause, the speed, a timeline marked with the
 // match's events, the robots' belief (B) and, from a player's view, a switch to everyone's.
 
 import { segments, visibility } from "./geometry.js";
 import { draw, fit } from "./render.js";
-import { addBeam, between, feedLine, fmtTime, legend } from "./hud.js";
+import { addBeam, between, copyLink, feedLine, fmtTime, legend, replayLink } from "./hud.js";
 import { PageSocket, socketUrl } from "./socket.js";
 
 const $ = (id) => document.getElementById(id);
@@ -27,8 +28,10 @@ const sleep = (ms) => new Promise((r) => setTimeout(r, ms));
 
 export class Replay {
   /** `as`: the opponent whose view to show (or null); `full`: start with everyone's view
-   * all the same (the switch goes back to the player's). */
-  constructor({ id, as, full, base = "" }) {
+   * all the same (the switch goes back to the player's); `t`: seconds in, where the replay
+   * opens paused (null: from the start, playing); `belief`: true or false to show the
+   * robots' belief or not (null: as the view has it by default). */
+  constructor({ id, as, full, t = null, belief = null, base = "" }) {
     this.id = id;
     // The node that played the match, in a fleet ("" for this page's own server).
     this.base = base;
@@ -39,16 +42,18 @@ export class Replay {
     this.latest = null;
     this.prev = null;
     this.belief = null;
-    this.beliefOn = !this.fogged;
-    this.beliefChosen = false;
+    this.beliefOn = belief === null ? !this.fogged : belief;
+    this.beliefChosen = belief !== null;
     this.beams = [];
     this.names = {};
     this.speed = 1;
     this.playing = true;
     this.ticks = 0;
     this.lastSeek = 0;
-    // The tick a connection starts at: where the page is.
-    this.from = 0;
+    // The tick a connection starts at: where the page is. A link to a moment opens there,
+    // paused (see `welcome`).
+    this.from = t === null ? 0 : Math.max(0, Math.round(t * 20));
+    if (t !== null) this.resume = false;
     this.socket = new PageSocket(this, {
       url: () => {
         const q = new URLSearchParams({ format: "compact", tick: String(this.from), speed: String(this.speed) });
@@ -113,7 +118,7 @@ export class Replay {
       if (p.kind === "player_joined") this.names[p.opponent] = p.name;
     }
     this.markers();
-    this.connect(0);
+    this.connect(this.from);
   }
 
   connect(tick) {
@@ -173,6 +178,7 @@ export class Replay {
     play.title = s.playing ? "pause (Space)" : atEnd ? "play again from the start (Space)" : "play (Space)";
     for (const b of $("replay-speeds").children) b.classList.toggle("on", Number(b.dataset.speed) === s.speed);
     $("hud-status").textContent = atEnd ? this.outcome() : "";
+    if (!s.playing) this.address();
   }
 
   /** How the match ended, for the status line at the end of the replay. */
@@ -277,12 +283,35 @@ export class Replay {
     belief.onclick = () => this.toggleBelief();
     belief.classList.toggle("on", this.beliefOn);
     $("replay-view").onclick = () => this.switchView();
+    const share = $("replay-share");
+    share.textContent = "copy link";
+    share.onclick = () => {
+      copyLink(this.link(), share);
+      setTimeout(() => { share.textContent = "copy link"; }, 2000);
+    };
     // A clicked button keeps no focus: Space is play and pause, not "press it again".
     $("replay-bar").onclick = (e) => { if (e.target.tagName === "BUTTON") e.target.blur(); };
   }
 
   toggle() {
     this.send({ type: this.playing ? "pause" : "play" });
+  }
+
+  /** The address of the moment shown, from this view, with the belief as it is. */
+  link() {
+    const tick = this.latest ? this.latest.tick : Number($("replay-timeline").value) || 0;
+    return replayLink(this.id, {
+      seconds: tick / (this.tickHz || 20), pov: this.fogged ? this.as : "full",
+      belief: this.beliefOn, as: this.as,
+    });
+  }
+
+  /** Keeps the address bar on the moment shown when it stands still (paused, a view or the
+   * belief switched), so that the address itself is the link. */
+  address() {
+    const url = new URL(this.link());
+    history.replaceState(null, "", url.hash);
+    debug.address = url.hash;
   }
 
   /** Seeks to `tick`: at once when `now` or when the last seek is old enough, otherwise the
@@ -305,6 +334,7 @@ export class Replay {
     $("replay-belief").classList.toggle("on", this.beliefOn);
     this.send({ type: "belief", on: this.beliefOn });
     this.legend();
+    if (!this.playing) this.address();
   }
 
   /** From the player's view to everyone's and back, at the same tick, playing or paused as
@@ -312,12 +342,11 @@ export class Replay {
   switchView() {
     if (!this.as) return;
     this.fogged = !this.fogged;
-    const hash = `#/replay/${encodeURIComponent(this.id)}?as=${this.as}${this.fogged ? "" : "&view=full"}`;
-    history.replaceState(null, "", hash);
     this.resume = this.playing;
     if (!this.beliefChosen) this.beliefOn = !this.fogged;
     $("replay-belief").classList.toggle("on", this.beliefOn);
     debug.view = this.fogged ? this.as : "full";
+    this.address();
     this.socket.close(1000, "view");
     this.latest = null;
     this.prev = null;

@@ -159,6 +159,7 @@ impl Replay {
                 free_slots: 0,
                 bots_joinable: settings.bots_joinable,
                 spectator_delay_ticks: settings.spectator_delay_ticks,
+                head_start_ticks: 0,
             },
             last_tick: l.ticks,
             winner: match l.winner.as_deref() {

@@ -46,6 +46,7 @@ async fn start(registry: &Registry) -> Option<String> {
         .await
         .ok()?
         .ok()?;
+    let delay = (crate::game::delay::SPECTATOR_DELAY_S * TICK_HZ as f64) as u64;
     let meta = MatchMeta {
         // As long as any match's id: the history (shared by a fleet) keeps every showcase.
         id: format!("showcase-{}", random_id(8)),
@@ -57,7 +58,10 @@ async fn start(registry: &Registry) -> Option<String> {
         // Anyone who opens the server can take one of the showcase's bots with one click.
         bots_joinable: true,
         // People play it: its truth is shown late, as in any match with people.
-        spectator_delay_ticks: (crate::game::delay::SPECTATOR_DELAY_S * TICK_HZ as f64) as u64,
+        spectator_delay_ticks: delay,
+        // Its delay's worth of play is made at once, so that a visitor watches it move from
+        // the first second (about 0.3 s of computing for 30 s of play).
+        head_start_ticks: delay,
     };
     Some(registry.start(world, meta).id)
 }

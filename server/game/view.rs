@@ -505,6 +505,11 @@ pub struct MatchMeta {
     /// How far behind the match its truth is shown to all but its owner (0: live). Set
     /// when people may play it (see `MatchRequest::spectator_delay_ticks`).
     pub spectator_delay_ticks: u64,
+    /// Ticks a real-time match runs at once when it starts, faster than real time, before
+    /// its clock starts (the showcase: its delay's worth, so that the delayed view moves
+    /// from the first second rather than showing the first frame until the delay is over).
+    /// Nobody can have joined by then, so nothing live is lost.
+    pub head_start_ticks: u64,
 }
 
 /// Whether people may play a match: human opponent slots, or bot opponents people may take

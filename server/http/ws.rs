@@ -193,6 +193,13 @@ impl Connection {
             belief_every: BELIEF_EVERY,
             spectator_delay_s: self.handle.hub.delay_ticks as f64
                 / lasertag_core::sim::TICK_HZ as f64,
+            view_starts_in_s: if self.watching {
+                // The match's age says nothing of where anyone is.
+                let live = hub.frames.borrow().tick;
+                hub.delay_ticks.saturating_sub(live) as f64 / lasertag_core::sim::TICK_HZ as f64
+            } else {
+                0.0
+            },
             kinematics: wire::Kinematics::of(&self.handle.hub.physics),
             protocol: 2,
             format: if self.compact { "compact" } else { "json" },

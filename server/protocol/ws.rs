@@ -117,6 +117,10 @@ pub struct Welcome<'a> {
     /// How far behind the match spectators' snapshots run (0: live). A player's own view is
     /// live; once its opponent is tagged it watches as spectators do, this far behind.
     pub spectator_delay_s: f64,
+    /// For a spectator of a delayed match that is younger than its delay: seconds until its
+    /// view starts to move (until then it shows the match's first frame, the agents at their
+    /// starts). 0 once it moves, and for a live view.
+    pub view_starts_in_s: f64,
     /// How the player's opponent moves, for prediction on the client.
     pub kinematics: Kinematics,
     /// The version of these messages (2: numbered inputs, `ack`, compact snapshots).

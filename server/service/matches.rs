@@ -156,6 +156,7 @@ pub async fn create<R>(
         free_slots: 0,
         bots_joinable: req.bots_joinable,
         spectator_delay_ticks: req.spectator_delay_ticks,
+        head_start_ticks: 0,
     };
     let owner = Owner::new(client);
     let owner_token = owner.token.clone().unwrap_or_default();

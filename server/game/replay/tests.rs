@@ -40,6 +40,7 @@ fn recorded() -> Replay {
         free_slots: 0,
         bots_joinable: false,
         spectator_delay_ticks: 0,
+        head_start_ticks: 0,
     };
     Replay::of(&world, meta, arena, config, inputs, SystemTime::now())
 }

@@ -492,6 +492,9 @@ impl MatchTask {
         housekeeping.set_missed_tick_behavior(MissedTickBehavior::Skip);
         let mut pending: Option<PendingStep> = None;
         let mut last_tick: Option<Instant> = None;
+        if realtime {
+            self.head_start();
+        }
         loop {
             self.archive();
             let running = self.world.status == MatchStatus::Running;
@@ -595,6 +598,25 @@ impl MatchTask {
         }
         self.archive();
         tracing::info!(tick = self.world.tick, "match ended");
+    }
+
+    /// Runs the match's head start (`MatchMeta::head_start_ticks`) at once: each tick as the
+    /// clock would run it (published, held back for spectators, recorded), so that the
+    /// delayed view already has that much to show. Off the workers: it computes for a few
+    /// hundred milliseconds. Its ticks are not timed against the tick budget: they run back
+    /// to back on purpose, and a slow one keeps no one waiting (the overrun guard is for ticks
+    /// that fall behind the clock).
+    fn head_start(&mut self) {
+        let ticks = self.meta.head_start_ticks;
+        off_the_workers(ticks > 0, || {
+            for _ in 0..ticks {
+                if self.world.status != MatchStatus::Running {
+                    break;
+                }
+                self.step();
+                self.publish();
+            }
+        });
     }
 
     /// Applies a change from outside to the world and records it (see `game::record`).

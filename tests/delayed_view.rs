@@ -1,0 +1,104 @@
+//! A delayed view in headless Chromium: the showcase moves the moment a newcomer opens it, a
+//! younger delayed match counts down to when it will, and the HUD's connection figures
+//! measure the network, not the held-back stream's schedule (through the delay proxy).
+//!
+//! Needs Chromium, as `tests/browser.rs`.
+
+// Shared with the other browser tests, which use the keys and screenshots this one does not.
+#[path = "common/cdp.rs"]
+#[allow(dead_code)]
+mod cdp;
+mod common;
+#[path = "common/netem.rs"]
+mod netem;
+
+use std::time::Duration;
+
+use cdp::Browser;
+use common::TestServer;
+use serde_json::json;
+
+/// A newcomer's first look: the showcase, opened 3 s after the server starts, moves within 5 s
+/// (it starts its delay's worth of play in the past), and after a minute of the held-back
+/// stream the HUD calls the loopback connection good. A match that is not a showcase and is
+/// younger than its delay shows a countdown over its first frame instead, and through a proxy
+/// with a steady 60 ms round trip its spectators' HUD says good, through a jittery one poor.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_delayed_view_moves_at_once_and_its_schedule_is_not_jitter() {
+    let s = TestServer::start().await;
+    let started = tokio::time::Instant::now();
+    tokio::spawn(lasertag::game::showcase::keep_running(s.registry.clone()));
+    let mut b = Browser::launch().await;
+    let base = format!("http://{}", s.addr);
+    tokio::time::sleep_until(started + Duration::from_secs(3)).await;
+    b.navigate(&format!("{base}/")).await;
+    b.wait_for("!document.getElementById('showcase').hidden", 20)
+        .await;
+    b.eval("document.getElementById('showcase-watch').click()")
+        .await;
+    b.wait_for(
+        "__lasertag.role === 'spectator' && __lasertag.snapshots > 0",
+        10,
+    )
+    .await;
+    assert_eq!(b.eval("__lasertag.viewStartsIn").await, json!(0));
+    let first = b.eval("__lasertag.lastTick").await.as_u64().unwrap();
+    // Within 5 s the ticks shown have moved on by seconds of play, and so have the robots.
+    b.eval("window.__at = JSON.stringify(__lasertag.drawnAgents)")
+        .await;
+    b.wait_for(
+        &format!("__lasertag.lastTick >= {first} + 40 && JSON.stringify(__lasertag.drawnAgents) !== window.__at"),
+        5,
+    )
+    .await;
+    // A minute of delayed spectating on loopback: good, and a jitter of milliseconds.
+    tokio::time::sleep(Duration::from_secs(60)).await;
+    let hud = b
+        .eval("({q: document.getElementById('hud-ping').dataset.quality, text: document.getElementById('hud-ping').textContent, jitter: __lasertag.jitterMs})")
+        .await;
+    assert_eq!(hud["q"], "good", "{hud}");
+    assert!(hud["jitter"].as_f64().unwrap() < 40.0, "{hud}");
+
+    // A match people play, 10 s late for spectators, opened at once through a proxy: first
+    // the countdown over the first frame, then play, and a steady network is good.
+    for (conditions, quality) in [
+        (netem::Conditions::rtt_ms(60), "good"),
+        (
+            netem::Conditions {
+                jitter: Duration::from_millis(150),
+                ..netem::Conditions::rtt_ms(60)
+            },
+            "poor",
+        ),
+    ] {
+        let id = s
+            .create_match(json!({"map": "office", "robots": 2, "opponents": 1,
+                "opponent_control": "human", "spectator_delay_s": 10, "time_limit_s": 120}))
+            .await;
+        let net = netem::Netem::start(s.addr, conditions).await;
+        b.navigate(&format!("http://{}/#/watch/{id}", net.addr))
+            .await;
+        b.wait_for(
+            &format!("__lasertag.matchId === '{id}' && __lasertag.role === 'spectator' && __lasertag.snapshots > 0"),
+            10,
+        )
+        .await;
+        let left = b.eval("__lasertag.viewStartsIn").await.as_f64().unwrap();
+        assert!(left > 0.0 && left <= 10.0, "{left}");
+        let status = b
+            .eval("document.getElementById('hud-status').textContent")
+            .await;
+        assert!(
+            status.as_str().unwrap().contains("starts to move in"),
+            "{status}"
+        );
+        b.wait_for("__lasertag.lastTick > 0", 15).await;
+        // The window of arrivals (3 s) has forgotten the wait; pings have been answered.
+        tokio::time::sleep(Duration::from_secs(8)).await;
+        let hud = b
+            .eval("({q: document.getElementById('hud-ping').dataset.quality, text: document.getElementById('hud-ping').textContent, status: document.getElementById('hud-status').textContent})")
+            .await;
+        assert_eq!(hud["q"], quality, "{hud}");
+        assert_eq!(hud["status"], "", "{hud}");
+    }
+}
