@@ -1,7 +1,8 @@
 //! The showcase: a real-time match that is always running, so that anyone who opens the
 //! server sees play at once. When it ends, a fresh one (new seed) starts a few seconds later.
 //! People may take its bots, so its seed is secret, drawn from the operating system's random
-//! source (see `view::people_may_play`).
+//! source (see `view::people_may_play`). It starts its spectators' delay in the past (its
+//! first 30 s of play run at once), so that its delayed view moves from the first second.
 //! While people hold every slot of every running showcase, another starts beside them (at
 //! most [`MAX_SHOWCASES`]), so that a visitor always finds a free one.
 
@@ -20,6 +21,12 @@ use lasertag_core::world::{MatchStatus, World};
 const SHOWCASE_MAP: &str = "office";
 /// How long a finished showcase stays up (so its end can be seen) before the next starts.
 const LINGER: Duration = Duration::from_secs(10);
+/// A showcase runs its delay's worth of play at once (see `start`); one whose robots would
+/// tag every bot before this long after that is drawn again (unless every try would), so
+/// that a visitor finds a match to watch and to join rather than a finished one.
+const LIVE_AFTER_HEAD_START_S: u64 = 30;
+/// Seeds tried for a showcase that outlasts its head start.
+const SEED_TRIES: usize = 4;
 
 async fn start(registry: &Registry) -> Option<String> {
     let arena = {
@@ -29,7 +36,7 @@ async fn start(registry: &Registry) -> Option<String> {
             .arena
             .clone()
     };
-    let config = MatchConfig {
+    let base = MatchConfig {
         robots: 2,
         // Three bots that run from the robots: a match that lasts long enough to watch, and
         // a belief that splits into several roles.
@@ -37,16 +44,31 @@ async fn start(registry: &Registry) -> Option<String> {
         opponent_control: ControlKind::Bot,
         opponent_bot: BotKind::Evade,
         planner: PlannerKind::Coordinated,
-        seed: random_seed(),
         ..MatchConfig::default()
     };
     let map = arena.def.name.clone();
-    // Off the async workers: the planner's views of a map take tens of milliseconds to build.
-    let world = tokio::task::spawn_blocking(move || World::new(arena, config))
-        .await
-        .ok()?
-        .ok()?;
     let delay = (crate::game::delay::SPECTATOR_DELAY_S * TICK_HZ as f64) as u64;
+    // Off the async workers: the planner's views of a map take tens of milliseconds to build,
+    // and a try runs a minute of play (without people a match is its seed's alone).
+    let world = tokio::task::spawn_blocking(move || {
+        let horizon = delay + LIVE_AFTER_HEAD_START_S * TICK_HZ as u64;
+        for attempt in 1..=SEED_TRIES {
+            let config = MatchConfig {
+                seed: random_seed(),
+                ..base.clone()
+            };
+            let mut probe = World::new(arena.clone(), config.clone()).ok()?;
+            while probe.status == MatchStatus::Running && probe.tick < horizon {
+                probe.step();
+            }
+            if probe.status == MatchStatus::Running || attempt == SEED_TRIES {
+                return World::new(arena, config).ok();
+            }
+        }
+        None
+    })
+    .await
+    .ok()??;
     let meta = MatchMeta {
         // As long as any match's id: the history (shared by a fleet) keeps every showcase.
         id: format!("showcase-{}", random_id(8)),
@@ -62,6 +84,7 @@ async fn start(registry: &Registry) -> Option<String> {
         // Its delay's worth of play is made at once, so that a visitor watches it move from
         // the first second (about 0.3 s of computing for 30 s of play).
         head_start_ticks: delay,
+        difficulty: None,
     };
     Some(registry.start(world, meta).id)
 }
