@@ -16,6 +16,7 @@
 //! - [`planner`]: the robot team's decisions (coordinated, baseline, idle).
 //! - [`bots`]: the opponents' bot behaviours (part of the environment: they may read truth).
 //! - [`world`]: one match, its tick pipeline and its event log.
+//! - [`difficulty`]: the robot team's presets a person chooses (recruit, veteran, elite).
 //! - [`env`]: the research environment's episodes as flat arrays (observation vectors,
 //!   rewards, episode ends) for in-process engines.
 
@@ -36,5 +37,7 @@ pub mod planner;
 pub mod bots;
 
 pub mod world;
+
+pub mod difficulty;
 
 pub mod env;

@@ -102,6 +102,7 @@ fn meta(id: &str) -> MatchMeta {
         bots_joinable: false,
         spectator_delay_ticks: 0,
         head_start_ticks: 0,
+        difficulty: None,
     }
 }
 
@@ -149,6 +150,7 @@ fn main() {
         StoredClock::Realtime,
         false,
         600,
+        None,
     ))
     .expect("settings");
     let stored = settings.len()
@@ -250,7 +252,13 @@ fn main() {
     let mut most = 0;
     for i in 0..matches {
         let id = format!("m{i}");
-        let settings = StoredSettings::of(&MatchConfig::default(), StoredClock::Realtime, false, 0);
+        let settings = StoredSettings::of(
+            &MatchConfig::default(),
+            StoredClock::Realtime,
+            false,
+            0,
+            None,
+        );
         let writes = [
             Write::Begin {
                 id: id.clone(),

@@ -13,11 +13,13 @@ use lasertag_core::settings::{FieldType, Group, Value};
 use lasertag_core::sim::arena::Arena;
 
 use crate::capture::Capture;
+use crate::difficulty::DifficultyStudy;
 use crate::execute::{self, Outcome};
 use crate::filters::Filters;
 use crate::localisation::Localisation;
 use crate::merge;
 use crate::reacquire::Reacquire;
+use crate::report::{Report, print};
 use crate::shard::ShardArgs;
 use crate::study::{MapStamp, Study};
 use crate::uncertainty::Uncertainty;
@@ -93,6 +95,27 @@ pub enum Experiment {
         /// Probability that a robot misses one teammate message (0..=1).
         #[arg(long, default_value_t = 0.0)]
         radio_loss: f32,
+    },
+    /// How hard each difficulty preset is: its robots' win rate and median time to the tag
+    /// against the `wander` and `evade` bots, from the spawns, for the preset's match length.
+    Difficulty {
+        /// Runs per map, preset and bot.
+        #[arg(long, default_value_t = 200)]
+        runs: usize,
+        /// Seed of the first run (run i uses seed + i, the same for every preset).
+        #[arg(long, default_value_t = 0)]
+        seed: u64,
+        /// Maps to run on.
+        #[arg(long, value_delimiter = ',', default_value = "office")]
+        on: Vec<String>,
+        /// Directory of map files.
+        #[arg(long, default_value = "maps")]
+        maps: PathBuf,
+        /// Where to write the CSV files and plots.
+        #[arg(long, default_value = "out/difficulty")]
+        out: PathBuf,
+        #[command(flatten)]
+        shard: ShardArgs,
     },
     /// Coltin et al.'s Table I: time for a robot to see an opponent again that a
     /// teammate sees, with and without shared hypotheses and the tracker's prediction.
@@ -221,15 +244,6 @@ fn one_map(load: LoadMaps, maps: &Path, name: &str) -> Result<Arc<Arena>, LabErr
         })
 }
 
-/// What an experiment command prints once its files are written.
-enum Report {
-    Capture(String),
-    Reacquire(Vec<crate::reacquire::Summary>),
-    Localisation(Vec<crate::localisation::Curve>),
-    Uncertainty(String),
-    Filters(crate::filters::FiltersResult),
-}
-
 /// Runs one experiment command, printing its table; `load` reads a directory of maps.
 pub fn run(e: Experiment, load: LoadMaps) -> Result<(), LabError> {
     match e {
@@ -292,6 +306,29 @@ pub fn run(e: Experiment, load: LoadMaps) -> Result<(), LabError> {
             };
             let done = execute::execute(&study, shard, &out, |j| study.run_one(&arenas, j))?;
             finish(done, Report::Capture, &out)
+        }
+        Experiment::Difficulty {
+            runs,
+            seed,
+            on,
+            maps,
+            out,
+            shard: ShardArgs { shard },
+        } => {
+            if runs == 0 {
+                return Err(LabError::Arguments("--runs must be at least 1".into()));
+            }
+            let arenas: Vec<Arc<Arena>> = chosen_maps(load, &maps, &on)?
+                .into_iter()
+                .map(|(_, a)| a)
+                .collect();
+            let study = DifficultyStudy {
+                runs,
+                seed,
+                maps: MapStamp::all(&arenas),
+            };
+            let done = execute::execute(&study, shard, &out, |j| study.run_one(&arenas, j))?;
+            finish(done, Report::Difficulty, &out)
         }
         Experiment::Reacquire {
             runs,
@@ -437,6 +474,9 @@ pub fn run(e: Experiment, load: LoadMaps) -> Result<(), LabError> {
             let experiment = merge::check(&parts)?;
             let report = match experiment {
                 Capture::NAME => Report::Capture(merge::join::<Capture>(&parts, &out)?),
+                DifficultyStudy::NAME => {
+                    Report::Difficulty(merge::join::<DifficultyStudy>(&parts, &out)?)
+                }
                 Reacquire::NAME => Report::Reacquire(merge::join::<Reacquire>(&parts, &out)?),
                 Localisation::NAME => {
                     Report::Localisation(merge::join::<Localisation>(&parts, &out)?)
@@ -478,89 +518,4 @@ fn finish<R>(
         ),
     }
     Ok(())
-}
-
-/// Prints a study's tables and the files it wrote into `out`.
-fn print(report: &Report, out: &Path) {
-    match report {
-        Report::Capture(table) => {
-            print!("{table}");
-            println!(
-                "ratio: median capture time / baseline's; p: two-sided Mann–Whitney U against baseline;\n\
-                 GOSPA: the belief against the truth until the tag (c = 2 m, p = 2), mean over runs of each run's mean\n\
-                 wrote {0}/capture.csv, {0}/capture_summary.csv, {0}/capture_gospa{{,_time}}.csv, {0}/capture_<map>_<bot>.svg and {0}/capture_gospa_<map>_<bot>.svg",
-                out.display()
-            );
-        }
-        Report::Reacquire(summaries) => {
-            println!(
-                "condition   shared  predicted  found    mean ± std (s)  median (s)  teammate saw"
-            );
-            for s in summaries {
-                println!(
-                    "{:<11} {:<7} {:<10} {:>3}/{:<3} {:>7.2} ± {:<5.2} {:>10.2} {:>12.0}%",
-                    s.condition.name,
-                    s.condition.shared,
-                    s.condition.predicted,
-                    s.found,
-                    s.runs,
-                    s.mean_s,
-                    s.std_s,
-                    s.median_s,
-                    100.0 * s.teammate_saw
-                );
-            }
-            println!(
-                "wrote {0}/reacquire.csv, {0}/reacquire_summary.csv and {0}/reacquire.svg",
-                out.display()
-            );
-        }
-        Report::Localisation(curves) => {
-            println!("map        variant        mean error (m)  worst (m)");
-            for c in curves {
-                println!(
-                    "{:<10} {:<14} {:>14.4} {:>10.4}",
-                    c.map,
-                    c.variant.name(),
-                    c.mean,
-                    c.worst
-                );
-            }
-            println!(
-                "wrote {0}/localisation.csv, {0}/localisation_summary.csv and {0}/localisation_<map>.svg",
-                out.display()
-            );
-        }
-        Report::Uncertainty(table) => {
-            print!("{table}");
-            println!(
-                "wrote {0}/uncertainty_{{hunt,capture}}{{,_summary}}.csv, {0}/uncertainty_lost.svg and {0}/uncertainty_error_<map>.svg",
-                out.display()
-            );
-        }
-        Report::Filters(r) => {
-            let parts = |g: &crate::tracking::Parts, ci: f64| {
-                format!(
-                    "GOSPA {:.2} ± {ci:.2} m (localisation {:.2} m, missed {:.2}, false {:.2})",
-                    g.gospa, g.localisation, g.missed, g.false_targets
-                )
-            };
-            println!(
-                "with merging: mean active filters peaks at {:.2}, ends at {:.2}; {}\n\
-                 without merging: peaks at {:.2}, ends at {:.2}; {} ({} s of play)\n\
-                 GOSPA: the belief against the truth (c = 2 m, p = 2), mean over runs of each run's mean ± the half-width of its 95% CI",
-                r.with_merge_max_mean,
-                r.with_merge_final_mean,
-                parts(&r.with_merge_gospa, r.with_merge_gospa_ci95),
-                r.without_merge_max_mean,
-                r.without_merge_final_mean,
-                parts(&r.without_merge_gospa, r.without_merge_gospa_ci95),
-                r.seconds,
-            );
-            println!(
-                "wrote {0}/filters.csv, {0}/filters.svg, {0}/filters_gospa{{,_runs}}.csv and {0}/filters_gospa.svg",
-                out.display()
-            );
-        }
-    }
 }

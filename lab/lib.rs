@@ -4,6 +4,7 @@
 //!
 //! - [`filters`]: Fig. 4 — the number of active filters with and without role merging.
 //! - [`capture`]: Fig. 5 — capture time of `coordinated` against `baseline`.
+//! - [`difficulty`]: how often each difficulty preset's robots win, and how soon.
 //! - [`localisation`]: the robots' own pose error with and without landmarks.
 //! - [`reacquire`]: Coltin et al.'s Table I: time to see an opponent again with
 //!   and without a teammate's hypotheses and the tracker's prediction.
@@ -19,6 +20,7 @@
 
 pub mod capture;
 pub mod cli;
+pub mod difficulty;
 pub mod error;
 pub mod execute;
 pub mod filters;
@@ -28,6 +30,7 @@ pub mod part;
 pub mod plot;
 pub mod reacquire;
 pub mod record;
+pub mod report;
 pub mod shard;
 pub mod study;
 pub mod tracking;

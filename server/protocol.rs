@@ -12,6 +12,7 @@
 
 pub mod bounds;
 pub mod compact;
+pub mod difficulties;
 pub mod fleet;
 mod refusal;
 pub mod replay_ws;
@@ -33,6 +34,7 @@ pub use state::{
 use serde::de::DeserializeOwned;
 
 use crate::schema;
+use lasertag_core::difficulty::Difficulty;
 use lasertag_core::planner::coordinated;
 use lasertag_core::settings::FieldError;
 use lasertag_core::sim::Odometry;
@@ -158,6 +160,37 @@ pub enum Planner {
     Api,
 }
 
+/// A robot-team preset (docs/difficulty.md): a set of the other settings, measured against
+/// the built-in bots.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, ToSchema)]
+#[serde(rename_all = "lowercase")]
+pub enum DifficultyName {
+    /// One robot at 0.8 m/s searching at random, 2 s between tags, 2 minutes.
+    Recruit,
+    /// Two robots at 0.8 m/s searching at random, 2 s between tags, 2 minutes.
+    Veteran,
+    /// Two coordinated robots tracking the opponents, at full speed, 2 minutes.
+    Elite,
+}
+
+impl DifficultyName {
+    pub fn kind(self) -> Difficulty {
+        match self {
+            DifficultyName::Recruit => Difficulty::Recruit,
+            DifficultyName::Veteran => Difficulty::Veteran,
+            DifficultyName::Elite => Difficulty::Elite,
+        }
+    }
+
+    pub fn of(d: Difficulty) -> DifficultyName {
+        match d {
+            Difficulty::Recruit => DifficultyName::Recruit,
+            Difficulty::Veteran => DifficultyName::Veteran,
+            Difficulty::Elite => DifficultyName::Elite,
+        }
+    }
+}
+
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, ToSchema)]
 #[serde(rename_all = "lowercase")]
 pub enum Clock {
@@ -210,6 +243,9 @@ pub struct CreateMatch {
     pub opponent_control: Option<OpponentControl>,
     pub opponent_bot: Option<OpponentBot>,
     pub planner: Option<Planner>,
+    /// A robot-team preset: sets `robots`, `planner`, `time_limit_s` (each unless given
+    /// here too) and the robots' speed and tag cool-down (docs/difficulty.md).
+    pub difficulty: Option<DifficultyName>,
     /// The team's opponent tracker (docs/settings.md).
     #[schema(schema_with = settings::tracker_request)]
     pub tracker: Option<Overrides<tracker::Settings>>,
@@ -265,6 +301,8 @@ pub struct MatchRequest {
     pub people: bool,
     /// Ticks the truth is held back (0 when no person may play).
     pub spectator_delay_ticks: u64,
+    /// The robot team's preset, if one was asked for.
+    pub difficulty: Option<Difficulty>,
 }
 
 /// Default of `spectator_delay_s` ([`bounds::SPECTATOR_DELAY_S`]).
@@ -280,9 +318,18 @@ fn refused(field: &str, message: String) -> FieldError {
 impl CreateMatch {
     /// Checks ranges and fills in defaults; an error names the field.
     pub fn validate(self) -> Result<MatchRequest, FieldError> {
-        let robots = bounds::ROBOTS.integer(self.robots)? as usize;
+        let difficulty = self.difficulty.map(DifficultyName::kind);
+        let preset = difficulty.map(Difficulty::preset);
+        // A preset fills in what the request leaves out; what it gives wins.
+        let robots = match (self.robots, preset) {
+            (None, Some(p)) => p.robots,
+            _ => bounds::ROBOTS.integer(self.robots)? as usize,
+        };
         let opponents = bounds::OPPONENTS.integer(self.opponents)? as usize;
-        let time_limit_s = bounds::TIME_LIMIT_S.number(self.time_limit_s)?;
+        let time_limit_s = match (self.time_limit_s, preset) {
+            (None, Some(p)) => p.time_limit_s as f64,
+            _ => bounds::TIME_LIMIT_S.number(self.time_limit_s)?,
+        };
         let check_points = |field: &str, pts: &[&[f64]]| -> Result<(), FieldError> {
             for (i, p) in pts.iter().enumerate() {
                 if let Some(v) = p
@@ -332,7 +379,10 @@ impl CreateMatch {
                 OpponentBot::Evade => BotKind::Evade,
                 OpponentBot::Idle => BotKind::Idle,
             },
-            planner: planner_kind(self.planner.unwrap_or(Planner::Coordinated)),
+            planner: match (self.planner, preset) {
+                (None, Some(p)) => p.planner,
+                (planner, _) => planner_kind(planner.unwrap_or(Planner::Coordinated)),
+            },
             seed: self.seed.unwrap_or(0),
             time_limit_ticks: (time_limit_s * TICK_HZ as f64).round().max(1.0) as u64,
             placement,
@@ -343,7 +393,9 @@ impl CreateMatch {
                 .odometry
                 .unwrap_or_default()
                 .apply(Odometry::default())?,
-            ..config.physics
+            ..difficulty.map_or(config.physics.clone(), |d| {
+                d.physics(config.physics.clone())
+            })
         };
         let localiser = self
             .localiser
@@ -384,6 +436,7 @@ impl CreateMatch {
             } else {
                 0
             },
+            difficulty,
         })
     }
 }

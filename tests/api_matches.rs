@@ -433,3 +433,64 @@ async fn a_match_of_robots_that_localise_from_landmarks_alone() {
         "landmarks alone {blind:?}, with 30 beams {sighted:?}"
     );
 }
+
+/// A preset fills in the team, the planner and the clock (what the request gives wins), and
+/// the presets are listed with their measured figures.
+#[tokio::test]
+async fn a_difficulty_preset_sets_the_team_unless_the_request_does() {
+    let s = TestServer::start().await;
+    let listed = s.get("/api/difficulties").await;
+    assert_eq!(listed.status, 200, "{}", listed.body);
+    let names: Vec<&str> = listed
+        .body
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|d| d["name"].as_str().unwrap())
+        .collect();
+    assert_eq!(names, ["recruit", "veteran", "elite"]);
+    assert_eq!(listed.body[0]["default"], true);
+    assert!(
+        listed.body[2]["measured"][1]["robots_win_rate"]
+            .as_f64()
+            .unwrap()
+            > 0.9
+    );
+
+    let r = s
+        .post(
+            "/api/matches",
+            &json!({"map": "office", "difficulty": "recruit", "clock": "manual"}),
+        )
+        .await;
+    assert_eq!(r.status, 201, "{}", r.body);
+    assert_eq!(r.body["difficulty"], "recruit");
+    assert_eq!(r.body["robots"], 1);
+    assert_eq!(r.body["planner"], "baseline");
+    assert_eq!(r.body["time_limit_s"], 120.0);
+    let r = s
+        .post(
+            "/api/matches",
+            &json!({"map": "office", "difficulty": "elite", "robots": 3,
+            "time_limit_s": 60, "clock": "manual"}),
+        )
+        .await;
+    assert_eq!(r.status, 201, "{}", r.body);
+    assert_eq!(
+        (r.body["robots"].as_u64(), r.body["planner"].as_str()),
+        (Some(3), Some("coordinated"))
+    );
+    assert_eq!(r.body["time_limit_s"], 60.0);
+    let r = s
+        .post(
+            "/api/matches",
+            &json!({"map": "office", "difficulty": "impossible"}),
+        )
+        .await;
+    assert_eq!(r.status, 400, "{}", r.body);
+    assert!(
+        r.body["error"].as_str().unwrap().contains("difficulty"),
+        "{}",
+        r.body
+    );
+}

@@ -106,6 +106,29 @@ fn capture_writes_every_run_and_a_summary() {
 }
 
 #[test]
+fn difficulty_writes_every_run_and_a_summary_per_preset_and_bot() {
+    let out = out_dir("difficulty");
+    let o = experiment(&["difficulty", "--runs", "1", "--out", out.to_str().unwrap()]);
+    assert!(o.status.success(), "{o:?}");
+    let (header, rows) = csv(&out.join("difficulty.csv"));
+    assert_eq!(header, "map,difficulty,bot,seed,robots_won,time_s");
+    assert_eq!(rows, 3 * 2, "3 presets × 2 bots × 1 run");
+    let (header, rows) = csv(&out.join("difficulty_summary.csv"));
+    assert!(
+        header.starts_with("map,difficulty,bot,runs,robots_won,win_rate"),
+        "{header}"
+    );
+    assert_eq!(rows, 6);
+    svg(&out.join("difficulty_office_evade.svg"));
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        stdout.contains("recruit") && stdout.contains("elite"),
+        "{stdout}"
+    );
+    let _ = std::fs::remove_dir_all(&out);
+}
+
+#[test]
 fn localisation_and_reacquire_write_their_files() {
     let out = out_dir("localisation");
     let o = experiment(&[

@@ -64,6 +64,7 @@ fn started(id: &str, n: u64, name: &str) -> Vec<Write> {
                 StoredClock::Realtime,
                 false,
                 0,
+                None,
             )),
             started_at: std::time::SystemTime::now(),
         },

@@ -14,7 +14,17 @@ use std::process::Command;
 
 /// The core's modules from the ground floor up: each may import only those before it.
 const CORE_FLOORS: &[&str] = &[
-    "settings", "sim", "nav", "localise", "tracker", "radio", "planner", "bots", "world", "env",
+    "settings",
+    "sim",
+    "nav",
+    "localise",
+    "tracker",
+    "radio",
+    "planner",
+    "bots",
+    "world",
+    "difficulty",
+    "env",
 ];
 
 /// Inside the core's `sim`: `mod.rs` (poses, physics, constants) is the floor, then the

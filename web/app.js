@@ -156,19 +156,72 @@ async function loadMaps() {
   } catch { /* the lobby shows the error */ }
 }
 
+/** The robot-team presets (GET /api/difficulties): the lobby's first choice, each with
+ * how often its robots beat the built-in bots. */
+let difficulties = [];
+
+async function loadDifficulties() {
+  const sel = $("create").elements.difficulty;
+  if (difficulties.length) return;
+  try {
+    difficulties = await api("GET", "/api/difficulties");
+  } catch { return; /* custom settings still work */ }
+  sel.prepend(...difficulties.map((d) => {
+    const o = document.createElement("option");
+    o.value = d.name;
+    o.textContent = d.name;
+    return o;
+  }));
+  sel.value = (difficulties.find((d) => d.default) || difficulties[0]).name;
+  sel.onchange = showDifficulty;
+  showDifficulty();
+}
+
+/** The chosen preset's settings fill the form (a preset decides them) and its measured
+ * figures show beside it; "custom" frees the fields. */
+function showDifficulty() {
+  const form = $("create");
+  const d = difficulties.find((x) => x.name === form.elements.difficulty.value);
+  for (const name of ["robots", "planner", "minutes"]) form.elements[name].disabled = Boolean(d);
+  debug.difficulty = d ? d.name : "custom";
+  if (!d) {
+    $("difficulty-note").textContent = "Custom: choose the robots, their planner and the match length yourself.";
+    return;
+  }
+  form.elements.robots.value = d.robots;
+  form.elements.planner.value = d.planner;
+  form.elements.minutes.value = d.time_limit_s / 60;
+  const by = Object.fromEntries(d.measured.map((m) => [m.bot, m]));
+  const pct = (m) => `${Math.round(100 * m.robots_win_rate)}%`;
+  const team = `${d.robots} robot${d.robots > 1 ? "s" : ""} at ${d.robot_speed} m/s, ` +
+    `${d.planner === "coordinated" ? "tracking you and coordinating" : "searching at random"}, ` +
+    `${d.tag_cooldown_s} s between tags, ${d.time_limit_s / 60} minutes`;
+  const measured = by.evade && by.wander
+    ? ` Measured on ${by.evade.map}: the robots win ${pct(by.evade)} of matches against a bot that runs from them ` +
+      `(median tag ${Math.round(by.evade.median_tag_s)} s) and ${pct(by.wander)} against one that wanders ` +
+      `(${Math.round(by.wander.median_tag_s)} s).`
+    : "";
+  $("difficulty-note").textContent = `${d.name[0].toUpperCase()}${d.name.slice(1)}: ${team}.${measured}`;
+}
+
 async function create(e) {
   e.preventDefault();
   const f = new FormData($("create"));
   $("create-error").textContent = "";
+  const preset = difficulties.find((d) => d.name === f.get("difficulty"));
   try {
+    // A preset decides the team and the clock (FormData leaves the disabled fields out).
+    const team = preset ? { difficulty: preset.name } : {
+      robots: Number(f.get("robots")),
+      planner: f.get("planner"),
+      time_limit_s: Number(f.get("minutes")) * 60,
+    };
     const m = await createMatch({
       map: f.get("map"),
-      robots: Number(f.get("robots")),
       opponents: Number(f.get("opponents")),
-      planner: f.get("planner"),
       opponent_control: f.get("control") === "human" ? "human" : "bot",
       bots_joinable: f.get("control") === "bots",
-      time_limit_s: Number(f.get("minutes")) * 60,
+      ...team,
     });
     location.hash = `#/play/${m.id}`;
   } catch (err) {
@@ -187,9 +240,10 @@ async function replay(g) {
   const m = matches.find((x) => x.id === g.matchId);
   if (!m) { location.hash = "#/"; return; }
   const fresh = await createMatch({
-    map: m.map, robots: m.robots, opponents: m.opponents, planner: m.planner,
-    opponent_control: m.opponent_control, opponent_bot: m.opponent_bot,
-    bots_joinable: m.bots_joinable, time_limit_s: m.time_limit_s,
+    map: m.map, opponents: m.opponents, opponent_control: m.opponent_control,
+    opponent_bot: m.opponent_bot, bots_joinable: m.bots_joinable,
+    ...(m.difficulty ? { difficulty: m.difficulty }
+      : { robots: m.robots, planner: m.planner, time_limit_s: m.time_limit_s }),
   });
   location.hash = g.role === "player" || m.free_slots > 0 ? `#/play/${fresh.id}` : `#/watch/${fresh.id}`;
 }
@@ -268,6 +322,7 @@ async function route() {
   $("game").hidden = true;
   $("lobby").hidden = false;
   loadMaps();
+  loadDifficulties();
   refreshLobby();
   lobbyTimer = setInterval(refreshLobby, 1000);
 }

@@ -160,6 +160,7 @@ impl Replay {
                 bots_joinable: settings.bots_joinable,
                 spectator_delay_ticks: settings.spectator_delay_ticks,
                 head_start_ticks: 0,
+                difficulty: settings.difficulty(),
             },
             last_tick: l.ticks,
             winner: match l.winner.as_deref() {

@@ -510,6 +510,9 @@ pub struct MatchMeta {
     /// from the first second rather than showing the first frame until the delay is over).
     /// Nobody can have joined by then, so nothing live is lost.
     pub head_start_ticks: u64,
+    /// The robot team's preset, when the match was created with one
+    /// (`lasertag_core::difficulty`).
+    pub difficulty: Option<lasertag_core::difficulty::Difficulty>,
 }
 
 /// Whether people may play a match: human opponent slots, or bot opponents people may take

@@ -75,6 +75,7 @@ fn router(registry: Arc<Registry>, web_dir: PathBuf, fleet: Option<Arc<Fleet>>) 
         .route("/health", get(handlers::health))
         .route("/openapi.json", get(openapi::document))
         .route("/rules", get(rules::rules))
+        .route("/difficulties", get(rules::difficulties))
         .route("/maps", get(handlers::list_maps).post(handlers::add_map))
         .route(
             "/maps/{name}",

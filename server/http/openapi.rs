@@ -17,6 +17,7 @@ use crate::protocol::*;
     paths(
         handlers::health,
         crate::http::rules::rules,
+        crate::http::rules::difficulties,
         handlers::list_maps,
         handlers::get_map,
         handlers::add_map,
@@ -47,6 +48,9 @@ use crate::protocol::*;
         ErrorBody,
         Health,
         rules::Rules,
+        crate::protocol::difficulties::DifficultyDto,
+        crate::protocol::difficulties::MeasuredDto,
+        crate::protocol::DifficultyName,
         rules::Motion,
         rules::Laser,
         rules::Detection,

@@ -56,6 +56,8 @@ pub struct MatchSummary {
     /// Opponent slots a person can take now (`POST /api/matches/{id}/players`).
     pub free_slots: usize,
     pub bots_joinable: bool,
+    /// The robot team's preset, when the match was created with one.
+    pub difficulty: Option<DifficultyName>,
     /// Caveats a user should know, e.g. a fallback in effect.
     pub notes: Vec<String>,
     /// How far behind the match its state, belief, events and spectator view run for
@@ -145,6 +147,7 @@ fn summary_showing(s: &view::Summary, seed: bool) -> MatchSummary {
         spectators: meta.spectators,
         free_slots: meta.free_slots,
         bots_joinable: meta.bots_joinable,
+        difficulty: meta.difficulty.map(DifficultyName::of),
         notes: notes(c),
         spectator_delay_s: meta.spectator_delay_ticks as f64 / TICK_HZ as f64,
         node: None,

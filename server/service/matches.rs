@@ -157,6 +157,7 @@ pub async fn create<R>(
         bots_joinable: req.bots_joinable,
         spectator_delay_ticks: req.spectator_delay_ticks,
         head_start_ticks: 0,
+        difficulty: req.difficulty,
     };
     let owner = Owner::new(client);
     let owner_token = owner.token.clone().unwrap_or_default();

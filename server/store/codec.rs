@@ -14,6 +14,7 @@ use flate2::Compression;
 use flate2::read::DeflateDecoder;
 use flate2::write::DeflateEncoder;
 use lasertag_core::bots::BotKind;
+use lasertag_core::difficulty::Difficulty;
 use lasertag_core::planner::PlannerKind;
 use lasertag_core::settings::{Group, Value};
 use lasertag_core::sim::Odometry;
@@ -59,6 +60,9 @@ pub struct StoredSettings {
     pub clock: StoredClock,
     pub bots_joinable: bool,
     pub spectator_delay_ticks: u64,
+    /// The robot team's preset (its robot speed and tag cool-down are stored nowhere else).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    difficulty: Option<StoredDifficulty>,
 }
 
 // The stored form's names for the core's kinds. They are the API's names too, but fixed
@@ -86,6 +90,32 @@ enum StoredBot {
     Wander,
     Evade,
     Idle,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+enum StoredDifficulty {
+    Recruit,
+    Veteran,
+    Elite,
+}
+
+impl StoredDifficulty {
+    fn of(d: Difficulty) -> StoredDifficulty {
+        match d {
+            Difficulty::Recruit => StoredDifficulty::Recruit,
+            Difficulty::Veteran => StoredDifficulty::Veteran,
+            Difficulty::Elite => StoredDifficulty::Elite,
+        }
+    }
+
+    fn kind(self) -> Difficulty {
+        match self {
+            StoredDifficulty::Recruit => Difficulty::Recruit,
+            StoredDifficulty::Veteran => Difficulty::Veteran,
+            StoredDifficulty::Elite => Difficulty::Elite,
+        }
+    }
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -207,12 +237,13 @@ fn group_in<G: Group>(mut base: G, m: &Map<String, Json>) -> Result<G, CodecErro
 }
 
 impl StoredSettings {
-    /// `config` as stored, with the shell's clock and spectator delay.
+    /// `config` as stored, with the shell's clock, spectator delay and the team's preset.
     pub fn of(
         config: &MatchConfig,
         clock: StoredClock,
         bots_joinable: bool,
         spectator_delay_ticks: u64,
+        difficulty: Option<Difficulty>,
     ) -> StoredSettings {
         StoredSettings {
             v: SETTINGS_VERSION,
@@ -240,7 +271,13 @@ impl StoredSettings {
             clock,
             bots_joinable,
             spectator_delay_ticks,
+            difficulty: difficulty.map(StoredDifficulty::of),
         }
+    }
+
+    /// The robot team's preset the match was created with.
+    pub fn difficulty(&self) -> Option<Difficulty> {
+        self.difficulty.map(StoredDifficulty::kind)
     }
 
     /// The config the match ran with.
@@ -254,7 +291,9 @@ impl StoredSettings {
         let base = MatchConfig::default();
         let physics = lasertag_core::sim::Physics {
             odometry: group_in(Odometry::default(), &self.odometry)?,
-            ..base.physics
+            ..self
+                .difficulty()
+                .map_or(base.physics.clone(), |d| d.physics(base.physics.clone()))
         };
         let localiser = group_in(localise::Settings::for_odometry(&physics), &self.localiser)?;
         Ok(MatchConfig {
@@ -483,116 +522,4 @@ pub fn decode_inputs(chunk: &[u8]) -> Result<Vec<(u64, WorldInput)>, CodecError>
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-    use lasertag_core::world::ControlKind;
-
-    fn round_trip(config: &MatchConfig) {
-        let stored = StoredSettings::of(config, StoredClock::Manual, true, 600);
-        let text = serde_json::to_string(&stored).expect("json");
-        let back: StoredSettings = serde_json::from_str(&text).expect("parse");
-        let again = back.config().expect("config");
-        // MatchConfig has no PartialEq; Debug prints every float exactly.
-        assert_eq!(format!("{config:?}"), format!("{again:?}"));
-        assert_eq!(
-            (back.clock, back.bots_joinable, back.spectator_delay_ticks),
-            (StoredClock::Manual, true, 600)
-        );
-    }
-
-    #[test]
-    fn settings_come_back_field_for_field() {
-        round_trip(&MatchConfig::default());
-        let mut config = MatchConfig {
-            robots: 3,
-            opponents: 4,
-            opponent_control: ControlKind::Api,
-            opponent_bot: BotKind::Evade,
-            planner: lasertag_core::planner::PlannerKind::Api,
-            seed: u64::MAX,
-            time_limit_ticks: 1234,
-            placement: Placement::Given {
-                robots: vec![[1.5, 2.25, 0.1]],
-                opponents: vec![[3.0, 4.125]],
-            },
-            localisation: false,
-            ..MatchConfig::default()
-        };
-        config.radio.loss = 0.2;
-        config.radio.latency_ticks = 3;
-        config.tracker.particles_per_role = 321;
-        config.physics.odometry.distance = 0.1;
-        config.localiser = localise::Settings {
-            beams: 12,
-            ..localise::Settings::for_odometry(&config.physics)
-        };
-        config.coordination.travel_weight = 0.0123;
-        round_trip(&config);
-    }
-
-    #[test]
-    fn inputs_come_back_in_order() {
-        let inputs = vec![
-            (
-                0,
-                WorldInput::Seat {
-                    slot: 1,
-                    name: "ålice \"x\"".into(),
-                },
-            ),
-            (
-                3,
-                WorldInput::Keys {
-                    slot: 1,
-                    input: HumanInput {
-                        forward: 1.0,
-                        turn: -0.3,
-                        tag: true,
-                        seen_tick: Some(2),
-                    },
-                },
-            ),
-            (
-                4,
-                WorldInput::Opponent {
-                    slot: 0,
-                    order: OpponentOrder::Waypoints(vec![Point2::new(1.0, 2.5)]),
-                },
-            ),
-            (
-                4,
-                WorldInput::Robot {
-                    robot: 1,
-                    order: RobotOrder::Drive {
-                        forward: 0.5,
-                        turn: 0.25,
-                        tag: false,
-                    },
-                },
-            ),
-            (
-                9,
-                WorldInput::Robot {
-                    robot: 0,
-                    order: RobotOrder::Stop,
-                },
-            ),
-            (
-                12,
-                WorldInput::Unseat {
-                    slot: 1,
-                    name: "ålice \"x\"".into(),
-                },
-            ),
-            (20, WorldInput::End(FinishReason::Stopped)),
-        ];
-        let chunk = encode_inputs(&inputs);
-        assert_eq!(decode_inputs(&chunk).expect("decode"), inputs);
-        assert!(decode_inputs(b"nonsense").is_err());
-        assert!(
-            decode_inputs(&encode_inputs(&[]))
-                .expect("empty")
-                .is_empty()
-        );
-    }
-}
+mod tests;

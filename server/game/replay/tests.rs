@@ -41,6 +41,7 @@ fn recorded() -> Replay {
         bots_joinable: false,
         spectator_delay_ticks: 0,
         head_start_ticks: 0,
+        difficulty: None,
     };
     Replay::of(&world, meta, arena, config, inputs, SystemTime::now())
 }

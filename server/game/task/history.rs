@@ -24,6 +24,7 @@ impl MatchTask {
             self.meta.clock.stored(),
             self.meta.bots_joinable,
             self.meta.spectator_delay_ticks,
+            self.meta.difficulty,
         );
         let begin = Write::Begin {
             id: self.meta.id.clone(),

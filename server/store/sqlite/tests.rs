@@ -34,6 +34,7 @@ fn a_match(id: &str, n: usize, name: &str, won: bool) -> Vec<Write> {
                 StoredClock::Realtime,
                 false,
                 0,
+                None,
             )),
             started_at: std::time::SystemTime::now(),
         },

@@ -1,6 +1,7 @@
-//! A delayed view in headless Chromium: the showcase moves the moment a newcomer opens it, a
-//! younger delayed match counts down to when it will, and the HUD's connection figures
-//! measure the network, not the held-back stream's schedule (through the delay proxy).
+//! A player's first hour, in headless Chromium: the showcase moves the moment a newcomer
+//! opens it, a younger delayed match counts down to when it will, and the HUD's connection
+//! figures measure the network, not the held-back stream's schedule (through the delay
+//! proxy); the lobby offers the robot team's difficulty presets with their measured figures.
 //!
 //! Needs Chromium, as `tests/browser.rs`.
 
@@ -101,4 +102,52 @@ async fn a_delayed_view_moves_at_once_and_its_schedule_is_not_jitter() {
         assert_eq!(hud["q"], quality, "{hud}");
         assert_eq!(hud["status"], "", "{hud}");
     }
+}
+
+/// The lobby's difficulty: recruit by default, each preset's measured figures beside the
+/// choice, its settings in the form; a match made from it has the preset's team.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_lobby_offers_difficulty_presets_with_their_measured_figures() {
+    let s = TestServer::start().await;
+    let mut b = Browser::launch().await;
+    b.navigate(&format!("http://{}/", s.addr)).await;
+    b.wait_for(
+        "__lasertag.page === 'lobby' && __lasertag.difficulty === 'recruit'",
+        20,
+    )
+    .await;
+    let form = b
+        .eval("(() => { const f = document.getElementById('create').elements; return {robots: f.robots.value, disabled: f.robots.disabled, planner: f.planner.value, note: document.getElementById('difficulty-note').textContent}; })()")
+        .await;
+    assert_eq!(form["robots"], "1", "{form}");
+    assert_eq!(form["disabled"], true, "{form}");
+    assert_eq!(form["planner"], "baseline", "{form}");
+    let note = form["note"].as_str().unwrap();
+    assert!(note.contains("41%") && note.contains("93%"), "{note}");
+    b.eval("(() => { const sel = document.getElementById('create').elements.difficulty; sel.value = 'elite'; sel.dispatchEvent(new Event('change')); })()")
+        .await;
+    let note = b
+        .wait_for("__lasertag.difficulty === 'elite' && document.getElementById('difficulty-note').textContent", 5)
+        .await;
+    assert!(note.as_str().unwrap().contains("coordinating"), "{note}");
+    b.eval("document.getElementById('name').value = 'tester'")
+        .await;
+    b.eval("document.querySelector('#create button[type=submit]').click()")
+        .await;
+    let id = b
+        .wait_for(
+            "__lasertag.page === 'game' && __lasertag.role === 'player' && __lasertag.matchId",
+            20,
+        )
+        .await;
+    let listed = s.get("/api/matches").await.body;
+    let m = listed
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|m| m["id"] == id)
+        .unwrap_or_else(|| panic!("{id} not in {listed}"));
+    assert_eq!(m["difficulty"], "elite", "{m}");
+    assert_eq!(m["robots"], 2, "{m}");
+    assert_eq!(m["planner"], "coordinated", "{m}");
 }
