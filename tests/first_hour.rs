@@ -1,7 +1,9 @@
 //! A player's first hour, in headless Chromium: the showcase moves the moment a newcomer
 //! opens it, a younger delayed match counts down to when it will, and the HUD's connection
 //! figures measure the network, not the held-back stream's schedule (through the delay
-//! proxy); the lobby offers the robot team's difficulty presets with their measured figures.
+//! proxy); the lobby offers the robot team's difficulty presets with their measured figures;
+//! on a phone-sized touch screen a player drives with the touch stick and tags with the
+//! button. With `LASERTAG_SCREENSHOTS=<dir>` it saves the phone's screenshot there.
 //!
 //! Needs Chromium, as `tests/browser.rs`.
 
@@ -150,4 +152,108 @@ async fn the_lobby_offers_difficulty_presets_with_their_measured_figures() {
     assert_eq!(m["difficulty"], "elite", "{m}");
     assert_eq!(m["robots"], 2, "{m}");
     assert_eq!(m["planner"], "coordinated", "{m}");
+}
+
+async fn save(browser: &mut Browser, name: &str) {
+    if let Ok(dir) = std::env::var("LASERTAG_SCREENSHOTS") {
+        let png = browser.screenshot().await;
+        std::fs::write(std::path::Path::new(&dir).join(name), png).expect("screenshot saved");
+    }
+}
+
+/// One touch of a finger at (x, y) CSS pixels: `touchStart`, `touchMove` or `touchEnd`.
+async fn touch(b: &mut Browser, kind: &str, x: f64, y: f64) {
+    let points = if kind == "touchEnd" {
+        json!([])
+    } else {
+        json!([{"x": x, "y": y}])
+    };
+    b.call(
+        "Input.dispatchTouchEvent",
+        json!({"type": kind, "touchPoints": points}),
+    )
+    .await;
+}
+
+/// The centre of element `id` on the screen.
+async fn centre(b: &mut Browser, id: &str) -> (f64, f64) {
+    let c = b
+        .eval(&format!("(() => {{ const r = document.getElementById('{id}').getBoundingClientRect(); return [r.left + r.width / 2, r.top + r.height / 2]; }})()"))
+        .await;
+    (c[0].as_f64().unwrap(), c[1].as_f64().unwrap())
+}
+
+/// A phone (390 × 844, a touch screen): the page shows the touch stick and tag button, fits
+/// the screen, the button tags the robot in front and the stick drives the player's disc.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn on_a_phone_the_touch_stick_drives_and_the_button_tags() {
+    let s = TestServer::start().await;
+    let id = s
+        .create_match(json!({"map": "office", "robots": 2, "opponents": 1,
+            "opponent_control": "human", "planner": "idle", "time_limit_s": 120,
+            "robot_starts": [[7.0, 8.0, std::f64::consts::PI], [22.0, 1.5, 0.0]],
+            "opponent_starts": [[3.0, 8.0]]}))
+        .await;
+    let mut b = Browser::launch().await;
+    b.call(
+        "Emulation.setDeviceMetricsOverride",
+        json!({"width": 390, "height": 844, "deviceScaleFactor": 2, "mobile": true}),
+    )
+    .await;
+    b.call(
+        "Emulation.setTouchEmulationEnabled",
+        json!({"enabled": true, "maxTouchPoints": 5}),
+    )
+    .await;
+    b.navigate(&format!("http://{}/#/play/{id}", s.addr)).await;
+    b.wait_for(
+        &format!("__lasertag.matchId === '{id}' && __lasertag.role === 'player' && __lasertag.snapshots > 5 && __lasertag.touch === true && __lasertag.drawn"),
+        20,
+    )
+    .await;
+    // It fits: nothing wider than the screen, the controls on it, the key hints hidden.
+    let fit = b
+        .eval("(() => { const t = document.getElementById('touch-tag').getBoundingClientRect(), k = document.getElementById('touch-stick').getBoundingClientRect(); return {width: document.documentElement.scrollWidth, tag: [t.left, t.bottom], stick: [k.left, k.bottom], hints: document.getElementById('controls').hidden}; })()")
+        .await;
+    assert!(fit["width"].as_f64().unwrap() <= 390.0, "{fit}");
+    assert!(
+        fit["tag"][0].as_f64().unwrap() > 195.0 && fit["tag"][1].as_f64().unwrap() <= 844.0,
+        "{fit}"
+    );
+    assert!(
+        fit["stick"][0].as_f64().unwrap() < 195.0 && fit["stick"][1].as_f64().unwrap() <= 844.0,
+        "{fit}"
+    );
+    assert_eq!(fit["hints"], true, "{fit}");
+
+    // The tag button fires at the robot in front: the feed says so.
+    let (x, y) = centre(&mut b, "touch-tag").await;
+    touch(&mut b, "touchStart", x, y).await;
+    tokio::time::sleep(Duration::from_millis(120)).await;
+    touch(&mut b, "touchEnd", x, y).await;
+    b.wait_for("__lasertag.feed.some((f) => f.kind === 'robot_tagged')", 10)
+        .await;
+
+    // Pushing the stick up drives forward: the server's state shows the opponent moved.
+    let x0 = s.get(&format!("/api/matches/{id}")).await.body["opponents"][0]["x"]
+        .as_f64()
+        .unwrap();
+    let (x, y) = centre(&mut b, "touch-stick").await;
+    touch(&mut b, "touchStart", x, y).await;
+    touch(&mut b, "touchMove", x, y - 30.0).await;
+    touch(&mut b, "touchMove", x, y - 60.0).await;
+    tokio::time::sleep(Duration::from_millis(800)).await;
+    save(&mut b, "phone.png").await;
+    touch(&mut b, "touchEnd", x, y - 60.0).await;
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    let x1 = s.get(&format!("/api/matches/{id}")).await.body["opponents"][0]["x"]
+        .as_f64()
+        .unwrap();
+    assert!(x1 - x0 > 0.3, "moved {} m", x1 - x0);
+    // Let go: it stops.
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    let x2 = s.get(&format!("/api/matches/{id}")).await.body["opponents"][0]["x"]
+        .as_f64()
+        .unwrap();
+    assert!((x2 - x1).abs() < 0.15, "still moving: {x1} -> {x2}");
 }

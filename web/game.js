@@ -6,6 +6,7 @@ import { draw, fit } from "./render.js";
 import { addBeam, between, copyLink, feedLine, fmtTime, legend, replayLink } from "./hud.js";
 import { Predictor } from "./predict.js";
 import { PageSocket, socketUrl } from "./socket.js";
+import { TouchPad, touchScreen } from "./touch.js";
 
 const $ = (id) => document.getElementById(id);
 const TICK_MS = 50;
@@ -89,6 +90,7 @@ export class Game {
     window.removeEventListener("keydown", this.onKey);
     window.removeEventListener("keyup", this.onKey);
     window.removeEventListener("blur", this.onBlur);
+    if (this.touch) this.touch.stop();
     this.socket.close(1000, "left");
   }
 
@@ -150,6 +152,12 @@ export class Game {
     const watching = this.delay ? `spectating, delayed ${this.delay}` : "spectating";
     $("hud-match").textContent = `${w.map.name} · ${w.role === "player" ? `playing ${w.you} (${w.name})` : watching}`;
     $("hud-status").textContent = "";
+    // On a touch screen a player drives with a stick and a tag button instead of keys.
+    if (w.role === "player" && !this.touch && touchScreen()) {
+      this.touch = new TouchPad({ onTag: () => this.fireTag() });
+    }
+    debug.touch = Boolean(this.touch);
+    $("controls").hidden = Boolean(this.touch);
     $("controls").innerHTML = w.role === "player"
       ? "<kbd>W</kbd><kbd>A</kbd><kbd>S</kbd><kbd>D</kbd> / arrows move and turn · <kbd>Space</kbd> tag · <kbd>B</kbd> robots' belief"
       : `spectating${this.delay ? ` (delayed ${this.delay}: people are playing)` : ""}: true positions, scans, goals and belief · <kbd>B</kbd> belief on/off`;
@@ -279,12 +287,15 @@ export class Game {
     if (!codes.includes(e.code)) return;
     e.preventDefault();
     if (e.type === "keydown") this.keys.add(e.code); else this.keys.delete(e.code);
-    // A tap shorter than a tick still fires.
-    if (e.code === "Space" && e.type === "keydown") {
-      this.tagLatch = true;
-      // The shot is aimed at what is drawn now, not at the next input tick's frame.
-      this.tagView = this.renderTick === null ? null : Math.max(0, Math.round(this.renderTick));
-    }
+    if (e.code === "Space" && e.type === "keydown") this.fireTag();
+  }
+
+  /** A press of the trigger (Space, the touch tag button): a tap shorter than a tick still
+   * fires. */
+  fireTag() {
+    this.tagLatch = true;
+    // The shot is aimed at what is drawn now, not at the next input tick's frame.
+    this.tagView = this.renderTick === null ? null : Math.max(0, Math.round(this.renderTick));
   }
 
   /** The keys held now, as an input. */
@@ -292,7 +303,10 @@ export class Game {
     const k = this.keys;
     const forward = (k.has("KeyW") || k.has("ArrowUp") ? 1 : 0) - (k.has("KeyS") || k.has("ArrowDown") ? 1 : 0);
     const turn = (k.has("KeyA") || k.has("ArrowLeft") ? 1 : 0) - (k.has("KeyD") || k.has("ArrowRight") ? 1 : 0);
-    return { forward, turn, tag: k.has("Space") };
+    // The touch stick adds to the keys (either alone drives fully).
+    const t = this.touch || { forward: 0, turn: 0 };
+    const clamp = (v) => Math.max(-1, Math.min(1, v));
+    return { forward: clamp(forward + t.forward), turn: clamp(turn + t.turn), tag: k.has("Space") };
   }
 
   /** Sends one numbered input per 50 ms tick that is due (the server applies one per tick,
