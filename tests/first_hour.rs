@@ -233,6 +233,13 @@ async fn on_a_phone_the_touch_stick_drives_and_the_button_tags() {
     touch(&mut b, "touchEnd", x, y).await;
     b.wait_for("__lasertag.feed.some((f) => f.kind === 'robot_tagged')", 10)
         .await;
+    // The sounds of a robot come into view and of the tag were made (and kept silent: sound
+    // is off until the player switches it on with the HUD's button).
+    let sounds = b.eval("({on: __lasertag.sound, made: __lasertag.sounds})").await;
+    assert_eq!(sounds["on"], false, "{sounds}");
+    assert_eq!(sounds["made"], json!(["seen", "tag"]), "{sounds}");
+    b.eval("document.getElementById('hud-sound').click()").await;
+    assert_eq!(b.eval("__lasertag.sound").await, true);
 
     // Pushing the stick up drives forward: the server's state shows the opponent moved.
     let x0 = s.get(&format!("/api/matches/{id}")).await.body["opponents"][0]["x"]

@@ -6,6 +6,7 @@ import { draw, fit } from "./render.js";
 import { addBeam, between, copyLink, feedLine, fmtTime, legend, replayLink } from "./hud.js";
 import { Predictor } from "./predict.js";
 import { PageSocket, socketUrl } from "./socket.js";
+import { Sound } from "./sound.js";
 import { TouchPad, touchScreen } from "./touch.js";
 
 const $ = (id) => document.getElementById(id);
@@ -59,6 +60,9 @@ export class Game {
     });
     $("feed").replaceChildren();
     $("end").hidden = true;
+    $("hud-sound").hidden = false;
+    this.sound = new Sound($("hud-sound"));
+    this.inSight = 0;
     $("hud-status").textContent = "connecting…";
     this.onKey = (e) => this.key(e);
     window.addEventListener("keydown", this.onKey);
@@ -159,7 +163,7 @@ export class Game {
     debug.touch = Boolean(this.touch);
     $("controls").hidden = Boolean(this.touch);
     $("controls").innerHTML = w.role === "player"
-      ? "<kbd>W</kbd><kbd>A</kbd><kbd>S</kbd><kbd>D</kbd> / arrows move and turn · <kbd>Space</kbd> tag · <kbd>B</kbd> robots' belief"
+      ? "<kbd>W</kbd><kbd>A</kbd><kbd>S</kbd><kbd>D</kbd> / arrows move and turn · <kbd>Space</kbd> tag · <kbd>B</kbd> robots' belief · <kbd>M</kbd> sound"
       : `spectating${this.delay ? ` (delayed ${this.delay}: people are playing)` : ""}: true positions, scans, goals and belief · <kbd>B</kbd> belief on/off`;
   }
 
@@ -199,6 +203,13 @@ export class Game {
     } else if (s.view === "spectator") {
       this.predictor = null; // tagged: nothing of ours moves any more
     }
+    // A player's snapshot holds only the robots in its sight: one more is a robot come
+    // into view.
+    if (s.view === "player") {
+      const inSight = s.robots.length;
+      if (inSight > this.inSight) this.sound.play("seen");
+      this.inSight = inSight;
+    }
     for (const o of s.opponents) if (o.name) this.names[o.id] = o.name;
     debug.snapshots++;
     debug.lastTick = s.tick;
@@ -223,8 +234,14 @@ export class Game {
     let cls = e.kind;
     switch (e.kind) {
       case "shot": addBeam(this.beams, e, latest, this.segs); break;
-      case "tag": text = `${this.who(e.by)} tagged ${e.target === this.you ? "you" : this.who(e.target)}`; break;
-      case "robot_tagged": text = `${e.by === this.you ? "you" : this.who(e.by)} tagged ${e.target} (frozen 10 s)`; break;
+      case "tag":
+        text = `${this.who(e.by)} tagged ${e.target === this.you ? "you" : this.who(e.target)}`;
+        if (e.target === this.you) this.sound.play("tagged");
+        break;
+      case "robot_tagged":
+        text = `${e.by === this.you ? "you" : this.who(e.by)} tagged ${e.target} (frozen 10 s)`;
+        if (e.by === this.you) this.sound.play("tag");
+        break;
       case "role_split": text = `belief: role ${e.role} split from ${e.from}`; cls = "role"; break;
       case "role_merge": text = `belief: role ${e.from} merged into ${e.role} (${e.count})`; cls = "role"; break;
       case "player_joined": text = `${e.name} joined as ${e.opponent}`; this.names[e.opponent] = e.name; break;
@@ -277,6 +294,10 @@ export class Game {
 
   key(e) {
     const codes = ["KeyW", "KeyA", "KeyS", "KeyD", "ArrowUp", "ArrowDown", "ArrowLeft", "ArrowRight", "Space"];
+    if (e.code === "KeyM" && e.type === "keydown" && !e.repeat) {
+      this.sound.toggle();
+      return;
+    }
     if (e.code === "KeyB" && e.type === "keydown" && !e.repeat) {
       this.beliefOn = !this.beliefOn;
       debug.belief = this.beliefOn;

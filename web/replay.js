@@ -72,6 +72,7 @@ export class Replay {
     $("legend").replaceChildren();
     $("end").hidden = true;
     $("hud-ping").textContent = "";
+    $("hud-sound").hidden = true;
     $("hud-score").textContent = "";
     $("hud-timer").textContent = "";
     $("hud-match").textContent = "replay";
