@@ -43,13 +43,6 @@ const PIXELS: &str = r#"(() => {
   return n;
 })()"#;
 
-async fn save(browser: &mut Browser, name: &str) {
-    if let Ok(dir) = std::env::var("LASERTAG_SCREENSHOTS") {
-        let png = browser.screenshot().await;
-        std::fs::write(std::path::Path::new(&dir).join(name), png).expect("screenshot saved");
-    }
-}
-
 async fn state(s: &TestServer, id: &str) -> Value {
     let r = s.get(&format!("/api/matches/{id}")).await;
     assert_eq!(r.status, 200, "{}", r.body);
@@ -73,10 +66,16 @@ async fn play_and_spectate_in_headless_chromium() {
             10,
         )
         .await;
-    assert_eq!(rows, json!(1));
+    // The showcase (and, should one have ended live, the next one beside it while the
+    // first's end is still held back from spectators).
+    assert!(
+        (1..=2).contains(&rows.as_u64().unwrap_or(0)),
+        "{rows}: {}",
+        s.get("/api/matches").await.body
+    );
     b.eval("document.getElementById('name').value = 'tester'")
         .await;
-    save(&mut b, "lobby.png").await;
+    b.save("lobby.png").await;
     b.eval("document.getElementById('showcase-watch').click()")
         .await;
     // People may play the showcase, so spectators see it 30 s late (its first frame, this
@@ -94,7 +93,7 @@ async fn play_and_spectate_in_headless_chromium() {
     let drawn = b.eval("__lasertag.drawn").await;
     assert!(drawn["walls"].as_u64().unwrap() > 10, "{drawn}");
     assert_eq!(drawn["robots"], 2, "{drawn}");
-    assert_eq!(drawn["opponents"], 3, "{drawn}");
+    assert_eq!(drawn["opponents"], 5, "{drawn}");
     assert!(drawn["fans"].as_u64().unwrap() >= 1, "{drawn}");
     // Each robot's localisation cloud is drawn: a sample of its particles.
     assert!(drawn["localisation"].as_u64().unwrap() >= 20, "{drawn}");
@@ -109,7 +108,7 @@ async fn play_and_spectate_in_headless_chromium() {
         px["particles"].as_u64().unwrap() > 100,
         "belief drawn: {px}"
     );
-    save(&mut b, "spectator.png").await;
+    b.save("spectator.png").await;
     // B switches the belief off: no particle is drawn any more.
     b.tap("KeyB", Duration::from_millis(50)).await;
     b.wait_for(
@@ -131,20 +130,22 @@ async fn play_and_spectate_in_headless_chromium() {
     b.eval("document.getElementById('showcase-play').click()")
         .await;
     b.wait_for(
-        "__lasertag.role === 'player' && __lasertag.view === 'player' && __lasertag.snapshots > 3",
+        "__lasertag.role === 'player' && __lasertag.snapshots > 3",
         20,
     )
     .await;
-    let show = s.get("/api/matches").await.body[0].clone();
-    assert_eq!(show["players"], 1, "{show}");
+    let listed = s.get("/api/matches").await.body;
+    assert!(
+        listed.as_array().unwrap().iter().any(|m| m["id"]
+            .as_str()
+            .unwrap()
+            .starts_with("showcase-")
+            && m["players"] == 1),
+        "nobody plays a showcase: {listed}"
+    );
 
     // 2. Play: a robot idles in the corridor in front of the player's opponent.
-    let id = s
-        .create_match(json!({"map": "office", "robots": 2, "opponents": 1,
-            "opponent_control": "human", "planner": "idle", "time_limit_s": 120,
-            "robot_starts": [[7.0, 8.0, std::f64::consts::PI], [22.0, 1.5, 0.0]],
-            "opponent_starts": [[3.0, 8.0]]}))
-        .await;
+    let id = s.create_match(common::corridor_duel()).await;
     b.navigate(&format!("{base}/#/play/{id}")).await;
     // Wait for *this* match: until the page has fetched its token, `__lasertag` still
     // describes the showcase game it was playing (a race seen in CI).
@@ -180,7 +181,7 @@ async fn play_and_spectate_in_headless_chromium() {
     let before = state(&s, &id).await["opponents"][0].clone();
     b.key("KeyW", true).await;
     tokio::time::sleep(Duration::from_millis(500)).await;
-    save(&mut b, "player.png").await;
+    b.save("player.png").await;
     tokio::time::sleep(Duration::from_millis(300)).await;
     b.key("KeyW", false).await;
     tokio::time::sleep(Duration::from_millis(200)).await;
@@ -251,7 +252,7 @@ async fn play_and_spectate_in_headless_chromium() {
         .eval("document.getElementById('end-text').textContent")
         .await;
     assert!(text.as_str().unwrap().contains("tagged"), "{text}");
-    save(&mut b, "end.png").await;
+    b.save("end.png").await;
     // The end screen copies a link to the replay's last moment, from the player's view.
     b.eval("document.getElementById('end-share').click()").await;
     let link = b.wait_for("__lasertag.sharedLink", 5).await;
@@ -440,7 +441,7 @@ async fn history_and_replays_in_headless_chromium() {
         .eval("document.getElementById('history-table').textContent")
         .await;
     assert!(names.as_str().unwrap().contains("ada"), "{names}");
-    save(&mut b, "history.png").await;
+    b.save("history.png").await;
     b.eval("document.querySelector('#history-table tbody tr button.watch').click()")
         .await;
 
@@ -483,7 +484,7 @@ async fn history_and_replays_in_headless_chromium() {
     b.eval("document.querySelector('#replay-speeds [data-speed=\"2\"]').click()")
         .await;
     b.wait_for("__lasertag.speed === 2", 5).await;
-    save(&mut b, "replay.png").await;
+    b.save("replay.png").await;
     // B hides the belief, as in the game.
     b.tap("KeyB", Duration::from_millis(50)).await;
     b.wait_for(

@@ -154,13 +154,6 @@ async fn the_lobby_offers_difficulty_presets_with_their_measured_figures() {
     assert_eq!(m["planner"], "coordinated", "{m}");
 }
 
-async fn save(browser: &mut Browser, name: &str) {
-    if let Ok(dir) = std::env::var("LASERTAG_SCREENSHOTS") {
-        let png = browser.screenshot().await;
-        std::fs::write(std::path::Path::new(&dir).join(name), png).expect("screenshot saved");
-    }
-}
-
 /// One touch of a finger at (x, y) CSS pixels: `touchStart`, `touchMove` or `touchEnd`.
 async fn touch(b: &mut Browser, kind: &str, x: f64, y: f64) {
     let points = if kind == "touchEnd" {
@@ -188,12 +181,7 @@ async fn centre(b: &mut Browser, id: &str) -> (f64, f64) {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn on_a_phone_the_touch_stick_drives_and_the_button_tags() {
     let s = TestServer::start().await;
-    let id = s
-        .create_match(json!({"map": "office", "robots": 2, "opponents": 1,
-            "opponent_control": "human", "planner": "idle", "time_limit_s": 120,
-            "robot_starts": [[7.0, 8.0, std::f64::consts::PI], [22.0, 1.5, 0.0]],
-            "opponent_starts": [[3.0, 8.0]]}))
-        .await;
+    let id = s.create_match(common::corridor_duel()).await;
     let mut b = Browser::launch().await;
     b.call(
         "Emulation.setDeviceMetricsOverride",
@@ -235,7 +223,9 @@ async fn on_a_phone_the_touch_stick_drives_and_the_button_tags() {
         .await;
     // The sounds of a robot come into view and of the tag were made (and kept silent: sound
     // is off until the player switches it on with the HUD's button).
-    let sounds = b.eval("({on: __lasertag.sound, made: __lasertag.sounds})").await;
+    let sounds = b
+        .eval("({on: __lasertag.sound, made: __lasertag.sounds})")
+        .await;
     assert_eq!(sounds["on"], false, "{sounds}");
     assert_eq!(sounds["made"], json!(["seen", "tag"]), "{sounds}");
     b.eval("document.getElementById('hud-sound').click()").await;
@@ -250,7 +240,7 @@ async fn on_a_phone_the_touch_stick_drives_and_the_button_tags() {
     touch(&mut b, "touchMove", x, y - 30.0).await;
     touch(&mut b, "touchMove", x, y - 60.0).await;
     tokio::time::sleep(Duration::from_millis(800)).await;
-    save(&mut b, "phone.png").await;
+    b.save("phone.png").await;
     touch(&mut b, "touchEnd", x, y - 60.0).await;
     tokio::time::sleep(Duration::from_millis(300)).await;
     let x1 = s.get(&format!("/api/matches/{id}")).await.body["opponents"][0]["x"]

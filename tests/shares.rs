@@ -345,10 +345,21 @@ async fn another_showcase_starts_while_every_one_is_full() {
     }
     let first = first.expect("a showcase starts");
     let id = first["id"].as_str().unwrap().to_string();
-    // People take and play every slot.
+    // People take and play every slot (until none is left: the robots may tag a bot
+    // meanwhile, which frees no slot either).
     let mut players = Vec::new();
     for k in 0..first["free_slots"].as_u64().unwrap() {
-        let (_, token) = s.join(&id, &format!("p{k}")).await;
+        let r = s
+            .post(
+                &format!("/api/matches/{id}/players"),
+                &json!({"name": format!("p{k}")}),
+            )
+            .await;
+        if r.status == 409 {
+            break;
+        }
+        assert_eq!(r.status, 201, "{}", r.body);
+        let token = r.body["token"].as_str().unwrap().to_string();
         let mut ws = s.ws(&id, Some(&token)).await.unwrap();
         ws.send_json(&json!({"type": "input", "forward": 0.0, "turn": 0.0, "tag": false}))
             .await

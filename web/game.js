@@ -161,6 +161,8 @@ export class Game {
       this.touch = new TouchPad({ onTag: () => this.fireTag() });
     }
     debug.touch = Boolean(this.touch);
+    // The sounds are a player's (what happens to you); a spectator has no use for the switch.
+    $("hud-sound").hidden = w.role !== "player";
     $("controls").hidden = Boolean(this.touch);
     $("controls").innerHTML = w.role === "player"
       ? "<kbd>W</kbd><kbd>A</kbd><kbd>S</kbd><kbd>D</kbd> / arrows move and turn · <kbd>Space</kbd> tag · <kbd>B</kbd> robots' belief · <kbd>M</kbd> sound"

@@ -2,7 +2,8 @@
 //! server sees play at once. When it ends, a fresh one (new seed) starts a few seconds later.
 //! People may take its bots, so its seed is secret, drawn from the operating system's random
 //! source (see `view::people_may_play`). It starts its spectators' delay in the past (its
-//! first 30 s of play run at once), so that its delayed view moves from the first second.
+//! first 30 s of play run at once, on a seed whose robots tag nobody in them), so that its
+//! delayed view moves from the first second.
 //! While people hold every slot of every running showcase, another starts beside them (at
 //! most [`MAX_SHOWCASES`]), so that a visitor always finds a free one.
 
@@ -17,16 +18,24 @@ use lasertag_core::sim::TICK_HZ;
 use lasertag_core::world::{ControlKind, MatchConfig};
 use lasertag_core::world::{MatchStatus, World};
 
-/// Preferred map of the showcase, when the server has it; otherwise the first map.
-const SHOWCASE_MAP: &str = "office";
+/// Preferred map of the showcase, when the server has it; otherwise the first map. The
+/// largest shipped map: a match there lasts (on `office` two coordinated robots tag three
+/// bots within a minute in most seeds, too soon for a visitor who comes after the head
+/// start to find a bot to take over).
+const SHOWCASE_MAP: &str = "warehouse";
 /// How long a finished showcase stays up (so its end can be seen) before the next starts.
 const LINGER: Duration = Duration::from_secs(10);
-/// A showcase runs its delay's worth of play at once (see `start`); one whose robots would
-/// tag every bot before this long after that is drawn again (unless every try would), so
-/// that a visitor finds a match to watch and to join rather than a finished one.
-const LIVE_AFTER_HEAD_START_S: u64 = 30;
-/// Seeds tried for a showcase that outlasts its head start.
-const SEED_TRIES: usize = 4;
+/// Bots of a showcase.
+const SHOWCASE_BOTS: usize = 5;
+/// A showcase runs its delay's worth of play at once (see `start`) only with a seed that
+/// leaves at least this many bots untagged by then and the match still running this long
+/// after it (on `warehouse`, 50 of 60 seeds), so that a visitor who opens it then finds
+/// bots to take over in a match that goes on.
+const FREE_AFTER_HEAD_START: usize = 3;
+const RUNNING_AFTER_HEAD_START_S: u64 = 10;
+/// Seeds tried for such a showcase; when none is, it starts without a head start (its
+/// spectators then count down to the delayed view, as in any young delayed match).
+const SEED_TRIES: usize = 6;
 
 async fn start(registry: &Registry) -> Option<String> {
     let arena = {
@@ -38,9 +47,9 @@ async fn start(registry: &Registry) -> Option<String> {
     };
     let base = MatchConfig {
         robots: 2,
-        // Three bots that run from the robots: a match that lasts long enough to watch, and
-        // a belief that splits into several roles.
-        opponents: 3,
+        // Bots that run from the robots: a match that lasts long enough to watch, and a
+        // belief that splits into several roles.
+        opponents: SHOWCASE_BOTS,
         opponent_control: ControlKind::Bot,
         opponent_bot: BotKind::Evade,
         planner: PlannerKind::Coordinated,
@@ -49,23 +58,33 @@ async fn start(registry: &Registry) -> Option<String> {
     let map = arena.def.name.clone();
     let delay = (crate::game::delay::SPECTATOR_DELAY_S * TICK_HZ as f64) as u64;
     // Off the async workers: the planner's views of a map take tens of milliseconds to build,
-    // and a try runs a minute of play (without people a match is its seed's alone).
-    let world = tokio::task::spawn_blocking(move || {
-        let horizon = delay + LIVE_AFTER_HEAD_START_S * TICK_HZ as u64;
-        for attempt in 1..=SEED_TRIES {
-            let config = MatchConfig {
+    // and a try runs up to 40 s of play. Without people a match is its seed's alone, so a
+    // probe of a seed shows what the showcase's first seconds will be.
+    let (world, head_start) = tokio::task::spawn_blocking(move || {
+        let horizon = delay + RUNNING_AFTER_HEAD_START_S * TICK_HZ as u64;
+        let untagged = |w: &World| w.opponents.iter().filter(|o| !o.tagged).count();
+        let mut config = base.clone();
+        for _ in 0..SEED_TRIES {
+            config = MatchConfig {
                 seed: random_seed(),
                 ..base.clone()
             };
             let mut probe = World::new(arena.clone(), config.clone()).ok()?;
-            while probe.status == MatchStatus::Running && probe.tick < horizon {
-                probe.step();
+            let run_to = |probe: &mut World, tick: u64| {
+                while probe.tick < tick && probe.status == MatchStatus::Running {
+                    probe.step();
+                }
+            };
+            run_to(&mut probe, delay);
+            if untagged(&probe) < FREE_AFTER_HEAD_START {
+                continue;
             }
-            if probe.status == MatchStatus::Running || attempt == SEED_TRIES {
-                return World::new(arena, config).ok();
+            run_to(&mut probe, horizon);
+            if probe.status == MatchStatus::Running {
+                return Some((World::new(arena, config).ok()?, delay));
             }
         }
-        None
+        Some((World::new(arena, config).ok()?, 0))
     })
     .await
     .ok()??;
@@ -83,7 +102,7 @@ async fn start(registry: &Registry) -> Option<String> {
         spectator_delay_ticks: delay,
         // Its delay's worth of play is made at once, so that a visitor watches it move from
         // the first second (about 0.3 s of computing for 30 s of play).
-        head_start_ticks: delay,
+        head_start_ticks: head_start,
         difficulty: None,
     };
     Some(registry.start(world, meta).id)

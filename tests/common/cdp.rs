@@ -206,6 +206,15 @@ impl Browser {
     }
 
     /// A PNG of the page.
+    /// Saves a screenshot as `name` in `LASERTAG_SCREENSHOTS` when that is set (how the
+    /// pictures in docs/screenshots are taken); otherwise does nothing.
+    pub async fn save(&mut self, name: &str) {
+        if let Ok(dir) = std::env::var("LASERTAG_SCREENSHOTS") {
+            let png = self.screenshot().await;
+            std::fs::write(std::path::Path::new(&dir).join(name), png).expect("screenshot saved");
+        }
+    }
+
     pub async fn screenshot(&mut self) -> Vec<u8> {
         let r = self
             .call("Page.captureScreenshot", json!({"format": "png"}))

@@ -293,6 +293,15 @@ impl TestServer {
     }
 }
 
+/// A match on `office` for one person against two idle robots: `r0` 4 m in front of the
+/// person's opponent in the west corridor, facing it; `r1` in a far room.
+pub fn corridor_duel() -> Value {
+    json!({"map": "office", "robots": 2, "opponents": 1,
+        "opponent_control": "human", "planner": "idle", "time_limit_s": 120,
+        "robot_starts": [[7.0, 8.0, std::f64::consts::PI], [22.0, 1.5, 0.0]],
+        "opponent_starts": [[3.0, 8.0]]})
+}
+
 /// A 14 m × 8 m room with a pillar: small enough to reason about in a test.
 pub fn duel_map() -> Value {
     json!({
