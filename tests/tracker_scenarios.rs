@@ -150,7 +150,7 @@ async fn two_opponents_seen_apart_split_into_two_roles_then_merge_when_hidden_to
     let id = server
         .create_match(json!({
             "map": room_map(), "clock": "manual", "robots": 1, "opponents": 2,
-            "opponent_control": "api", "planner": "idle", "seed": 3,
+            "opponent_control": "api", "planner": "idle", "seed": 4,
             "robot_starts": [[7.0, 3.0, 0.485]], "opponent_starts": [[2.0, 8.0], [1.0, 9.0]]
         }))
         .await;
