@@ -227,7 +227,8 @@ mod tests {
         let (p, lo, hi) = win_rate(50, 100);
         assert!((p - 0.5).abs() < 1e-12 && lo < 0.5 && hi > 0.5);
         assert!((hi - lo - 0.19).abs() < 0.01, "{lo} {hi}");
-        let (_, _, hi) = win_rate(100, 100);
-        assert_eq!(hi, 1.0);
+        let (p, lo, hi) = win_rate(100, 100);
+        assert_eq!(p, 1.0);
+        assert!(lo > 0.95 && (hi - 1.0).abs() < 1e-12, "{lo} {hi}");
     }
 }
