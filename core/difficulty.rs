@@ -33,6 +33,25 @@ pub struct Preset {
     pub time_limit_s: u64,
 }
 
+/// One row of a preset's measurement: how its robots did against one built-in bot.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Measured {
+    /// `wander` or `evade`.
+    pub bot: &'static str,
+    pub runs: u32,
+    /// Matches the robots won (tagged the bot in time).
+    pub robots_won: u32,
+    /// Median seconds to the tag, of the matches the robots won.
+    pub median_tag_s: f64,
+}
+
+/// A preset's rating, which matches never change (see [`Difficulty::rating`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FixedRating {
+    pub rating: f64,
+    pub deviation: f64,
+}
+
 impl Difficulty {
     pub const ALL: [Difficulty; 3] = [Difficulty::Recruit, Difficulty::Veteran, Difficulty::Elite];
 
@@ -88,6 +107,41 @@ impl Difficulty {
         config.time_limit_ticks = p.time_limit_s * TICK_HZ as u64;
     }
 
+    /// How the preset's robots did against each built-in bot on `office`
+    /// (`lasertag experiment difficulty --runs 200`, seeds 0..200; the committed figures are
+    /// `docs/results/difficulty_summary.csv`, which a test of the server holds these to).
+    pub fn measured(self) -> [Measured; 2] {
+        let m = |bot, runs, robots_won, median_tag_s| Measured {
+            bot,
+            runs,
+            robots_won,
+            median_tag_s,
+        };
+        match self {
+            Difficulty::Recruit => [m("wander", 200, 186, 32.03), m("evade", 200, 82, 65.53)],
+            Difficulty::Veteran => [m("wander", 200, 198, 23.83), m("evade", 200, 113, 72.75)],
+            Difficulty::Elite => [m("wander", 200, 200, 13.25), m("evade", 200, 199, 26.90)],
+        }
+    }
+
+    /// The preset's fixed rating on the Glicko scale, where the `evade` bot (a bot that runs
+    /// from the robots, the nearest to a person) stands at 1500: the rating whose expected
+    /// score against 1500 is the robots' measured win rate against that bot, and as its
+    /// deviation the standard error of that estimate on the same scale. The win rate is
+    /// taken as (wins + ½) / (runs + 1), so that a preset that never lost still gets a finite
+    /// rating.
+    pub fn rating(self) -> FixedRating {
+        let evade = self.measured()[1];
+        let n = evade.runs as f64;
+        let p = (evade.robots_won as f64 + 0.5) / (n + 1.0);
+        // 400 / ln 10: the Elo and Glicko scale's points per unit of log-odds.
+        let scale = 400.0 / std::f64::consts::LN_10;
+        FixedRating {
+            rating: 1500.0 + scale * (p / (1.0 - p)).ln(),
+            deviation: scale / (n * p * (1.0 - p)).sqrt(),
+        }
+    }
+
     /// `physics` with the preset's robot speed and tag cool-down: the part of a preset no
     /// other setting of a match carries.
     pub fn physics(self, physics: Physics) -> Physics {
@@ -133,5 +187,17 @@ mod tests {
         );
         assert_eq!(config.opponents, default.opponents);
         assert_eq!(config.tracker, default.tracker);
+    }
+
+    #[test]
+    fn ratings_follow_the_measured_win_rates() {
+        let [r, v, e] = Difficulty::ALL.map(Difficulty::rating);
+        // Recruit's robots win 41% against the evade bot: below 1500; veteran's 56.5%: above.
+        assert!(r.rating < 1500.0 && v.rating > 1500.0 && e.rating > v.rating + 500.0);
+        assert!((r.rating - 1437.0).abs() < 2.0, "{r:?}");
+        // A rating 400 points up means 10:1 odds: elite's 199 of 200 (smoothed) is ~2350.
+        assert!((2300.0..2400.0).contains(&e.rating), "{e:?}");
+        // Fewer losses measured, a wider interval.
+        assert!(r.deviation < e.deviation && r.deviation > 20.0);
     }
 }

@@ -103,6 +103,7 @@ fn meta(id: &str) -> MatchMeta {
         spectator_delay_ticks: 0,
         head_start_ticks: 0,
         difficulty: None,
+        rated: false,
     }
 }
 
@@ -151,6 +152,7 @@ fn main() {
         false,
         600,
         None,
+        false,
     ))
     .expect("settings");
     let stored = settings.len()
@@ -258,6 +260,7 @@ fn main() {
             false,
             0,
             None,
+            false,
         );
         let writes = [
             Write::Begin {
@@ -280,6 +283,7 @@ fn main() {
                     winner: Some("robots"),
                     reason: Some("all_tagged"),
                     players: vec![],
+                    rated: None,
                 },
             },
         ];

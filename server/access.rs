@@ -105,6 +105,9 @@ pub struct Owner {
     pub token: Option<String>,
     /// The client that made it; `None` for the server's own.
     pub client: Option<ClientKey>,
+    /// Whether the token also reads the match live and sees its secret seed. Not for a
+    /// rated match (docs/ratings.md): whoever made it may be the person playing it.
+    pub reads_live: bool,
 }
 
 impl Owner {
@@ -114,6 +117,7 @@ impl Owner {
         Owner {
             token: Some(random_id(16)),
             client,
+            reads_live: true,
         }
     }
 

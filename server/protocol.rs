@@ -13,6 +13,7 @@
 pub mod bounds;
 pub mod compact;
 pub mod difficulties;
+mod difficulty_name;
 pub mod fleet;
 mod refusal;
 pub mod replay_ws;
@@ -49,6 +50,7 @@ use lasertag_core::sim::{AgentId, TICK_HZ};
 use lasertag_core::world::{ControlKind, FinishReason, MatchConfig, Placement};
 use lasertag_core::world::{EventKind, MatchStatus, Side, World};
 
+pub use difficulty_name::DifficultyName;
 pub use refusal::{Invalid, invalid};
 
 /// Deserialises with serde, naming the JSON path of whatever is wrong (`root` when it is
@@ -158,37 +160,6 @@ pub enum Planner {
     Idle,
     /// Robots driven from outside (`POST /api/matches/{id}/robots/{rid}/command`, `/act`).
     Api,
-}
-
-/// A robot-team preset (docs/difficulty.md): a set of the other settings, measured against
-/// the built-in bots.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, ToSchema)]
-#[serde(rename_all = "lowercase")]
-pub enum DifficultyName {
-    /// One robot at 0.8 m/s searching at random, 2 s between tags, 2 minutes.
-    Recruit,
-    /// Two robots at 0.8 m/s searching at random, 2 s between tags, 2 minutes.
-    Veteran,
-    /// Two coordinated robots tracking the opponents, at full speed, 2 minutes.
-    Elite,
-}
-
-impl DifficultyName {
-    pub fn kind(self) -> Difficulty {
-        match self {
-            DifficultyName::Recruit => Difficulty::Recruit,
-            DifficultyName::Veteran => Difficulty::Veteran,
-            DifficultyName::Elite => Difficulty::Elite,
-        }
-    }
-
-    pub fn of(d: Difficulty) -> DifficultyName {
-        match d {
-            Difficulty::Recruit => DifficultyName::Recruit,
-            Difficulty::Veteran => DifficultyName::Veteran,
-            Difficulty::Elite => DifficultyName::Elite,
-        }
-    }
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, ToSchema)]
@@ -303,6 +274,8 @@ pub struct MatchRequest {
     pub spectator_delay_ticks: u64,
     /// The robot team's preset, if one was asked for.
     pub difficulty: Option<Difficulty>,
+    /// Whether the match counts for ratings ([`CreateMatch::rated`]).
+    pub rated: bool,
 }
 
 /// Default of `spectator_delay_s` ([`bounds::SPECTATOR_DELAY_S`]).
@@ -318,6 +291,7 @@ fn refused(field: &str, message: String) -> FieldError {
 impl CreateMatch {
     /// Checks ranges and fills in defaults; an error names the field.
     pub fn validate(self) -> Result<MatchRequest, FieldError> {
+        let rated = self.rated();
         let difficulty = self.difficulty.map(DifficultyName::kind);
         let preset = difficulty.map(Difficulty::preset);
         // A preset fills in what the request leaves out; what it gives wins.
@@ -437,7 +411,34 @@ impl CreateMatch {
                 0
             },
             difficulty,
+            rated,
         })
+    }
+
+    /// Whether a match made from this request counts for ratings (docs/ratings.md): one
+    /// person against a preset exactly as it was measured — a `difficulty` and nothing that
+    /// changes the robot team, its clock or where anyone starts; one opponent, a person's
+    /// seat; a real-time clock (nobody steps it); and (checked where the maps are) a map
+    /// the server ships. Its owner token then reads it as late as
+    /// everyone else, and its seed stays secret from the owner too: nobody in it can see its
+    /// truth live.
+    fn rated(&self) -> bool {
+        let team_as_measured = self.robots.is_none()
+            && self.planner.is_none()
+            && self.time_limit_s.is_none()
+            && self.tracker.is_none()
+            && self.coordination.is_none()
+            && self.localisation.is_none()
+            && self.radio.is_none()
+            && self.odometry.is_none()
+            && self.localiser.is_none()
+            && self.robot_starts.is_none()
+            && self.opponent_starts.is_none();
+        self.difficulty.is_some()
+            && team_as_measured
+            && self.opponents.unwrap_or(1) == 1
+            && self.opponent_control == Some(OpponentControl::Human)
+            && self.clock.unwrap_or(Clock::Realtime) == Clock::Realtime
     }
 }
 

@@ -125,6 +125,7 @@ async fn the_servers_own_matches_change_only_for_the_operator() {
         bots_joinable: true,
         spectator_delay_ticks: 0,
         head_start_ticks: 0,
+        rated: false,
         difficulty: None,
     };
     s.registry.start(world, meta);

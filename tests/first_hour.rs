@@ -107,10 +107,11 @@ async fn a_delayed_view_moves_at_once_and_its_schedule_is_not_jitter() {
 }
 
 /// The lobby's difficulty: recruit by default, each preset's measured figures beside the
-/// choice, its settings in the form; a match made from it has the preset's team.
+/// choice, its settings in the form; a match made from it has the preset's team, is rated,
+/// and its end screen shows the player's rating change.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn the_lobby_offers_difficulty_presets_with_their_measured_figures() {
-    let s = TestServer::start().await;
+    let s = TestServer::start_stored(&common::temp_dir("first-hour-rated")).await;
     let mut b = Browser::launch().await;
     b.navigate(&format!("http://{}/", s.addr)).await;
     b.wait_for(
@@ -132,6 +133,7 @@ async fn the_lobby_offers_difficulty_presets_with_their_measured_figures() {
         .wait_for("__lasertag.difficulty === 'elite' && document.getElementById('difficulty-note').textContent", 5)
         .await;
     assert!(note.as_str().unwrap().contains("coordinating"), "{note}");
+    assert!(note.as_str().unwrap().contains("rating"), "{note}");
     b.eval("document.getElementById('name').value = 'tester'")
         .await;
     b.eval("document.querySelector('#create button[type=submit]').click()")
@@ -152,6 +154,24 @@ async fn the_lobby_offers_difficulty_presets_with_their_measured_figures() {
     assert_eq!(m["difficulty"], "elite", "{m}");
     assert_eq!(m["robots"], 2, "{m}");
     assert_eq!(m["planner"], "coordinated", "{m}");
+    // One person against the preset on a shipped map: rated, and the page knows it.
+    assert_eq!(m["rated"], true, "{m}");
+    b.wait_for("__lasertag.rated === true", 10).await;
+    // Played (a slot nobody plays lapses), then left standing until the robots tag the
+    // player or the two minutes are up; the end screen then shows the rating change.
+    b.tap("KeyW", Duration::from_millis(300)).await;
+    let change = b
+        .wait_for("__lasertag.ended && __lasertag.ratingChange", 150)
+        .await;
+    assert_eq!(change["before"], 1500.0, "{change}");
+    let text = b
+        .eval("document.getElementById('end-rating').textContent")
+        .await;
+    assert!(
+        text.as_str().unwrap().starts_with("Rating 1500 → "),
+        "{text}"
+    );
+    b.save("rated-end.png").await;
 }
 
 /// One touch of a finger at (x, y) CSS pixels: `touchStart`, `touchMove` or `touchEnd`.

@@ -65,6 +65,7 @@ fn started(id: &str, n: u64, name: &str) -> Vec<Write> {
                 false,
                 0,
                 None,
+                false,
             )),
             started_at: std::time::SystemTime::now(),
         },
@@ -91,6 +92,7 @@ fn finish(id: &str, n: u64, name: &str, won: bool) -> Write {
                 survived_ticks: n,
                 won,
             }],
+            rated: None,
         },
     }
 }
@@ -203,7 +205,7 @@ fn answers(open: &dyn Fn(Retention) -> Box<dyn Backend>) -> Answers {
             .played("bob", 10)
             .expect("played")
             .into_iter()
-            .map(|l| l.id)
+            .map(|p| p.listed.id)
             .collect(),
         leaders: orders
             .iter()
@@ -249,6 +251,124 @@ fn listings_statistics_and_retention_answer_as_sqlites_do() {
                  WHERE hash NOT IN (SELECT map_hash FROM matches)))::TEXT",
     );
     assert_eq!(orphans.as_deref(), Some("0"));
+}
+
+/// A scripted series of rated matches (and one unrated), on any backend: each name's
+/// rating and match count, what each of ada's matches did to her rating (newest first),
+/// and the leaderboard by rating.
+/// A name's (rating, deviation, rated matches), rounded, once rated.
+type RatingOf = Option<(i64, i64, u64)>;
+
+#[derive(Debug, PartialEq)]
+struct Ratings {
+    of: Vec<(String, RatingOf)>,
+    ada_changes: Vec<(Option<i64>, Option<i64>)>,
+    by_rating: Vec<String>,
+}
+
+fn rated_series(open: &dyn Fn() -> Box<dyn Backend>) -> Ratings {
+    use lasertag_core::difficulty::Difficulty::{Elite, Recruit, Veteran};
+    let mut db = open();
+    let series = [
+        ("ada", Some(Recruit), true),
+        ("bob", Some(Recruit), false),
+        ("ada", Some(Recruit), true),
+        ("cy", Some(Elite), true),
+        ("ada", Some(Elite), false),
+        ("bob", Some(Recruit), false),
+        ("ada", Some(Veteran), true),
+        // Unrated (a custom team, or an end not by the rules): no rating.
+        ("dee", None, true),
+        ("ada", None, false),
+    ];
+    for (i, (name, preset, won)) in series.into_iter().enumerate() {
+        let id = format!("r{i}");
+        let mut writes = started(&id, 5, name);
+        let mut end = finish(&id, 5, name, won);
+        if let Write::Finish { ended, .. } = &mut end {
+            ended.rated = preset;
+        }
+        writes.push(end);
+        db.write(&writes).expect("write");
+    }
+    let round = |v: f64| v.round() as i64;
+    let of = ["ada", "bob", "cy", "dee"]
+        .iter()
+        .map(|n| {
+            let stats = db.player(n).expect("stats").expect("played");
+            let r = stats
+                .rating
+                .map(|r| (round(r.rating), round(r.deviation), r.matches));
+            (n.to_string(), r)
+        })
+        .collect();
+    let ada_changes = db
+        .played("ada", 10)
+        .expect("played")
+        .into_iter()
+        .map(|p| (p.rating_before.map(round), p.rating_after.map(round)))
+        .collect();
+    let by_rating = db
+        .leaders(LeaderOrder::Rating, 10)
+        .expect("leaders")
+        .into_iter()
+        .map(|s| s.name)
+        .collect();
+    Ratings {
+        of,
+        ada_changes,
+        by_rating,
+    }
+}
+
+#[test]
+fn a_series_of_rated_matches_rates_alike_in_both_databases() {
+    let database = pg::database("ratings");
+    let url = database.url.clone();
+    let postgres = rated_series(&|| Box::new(Postgres::open(&url, KEEP_ALL).expect("open")));
+    let dir = common::temp_dir("sqlite-ratings");
+    let sqlite = rated_series(&|| Box::new(Sqlite::open(&dir, KEEP_ALL).expect("open")));
+    assert_eq!(postgres, sqlite);
+    eprintln!("ratings after the series: {:?}", postgres.of);
+    eprintln!(
+        "ada's matches, newest first (before, after): {:?}",
+        postgres.ada_changes
+    );
+    let rating = |name: &str| {
+        postgres
+            .of
+            .iter()
+            .find(|(n, _)| n == name)
+            .and_then(|(_, r)| *r)
+    };
+    let (ada, bob, cy) = (
+        rating("ada").expect("ada is rated"),
+        rating("bob").expect("bob is rated"),
+        rating("cy").expect("cy is rated"),
+    );
+    assert_eq!(rating("dee"), None, "an unrated match rates nobody");
+    assert_eq!((ada.2, bob.2, cy.2), (4, 2, 1));
+    assert!(ada.0 > 1500 && bob.0 < 1500, "{ada:?} {bob:?}");
+    // One upset moves a newcomer far, with a wide deviation left.
+    assert!(cy.0 > ada.0 && cy.1 > ada.1, "{cy:?} {ada:?}");
+    // Each rated match starts where the one before ended; the unrated one changes nothing.
+    let changes = &postgres.ada_changes;
+    assert_eq!(changes[0], (None, None));
+    assert_eq!(changes[4].0, Some(1500));
+    for pair in changes[1..].windows(2) {
+        assert_eq!(pair[0].0, pair[1].1, "{changes:?}");
+    }
+    assert_eq!(changes[1].1, Some(ada.0));
+    // Ranked by rating less two deviations, rated names only.
+    let mut expected: Vec<_> = postgres
+        .of
+        .iter()
+        .filter_map(|(n, r)| r.map(|r| (r.0 - 2 * r.1, n.clone())))
+        .collect();
+    expected.sort_by(|a, b| b.cmp(a));
+    let expected: Vec<String> = expected.into_iter().map(|(_, n)| n).collect();
+    assert_eq!(postgres.by_rating, expected);
+    assert_eq!(postgres.by_rating.len(), 3);
 }
 
 #[test]

@@ -201,7 +201,8 @@ function showDifficulty() {
       `(median tag ${Math.round(by.evade.median_tag_s)} s) and ${pct(by.wander)} against one that wanders ` +
       `(${Math.round(by.wander.median_tag_s)} s).`
     : "";
-  $("difficulty-note").textContent = `${d.name[0].toUpperCase()}${d.name.slice(1)}: ${team}.${measured}`;
+  const rated = d.rating ? ` One person against it (people, 1 opponent) plays for a rating; this team stands at ${Math.round(d.rating)}.` : "";
+  $("difficulty-note").textContent = `${d.name[0].toUpperCase()}${d.name.slice(1)}: ${team}.${measured}${rated}`;
 }
 
 async function create(e) {

@@ -135,6 +135,9 @@ export class Game {
     this.segs = segments(w.map);
     this.you = w.you;
     this.role = w.role;
+    this.name = w.name;
+    this.rated = Boolean(w.rated);
+    debug.rated = this.rated;
     this.tickHz = w.tick_hz;
     // A match people play is shown to spectators late (so that nobody can watch where the
     // robots are while playing them): say so, wherever the page shows everything.
@@ -286,8 +289,41 @@ export class Game {
     }), share);
     $("end-title").textContent = won + you;
     $("end-text").textContent = why[0].toUpperCase() + why.slice(1) + ".";
+    $("end-rating").textContent = "";
+    if (this.role === "player" && this.rated && this.name) this.showRating(["all_tagged", "time_limit"].includes(f.reason));
     $("end").hidden = false;
     $("hud-status").textContent = "";
+  }
+
+  /** The player's rating change this match, once the history has it (it rates the match a
+   * moment after the end); `counts` is false for an end that rates nobody. */
+  async showRating(counts) {
+    const out = $("end-rating");
+    if (!counts) {
+      out.textContent = "This rated match ended early: it does not change your rating.";
+      return;
+    }
+    out.textContent = "Rating: …";
+    for (let i = 0; i < 20 && this.ended; i++) {
+      try {
+        const r = await fetch(`${this.base}/api/players/${encodeURIComponent(this.name)}`);
+        if (r.ok) {
+          const p = await r.json();
+          const m = (p.recent || []).find((x) => x.id === this.matchId);
+          if (m && m.rating_after != null) {
+            const change = Math.round(m.rating_after - m.rating_before);
+            const dev = p.rating ? ` ± ${Math.round(2 * p.rating.deviation)}` : "";
+            out.textContent = `Rating ${Math.round(m.rating_before)} → ${Math.round(m.rating_after)}` +
+              ` (${change >= 0 ? "+" : ""}${change})${dev}`;
+            out.className = change >= 0 ? "rating up" : "rating down";
+            debug.ratingChange = { before: m.rating_before, after: m.rating_after };
+            return;
+          }
+        }
+      } catch { /* try again */ }
+      await new Promise((ok) => setTimeout(ok, 500));
+    }
+    out.textContent = "Your rating will show on the leaderboard.";
   }
 
   legend() {

@@ -138,7 +138,14 @@ export async function showHistory(before) {
 
 const BOARDS = [
   ["wins", "Wins"], ["tags", "Tags"], ["survival", "Longest survival"], ["matches", "Matches"],
+  ["rating", "Rating"],
 ];
+
+/** A rating as "1646 ± 368" (two deviations: 95% confidence), or a dash before any rated
+ * match (docs/ratings.md). */
+function fmtRating(r) {
+  return r ? `${Math.round(r.rating)} ± ${Math.round(2 * r.deviation)}` : "—";
+}
 
 function statsTable(heads, rows) {
   const table = document.createElement("table");
@@ -154,7 +161,7 @@ function noStats(text) {
   return Object.assign(document.createElement("p"), { className: "empty", textContent: text });
 }
 
-/** #/leaderboard?by=wins|tags|survival|matches */
+/** #/leaderboard?by=wins|tags|survival|matches|rating */
 export async function showLeaderboard(by) {
   if (!BOARDS.some(([k]) => k === by)) by = "wins";
   debug.page = "leaderboard";
@@ -183,16 +190,19 @@ export async function showLeaderboard(by) {
   const players = board.players || [];
   debug.leaderboard = players.length;
   if (!players.length) {
-    out.replaceChildren(noStats("No statistics yet: nobody has finished a match."));
+    out.replaceChildren(noStats(by === "rating"
+      ? "Nobody is rated yet: play a match with a difficulty preset to the end."
+      : "No statistics yet: nobody has finished a match."));
     return;
   }
   const rows = players.map((p, i) => {
     const tr = document.createElement("tr");
     tr.append(cell(String(i + 1), "num"), cell(nameLink(p.name)), cell(String(p.matches), "num"),
-      cell(String(p.wins), "num"), cell(String(p.tags), "num"), cell(fmtTime(p.longest_survival_s), "num"));
+      cell(String(p.wins), "num"), cell(String(p.tags), "num"), cell(fmtTime(p.longest_survival_s), "num"),
+      cell(fmtRating(p.rating), "num"));
     return tr;
   });
-  out.replaceChildren(statsTable(["#", "name", "matches", "wins", "tags", "longest survival"], rows));
+  out.replaceChildren(statsTable(["#", "name", "matches", "wins", "tags", "longest survival", "rating"], rows));
 }
 
 /** #/player/<name>: one name's figures and its recent matches. */
@@ -221,12 +231,19 @@ export async function showPlayer(name) {
   debug.player = p.name;
   const figures = Object.assign(document.createElement("div"), { className: "figures" });
   for (const [label, value] of [["matches", p.matches], ["wins", p.wins], ["tags", p.tags],
-    ["longest survival", fmtTime(p.longest_survival_s)]]) {
+    ["longest survival", fmtTime(p.longest_survival_s)], ["rating", fmtRating(p.rating)]]) {
     const f = document.createElement("div");
     f.append(Object.assign(document.createElement("strong"), { textContent: String(value) }), label);
     figures.append(f);
   }
-  const recent = (p.recent || []).map(replayRow);
+  const recent = (p.recent || []).map((m) => {
+    const tr = replayRow(m);
+    if (m.rating_after != null) {
+      const change = Math.round(m.rating_after - m.rating_before);
+      tr.cells[3].append(` · rating ${change >= 0 ? "+" : ""}${change}`);
+    }
+    return tr;
+  });
   const h = Object.assign(document.createElement("h2"), { textContent: "Recent matches" });
   out.replaceChildren(figures, h, recent.length
     ? statsTable(["ended", "map", "players", "result", "length", ""], recent)

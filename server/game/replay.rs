@@ -161,6 +161,7 @@ impl Replay {
                 spectator_delay_ticks: settings.spectator_delay_ticks,
                 head_start_ticks: 0,
                 difficulty: settings.difficulty(),
+                rated: settings.rated,
             },
             last_tick: l.ticks,
             winner: match l.winner.as_deref() {

@@ -104,6 +104,7 @@ async fn start(registry: &Registry) -> Option<String> {
         // the first second (about 0.3 s of computing for 30 s of play).
         head_start_ticks: head_start,
         difficulty: None,
+        rated: false,
     };
     Some(registry.start(world, meta).id)
 }

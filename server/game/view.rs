@@ -513,6 +513,10 @@ pub struct MatchMeta {
     /// The robot team's preset, when the match was created with one
     /// (`lasertag_core::difficulty`).
     pub difficulty: Option<lasertag_core::difficulty::Difficulty>,
+    /// Whether it counts for ratings (`CreateMatch::rated`, docs/ratings.md): its owner
+    /// reads it as late as everyone else, and its end rates the person who played it
+    /// against `difficulty`.
+    pub rated: bool,
 }
 
 /// Whether people may play a match: human opponent slots, or bot opponents people may take

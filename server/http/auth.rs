@@ -1,6 +1,7 @@
 //! Who may change what: the owner token handed out when a match or map was made, or the
 //! operator's admin token, presented as `Authorization: Bearer <token>`. Reading is open;
-//! with one of those tokens it also sees a match people play live (see `game::delay`).
+//! with one of those tokens it also sees a match people play live (see `game::delay`),
+//! except a rated match's owner token, which reads it as late as everybody.
 
 use axum::http::StatusCode;
 use axum::http::header::AUTHORIZATION;
@@ -83,7 +84,7 @@ impl Bearer {
     pub fn opens(&self, state: &AppState, owner: &Owner) -> bool {
         self.0
             .as_deref()
-            .is_some_and(|token| opens(state, Some(owner), token))
+            .is_some_and(|token| reads_live(state, owner, token))
     }
 
     /// How a read of `what` (owned by `owner`) sees it: live with the owner's or the admin
@@ -93,8 +94,12 @@ impl Bearer {
         let Some(token) = &self.0 else {
             return Ok(Sight::Public);
         };
-        if opens(state, Some(owner), token) {
+        if reads_live(state, owner, token) {
             return Ok(Sight::Live);
+        }
+        if owner.is(token) {
+            // A rated match's owner reads what everybody reads.
+            return Ok(Sight::Public);
         }
         state.registry.metrics.refuse(Refusal::Forbidden);
         Err(ApiError::new(
@@ -104,6 +109,13 @@ impl Bearer {
             ),
         ))
     }
+}
+
+/// Whether `token` sees `owner`'s match live: the admin token, or the owner's token when
+/// the owner reads live (not in a rated match).
+fn reads_live(state: &AppState, owner: &Owner, token: &str) -> bool {
+    let admin = state.registry.config.admin_token.as_ref();
+    admin.is_some_and(|a| same_secret(&a.0, token)) || (owner.reads_live && owner.is(token))
 }
 
 /// Whether `token` is the admin token or `owner`'s.

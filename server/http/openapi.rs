@@ -84,6 +84,8 @@ use crate::protocol::*;
         replays::ReplayListed,
         replays::ReplayDetail,
         replays::PlayerTotals,
+        replays::RatingDto,
+        replays::PlayedMatch,
         replays::PlayerDetail,
         replays::Leaderboard,
         JoinRequest,

@@ -26,7 +26,7 @@ pub async fn player(
 }
 
 #[utoipa::path(get, path = "/api/leaderboard",
-    params(("by" = Option<String>, Query, pattern = "^(wins|tags|survival|matches)$", description = "wins (default), tags, survival or matches"),
+    params(("by" = Option<String>, Query, pattern = "^(wins|tags|survival|matches|rating)$", description = "wins (default), tags, survival, matches or rating (rated names only, by rating less two deviations)"),
            ("limit" = Option<u64>, Query, minimum = 1, maximum = 100, description = "at most this many (20)")),
     responses((status = 200, body = Leaderboard), (status = 400, body = ErrorBody), (status = 404, body = ErrorBody)))]
 pub async fn leaderboard(
@@ -38,9 +38,10 @@ pub async fn leaderboard(
         Some("tags") => ("tags", LeaderOrder::Tags),
         Some("survival") => ("survival", LeaderOrder::Survival),
         Some("matches") => ("matches", LeaderOrder::Matches),
+        Some("rating") => ("rating", LeaderOrder::Rating),
         Some(other) => {
             return Err(ApiError::bad_request(format!(
-                "by: {other:?} is not one of wins, tags, survival, matches"
+                "by: {other:?} is not one of wins, tags, survival, matches, rating"
             )));
         }
     };

@@ -201,6 +201,7 @@ impl Connection {
                 0.0
             },
             kinematics: wire::Kinematics::of(&self.handle.hub.physics),
+            rated: hub.summary.borrow().meta.rated,
             protocol: 2,
             format: if self.compact { "compact" } else { "json" },
             belief: self.belief,

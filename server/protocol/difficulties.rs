@@ -1,7 +1,7 @@
 //! `GET /api/difficulties`: the robot-team presets a person chooses from (the lobby shows
 //! them), each with the settings it sets and how often its robots beat the built-in bots
 //! (`lasertag experiment difficulty`; the figures are `docs/results/difficulty_summary.csv`,
-//! which a test holds them to).
+//! which a test holds them to), and the fixed rating that follows from them.
 
 use serde::Serialize;
 use utoipa::ToSchema;
@@ -25,6 +25,9 @@ pub struct DifficultyDto {
     pub time_limit_s: f64,
     /// Measured against each built-in bot.
     pub measured: Vec<MeasuredDto>,
+    /// The preset's fixed rating, which a player's rating is measured against in a rated
+    /// match (docs/ratings.md): the `evade` bot stands at 1500.
+    pub rating: f64,
 }
 
 /// How the preset's robots did against one bot, from the map's spawns.
@@ -40,17 +43,6 @@ pub struct MeasuredDto {
     pub median_tag_s: f64,
 }
 
-/// `lasertag experiment difficulty --runs 200` (seeds 0..200): preset, bot, runs, robots'
-/// wins, median seconds to the tag when they won.
-const MEASURED: &[(Difficulty, &str, u32, u32, f64)] = &[
-    (Difficulty::Recruit, "wander", 200, 186, 32.03),
-    (Difficulty::Recruit, "evade", 200, 82, 65.53),
-    (Difficulty::Veteran, "wander", 200, 198, 23.83),
-    (Difficulty::Veteran, "evade", 200, 113, 72.75),
-    (Difficulty::Elite, "wander", 200, 200, 13.25),
-    (Difficulty::Elite, "evade", 200, 199, 26.90),
-];
-
 /// Every preset, from the easiest.
 pub fn all() -> Vec<DifficultyDto> {
     Difficulty::ALL
@@ -65,17 +57,18 @@ pub fn all() -> Vec<DifficultyDto> {
                 robot_speed: (p.robot_speed as f64 * 1e6).round() / 1e6,
                 tag_cooldown_s: p.tag_cooldown_ticks as f64 / TICK_HZ as f64,
                 time_limit_s: p.time_limit_s as f64,
-                measured: MEASURED
+                measured: d
+                    .measured()
                     .iter()
-                    .filter(|m| m.0 == d)
-                    .map(|&(_, bot, runs, won, median)| MeasuredDto {
+                    .map(|m| MeasuredDto {
                         map: "office",
-                        bot,
-                        runs,
-                        robots_win_rate: won as f64 / runs as f64,
-                        median_tag_s: median,
+                        bot: m.bot,
+                        runs: m.runs,
+                        robots_win_rate: m.robots_won as f64 / m.runs as f64,
+                        median_tag_s: m.median_tag_s,
                     })
                     .collect(),
+                rating: d.rating().rating.round(),
             }
         })
         .collect()
@@ -96,14 +89,18 @@ mod tests {
             .skip(1)
             .map(|l| l.split(',').collect())
             .collect();
-        assert_eq!(rows.len(), MEASURED.len());
-        for (row, &(d, bot, runs, won, median)) in rows.iter().zip(MEASURED) {
+        let measured: Vec<_> = Difficulty::ALL
+            .into_iter()
+            .flat_map(|d| d.measured().map(|m| (d, m)))
+            .collect();
+        assert_eq!(rows.len(), measured.len());
+        for (row, (d, m)) in rows.iter().zip(measured) {
             assert_eq!(row[0], "office");
             assert_eq!(row[1], d.name());
-            assert_eq!(row[2], bot);
-            assert_eq!(row[3].parse::<u32>().ok(), Some(runs));
-            assert_eq!(row[4].parse::<u32>().ok(), Some(won));
-            assert_eq!(format!("{median:.2}"), row[8]);
+            assert_eq!(row[2], m.bot);
+            assert_eq!(row[3].parse::<u32>().ok(), Some(m.runs));
+            assert_eq!(row[4].parse::<u32>().ok(), Some(m.robots_won));
+            assert_eq!(format!("{:.2}", m.median_tag_s), row[8]);
             assert_eq!(row[9].parse::<u64>().ok(), Some(d.preset().time_limit_s));
         }
     }

@@ -70,6 +70,30 @@ pub struct PlayerTotals {
     pub tags: u64,
     /// Their longest stay in a match without being tagged, seconds.
     pub longest_survival_s: f64,
+    /// Their rating, once they have played a rated match (docs/ratings.md); null before.
+    pub rating: Option<RatingDto>,
+}
+
+/// A name's Glicko-2 rating: the robot presets' fixed ratings are on the same scale, where
+/// the `evade` bot stands at 1500.
+#[derive(Debug, Clone, Serialize, ToSchema)]
+pub struct RatingDto {
+    pub rating: f64,
+    /// Its uncertainty: the name's strength is within two deviations of `rating` with 95%
+    /// confidence. The leaderboard ranks by `rating - 2 * deviation`.
+    pub deviation: f64,
+    /// Rated matches it rests on.
+    pub matches: u64,
+}
+
+/// A match a name played, with what it did to their rating.
+#[derive(Debug, Clone, Serialize, ToSchema)]
+pub struct PlayedMatch {
+    #[serde(flatten)]
+    pub listed: ReplayListed,
+    /// Their rating before and after this match; null when it was not rated.
+    pub rating_before: Option<f64>,
+    pub rating_after: Option<f64>,
 }
 
 /// `GET /api/players/{name}`: the totals and the latest matches of that name.
@@ -78,13 +102,14 @@ pub struct PlayerDetail {
     #[serde(flatten)]
     pub totals: PlayerTotals,
     /// Their latest ended matches, newest first (at most 20).
-    pub recent: Vec<ReplayListed>,
+    pub recent: Vec<PlayedMatch>,
 }
 
 /// `GET /api/leaderboard`.
 #[derive(Debug, Clone, Serialize, ToSchema)]
 pub struct Leaderboard {
-    /// What it ranks by: `wins`, `tags`, `survival` or `matches`.
+    /// What it ranks by: `wins`, `tags`, `survival`, `matches` or `rating` (rated names
+    /// only, by `rating - 2 * deviation`).
     pub by: &'static str,
     pub players: Vec<PlayerTotals>,
 }

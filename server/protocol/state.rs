@@ -58,6 +58,9 @@ pub struct MatchSummary {
     pub bots_joinable: bool,
     /// The robot team's preset, when the match was created with one.
     pub difficulty: Option<DifficultyName>,
+    /// Whether it counts for ratings (docs/ratings.md): then its owner token reads it late,
+    /// like everybody, and does not see its seed while it runs.
+    pub rated: bool,
     /// Caveats a user should know, e.g. a fallback in effect.
     pub notes: Vec<String>,
     /// How far behind the match its state, belief, events and spectator view run for
@@ -148,6 +151,7 @@ fn summary_showing(s: &view::Summary, seed: bool) -> MatchSummary {
         free_slots: meta.free_slots,
         bots_joinable: meta.bots_joinable,
         difficulty: meta.difficulty.map(DifficultyName::of),
+        rated: meta.rated,
         notes: notes(c),
         spectator_delay_s: meta.spectator_delay_ticks as f64 / TICK_HZ as f64,
         node: None,

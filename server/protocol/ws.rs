@@ -123,6 +123,9 @@ pub struct Welcome<'a> {
     pub view_starts_in_s: f64,
     /// How the player's opponent moves, for prediction on the client.
     pub kinematics: Kinematics,
+    /// Whether the match counts for ratings (docs/ratings.md): the page shows the player's
+    /// rating change at the end.
+    pub rated: bool,
     /// The version of these messages (2: numbered inputs, `ack`, compact snapshots).
     pub protocol: u32,
     /// `json` or `compact`: how this connection's snapshots come (`?format=`).

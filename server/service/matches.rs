@@ -128,6 +128,8 @@ pub async fn create<R>(
     within_match_limits(service, &req.config)?;
     // Refused before anything is built; `try_start` checks again under the lock.
     registry.has_room(client)?;
+    // Only on a map the server ships: a map of one's own could wall the robots off.
+    req.rated &= shipped(service, &req.map);
     let source = map_source(service, req.map).await?;
     let price = admission::held_back(&req.config, req.spectator_delay_ticks)
         + match &source {
@@ -158,8 +160,13 @@ pub async fn create<R>(
         spectator_delay_ticks: req.spectator_delay_ticks,
         head_start_ticks: 0,
         difficulty: req.difficulty,
+        rated: req.rated,
     };
-    let owner = Owner::new(client);
+    let rated = req.rated;
+    let owner = Owner {
+        reads_live: !rated,
+        ..Owner::new(client)
+    };
     let owner_token = owner.token.clone().unwrap_or_default();
     let handle = registry.try_start(world, meta, owner, price)?;
     // Asked of the task so that fields it owns (free slots) are filled in.
@@ -167,6 +174,10 @@ pub async fn create<R>(
         .read(crate::game::Sight::Live, protocol::read_summary)
         .await?;
     summary.node = service.fleet.map(|f| f.me());
+    if rated {
+        // Whoever made a rated match may be the person playing it.
+        summary.seed = None;
+    }
     Ok(Created::Here(Box::new(MatchCreated {
         summary,
         owner_token,
@@ -213,6 +224,18 @@ enum MapSource {
 }
 
 /// The request's `map`: a stored map's name, or an inline map validated on the pool.
+/// Whether `map` names one of the maps the server ships (not an uploaded or inline one).
+fn shipped(service: Service<'_>, map: &serde_json::Value) -> bool {
+    let maps = service
+        .registry
+        .maps
+        .read()
+        .unwrap_or_else(|e| e.into_inner());
+    map.as_str()
+        .and_then(|name| maps.get(name))
+        .is_some_and(|m| m.owner.token.is_none())
+}
+
 async fn map_source(
     service: Service<'_>,
     map: serde_json::Value,

@@ -3,7 +3,7 @@
 //! `store::results`).
 
 use crate::game::replay::HistoryError;
-use crate::protocol::replays::{Leaderboard, PlayerDetail, PlayerTotals};
+use crate::protocol::replays::{Leaderboard, PlayedMatch, PlayerDetail, PlayerTotals, RatingDto};
 use crate::service::replays::listed;
 use crate::service::{PoolError, Service};
 use crate::store::{LeaderOrder, PlayerStats, StoreError};
@@ -39,6 +39,11 @@ fn totals(p: &PlayerStats) -> PlayerTotals {
         wins: p.wins,
         tags: p.tags,
         longest_survival_s: p.longest_survival_ticks as f64 / TICK_HZ as f64,
+        rating: p.rating.map(|r| RatingDto {
+            rating: r.rating.round(),
+            deviation: r.deviation.round(),
+            matches: r.matches,
+        }),
     }
 }
 
@@ -59,7 +64,14 @@ pub async fn player(service: Service<'_>, name: String) -> Result<PlayerDetail, 
     match found {
         (Some(stats), recent) => Ok(PlayerDetail {
             totals: totals(&stats),
-            recent: recent.iter().map(listed).collect(),
+            recent: recent
+                .iter()
+                .map(|p| PlayedMatch {
+                    listed: listed(&p.listed),
+                    rating_before: p.rating_before.map(f64::round),
+                    rating_after: p.rating_after.map(f64::round),
+                })
+                .collect(),
         }),
         (None, _) => Err(StatsError::NoPlayer(name)),
     }

@@ -5,6 +5,7 @@
 use std::sync::Arc;
 use std::time::{Duration, SystemTime};
 
+use lasertag_core::difficulty::Difficulty;
 use lasertag_core::sim::arena::Arena;
 use lasertag_core::world::WorldInput;
 
@@ -83,6 +84,9 @@ pub struct Ended {
     pub winner: Option<&'static str>,
     pub reason: Option<&'static str>,
     pub players: Vec<PlayerResult>,
+    /// The preset its players are rated against, when it counts for ratings (a rated match
+    /// that ended by the rules: all tagged or out of time).
+    pub rated: Option<Difficulty>,
 }
 
 /// An ended match as lists show it.
@@ -121,6 +125,25 @@ pub struct PlayerStats {
     /// Robots this name tagged.
     pub tags: u64,
     pub longest_survival_ticks: u64,
+    /// Their rating, once they have played a rated match.
+    pub rating: Option<Rated>,
+}
+
+/// A name's rating as reads show it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Rated {
+    pub rating: f64,
+    pub deviation: f64,
+    /// Rated matches it is made of.
+    pub matches: u64,
+}
+
+/// An ended match a name played, with what it did to their rating (rated matches only).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Played {
+    pub listed: Listed,
+    pub rating_before: Option<f64>,
+    pub rating_after: Option<f64>,
 }
 
 /// What a leaderboard ranks by.
@@ -130,6 +153,8 @@ pub enum LeaderOrder {
     Tags,
     Survival,
     Matches,
+    /// Rated names only, by [`Rating::conservative`](super::ratings::Rating::conservative).
+    Rating,
 }
 
 /// The operations a database must offer the store.
@@ -148,7 +173,7 @@ pub trait Backend: Send {
     fn list(&mut self, limit: usize, before: Option<&str>) -> Result<Vec<Listed>, StoreError>;
     fn load(&mut self, id: &str) -> Result<Option<Stored>, StoreError>;
     fn player(&mut self, name: &str) -> Result<Option<PlayerStats>, StoreError>;
-    fn played(&mut self, name: &str, limit: usize) -> Result<Vec<Listed>, StoreError>;
+    fn played(&mut self, name: &str, limit: usize) -> Result<Vec<Played>, StoreError>;
     fn leaders(&mut self, order: LeaderOrder, limit: usize)
     -> Result<Vec<PlayerStats>, StoreError>;
     /// (ended matches, their bytes).

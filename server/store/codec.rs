@@ -63,6 +63,9 @@ pub struct StoredSettings {
     /// The robot team's preset (its robot speed and tag cool-down are stored nowhere else).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     difficulty: Option<StoredDifficulty>,
+    /// Whether it counted for ratings (docs/ratings.md).
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub rated: bool,
 }
 
 // The stored form's names for the core's kinds. They are the API's names too, but fixed
@@ -244,6 +247,7 @@ impl StoredSettings {
         bots_joinable: bool,
         spectator_delay_ticks: u64,
         difficulty: Option<Difficulty>,
+        rated: bool,
     ) -> StoredSettings {
         StoredSettings {
             v: SETTINGS_VERSION,
@@ -272,6 +276,7 @@ impl StoredSettings {
             bots_joinable,
             spectator_delay_ticks,
             difficulty: difficulty.map(StoredDifficulty::of),
+            rated,
         }
     }
 

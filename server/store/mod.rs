@@ -14,12 +14,13 @@
 pub mod backend;
 pub mod codec;
 pub mod postgres;
+pub mod ratings;
 pub mod results;
 pub mod sqlite;
 
 pub use backend::{
-    Backend, Ended, HEARTBEAT, LeaderOrder, Listed, PlayerStats, Retention, StoreError, Stored,
-    Write, unix_ms,
+    Backend, Ended, HEARTBEAT, LeaderOrder, Listed, Played, PlayerStats, Rated, Retention,
+    StoreError, Stored, Write, unix_ms,
 };
 pub use results::PlayerResult;
 

@@ -28,7 +28,7 @@ use ::postgres::config::{Host, SslMode};
 use ::postgres::{Client, Config, NoTls, Row};
 
 use crate::store::backend::{
-    self, Backend, LeaderOrder, Listed, PlayerStats, Retention, StoreError, Stored,
+    self, Backend, LeaderOrder, Listed, Played, PlayerStats, Rated, Retention, StoreError, Stored,
 };
 
 mod convert;
@@ -172,12 +172,21 @@ fn stats(r: &Row) -> Result<PlayerStats, ::postgres::Error> {
         r.try_get::<_, Option<i64>>(i)
             .map(|v| v.unwrap_or(0).max(0) as u64)
     };
+    let rating = match r.try_get::<_, Option<f64>>(5)? {
+        Some(rating) => Some(Rated {
+            rating,
+            deviation: r.try_get(6)?,
+            matches: n(7)?,
+        }),
+        None => None,
+    };
     Ok(PlayerStats {
         name: r.try_get(0)?,
         matches: n(1)?,
         wins: n(2)?,
         tags: n(3)?,
         longest_survival_ticks: n(4)?,
+        rating,
     })
 }
 
@@ -437,12 +446,18 @@ impl Backend for Postgres {
         })
     }
 
-    fn played(&mut self, name: &str, limit: usize) -> Result<Vec<Listed>, StoreError> {
+    fn played(&mut self, name: &str, limit: usize) -> Result<Vec<Played>, StoreError> {
         let limit = big(limit as u64);
         self.read(|c, st| {
             c.query(&st.played, &[&name, &limit])?
                 .iter()
-                .map(listed)
+                .map(|r| {
+                    Ok(Played {
+                        listed: listed(r)?,
+                        rating_before: r.try_get(9)?,
+                        rating_after: r.try_get(10)?,
+                    })
+                })
                 .collect()
         })
     }
@@ -458,6 +473,7 @@ impl Backend for Postgres {
             LeaderOrder::Tags => 1,
             LeaderOrder::Survival => 2,
             LeaderOrder::Matches => 3,
+            LeaderOrder::Rating => 4,
         };
         self.read(|c, st| {
             c.query(&st.leaders[i], &[&limit])?

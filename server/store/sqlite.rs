@@ -11,7 +11,7 @@ use std::path::Path;
 use rusqlite::{Connection, OptionalExtension, params};
 
 use crate::store::backend::{
-    self, Ended, LeaderOrder, Listed, PlayerStats, Retention, StoreError, Stored,
+    self, Ended, LeaderOrder, Listed, Played, PlayerStats, Retention, StoreError, Stored,
 };
 
 /// The schema, one migration a step: step i takes `user_version` i to i + 1.
@@ -52,14 +52,22 @@ const MIGRATIONS: &[&str] = &[
         won INTEGER NOT NULL
     );
     CREATE INDEX players_by_name ON players(name);",
+    // 2: ratings (docs/ratings.md): each name's, and what each rated match did to it.
+    "CREATE TABLE ratings (
+        name TEXT PRIMARY KEY,
+        rating REAL NOT NULL,
+        deviation REAL NOT NULL,
+        volatility REAL NOT NULL,
+        matches INTEGER NOT NULL,
+        updated_at INTEGER NOT NULL
+    );
+    CREATE INDEX ratings_by_age ON ratings(updated_at);
+    ALTER TABLE players ADD COLUMN rating_before REAL;
+    ALTER TABLE players ADD COLUMN rating_after REAL;",
 ];
 
 /// The schema version this build writes.
 pub const SCHEMA_VERSION: usize = MIGRATIONS.len();
-
-fn db(e: rusqlite::Error) -> StoreError {
-    StoreError::Database(e.to_string())
-}
 
 /// Opens (creating) the database in `dir` and brings its schema up to date.
 pub fn open(dir: &Path) -> Result<Connection, StoreError> {
@@ -202,31 +210,26 @@ pub fn finish(conn: &Connection, id: &str, ended: &Ended) -> Result<(), StoreErr
     )
     .map_err(db)?;
     for p in &ended.players {
+        let rating = match ended.rated {
+            Some(preset) => Some(rate(conn, &p.name, preset, p.won, ended.ended_at)?),
+            None => None,
+        };
         conn.execute(
-            "INSERT INTO players (seq, name, tags, survived_ticks, won) VALUES (?1, ?2, ?3, ?4, ?5)",
-            params![seq, p.name, p.tags, p.survived_ticks as i64, p.won],
+            "INSERT INTO players (seq, name, tags, survived_ticks, won, rating_before, rating_after)
+             VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7)",
+            params![
+                seq,
+                p.name,
+                p.tags,
+                p.survived_ticks as i64,
+                p.won,
+                rating.map(|r| r.0.rating),
+                rating.map(|r| r.1.rating)
+            ],
         )
         .map_err(db)?;
     }
     Ok(())
-}
-
-const LISTED: &str = "SELECT id, map, started_at, ended_at, ticks, winner, reason, complete, names
-                      FROM matches";
-
-fn listed(r: &rusqlite::Row) -> rusqlite::Result<Listed> {
-    let names: String = r.get(8)?;
-    Ok(Listed {
-        id: r.get(0)?,
-        map: r.get(1)?,
-        started_at_ms: r.get(2)?,
-        ended_at_ms: r.get(3)?,
-        ticks: r.get::<_, i64>(4)? as u64,
-        winner: r.get(5)?,
-        reason: r.get(6)?,
-        complete: r.get(7)?,
-        players: serde_json::from_str(&names).unwrap_or_default(),
-    })
 }
 
 /// Ended matches, newest first: at most `limit`, started before `before` when given.
@@ -370,64 +373,6 @@ pub fn vacuum(conn: &Connection) -> Result<(), StoreError> {
     Ok(())
 }
 
-const STATS: &str = "SELECT name, COUNT(*), SUM(won), SUM(tags), MAX(survived_ticks) FROM players";
-
-fn stats(r: &rusqlite::Row) -> rusqlite::Result<PlayerStats> {
-    Ok(PlayerStats {
-        name: r.get(0)?,
-        matches: r.get::<_, i64>(1)? as u64,
-        wins: r.get::<_, i64>(2)? as u64,
-        tags: r.get::<_, i64>(3)? as u64,
-        longest_survival_ticks: r.get::<_, i64>(4)? as u64,
-    })
-}
-
-/// The totals of everyone named `name`.
-pub fn player(conn: &Connection, name: &str) -> Result<Option<PlayerStats>, StoreError> {
-    conn.query_row(
-        &format!("{STATS} WHERE name = ?1 GROUP BY name"),
-        [name],
-        stats,
-    )
-    .optional()
-    .map_err(db)
-}
-
-/// The ended matches `name` played, newest first.
-pub fn played(conn: &Connection, name: &str, limit: usize) -> Result<Vec<Listed>, StoreError> {
-    let mut stmt = conn
-        .prepare_cached(&format!(
-            "{LISTED} WHERE seq IN (SELECT seq FROM players WHERE name = ?1)
-             ORDER BY seq DESC LIMIT ?2"
-        ))
-        .map_err(db)?;
-    let rows = stmt
-        .query_map(params![name, limit as i64], listed)
-        .map_err(db)?;
-    rows.collect::<Result<_, _>>().map_err(db)
-}
-
-/// The best `limit` names by `order`.
-pub fn leaders(
-    conn: &Connection,
-    order: LeaderOrder,
-    limit: usize,
-) -> Result<Vec<PlayerStats>, StoreError> {
-    let by = match order {
-        LeaderOrder::Wins => "SUM(won) DESC, COUNT(*) ASC",
-        LeaderOrder::Tags => "SUM(tags) DESC, COUNT(*) ASC",
-        LeaderOrder::Survival => "MAX(survived_ticks) DESC",
-        LeaderOrder::Matches => "COUNT(*) DESC",
-    };
-    let mut stmt = conn
-        .prepare_cached(&format!(
-            "{STATS} GROUP BY name ORDER BY {by}, name LIMIT ?1"
-        ))
-        .map_err(db)?;
-    let rows = stmt.query_map([limit as i64], stats).map_err(db)?;
-    rows.collect::<Result<_, _>>().map_err(db)
-}
-
 /// The SQLite [`Backend`](super::Backend).
 pub struct Sqlite {
     conn: Connection,
@@ -552,7 +497,7 @@ impl backend::Backend for Sqlite {
         player(&self.conn, name)
     }
 
-    fn played(&mut self, name: &str, limit: usize) -> Result<Vec<Listed>, StoreError> {
+    fn played(&mut self, name: &str, limit: usize) -> Result<Vec<Played>, StoreError> {
         played(&self.conn, name, limit)
     }
 
@@ -568,6 +513,12 @@ impl backend::Backend for Sqlite {
         totals(&self.conn)
     }
 }
+
+mod players;
+mod rows;
+use players::rate;
+pub use players::{leaders, played, player};
+use rows::{LISTED, db, listed};
 
 #[cfg(test)]
 mod tests;

@@ -42,6 +42,7 @@ fn recorded() -> Replay {
         spectator_delay_ticks: 0,
         head_start_ticks: 0,
         difficulty: None,
+        rated: false,
     };
     Replay::of(&world, meta, arena, config, inputs, SystemTime::now())
 }

@@ -25,6 +25,7 @@ impl MatchTask {
             self.meta.bots_joinable,
             self.meta.spectator_delay_ticks,
             self.meta.difficulty,
+            self.meta.rated,
         );
         let begin = Write::Begin {
             id: self.meta.id.clone(),
@@ -91,6 +92,15 @@ impl MatchTask {
             }),
             reason: replay.reason.map(FinishReason::name),
             players: results::of(&self.world),
+            // Only an end by the rules rates anyone: a match stopped, abandoned or cut short
+            // by the server says nothing about who was stronger.
+            rated: self.meta.difficulty.filter(|_| {
+                self.meta.rated
+                    && matches!(
+                        replay.reason,
+                        Some(FinishReason::AllTagged | FinishReason::TimeLimit)
+                    )
+            }),
         };
         debug_assert_eq!(listed.ticks, ended.ticks);
         if self.store.begun

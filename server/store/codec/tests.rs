@@ -5,7 +5,7 @@ use super::*;
 use lasertag_core::world::ControlKind;
 
 fn round_trip(config: &MatchConfig) {
-    let stored = StoredSettings::of(config, StoredClock::Manual, true, 600, None);
+    let stored = StoredSettings::of(config, StoredClock::Manual, true, 600, None, false);
     let text = serde_json::to_string(&stored).expect("json");
     let back: StoredSettings = serde_json::from_str(&text).expect("parse");
     let again = back.config().expect("config");
@@ -29,11 +29,13 @@ fn a_presets_physics_come_back_from_its_name() {
         false,
         0,
         Some(Difficulty::Recruit),
+        true,
     );
     let text = serde_json::to_string(&stored).expect("json");
     assert!(text.contains(r#""difficulty":"recruit""#), "{text}");
     let back: StoredSettings = serde_json::from_str(&text).expect("parse");
     assert_eq!(back.difficulty(), Some(Difficulty::Recruit));
+    assert!(back.rated);
     assert_eq!(
         format!("{config:?}"),
         format!("{:?}", back.config().expect("config"))
@@ -45,9 +47,11 @@ fn a_presets_physics_come_back_from_its_name() {
         false,
         0,
         None,
+        false,
     ))
     .expect("json");
     assert!(!plain.contains("difficulty"), "{plain}");
+    assert!(!plain.contains("rated"), "{plain}");
 }
 
 #[test]

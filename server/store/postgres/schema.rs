@@ -55,6 +55,18 @@ const MIGRATIONS: &[&str] = &[
         started_at TIMESTAMPTZ NOT NULL DEFAULT now(),
         seen_at TIMESTAMPTZ NOT NULL DEFAULT now()
     );",
+    // 2: ratings (docs/ratings.md): each name's, and what each rated match did to it.
+    "CREATE TABLE ratings (
+        name TEXT PRIMARY KEY,
+        rating DOUBLE PRECISION NOT NULL,
+        deviation DOUBLE PRECISION NOT NULL,
+        volatility DOUBLE PRECISION NOT NULL,
+        matches BIGINT NOT NULL,
+        updated_at BIGINT NOT NULL
+    );
+    CREATE INDEX ratings_by_age ON ratings(updated_at);
+    ALTER TABLE players ADD COLUMN rating_before DOUBLE PRECISION,
+                        ADD COLUMN rating_after DOUBLE PRECISION;",
 ];
 
 /// The schema version this build writes.
@@ -100,8 +112,10 @@ pub fn migrate(client: &mut Client) -> Result<(), StoreError> {
 const LISTED: &str = "SELECT id, map, started_at, ended_at, ticks, winner, reason, complete, names
                       FROM matches";
 
-const STATS: &str = "SELECT name, COUNT(*), SUM(won::INT)::BIGINT, SUM(tags)::BIGINT,
-                            MAX(survived_ticks) FROM players";
+const STATS: &str = "SELECT p.name, COUNT(*), SUM(p.won::INT)::BIGINT, SUM(p.tags)::BIGINT,
+                            MAX(p.survived_ticks), r.rating, r.deviation, r.matches
+                     FROM players p LEFT JOIN ratings r ON r.name = p.name";
+const BY_NAME: &str = "GROUP BY p.name, r.rating, r.deviation, r.matches";
 
 /// Every statement, prepared once a connection.
 pub(super) struct Statements {
@@ -118,7 +132,11 @@ pub(super) struct Statements {
     pub(super) player: Statement,
     pub(super) played: Statement,
     /// By [`LeaderOrder`]: wins, tags, survival, matches.
-    pub(super) leaders: [Statement; 4],
+    pub(super) leaders: [Statement; 5],
+    pub(super) rating_lock: Statement,
+    pub(super) rating_of: Statement,
+    pub(super) rate: Statement,
+    pub(super) forget_ratings: Statement,
     pub(super) beat: Statement,
     pub(super) close_silent: Statement,
     pub(super) forget_writers: Statement,
@@ -126,10 +144,10 @@ pub(super) struct Statements {
 
 impl Statements {
     pub(super) fn prepare(c: &mut Client) -> Result<Statements, ::postgres::Error> {
-        let leaders = |c: &mut Client, by: &str| {
+        let leaders = |c: &mut Client, only: &str, by: &str| {
             // Ties by name in byte order, as SQLite orders them.
             c.prepare(&format!(
-                "{STATS} GROUP BY name ORDER BY {by}, name COLLATE \"C\" LIMIT $1"
+                "{STATS} {only} {BY_NAME} ORDER BY {by}, p.name COLLATE \"C\" LIMIT $1"
             ))
         };
         Ok(Statements {
@@ -162,9 +180,32 @@ impl Statements {
                  WHERE id = $1 AND writer = $2 RETURNING seq",
             )?,
             add_players: c.prepare(
-                "INSERT INTO players (seq, name, tags, survived_ticks, won)
+                "INSERT INTO players (seq, name, tags, survived_ticks, won, rating_before,
+                                      rating_after)
                  SELECT $1, * FROM UNNEST($2::TEXT[], $3::BIGINT[], $4::BIGINT[],
-                                          $5::BOOLEAN[])",
+                                          $5::BOOLEAN[], $6::FLOAT8[], $7::FLOAT8[])",
+            )?,
+            // Servers rating one name at once take turns: the row is locked until commit
+            // (a new name's row is made first, with no matches, so that there is a row to
+            // lock).
+            rating_lock: c.prepare(
+                "INSERT INTO ratings (name, rating, deviation, volatility, matches, updated_at)
+                 VALUES ($1, $2, $3, $4, 0, $5) ON CONFLICT (name) DO NOTHING",
+            )?,
+            rating_of: c.prepare(
+                "SELECT rating, deviation, volatility, matches FROM ratings WHERE name = $1
+                 FOR UPDATE",
+            )?,
+            rate: c.prepare(
+                "UPDATE ratings SET rating = $2, deviation = $3, volatility = $4,
+                                    matches = matches + 1, updated_at = $5
+                 WHERE name = $1",
+            )?,
+            forget_ratings: c.prepare(
+                "DELETE FROM ratings WHERE name IN (
+                   SELECT name FROM ratings ORDER BY updated_at, name
+                   LIMIT GREATEST(0, (SELECT COUNT(*) FROM ratings) - $1)
+                   FOR UPDATE SKIP LOCKED)",
             )?,
             // The newest matches are kept while both their count and their bytes fit.
             evict: c.prepare(
@@ -201,16 +242,23 @@ impl Statements {
                 "SELECT COUNT(*), COALESCE(SUM(bytes), 0)::BIGINT FROM matches
                  WHERE ended_at IS NOT NULL",
             )?,
-            player: c.prepare(&format!("{STATS} WHERE name = $1 GROUP BY name"))?,
-            played: c.prepare(&format!(
-                "{LISTED} WHERE seq IN (SELECT seq FROM players WHERE name = $1)
-                 ORDER BY seq DESC LIMIT $2"
-            ))?,
+            player: c.prepare(&format!("{STATS} WHERE p.name = $1 {BY_NAME}"))?,
+            played: c.prepare(
+                "SELECT m.id, m.map, m.started_at, m.ended_at, m.ticks, m.winner, m.reason,
+                        m.complete, m.names, p.rating_before, p.rating_after
+                 FROM players p JOIN matches m ON m.seq = p.seq
+                 WHERE p.name = $1 ORDER BY m.seq DESC LIMIT $2",
+            )?,
             leaders: [
-                leaders(c, "SUM(won::INT) DESC, COUNT(*) ASC")?,
-                leaders(c, "SUM(tags) DESC, COUNT(*) ASC")?,
-                leaders(c, "MAX(survived_ticks) DESC")?,
-                leaders(c, "COUNT(*) DESC")?,
+                leaders(c, "", "SUM(p.won::INT) DESC, COUNT(*) ASC")?,
+                leaders(c, "", "SUM(p.tags) DESC, COUNT(*) ASC")?,
+                leaders(c, "", "MAX(p.survived_ticks) DESC")?,
+                leaders(c, "", "COUNT(*) DESC")?,
+                leaders(
+                    c,
+                    "WHERE r.rating IS NOT NULL AND r.matches > 0",
+                    "r.rating - 2 * r.deviation DESC",
+                )?,
             ],
             beat: c.prepare(
                 "INSERT INTO writers (id) VALUES ($1)

@@ -6,6 +6,8 @@ use ::postgres::Transaction;
 use super::convert::big;
 use super::schema::Statements;
 use crate::store::backend::{Ended, Retention, StoreError};
+use crate::store::ratings::{self, Rating};
+use lasertag_core::difficulty::Difficulty;
 
 /// A write, encoded before its transaction begins.
 pub(super) enum Change<'a> {
@@ -142,11 +144,62 @@ pub(super) fn apply(
                 let tags: Vec<i64> = p.iter().map(|p| i64::from(p.tags)).collect();
                 let survived: Vec<i64> = p.iter().map(|p| big(p.survived_ticks)).collect();
                 let won: Vec<bool> = p.iter().map(|p| p.won).collect();
-                tx.execute(&st.add_players, &[&seq, &names, &tags, &survived, &won])?;
+                let mut before: Vec<Option<f64>> = vec![None; p.len()];
+                let mut after: Vec<Option<f64>> = vec![None; p.len()];
+                if let Some(preset) = ended.rated {
+                    for (i, person) in p.iter().enumerate() {
+                        let (b, a) = rate(tx, st, &person.name, preset, person.won, now)?;
+                        before[i] = Some(b.rating);
+                        after[i] = Some(a.rating);
+                    }
+                }
+                tx.execute(
+                    &st.add_players,
+                    &[&seq, &names, &tags, &survived, &won, &before, &after],
+                )?;
             }
             Ok(Ok(()))
         }
     }
+}
+
+/// Rates `name` for one match against `preset`, with its row locked until the transaction
+/// ends: answers (before, after). A new name past [`ratings::MAX_RATED_NAMES`] pushes out the
+/// one rated longest ago.
+fn rate(
+    tx: &mut Transaction<'_>,
+    st: &Statements,
+    name: &str,
+    preset: Difficulty,
+    won: bool,
+    now: i64,
+) -> Result<(Rating, Rating), ::postgres::Error> {
+    let new = Rating::newcomer();
+    let made = tx.execute(
+        &st.rating_lock,
+        &[&name, &new.rating, &new.deviation, &new.volatility, &now],
+    )?;
+    let row = tx.query_one(&st.rating_of, &[&name])?;
+    let before = Rating {
+        rating: row.try_get(0)?,
+        deviation: row.try_get(1)?,
+        volatility: row.try_get(2)?,
+    };
+    let after = ratings::after(before, preset, won);
+    tx.execute(
+        &st.rate,
+        &[
+            &name,
+            &after.rating,
+            &after.deviation,
+            &after.volatility,
+            &now,
+        ],
+    )?;
+    if made > 0 {
+        tx.execute(&st.forget_ratings, &[&big(ratings::MAX_RATED_NAMES)])?;
+    }
+    Ok((before, after))
 }
 
 /// Deletes the oldest ended matches past `retention`, and the maps no match uses any more,

@@ -35,6 +35,7 @@ fn a_match(id: &str, n: usize, name: &str, won: bool) -> Vec<Write> {
                 false,
                 0,
                 None,
+                false,
             )),
             started_at: std::time::SystemTime::now(),
         },
@@ -57,6 +58,7 @@ fn a_match(id: &str, n: usize, name: &str, won: bool) -> Vec<Write> {
                     survived_ticks: n as u64,
                     won,
                 }],
+                rated: None,
             },
         },
     ]
