@@ -81,6 +81,7 @@ fn planner(c: &mut Criterion) {
                 scan: &scan.ranges,
                 detections: &[],
                 hit: false,
+                outside: false,
             })
             .collect(),
     };

@@ -15,6 +15,7 @@ pub mod compact;
 pub mod difficulties;
 mod difficulty_name;
 pub mod fleet;
+mod planners;
 mod refusal;
 pub mod replay_ws;
 pub mod replays;
@@ -51,6 +52,8 @@ use lasertag_core::world::{ControlKind, FinishReason, MatchConfig, Placement};
 use lasertag_core::world::{EventKind, MatchStatus, Side, World};
 
 pub use difficulty_name::DifficultyName;
+pub(crate) use planners::planner_dto;
+pub use planners::{Planner, PlannerChoice, planner_name};
 pub use refusal::{Invalid, invalid};
 
 /// Deserialises with serde, naming the JSON path of whatever is wrong (`root` when it is
@@ -154,16 +157,6 @@ pub enum OpponentBot {
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, ToSchema)]
 #[serde(rename_all = "lowercase")]
-pub enum Planner {
-    Coordinated,
-    Baseline,
-    Idle,
-    /// Robots driven from outside (`POST /api/matches/{id}/robots/{rid}/command`, `/act`).
-    Api,
-}
-
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, ToSchema)]
-#[serde(rename_all = "lowercase")]
 pub enum Clock {
     Realtime,
     Manual,
@@ -213,7 +206,10 @@ pub struct CreateMatch {
     pub opponents: Option<i64>,
     pub opponent_control: Option<OpponentControl>,
     pub opponent_bot: Option<OpponentBot>,
-    pub planner: Option<Planner>,
+    /// One planner for the whole team, or one per robot (`["coordinated", "api"]`: robot r1
+    /// driven from outside beside a planned r0; the built-in ones must agree).
+    #[schema(schema_with = planners::choice_schema)]
+    pub planner: Option<PlannerChoice>,
     /// A robot-team preset: sets `robots`, `planner`, `time_limit_s` (each unless given
     /// here too) and the robots' speed and tag cool-down (docs/difficulty.md).
     pub difficulty: Option<DifficultyName>,
@@ -294,10 +290,21 @@ impl CreateMatch {
         let rated = self.rated();
         let difficulty = self.difficulty.map(DifficultyName::kind);
         let preset = difficulty.map(Difficulty::preset);
-        // A preset fills in what the request leaves out; what it gives wins.
-        let robots = match (self.robots, preset) {
+        let given_robots = match self.robots {
+            Some(_) => Some(bounds::ROBOTS.integer(self.robots)? as usize),
+            None => None,
+        };
+        let planners::Resolved {
+            planner,
+            robots: listed_robots,
+            outside: outside_robots,
+        } = planners::resolve(self.planner.as_ref(), given_robots)?;
+        // A preset fills in what the request leaves out; what it gives wins (a planner per
+        // robot gives the robots too).
+        let robots = match (listed_robots, preset) {
+            (Some(n), _) => bounds::ROBOTS.integer(Some(n as i64))? as usize,
             (None, Some(p)) => p.robots,
-            _ => bounds::ROBOTS.integer(self.robots)? as usize,
+            (None, None) => bounds::ROBOTS.integer(None)? as usize,
         };
         let opponents = bounds::OPPONENTS.integer(self.opponents)? as usize;
         let time_limit_s = match (self.time_limit_s, preset) {
@@ -353,10 +360,12 @@ impl CreateMatch {
                 OpponentBot::Evade => BotKind::Evade,
                 OpponentBot::Idle => BotKind::Idle,
             },
-            planner: match (self.planner, preset) {
+            planner: match (planner, preset) {
+                (Some(kind), _) => kind,
                 (None, Some(p)) => p.planner,
-                (planner, _) => planner_kind(planner.unwrap_or(Planner::Coordinated)),
+                (None, None) => PlannerKind::Coordinated,
             },
+            outside_robots,
             seed: self.seed.unwrap_or(0),
             time_limit_ticks: (time_limit_s * TICK_HZ as f64).round().max(1.0) as u64,
             placement,
@@ -439,29 +448,6 @@ impl CreateMatch {
             && self.opponents.unwrap_or(1) == 1
             && self.opponent_control == Some(OpponentControl::Human)
             && self.clock.unwrap_or(Clock::Realtime) == Clock::Realtime
-    }
-}
-
-pub(crate) fn planner_kind(p: Planner) -> PlannerKind {
-    match p {
-        Planner::Coordinated => PlannerKind::Coordinated,
-        Planner::Baseline => PlannerKind::Baseline,
-        Planner::Idle => PlannerKind::Idle,
-        Planner::Api => PlannerKind::Api,
-    }
-}
-
-/// The planner's name as the API spells it (also the `kind` label of the tick metrics).
-pub fn planner_name(p: PlannerKind) -> &'static str {
-    p.name()
-}
-
-pub(crate) fn planner_dto(p: PlannerKind) -> Planner {
-    match p {
-        PlannerKind::Coordinated => Planner::Coordinated,
-        PlannerKind::Baseline => Planner::Baseline,
-        PlannerKind::Idle => Planner::Idle,
-        PlannerKind::Api => Planner::Api,
     }
 }
 

@@ -78,9 +78,7 @@ fn robots_split_across_the_two_branches_of_the_office_corridor() {
         .collect();
     assert!(north.iter().all(|p| in_north_branch(*p)));
     assert!(east.iter().all(|p| in_east_branch(*p)));
-    let role = &mut world.team.trackers[0].roles[0];
-    role.reset(north.iter().chain(&east).copied().collect());
-    world.team.renegotiate();
+    split_belief(&mut world);
     // A round lets one robot choose per tick.
     world.step();
     world.step();
@@ -110,6 +108,103 @@ fn robots_split_across_the_two_branches_of_the_office_corridor() {
     assert_ne!(north_robot, east_robot, "goals {goals:?}, views {views:?}");
     assert!(views[north_robot].0 > 0.5, "views {views:?}");
     assert!(views[east_robot].1 > 0.5, "views {views:?}");
+}
+
+/// The branches' belief as in the test above, in `world`'s team tracker.
+fn split_belief(world: &mut World) {
+    let north: Vec<Point2<f32>> = (0..400)
+        .map(|i| Point2::new(16.0 + (i % 20) as f32 * 0.13, 13.0 + (i / 20) as f32 * 0.14))
+        .collect();
+    let east: Vec<Point2<f32>> = (0..600)
+        .map(|i| Point2::new(20.6 + (i % 20) as f32 * 0.14, 1.0 + (i / 20) as f32 * 0.16))
+        .collect();
+    let role = &mut world.team.trackers[0].roles[0];
+    role.reset(north.iter().chain(&east).copied().collect());
+    world.team.renegotiate();
+}
+
+/// Robot 0 (planned) beside robot 1 driven from outside (a person, say) at `other`: robot
+/// 0's goal after its first choice, and robot 1's pose then.
+fn beside_an_outside_teammate(other: [f32; 3]) -> (Pose, Pose) {
+    let config = MatchConfig {
+        robots: 2,
+        opponents: 1,
+        opponent_bot: BotKind::Idle,
+        planner: PlannerKind::Coordinated,
+        outside_robots: vec![false, true],
+        placement: Placement::Given {
+            robots: vec![[7.0, 7.6, std::f32::consts::PI], other],
+            // In the north-east room, out of both robots' sight.
+            opponents: vec![[22.8, 15.2]],
+        },
+        seed: 7,
+        ..MatchConfig::default()
+    };
+    let mut world = World::new(office(), config).expect("valid match");
+    split_belief(&mut world);
+    world.step();
+    world.step();
+    let goal = world.robots[0].command.goal.expect("robot 0 has a goal");
+    (goal, world.robots[1].pose)
+}
+
+/// A teammate the robots cannot command (a person on their team) counts as having chosen
+/// first: the planned robot searches where the person is not heading, instead of following
+/// them. Alone (the person looking at a wall far from both branches) it searches east, where
+/// most of the belief is; with the person standing at that very goal and looking the same way,
+/// it goes north.
+#[test]
+fn a_planned_robot_leaves_the_branch_an_outside_teammate_heads_into() {
+    let (alone, _) = beside_an_outside_teammate([7.0, 8.4, std::f32::consts::PI]);
+    assert!(in_east_branch(alone.pos), "alone it goes east: {alone:?}");
+    let (beside, person) = beside_an_outside_teammate([alone.pos.x, alone.pos.y, alone.theta]);
+    assert!(
+        in_north_branch(beside.pos),
+        "with the person heading east it goes north: {beside:?}"
+    );
+    // The person's robot went nowhere it was not told to (no order: it stands).
+    assert!((person.pos - alone.pos).norm() < 1e-3, "{person:?}");
+}
+
+/// Robots of one match may mix controllers: only a robot driven from outside takes orders,
+/// and it moves by them while its teammate moves by the planner.
+#[test]
+fn only_a_robot_driven_from_outside_takes_orders() {
+    use lasertag_core::world::{RobotOrder, RobotOrderError};
+    let config = MatchConfig {
+        robots: 2,
+        opponents: 1,
+        opponent_bot: BotKind::Idle,
+        planner: PlannerKind::Baseline,
+        outside_robots: vec![false, true],
+        seed: 3,
+        ..MatchConfig::default()
+    };
+    let mut world = World::new(office(), config).expect("valid match");
+    let forward = RobotOrder::Drive {
+        forward: 1.0,
+        turn: 0.0,
+        tag: false,
+    };
+    assert_eq!(
+        world.order_robot(0, forward.clone()),
+        Err(RobotOrderError::NotApiDriven)
+    );
+    world.order_robot(1, forward).expect("robot 1 takes orders");
+    let start: Vec<Pose> = world.robots.iter().map(|r| r.pose).collect();
+    for _ in 0..100 {
+        world.step();
+    }
+    // Straight ahead at full speed (heading unchanged), unless a wall stopped it.
+    let r1 = world.robots[1].pose;
+    assert!((r1.theta - start[1].theta).abs() < 0.2, "{r1:?}");
+    assert!(
+        (r1.pos - start[1].pos).norm() > 0.5,
+        "{r1:?} from {:?}",
+        start[1]
+    );
+    // The planned robot searched on its own.
+    assert!((world.robots[0].pose.pos - start[0].pos).norm() > 0.3);
 }
 
 /// An L-shaped corridor: along the bottom (y < 4) and up the right-hand side (x > 10).

@@ -192,3 +192,64 @@ async fn two_runs_with_one_seed_observe_the_same() {
         "the same seed and commands, other observations"
     );
 }
+
+/// A team may mix controllers: `"planner": ["coordinated", "api"]` plans r0 and leaves r1
+/// to the client, which commands r1 (not r0) and steps both with `act`.
+#[tokio::test]
+async fn a_team_may_mix_planned_robots_and_robots_driven_from_outside() {
+    let s = TestServer::start().await;
+    let id = api_match(
+        &s,
+        json!({"planner": ["coordinated", "api"], "robots": null}),
+    )
+    .await;
+    let summary = s.get(&format!("/api/matches/{id}")).await.body;
+    assert_eq!(summary["planner"], "coordinated", "{summary}");
+    assert_eq!(summary["robot_planners"], json!(["coordinated", "api"]));
+    let cmd = |rid: &str| format!("/api/matches/{id}/robots/{rid}/command");
+    assert_error(
+        &s.post(&cmd("r0"), &json!({"forward": 1})).await,
+        409,
+        "not driven from outside",
+    );
+    assert_eq!(s.post(&cmd("r1"), &json!({"turn": 1})).await.status, 204);
+    let before = s.get(&format!("/api/matches/{id}")).await.body;
+    let after = act(
+        &s,
+        &id,
+        json!({"commands": {"r1": {"turn": 1}}, "ticks": 20}),
+    )
+    .await;
+    assert_eq!(after["tick"], 20);
+    let state = s.get(&format!("/api/matches/{id}")).await.body;
+    // r1 turned on the spot as told; r0 went where its planner sent it.
+    let (b1, a1) = (&before["robots"][1], &state["robots"][1]);
+    let moved = |a: &Value, b: &Value| {
+        (a["x"].as_f64().unwrap() - b["x"].as_f64().unwrap())
+            .hypot(a["y"].as_f64().unwrap() - b["y"].as_f64().unwrap())
+    };
+    assert!(moved(a1, b1) < 0.05, "{b1} → {a1}");
+    assert_ne!(a1["theta"], b1["theta"], "{b1} → {a1}");
+    assert!(
+        moved(&state["robots"][0], &before["robots"][0]) > 0.1,
+        "{state}"
+    );
+    // Every way of getting the list wrong is named.
+    for (planner, robots, says) in [
+        (
+            json!(["coordinated", "baseline"]),
+            json!(null),
+            "share one planner",
+        ),
+        (
+            json!(["coordinated", "api"]),
+            json!(3),
+            "2 planners for 3 robots",
+        ),
+        (json!([]), json!(null), "empty list"),
+        (json!(7), json!(null), "one per robot"),
+    ] {
+        let body = json!({"map": "office", "planner": planner, "robots": robots});
+        assert_error(&s.post("/api/matches", &body).await, 400, says);
+    }
+}

@@ -208,6 +208,7 @@ mod tests {
             scan: &[],
             detections: seen,
             hit: false,
+            outside: false,
         }
     }
 

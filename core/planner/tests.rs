@@ -40,6 +40,7 @@ fn view<'a>(tick: u64, scan: &'a [f32], seen: &'a [Detection], hit: bool) -> Tea
         scan,
         detections,
         hit,
+        outside: false,
     };
     TeamView {
         tick,

@@ -23,6 +23,10 @@ pub struct RobotView<'a> {
     pub detections: &'a [Detection],
     /// True when this robot's shot tagged an opponent this tick (the device reports hits).
     pub hit: bool,
+    /// Driven from outside (a person or an API client): the team plans nothing for it, and
+    /// the coordinated planner counts it as a teammate that has chosen first (what lies
+    /// ahead of it is claimed).
+    pub outside: bool,
 }
 
 /// What the team knows this tick.

@@ -33,6 +33,10 @@ pub struct MatchConfig {
     pub opponent_control: ControlKind,
     pub opponent_bot: BotKind,
     pub planner: PlannerKind,
+    /// Robots driven from outside (by an API client or a person) while the team's planner
+    /// drives the rest: `outside_robots[i]` for robot `i`, none when shorter. With
+    /// `planner` [`PlannerKind::Api`] every robot is driven from outside whatever this says.
+    pub outside_robots: Vec<bool>,
     pub seed: u64,
     pub time_limit_ticks: u64,
     pub placement: Placement,
@@ -58,6 +62,7 @@ impl Default for MatchConfig {
             opponent_control: ControlKind::Bot,
             opponent_bot: BotKind::Wander,
             planner: PlannerKind::Coordinated,
+            outside_robots: Vec::new(),
             seed: 0,
             time_limit_ticks: 300 * TICK_HZ as u64,
             placement: Placement::Spawns,

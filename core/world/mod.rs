@@ -291,7 +291,7 @@ impl World {
 
     /// Stage 1: this tick's motion of every agent (robots first, then opponents).
     pub fn inputs(&mut self) -> Vec<Motion> {
-        if self.robots_api_driven() {
+        if self.any_robot_outside() {
             self.drive_api_robots();
         }
         let mut motions: Vec<Motion> = (0..self.robots.len())
@@ -608,6 +608,7 @@ impl World {
                     can_fire: tick + 1 >= r.cooldown_until,
                     scan: &r.scan.ranges,
                     detections: &r.scan.detections,
+                    outside: self.robot_outside(i),
                 })
                 .collect(),
         };
@@ -616,8 +617,12 @@ impl World {
         mark(StepMark::Planner);
         let commands = self.team.plan(&self.arena, &self.config.physics, &view);
         mark(StepMark::Planned);
-        for (r, c) in self.robots.iter_mut().zip(commands) {
-            r.command = c;
+        let outside: Vec<bool> = view.robots.iter().map(|r| r.outside).collect();
+        // A robot driven from outside keeps the command its order gave (see `inputs`).
+        for ((r, c), outside) in self.robots.iter_mut().zip(commands).zip(outside) {
+            if !outside {
+                r.command = c;
+            }
         }
         for e in tracker_events {
             self.push(match e {

@@ -1,7 +1,9 @@
-//! Robots driven from outside (`PlannerKind::Api`): the orders a researcher's own robot
-//! brain gives, and what each robot knows to decide them.
+//! Robots driven from outside (every robot with `PlannerKind::Api`, or those
+//! `MatchConfig::outside_robots` names beside planned teammates): the orders a
+//! researcher's own robot brain (or a person's keys) gives, and what each robot knows to
+//! decide them.
 //!
-//! The team plans nothing for such robots; at the start of each tick every robot's command
+//! The team plans nothing for such robots; at the start of each tick each one's command
 //! comes from its last order: velocities that hold until the next order, or a route the
 //! built-in path follower drives (planned on the navigation grid around walls, steered from
 //! the robot's own pose estimate, never the truth). A tag fires once, on the next tick.
@@ -44,7 +46,7 @@ pub struct ApiDrive {
 pub enum RobotOrderError {
     #[error("no robot {0} in this match")]
     UnknownRobot(String),
-    #[error("the robots of this match are not driven from outside (planner is not \"api\")")]
+    #[error("this robot is not driven from outside (its planner is not \"api\")")]
     NotApiDriven,
     #[error("{field}: {value} must be a number in -1..=1")]
     OutOfRange { field: &'static str, value: f32 },
@@ -91,9 +93,19 @@ pub struct RobotObservation<'a> {
 }
 
 impl World {
-    /// Whether the robots take orders from outside.
+    /// Whether every robot takes orders from outside.
     pub fn robots_api_driven(&self) -> bool {
         self.team.kind() == PlannerKind::Api
+    }
+
+    /// Whether robot `index` takes orders from outside.
+    pub fn robot_outside(&self, index: usize) -> bool {
+        self.robots_api_driven() || self.config.outside_robots.get(index) == Some(&true)
+    }
+
+    /// Whether any robot takes orders from outside.
+    pub fn any_robot_outside(&self) -> bool {
+        (0..self.robots.len()).any(|i| self.robot_outside(i))
     }
 
     /// Gives robot `index` an order; it applies from the next tick. Every part of the order
@@ -104,7 +116,7 @@ impl World {
                 AgentId::Robot(index).to_string(),
             ));
         }
-        if !self.robots_api_driven() {
+        if !self.robot_outside(index) {
             return Err(RobotOrderError::NotApiDriven);
         }
         let drive = match order {
@@ -192,7 +204,10 @@ impl World {
     /// Stage 1 for API-driven robots: each robot's command from its order.
     pub(super) fn drive_api_robots(&mut self) {
         let turn_rate = self.config.physics.robot_turn_rate;
-        for r in &mut self.robots {
+        let outside: Vec<bool> = (0..self.robots.len())
+            .map(|i| self.robot_outside(i))
+            .collect();
+        for (r, _) in self.robots.iter_mut().zip(outside).filter(|(_, o)| *o) {
             let api = &mut r.api;
             let motion = match &mut api.route {
                 Some(route) => route

@@ -142,6 +142,7 @@ pub fn map(def: &MapDef) -> Price {
 /// replay): none when it takes none.
 fn recorded_orders(config: &MatchConfig) -> f64 {
     let takes_orders = config.planner == lasertag_core::planner::PlannerKind::Api
+        || config.outside_robots.contains(&true)
         || config.opponent_control == lasertag_core::world::ControlKind::Api;
     if takes_orders {
         crate::game::record::MAX_ORDER_BYTES as f64

@@ -24,8 +24,12 @@ pub struct MatchSummary {
     pub opponents_left: usize,
     pub opponent_control: OpponentControl,
     pub opponent_bot: OpponentBot,
-    /// The planner asked for.
+    /// The planner asked for (the team's: robots driven from outside beside it are
+    /// `robot_planners`' `api` ones).
     pub planner: Planner,
+    /// Each robot's controller, `r0` first: the team's planner, or `api` for one driven
+    /// from outside.
+    pub robot_planners: Vec<Planner>,
     /// Deprecated: always equal to `planner` (no planner falls back to another); kept so
     /// that clients reading it do not break.
     #[schema(deprecated)]
@@ -138,6 +142,7 @@ fn summary_showing(s: &view::Summary, seed: bool) -> MatchSummary {
             BotKind::Idle => OpponentBot::Idle,
         },
         planner: planner_dto(s.planner),
+        robot_planners: super::planners::per_robot(s.planner, &c.outside_robots, s.robots),
         planner_active: planner_dto(s.planner),
         tracker: Echo(c.tracker.clone()),
         coordination: Echo(c.coordination.clone()),
@@ -258,6 +263,8 @@ pub struct MatchState {
     pub status: Status,
     pub winner: Option<Winner>,
     pub planner: Planner,
+    /// Each robot's controller, as in the summary.
+    pub robot_planners: Vec<Planner>,
     pub planner_active: Planner,
     pub notes: Vec<String>,
     pub robots: Vec<RobotState>,
@@ -311,6 +318,11 @@ pub fn state(frame: &Frame, meta: &MatchMeta, config: &MatchConfig) -> MatchStat
         status: status(frame.status),
         winner: winner(frame.winner),
         planner: planner_dto(config.planner),
+        robot_planners: super::planners::per_robot(
+            config.planner,
+            &config.outside_robots,
+            config.robots,
+        ),
         planner_active: planner_dto(config.planner),
         notes: notes(config),
         robots: frame

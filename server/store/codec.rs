@@ -48,6 +48,9 @@ pub struct StoredSettings {
     opponent_control: StoredControl,
     opponent_bot: StoredBot,
     planner: StoredPlanner,
+    /// Robots driven from outside beside planned ones (`MatchConfig::outside_robots`).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    outside_robots: Vec<bool>,
     seed: u64,
     time_limit_ticks: u64,
     placement: StoredPlacement,
@@ -256,6 +259,7 @@ impl StoredSettings {
             opponent_control: StoredControl::of(config.opponent_control),
             opponent_bot: StoredBot::of(config.opponent_bot),
             planner: StoredPlanner::of(config.planner),
+            outside_robots: config.outside_robots.clone(),
             seed: config.seed,
             time_limit_ticks: config.time_limit_ticks,
             placement: match &config.placement {
@@ -307,6 +311,7 @@ impl StoredSettings {
             opponent_control: self.opponent_control.kind(),
             opponent_bot: self.opponent_bot.kind(),
             planner: self.planner.kind(),
+            outside_robots: self.outside_robots.clone(),
             seed: self.seed,
             time_limit_ticks: self.time_limit_ticks,
             placement: match &self.placement {

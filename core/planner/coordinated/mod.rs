@@ -146,6 +146,20 @@ const STUCK_DISTANCE: f32 = 0.2;
 const STUCK_TICKS: u64 = 40;
 /// Shortest time between two choices of one robot outside full rounds.
 const MIN_CHOICE_TICKS: u64 = 10;
+/// How far ahead of a teammate driven from outside its claim lies (m): where it will be in
+/// about a second and a half at a robot's speed, looking the way it looks.
+const OUTSIDE_LEAD_M: f32 = 1.5;
+
+/// Where a teammate driven from outside is heading: `OUTSIDE_LEAD_M` ahead of its pose, the
+/// way it faces. Nobody knows its driver's plan; its heading is the best guess, and a
+/// person who turns makes the next choice of the others follow.
+fn ahead(pose: Pose) -> Pose {
+    let (s, c) = pose.theta.sin_cos();
+    Pose {
+        pos: pose.pos + nalgebra::Vector2::new(c, s) * OUTSIDE_LEAD_M,
+        theta: pose.theta,
+    }
+}
 
 #[derive(Debug, Clone, Copy, PartialEq)]
 struct Goal {
@@ -176,6 +190,9 @@ struct RobotState {
     yield_request: Option<usize>,
     /// Radio only: whom it last asked to step aside, and when.
     asked: Option<(usize, u64)>,
+    /// Driven from outside (as of the last decision): it chooses for itself, first; what
+    /// lies ahead of it is its claim.
+    outside: bool,
 }
 
 /// What a robot knows of a teammate when it plans (see [`Knowledge`]).
@@ -252,7 +269,9 @@ impl Coordinated {
     /// to a teammate to step aside: it is asked once per stuck check.
     pub fn status(&mut self, i: usize, pose: Pose) -> Status {
         let s = &self.robots[i];
-        let claim = if s.seeing {
+        let claim = if s.outside {
+            self.nearest_pose(ahead(pose))
+        } else if s.seeing {
             self.nearest_pose(pose)
         } else {
             s.goal.map(|g| g.pose)
@@ -284,12 +303,17 @@ impl Coordinated {
             .filter_map(|j| {
                 if know.shared_memory() {
                     let r = &self.robots[j];
+                    let outside = view.robots[j].outside;
                     Some(Mate {
                         index: j,
                         pos: view.robots[j].pose.pos,
                         frozen: view.robots[j].frozen,
-                        pursuing: r.seeing,
-                        goal: self.goal_pose(j).map(|g| g.pos),
+                        pursuing: r.seeing || outside,
+                        goal: if outside {
+                            Some(ahead(view.robots[j].pose).pos)
+                        } else {
+                            self.goal_pose(j).map(|g| g.pos)
+                        },
                         moving: !r.path.finished(),
                         making_way: r.making_way.is_some(),
                     })
@@ -334,6 +358,18 @@ impl Coordinated {
         // Who pursues, who is out of the game, who needs a new destination.
         for (i, robot) in view.robots.iter().enumerate() {
             let state = &mut self.robots[i];
+            state.outside = robot.outside;
+            if robot.outside {
+                // Its own driver chooses where it goes: nothing to negotiate, and its
+                // teammates plan around it (`choose` claims what it is heading for).
+                *state = RobotState {
+                    outside: true,
+                    chosen_at: state.chosen_at,
+                    ..RobotState::default()
+                };
+                commands[i] = Some(RobotCommand::default());
+                continue;
+            }
             if robot.frozen {
                 state.seeing = false;
                 state.progress = None; // standing still while frozen is not being stuck

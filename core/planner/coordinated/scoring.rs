@@ -112,7 +112,9 @@ impl Coordinated {
         for m in mates.iter().filter(|m| !m.frozen) {
             let j = m.index;
             let k = if know.shared_memory() {
-                if self.robots[j].seeing {
+                if view.robots[j].outside {
+                    self.nearest_pose(super::ahead(view.robots[j].pose))
+                } else if self.robots[j].seeing {
                     self.nearest_pose(view.robots[j].pose)
                 } else {
                     self.robots[j].goal.map(|g| g.pose)

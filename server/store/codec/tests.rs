@@ -62,7 +62,8 @@ fn settings_come_back_field_for_field() {
         opponents: 4,
         opponent_control: ControlKind::Api,
         opponent_bot: BotKind::Evade,
-        planner: lasertag_core::planner::PlannerKind::Api,
+        planner: lasertag_core::planner::PlannerKind::Coordinated,
+        outside_robots: vec![false, true, false],
         seed: u64::MAX,
         time_limit_ticks: 1234,
         placement: Placement::Given {
