@@ -22,6 +22,7 @@ use crate::reacquire::Reacquire;
 use crate::report::{Report, print};
 use crate::shard::ShardArgs;
 use crate::study::{MapStamp, Study};
+use crate::teammate::TeammateStudy;
 use crate::uncertainty::Uncertainty;
 
 /// Reads every map of a directory into arenas (the binary's map loader).
@@ -113,6 +114,31 @@ pub enum Experiment {
         maps: PathBuf,
         /// Where to write the CSV files and plots.
         #[arg(long, default_value = "out/difficulty")]
+        out: PathBuf,
+        #[command(flatten)]
+        shard: ShardArgs,
+    },
+    /// A person on the robot team: how soon one planned robot and a scripted person-like
+    /// pursuer tag the opponent, with and without the coordinated planner accounting for
+    /// the person, against two coordinated and two baseline robots, from random starts.
+    Teammate {
+        /// Runs per map, bot and team (the same seeds for every team).
+        #[arg(long, default_value_t = 100)]
+        runs: usize,
+        /// Seed of the first run (run i uses seed + i).
+        #[arg(long, default_value_t = 0)]
+        seed: u64,
+        /// Seconds before a run counts as not captured.
+        #[arg(long, default_value_t = 300)]
+        time_limit: u64,
+        /// Maps to run on.
+        #[arg(long, value_delimiter = ',', default_value = "office,warehouse")]
+        on: Vec<String>,
+        /// Directory of map files.
+        #[arg(long, default_value = "maps")]
+        maps: PathBuf,
+        /// Where to write the CSV files and plots.
+        #[arg(long, default_value = "out/teammate")]
         out: PathBuf,
         #[command(flatten)]
         shard: ShardArgs,
@@ -330,6 +356,33 @@ pub fn run(e: Experiment, load: LoadMaps) -> Result<(), LabError> {
             let done = execute::execute(&study, shard, &out, |j| study.run_one(&arenas, j))?;
             finish(done, Report::Difficulty, &out)
         }
+        Experiment::Teammate {
+            runs,
+            seed,
+            time_limit,
+            on,
+            maps,
+            out,
+            shard: ShardArgs { shard },
+        } => {
+            if runs == 0 || time_limit == 0 {
+                return Err(LabError::Arguments(
+                    "--runs and --time-limit must be at least 1".into(),
+                ));
+            }
+            let arenas: Vec<Arc<Arena>> = chosen_maps(load, &maps, &on)?
+                .into_iter()
+                .map(|(_, a)| a)
+                .collect();
+            let study = TeammateStudy {
+                runs,
+                seed,
+                time_limit_s: time_limit,
+                maps: MapStamp::all(&arenas),
+            };
+            let done = execute::execute(&study, shard, &out, |j| study.run_one(&arenas, j))?;
+            finish(done, Report::Teammate, &out)
+        }
         Experiment::Reacquire {
             runs,
             seed,
@@ -476,6 +529,9 @@ pub fn run(e: Experiment, load: LoadMaps) -> Result<(), LabError> {
                 Capture::NAME => Report::Capture(merge::join::<Capture>(&parts, &out)?),
                 DifficultyStudy::NAME => {
                     Report::Difficulty(merge::join::<DifficultyStudy>(&parts, &out)?)
+                }
+                TeammateStudy::NAME => {
+                    Report::Teammate(merge::join::<TeammateStudy>(&parts, &out)?)
                 }
                 Reacquire::NAME => Report::Reacquire(merge::join::<Reacquire>(&parts, &out)?),
                 Localisation::NAME => {

@@ -5,6 +5,8 @@
 //! - [`filters`]: Fig. 4 — the number of active filters with and without role merging.
 //! - [`capture`]: Fig. 5 — capture time of `coordinated` against `baseline`.
 //! - [`difficulty`]: how often each difficulty preset's robots win, and how soon.
+//! - [`teammate`]: a person-like pursuer on the robot team, with and without the
+//!   coordinated planner accounting for it, against two planned robots.
 //! - [`localisation`]: the robots' own pose error with and without landmarks.
 //! - [`reacquire`]: Coltin et al.'s Table I: time to see an opponent again with
 //!   and without a teammate's hypotheses and the tracker's prediction.
@@ -33,6 +35,7 @@ pub mod record;
 pub mod report;
 pub mod shard;
 pub mod study;
+pub mod teammate;
 pub mod tracking;
 pub mod uncertainty;
 

@@ -7,6 +7,7 @@ use std::path::Path;
 pub enum Report {
     Capture(String),
     Difficulty(String),
+    Teammate(String),
     Reacquire(Vec<crate::reacquire::Summary>),
     Localisation(Vec<crate::localisation::Curve>),
     Uncertainty(String),
@@ -30,6 +31,15 @@ pub fn print(report: &Report, out: &Path) {
             println!(
                 "win rate: matches the robots won (95% Wilson interval); median tag: of the matches they won\n\
                  wrote {0}/difficulty.csv, {0}/difficulty_summary.csv and {0}/difficulty_<map>_<bot>.svg",
+                out.display()
+            );
+        }
+        Report::Teammate(table) => {
+            print!("{table}");
+            println!(
+                "captured: runs that tagged within the limit; median and mean count the others at the limit;\n\
+                 ratio: median / two coordinated robots' median; p: two-sided Mann–Whitney U against them\n\
+                 wrote {0}/teammate.csv, {0}/teammate_summary.csv and {0}/teammate_<map>_<bot>.svg",
                 out.display()
             );
         }

@@ -95,6 +95,10 @@ crate::settings! {
         /// Pursuit look-ahead (seconds, 0 = off): while it sees an opponent, an uncertain
         /// robot weighs a few motions held this long by the chance of still seeing it.
         pub lookahead: f32 = 0.5, range(0.0, MAX_LOOKAHEAD);
+        /// Whether a teammate driven from outside (a person, an API client) claims what
+        /// lies ahead of it, so that the planned robots search elsewhere; off, they plan as
+        /// if it were not there (`lasertag experiment teammate` measures the difference).
+        pub outside_claims: bool = true;
     }
     internal {
         /// Spacing of candidate positions (metres) and headings per position.
@@ -269,7 +273,7 @@ impl Coordinated {
     /// to a teammate to step aside: it is asked once per stuck check.
     pub fn status(&mut self, i: usize, pose: Pose) -> Status {
         let s = &self.robots[i];
-        let claim = if s.outside {
+        let claim = if s.outside && self.settings.outside_claims {
             self.nearest_pose(ahead(pose))
         } else if s.seeing {
             self.nearest_pose(pose)
@@ -303,7 +307,7 @@ impl Coordinated {
             .filter_map(|j| {
                 if know.shared_memory() {
                     let r = &self.robots[j];
-                    let outside = view.robots[j].outside;
+                    let outside = view.robots[j].outside && self.settings.outside_claims;
                     Some(Mate {
                         index: j,
                         pos: view.robots[j].pose.pos,

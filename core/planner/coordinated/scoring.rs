@@ -112,7 +112,7 @@ impl Coordinated {
         for m in mates.iter().filter(|m| !m.frozen) {
             let j = m.index;
             let k = if know.shared_memory() {
-                if view.robots[j].outside {
+                if view.robots[j].outside && self.settings.outside_claims {
                     self.nearest_pose(super::ahead(view.robots[j].pose))
                 } else if self.robots[j].seeing {
                     self.nearest_pose(view.robots[j].pose)
