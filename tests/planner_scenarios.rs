@@ -67,15 +67,8 @@ fn robots_split_across_the_two_branches_of_the_office_corridor() {
         ..MatchConfig::default()
     };
     let mut world = World::new(arena.clone(), config).expect("valid match");
-    // The belief: 40% of the hypotheses deep in the north branch (in the north-east room),
-    // 60% deep in the east branch (in the south-east room); no single pose sees into both.
     // Each robot alone would search east: only coordination sends one north.
-    let north: Vec<Point2<f32>> = (0..400)
-        .map(|i| Point2::new(16.0 + (i % 20) as f32 * 0.13, 13.0 + (i / 20) as f32 * 0.14))
-        .collect();
-    let east: Vec<Point2<f32>> = (0..600)
-        .map(|i| Point2::new(20.6 + (i % 20) as f32 * 0.14, 1.0 + (i / 20) as f32 * 0.16))
-        .collect();
+    let (north, east) = branch_hypotheses();
     assert!(north.iter().all(|p| in_north_branch(*p)));
     assert!(east.iter().all(|p| in_east_branch(*p)));
     split_belief(&mut world);
@@ -110,14 +103,22 @@ fn robots_split_across_the_two_branches_of_the_office_corridor() {
     assert!(views[east_robot].1 > 0.5, "views {views:?}");
 }
 
-/// The branches' belief as in the test above, in `world`'s team tracker.
-fn split_belief(world: &mut World) {
-    let north: Vec<Point2<f32>> = (0..400)
+/// The belief of the branch tests: 40% of the hypotheses deep in the north branch (in the
+/// north-east room), 60% deep in the east branch (in the south-east room); no single pose
+/// sees into both.
+fn branch_hypotheses() -> (Vec<Point2<f32>>, Vec<Point2<f32>>) {
+    let north = (0..400)
         .map(|i| Point2::new(16.0 + (i % 20) as f32 * 0.13, 13.0 + (i / 20) as f32 * 0.14))
         .collect();
-    let east: Vec<Point2<f32>> = (0..600)
+    let east = (0..600)
         .map(|i| Point2::new(20.6 + (i % 20) as f32 * 0.14, 1.0 + (i / 20) as f32 * 0.16))
         .collect();
+    (north, east)
+}
+
+/// [`branch_hypotheses`] as `world`'s team belief, and a negotiation round to come.
+fn split_belief(world: &mut World) {
+    let (north, east) = branch_hypotheses();
     let role = &mut world.team.trackers[0].roles[0];
     role.reset(north.iter().chain(&east).copied().collect());
     world.team.renegotiate();

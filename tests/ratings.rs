@@ -79,21 +79,9 @@ async fn only_a_preset_as_measured_is_rated_and_its_owner_reads_it_late() {
     );
 
     // The listing: the owner's token opens the seed of an unrated match, not of a rated one.
-    let listing = s.get_as("/api/matches", Some(&owner)).await.body;
-    let mine = listing
-        .as_array()
-        .unwrap()
-        .iter()
-        .find(|m| m["id"] == id.as_str())
-        .expect("listed");
+    let mine = listed(&s, &id, &owner).await;
     assert!(mine["seed"].is_null(), "{mine}");
-    let admin = s.get_as("/api/matches", Some(ADMIN)).await.body;
-    let theirs = admin
-        .as_array()
-        .unwrap()
-        .iter()
-        .find(|m| m["id"] == id.as_str())
-        .expect("listed");
+    let theirs = listed(&s, &id, ADMIN).await;
     assert!(theirs["seed"].is_u64(), "the operator sees it: {theirs}");
 
     // Live against late: after a second the operator's view has moved on, the owner's is
@@ -114,6 +102,16 @@ async fn only_a_preset_as_measured_is_rated_and_its_owner_reads_it_late() {
     assert_eq!(belief.status, 200, "{}", belief.body);
     // The owner still owns it: they may end it (an end not by the rules rates nobody).
     assert_eq!(s.delete_as(&path, Some(&owner)).await.status, 204);
+}
+
+/// Match `id` in the listing, as `token` reads it.
+async fn listed(s: &TestServer, id: &str, token: &str) -> Value {
+    let listing = s.get_as("/api/matches", Some(token)).await.body;
+    listing
+        .as_array()
+        .and_then(|all| all.iter().find(|m| m["id"] == id))
+        .cloned()
+        .unwrap_or_else(|| panic!("{id} is not listed: {listing}"))
 }
 
 /// Polls `path` until `done` holds of its body (at most `secs`).
