@@ -123,7 +123,12 @@ async function refreshLobby() {
     const short = m.id.length > 16 ? m.id.slice(0, 16) + "…" : m.id;
     // In a fleet, the node that hosts it (the page plays it there).
     const where = m.node ? ` · ${m.node.id}${m.node.draining ? " (closing)" : ""}` : "";
-    const cells = [short + where, m.map, `${m.robots} · ${m.planner_active}`,
+    // The team: its preset (★ when the match is rated), or its planner; a mixed team names
+    // each robot's controller.
+    const mixed = (m.robot_planners || []).some((p) => p !== m.planner);
+    const team = m.difficulty ? `${m.difficulty}${m.rated ? " ★ rated" : ""}`
+      : mixed ? m.robot_planners.join(" + ") : m.planner;
+    const cells = [short + where, m.map, `${m.robots} · ${team}`,
       `${m.opponents_left}/${m.opponents} ${m.opponent_control}`, m.players, m.spectators, left];
     for (const c of cells) {
       const td = document.createElement("td");
