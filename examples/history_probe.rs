@@ -99,6 +99,7 @@ fn meta(id: &str) -> MatchMeta {
         players: 0,
         spectators: 0,
         free_slots: 0,
+        free_pursuer_slots: 0,
         bots_joinable: false,
         spectator_delay_ticks: 0,
         head_start_ticks: 0,

@@ -53,7 +53,7 @@ use lasertag_core::world::{EventKind, MatchStatus, Side, World};
 
 pub use difficulty_name::DifficultyName;
 pub(crate) use planners::planner_dto;
-pub use planners::{Planner, PlannerChoice, planner_name};
+pub use planners::{Controller, Planner, PlannerChoice, planner_name};
 pub use refusal::{Invalid, invalid};
 
 /// Deserialises with serde, naming the JSON path of whatever is wrong (`root` when it is
@@ -206,6 +206,10 @@ pub struct CreateMatch {
     pub opponents: Option<i64>,
     pub opponent_control: Option<OpponentControl>,
     pub opponent_bot: Option<OpponentBot>,
+    /// [`bounds::PURSUER_SLOTS`]: people on the robot team.
+    #[serde(default, deserialize_with = "schema::opt_int")]
+    #[schema(schema_with = bounds::pursuer_slots_schema)]
+    pub pursuer_slots: Option<i64>,
     /// One planner for the whole team, or one per robot (`["coordinated", "api"]`: robot r1
     /// driven from outside beside a planned r0; the built-in ones must agree).
     #[schema(schema_with = planners::choice_schema)]
@@ -307,6 +311,25 @@ impl CreateMatch {
             (None, None) => bounds::ROBOTS.integer(None)? as usize,
         };
         let opponents = bounds::OPPONENTS.integer(self.opponents)? as usize;
+        let pursuer_slots = bounds::PURSUER_SLOTS.integer(self.pursuer_slots)? as usize;
+        if pursuer_slots > robots {
+            return Err(refused(
+                "pursuer_slots",
+                format!(
+                    "{pursuer_slots} seats on a team of {robots} robots: at most one per robot"
+                ),
+            ));
+        }
+        if let Some(PlannerChoice::PerRobot(list)) = &self.planner
+            && let Some(i) = (robots - pursuer_slots..robots).find(|&i| list[i] != Planner::Api)
+        {
+            return Err(refused(
+                "planner",
+                format!(
+                    "r{i} is a pursuer slot (the last {pursuer_slots} robots are): a person drives it, so list it as \"api\""
+                ),
+            ));
+        }
         let time_limit_s = match (self.time_limit_s, preset) {
             (None, Some(p)) => p.time_limit_s as f64,
             _ => bounds::TIME_LIMIT_S.number(self.time_limit_s)?,
@@ -366,6 +389,7 @@ impl CreateMatch {
                 (None, None) => PlannerKind::Coordinated,
             },
             outside_robots,
+            pursuer_slots,
             seed: self.seed.unwrap_or(0),
             time_limit_ticks: (time_limit_s * TICK_HZ as f64).round().max(1.0) as u64,
             placement,
@@ -402,7 +426,7 @@ impl CreateMatch {
         if people && self.seed.is_some() {
             return Err(refused(
                 "seed",
-                "a match people may join (opponent_control human, or bots_joinable) gets a \
+                "a match people may join (opponent_control human, bots_joinable, or pursuer_slots) gets a \
                  secret seed that the server chooses, so that nobody can rebuild it while it \
                  runs; leave seed out (it is shown with the replay once the match has ended)"
                     .to_string(),
@@ -442,7 +466,8 @@ impl CreateMatch {
             && self.odometry.is_none()
             && self.localiser.is_none()
             && self.robot_starts.is_none()
-            && self.opponent_starts.is_none();
+            && self.opponent_starts.is_none()
+            && self.pursuer_slots.unwrap_or(0) == 0;
         self.difficulty.is_some()
             && team_as_measured
             && self.opponents.unwrap_or(1) == 1
@@ -558,20 +583,47 @@ pub struct JoinRequest {
         pattern = r"^[^\u0000-\u001F\u007F-\u009F]*[^\s\u0000-\u001F\u007F-\u009F][^\u0000-\u001F\u007F-\u009F]*$"
     )]
     pub name: String,
+    /// `opponents` (default: a free opponent slot, the hunted) or `robots` (a free pursuer
+    /// slot: a robot of the team, hunting beside the others).
+    pub team: Option<JoinTeam>,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, ToSchema)]
+#[serde(rename_all = "lowercase")]
+pub enum JoinTeam {
+    Opponents,
+    Robots,
+}
+
+impl JoinTeam {
+    pub fn team(team: Option<JoinTeam>) -> crate::game::view::Team {
+        match team {
+            None | Some(JoinTeam::Opponents) => crate::game::view::Team::Opponents,
+            Some(JoinTeam::Robots) => crate::game::view::Team::Robots,
+        }
+    }
 }
 
 #[derive(Debug, Clone, Serialize, ToSchema)]
 pub struct Joined {
     pub player_id: String,
-    pub opponent_id: String,
+    /// The opponent taken (`o0`, …), for a seat on the opponents' side ...
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub opponent_id: Option<String>,
+    /// ... or the robot (`r1`, …), for a pursuer slot.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub robot_id: Option<String>,
     pub token: String,
 }
 
 impl From<crate::game::view::Joined> for Joined {
     fn from(j: crate::game::view::Joined) -> Self {
+        let id = Some(j.body.to_string());
+        let robot = matches!(j.body, AgentId::Robot(_));
         Joined {
             player_id: j.player_id,
-            opponent_id: AgentId::Opponent(j.slot).to_string(),
+            opponent_id: if robot { None } else { id.clone() },
+            robot_id: if robot { id } else { None },
             token: j.token,
         }
     }

@@ -122,6 +122,7 @@ async fn the_servers_own_matches_change_only_for_the_operator() {
         players: 0,
         spectators: 0,
         free_slots: 0,
+        free_pursuer_slots: 0,
         bots_joinable: true,
         spectator_delay_ticks: 0,
         head_start_ticks: 0,

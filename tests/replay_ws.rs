@@ -360,7 +360,8 @@ async fn a_replay_socket_is_refused_before_the_upgrade() {
     assert_error(&get("?speed=fast".into()).await, 400, "speed");
     assert_error(&get("?tick=x".into()).await, 400, "tick");
     assert_error(&get(format!("?tick={}", last + 1)).await, 404, "tick");
-    assert_error(&get("?as=r0".into()).await, 400, "as");
+    assert_error(&get("?as=x0".into()).await, 400, "as");
+    assert_error(&get("?as=r7".into()).await, 404, "as");
     assert_error(&get("?as=o7".into()).await, 404, "as");
     assert_error(&get("?format=xml".into()).await, 400, "format");
     assert_error(&get("?token=x".into()).await, 400, "token");

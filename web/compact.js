@@ -52,7 +52,7 @@ export class CompactDecoder {
     const pose = () => ({ x: m(), y: m(), theta: angle() });
     if (u8() !== 1) throw new Error("not a compact snapshot");
     const flags = u8();
-    const spectator = (flags & 1) !== 0, hasBelief = (flags & 2) !== 0, slow = (flags & 4) !== 0;
+    const spectator = (flags & 1) !== 0, hasBelief = (flags & 2) !== 0, youRobot = (flags & 64) !== 0;
     const tick = u32();
     const timeLeft = u16() / 10;
     const ack = u32();
@@ -66,14 +66,20 @@ export class CompactDecoder {
       const r = { id, ...p, frozen: (bits & 1) !== 0 };
       if (bits & 2) r.goal = pose();
       if (bits & 4) { r.estimate = pose(); r.spread = u16() / 1000; }
-      if (slow) {
+      if (bits & 8) {
         const cloud = [];
         for (let k = u8(); k > 0; k--) cloud.push(u16(), u16());
         const scan = [];
         for (let k = u8(); k > 0; k--) scan.push(Math.round((u8() * 100) / 32));
         this.slow.set(id, { cloud, scan });
       }
-      const kept = spectator && this.slow.get(id);
+      if (bits & 16) {
+        const len = u8();
+        r.name = utf8.decode(new Uint8Array(buffer, at, len));
+        at += len;
+      }
+      // A spectator's robots, and a person's own robot, keep their last scan between slow parts.
+      const kept = (spectator || (youRobot && id === `r${you - 1}`)) && this.slow.get(id);
       if (kept) { r.cloud = kept.cloud; r.scan = kept.scan; }
       robots.push(r);
     }
@@ -110,7 +116,7 @@ export class CompactDecoder {
     const winner = flags & 16 ? "robots" : flags & 32 ? "opponents" : null;
     const s = {
       type: "snapshot", tick, time_left_s: timeLeft, status: flags & 8 ? "finished" : "running", winner,
-      view: spectator ? "spectator" : "player", you: you ? `o${you - 1}` : null, robots, opponents, score,
+      view: spectator ? "spectator" : "player", you: you ? `${youRobot ? "r" : "o"}${you - 1}` : null, robots, opponents, score,
     };
     if (!spectator) s.ack = ack;
     if (belief) s.belief = belief;

@@ -37,6 +37,9 @@ pub struct MatchConfig {
     /// drives the rest: `outside_robots[i]` for robot `i`, none when shorter. With
     /// `planner` [`PlannerKind::Api`] every robot is driven from outside whatever this says.
     pub outside_robots: Vec<bool>,
+    /// The last this many robots are seats for people on the robot team (pursuers): driven
+    /// from outside, by a person's keys, whatever `outside_robots` says.
+    pub pursuer_slots: usize,
     pub seed: u64,
     pub time_limit_ticks: u64,
     pub placement: Placement,
@@ -63,6 +66,7 @@ impl Default for MatchConfig {
             opponent_bot: BotKind::Wander,
             planner: PlannerKind::Coordinated,
             outside_robots: Vec::new(),
+            pursuer_slots: 0,
             seed: 0,
             time_limit_ticks: 300 * TICK_HZ as u64,
             placement: Placement::Spawns,

@@ -108,12 +108,14 @@ pub enum EventKind {
         from: u64,
         count: u32,
     },
+    /// A person took `agent`'s seat: an opponent slot, or a robot of the team
+    /// (`MatchConfig::pursuer_slots`).
     PlayerJoined {
-        opponent: AgentId,
+        agent: AgentId,
         name: String,
     },
     PlayerLeft {
-        opponent: AgentId,
+        agent: AgentId,
         name: String,
     },
     Finished {

@@ -20,6 +20,11 @@ pub enum WorldInput {
     Seat { slot: usize, name: String },
     /// The person leaves `slot` (a bot kept aside comes back).
     Unseat { slot: usize, name: String },
+    /// A person named `name` takes the seat of robot `robot` (one of the team's pursuer
+    /// slots); their keys come as [`WorldInput::Robot`] orders.
+    SeatRobot { robot: usize, name: String },
+    /// The person leaves robot `robot`'s seat: it stops where it is.
+    UnseatRobot { robot: usize, name: String },
     /// The match ends from outside.
     End(FinishReason),
 }
@@ -35,6 +40,8 @@ pub enum InputError {
     NotHuman(usize),
     #[error("no opponent slot {0} in this match")]
     NoSlot(usize),
+    #[error("robot {0} is not a seat for a person (the match's pursuer_slots)")]
+    NoRobotSeat(usize),
     /// Only robots' orders apply all or none (`World::apply_all`).
     #[error("only robots' orders apply all or none")]
     NotAllOrNone,
@@ -65,7 +72,7 @@ impl World {
                         o.bench = Some(bot);
                     }
                 }
-                self.log_player(*slot, name.clone(), true);
+                self.log_player(AgentId::Opponent(*slot), name.clone(), true);
                 Ok(())
             }
             WorldInput::Unseat { slot, name } => {
@@ -81,7 +88,22 @@ impl World {
                         }
                     }
                 }
-                self.log_player(*slot, name.clone(), false);
+                self.log_player(AgentId::Opponent(*slot), name.clone(), false);
+                Ok(())
+            }
+            WorldInput::SeatRobot { robot, name } => {
+                if !self.robot_seat(*robot) {
+                    return Err(InputError::NoRobotSeat(*robot));
+                }
+                self.log_player(AgentId::Robot(*robot), name.clone(), true);
+                Ok(())
+            }
+            WorldInput::UnseatRobot { robot, name } => {
+                if !self.robot_seat(*robot) {
+                    return Err(InputError::NoRobotSeat(*robot));
+                }
+                self.order_robot(*robot, RobotOrder::Stop)?;
+                self.log_player(AgentId::Robot(*robot), name.clone(), false);
                 Ok(())
             }
             WorldInput::End(reason) => {

@@ -684,12 +684,11 @@ impl World {
         }
     }
 
-    pub fn log_player(&mut self, index: usize, name: String, joined: bool) {
-        let opponent = AgentId::Opponent(index);
+    pub fn log_player(&mut self, agent: AgentId, name: String, joined: bool) {
         self.push(if joined {
-            EventKind::PlayerJoined { opponent, name }
+            EventKind::PlayerJoined { agent, name }
         } else {
-            EventKind::PlayerLeft { opponent, name }
+            EventKind::PlayerLeft { agent, name }
         });
     }
 }

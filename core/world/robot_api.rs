@@ -100,7 +100,16 @@ impl World {
 
     /// Whether robot `index` takes orders from outside.
     pub fn robot_outside(&self, index: usize) -> bool {
-        self.robots_api_driven() || self.config.outside_robots.get(index) == Some(&true)
+        self.robots_api_driven()
+            || self.config.outside_robots.get(index) == Some(&true)
+            || self.robot_seat(index)
+    }
+
+    /// Whether robot `index` is a seat for a person on the robot team
+    /// (`MatchConfig::pursuer_slots`).
+    pub fn robot_seat(&self, index: usize) -> bool {
+        index < self.robots.len()
+            && index + self.config.pursuer_slots.min(self.robots.len()) >= self.robots.len()
     }
 
     /// Whether any robot takes orders from outside.

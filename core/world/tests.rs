@@ -440,3 +440,67 @@ fn an_observation_is_what_the_robot_knows() {
     assert_eq!(o.teammates[0].age_ticks, 0);
     assert!(w.observation(2).is_none());
 }
+
+#[test]
+fn a_persons_robot_seat_feeds_the_team_and_tags_like_a_robot() {
+    // r1 is the seat (1, 1) facing east; o1 stands ahead of it, o0 far behind the pillar.
+    let config = MatchConfig {
+        robots: 2,
+        opponents: 2,
+        pursuer_slots: 1,
+        planner: PlannerKind::Coordinated,
+        opponent_control: ControlKind::Api,
+        placement: Placement::Given {
+            robots: vec![[1.0, 4.5, std::f32::consts::PI], [1.0, 1.0, 0.0]],
+            opponents: vec![[11.0, 5.0], [4.0, 1.0]],
+        },
+        ..MatchConfig::default()
+    };
+    let mut w = World::new(duel(), config).unwrap();
+    assert!(!w.robot_seat(0) && w.robot_seat(1) && w.robot_outside(1));
+    assert_eq!(
+        w.apply(&WorldInput::SeatRobot {
+            robot: 0,
+            name: "ada".into()
+        }),
+        Err(InputError::NoRobotSeat(0))
+    );
+    w.apply(&WorldInput::SeatRobot {
+        robot: 1,
+        name: "ada".into(),
+    })
+    .unwrap();
+    let seat_start = w.robots[1].pose;
+    w.step();
+    // Its laser saw o1, and the team's tracker split a role off for it.
+    assert!(!w.robots[1].scan.detections.is_empty());
+    assert!(
+        w.events()
+            .iter()
+            .any(|e| matches!(e.kind, EventKind::RoleSplit { .. })),
+        "{:?}",
+        w.events()
+    );
+    // Nobody but the person moves it; their trigger tags o1.
+    assert_eq!(w.robots[1].pose, seat_start);
+    w.apply(&WorldInput::Robot {
+        robot: 1,
+        order: RobotOrder::Drive {
+            forward: 0.0,
+            turn: 0.0,
+            tag: true,
+        },
+    })
+    .unwrap();
+    w.step();
+    assert!(w.events().iter().any(|e| e.kind
+        == EventKind::Tag {
+            by: AgentId::Robot(1),
+            target: AgentId::Opponent(1)
+        }));
+    assert!(w.events().iter().any(|e| e.kind
+        == EventKind::PlayerJoined {
+            agent: AgentId::Robot(1),
+            name: "ada".into()
+        }));
+}

@@ -263,12 +263,18 @@ mod tests {
         let delay = 100;
         let price = crate::game::admission::held_back(&config, delay).memory as usize;
         let mut world = World::new(arena, config).expect("world");
-        let first = Arc::new(Frame::build(&world, &[], 0, 0, true));
+        let first = Arc::new(Frame::build(&world, &Default::default(), 0, 0, true));
         let (mut held, rx) = HeldBack::new(delay, first, &world);
         let (mut seq, mut most) = (0, 0);
         for _ in 0..400 {
             world.step();
-            let frame = Frame::build(&world, &[], seq, 0, world.tick.is_multiple_of(4));
+            let frame = Frame::build(
+                &world,
+                &Default::default(),
+                seq,
+                0,
+                world.tick.is_multiple_of(4),
+            );
             seq = frame.last_seq;
             held.push(Arc::new(frame), &world);
             let shown = rx.borrow().tick;

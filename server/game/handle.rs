@@ -9,7 +9,7 @@ use tokio::sync::{mpsc, oneshot};
 use super::error::MatchError;
 use super::hub::{Hub, Seat};
 use super::task::{Answer, Reading, Request};
-use super::view::{Clock, Joined, Sight};
+use super::view::{Clock, Joined, Sight, Team};
 use crate::access::{ClientKey, Owner};
 use crate::game::admission::Price;
 use lasertag_core::world::{FinishReason, HumanInput, WorldInput};
@@ -100,10 +100,12 @@ impl MatchHandle {
     pub async fn join(
         &self,
         name: String,
+        team: Team,
         client: Option<ClientKey>,
     ) -> Result<Joined, MatchError> {
         self.ask(|reply| Request::Join {
             name,
+            team,
             client,
             reply,
         })
@@ -117,14 +119,14 @@ impl MatchHandle {
     /// Forwards a player's keys; waits only for room in the task's queue.
     pub async fn input(
         &self,
-        slot: usize,
+        seat: usize,
         generation: u64,
         input: HumanInput,
         seq: Option<u64>,
     ) -> bool {
         self.tx
             .send(Request::Input {
-                slot,
+                seat,
                 generation,
                 input,
                 seq,

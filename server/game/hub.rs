@@ -25,11 +25,13 @@ pub const SPECTATOR_STALLED: Duration = Duration::from_secs(2);
 /// a quarter of a minute, for a silent one's place.
 pub const SPECTATOR_SILENT: Duration = Duration::from_secs(5);
 
-/// A connection's place at a match: the opponent slot it plays.
+/// A connection's place at a match: the seat it holds and the body it plays there.
 #[derive(Debug)]
 pub struct Seat {
-    pub slot: usize,
-    pub opponent_id: String,
+    /// The task's number for the seat (what its inputs name).
+    pub seat: usize,
+    /// An opponent, or a robot of the team's pursuer slots.
+    pub body: lasertag_core::sim::AgentId,
     pub name: String,
     pub generation: u64,
     /// Resolves, with the reason, when the connection must close: a newer connection with

@@ -90,7 +90,7 @@ impl Recording {
     pub fn names(&self) -> Vec<String> {
         let mut names: Vec<String> = Vec::new();
         for (_, input) in &self.inputs {
-            if let WorldInput::Seat { name, .. } = input
+            if let WorldInput::Seat { name, .. } | WorldInput::SeatRobot { name, .. } = input
                 && !names.contains(name)
             {
                 names.push(name.clone());
@@ -103,7 +103,7 @@ impl Recording {
     pub fn seats_unstored(&self) -> bool {
         self.unstored()
             .iter()
-            .any(|(_, i)| matches!(i, WorldInput::Seat { .. }))
+            .any(|(_, i)| matches!(i, WorldInput::Seat { .. } | WorldInput::SeatRobot { .. }))
     }
 }
 

@@ -157,6 +157,7 @@ impl Replay {
                 players: 0,
                 spectators: 0,
                 free_slots: 0,
+                free_pursuer_slots: 0,
                 bots_joinable: settings.bots_joinable,
                 spectator_delay_ticks: settings.spectator_delay_ticks,
                 head_start_ticks: 0,

@@ -96,6 +96,7 @@ async fn start(registry: &Registry) -> Option<String> {
         players: 0,
         spectators: 0,
         free_slots: 0,
+        free_pursuer_slots: 0,
         // Anyone who opens the server can take one of the showcase's bots with one click.
         bots_joinable: true,
         // People play it: its truth is shown late, as in any match with people.

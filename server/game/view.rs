@@ -28,7 +28,7 @@ use lasertag_core::localise::Localiser;
 use lasertag_core::planner::PlannerKind;
 use lasertag_core::sim::arena::Arena;
 use lasertag_core::sim::sensors::Detection;
-use lasertag_core::sim::{AgentId, Pose};
+use lasertag_core::sim::{AgentId, Physics, Pose};
 use lasertag_core::tracker::estimate::tracking_quality;
 use lasertag_core::tracker::gospa::{Gospa, Params};
 use lasertag_core::tracker::{Confidence, Role};
@@ -60,6 +60,12 @@ pub struct RobotFrame {
     /// A thinned sample of its localisation particles, in centimetres (empty when it does
     /// not localise).
     pub cloud: Vec<[i32; 2]>,
+    /// The person driving it, when it is a pursuer seat somebody holds.
+    pub player: Option<Arc<str>>,
+    /// Whether that person is connected right now.
+    pub connected: bool,
+    /// The `seq` of that person's last numbered input applied.
+    pub ack: u64,
 }
 
 /// Localisation particles shown per robot. Every spectator snapshot carries them, so they
@@ -100,13 +106,29 @@ pub struct OpponentFrame {
     pub ack: u64,
 }
 
-/// A person at an opponent slot, as frames show it.
+/// A person at an opponent slot or a robot's seat, as frames show it.
 #[derive(Debug, Clone)]
 pub struct SeatView {
     pub name: Arc<str>,
     pub connected: bool,
     /// The `seq` of the last numbered input applied.
     pub ack: u64,
+}
+
+/// Who sits where: one entry per opponent slot and per robot (`None`: nobody, or no seat).
+#[derive(Debug, Clone, Default)]
+pub struct SeatViews {
+    pub opponents: Vec<Option<SeatView>>,
+    pub robots: Vec<Option<SeatView>>,
+}
+
+impl SeatViews {
+    fn of(seats: &[Option<SeatView>], i: usize) -> (Option<Arc<str>>, bool, u64) {
+        match seats.get(i) {
+            Some(Some(s)) => (Some(s.name.clone()), s.connected, s.ack),
+            _ => (None, false, 0),
+        }
+    }
 }
 
 /// One role of the belief, thinned for display.
@@ -198,7 +220,7 @@ impl Frame {
     /// The frame of a world that has not changed since `since_seq`.
     pub fn build(
         world: &World,
-        players: &[Option<SeatView>],
+        seats: &SeatViews,
         since_seq: u64,
         robot_tags: u32,
         with_belief: bool,
@@ -222,18 +244,24 @@ impl Frame {
                 .robots
                 .iter()
                 .enumerate()
-                .map(|(i, r)| RobotFrame {
-                    pose: r.pose,
-                    frozen: world.robot_frozen(i),
-                    goal: r.command.goal,
-                    scan: r.scan.ranges.clone(),
-                    detections: r.scan.detections.clone(),
-                    estimate: r.estimate,
-                    spread: r.spread,
-                    cloud: r
-                        .localiser
-                        .as_ref()
-                        .map_or_else(Vec::new, |l| thin_cloud(l)),
+                .map(|(i, r)| {
+                    let (player, connected, ack) = SeatViews::of(&seats.robots, i);
+                    RobotFrame {
+                        pose: r.pose,
+                        frozen: world.robot_frozen(i),
+                        goal: r.command.goal,
+                        scan: r.scan.ranges.clone(),
+                        detections: r.scan.detections.clone(),
+                        estimate: r.estimate,
+                        spread: r.spread,
+                        cloud: r
+                            .localiser
+                            .as_ref()
+                            .map_or_else(Vec::new, |l| thin_cloud(l)),
+                        player,
+                        connected,
+                        ack,
+                    }
                 })
                 .collect(),
             opponents: world
@@ -241,10 +269,7 @@ impl Frame {
                 .iter()
                 .enumerate()
                 .map(|(i, o)| {
-                    let (player, connected, ack) = match players.get(i) {
-                        Some(Some(s)) => (Some(s.name.clone()), s.connected, s.ack),
-                        _ => (None, false, 0),
-                    };
+                    let (player, connected, ack) = SeatViews::of(&seats.opponents, i);
                     OpponentFrame {
                         pose: o.pose,
                         tagged: o.tagged,
@@ -304,24 +329,55 @@ impl Frame {
     }
 }
 
-/// Which agents the person playing opponent `slot` can see: its own line of sight (walls
-/// occlude, agents do not), computed from ground truth on the server. A tagged opponent has
-/// left the arena and sees everything, like a spectator.
-pub fn visible_to(frame: &Frame, arena: &Arena, slot: usize) -> Option<Visible> {
-    let me = frame.opponents.get(slot)?;
-    if me.tagged {
-        return None;
+/// Which agents the person playing `you` can see, computed from ground truth on the server.
+/// An opponent sees along its own line of sight (walls occlude, agents do not); a tagged one
+/// has left the arena and sees everything, like a spectator (`None`). A person on the robot
+/// team sees every robot (their own team) and the opponents their robot's laser sees: in its
+/// field of view, within its range, in line of sight, and nothing while it is frozen (the
+/// laser is off); the team's belief tells them the rest.
+pub fn visible_to(
+    frame: &Frame,
+    arena: &Arena,
+    physics: &Physics,
+    you: AgentId,
+) -> Option<Visible> {
+    match you {
+        AgentId::Opponent(slot) => {
+            let me = frame.opponents.get(slot)?;
+            if me.tagged {
+                return None;
+            }
+            let sees = |p: Point2<f32>| arena.line_of_sight(me.pose.pos, p);
+            Some(Visible {
+                robots: frame.robots.iter().map(|r| sees(r.pose.pos)).collect(),
+                opponents: frame
+                    .opponents
+                    .iter()
+                    .enumerate()
+                    .map(|(i, o)| i == slot || (!o.tagged && sees(o.pose.pos)))
+                    .collect(),
+            })
+        }
+        AgentId::Robot(r) => {
+            let me = frame.robots.get(r)?;
+            let sees = |p: Point2<f32>| {
+                let to = p - me.pose.pos;
+                let bearing = lasertag_core::sim::wrap_angle(to.y.atan2(to.x) - me.pose.theta);
+                !me.frozen
+                    && to.norm() <= physics.laser_range
+                    && bearing.abs() <= physics.laser_fov / 2.0
+                    && arena.line_of_sight(me.pose.pos, p)
+            };
+            Some(Visible {
+                robots: vec![true; frame.robots.len()],
+                opponents: frame
+                    .opponents
+                    .iter()
+                    .map(|o| !o.tagged && sees(o.pose.pos))
+                    .collect(),
+            })
+        }
     }
-    let sees = |p: Point2<f32>| arena.line_of_sight(me.pose.pos, p);
-    Some(Visible {
-        robots: frame.robots.iter().map(|r| sees(r.pose.pos)).collect(),
-        opponents: frame
-            .opponents
-            .iter()
-            .enumerate()
-            .map(|(i, o)| i == slot || (!o.tagged && sees(o.pose.pos)))
-            .collect(),
-    })
 }
 
 /// The result of [`visible_to`], one flag per agent.
@@ -349,28 +405,44 @@ impl Visible {
     }
 }
 
-/// Whether the person playing opponent `slot` is told of `event` as it happens, `visible`
-/// being [`visible_to`] of the frame the event comes with (the rule its snapshots follow):
-/// it took part (its own shot or tag, or it was hit), or every agent the event names is in
-/// its view (an opponent a robot's shot tags has just left the arena: the shot counts, as
-/// seen when its shooter is). Seats and the end are public and go live; the robots' belief
-/// splitting or merging is not something it saw. Everything else reaches it as late as
+/// Whether the person playing `you` is told of `event` as it happens, `visible` being
+/// [`visible_to`] of the frame the event comes with (the rule its snapshots follow).
+///
+/// An opponent: it took part (its own shot or tag, or it was hit), or every agent the event
+/// names is in its view (an opponent a robot's shot tags has just left the arena: the shot
+/// counts, as seen when its shooter is). The robots' belief splitting or merging is not
+/// something it saw.
+///
+/// A person on the robot team: whatever the team knows as it happens (its robots' shots and
+/// tags, a robot of it hit or frozen, its belief splitting or merging); an opponent's shot
+/// that hit no robot only when that opponent is in their robot's view.
+///
+/// Seats and the end are public and go live. Everything else reaches the player as late as
 /// spectators get it.
-pub fn event_seen(event: &Event, visible: &Visible, slot: usize) -> bool {
-    let me = AgentId::Opponent(slot);
-    let seen = |agents: &[AgentId]| agents.contains(&me) || agents.iter().all(|a| visible.sees(*a));
-    match &event.kind {
-        EventKind::Shot { by, hit: None } => seen(&[*by]),
-        EventKind::Shot { by, hit: Some(hit) } => match (by, hit) {
-            (AgentId::Robot(_), AgentId::Opponent(_)) if *hit != me => seen(&[*by]),
+pub fn event_seen(event: &Event, visible: &Visible, you: AgentId) -> bool {
+    let seen =
+        |agents: &[AgentId]| agents.contains(&you) || agents.iter().all(|a| visible.sees(*a));
+    let robot = |a: &AgentId| matches!(a, AgentId::Robot(_));
+    match (&event.kind, you) {
+        (
+            EventKind::PlayerJoined { .. }
+            | EventKind::PlayerLeft { .. }
+            | EventKind::Finished { .. },
+            _,
+        ) => true,
+        (EventKind::RoleSplit { .. } | EventKind::RoleMerge { .. }, AgentId::Robot(_)) => true,
+        (EventKind::RoleSplit { .. } | EventKind::RoleMerge { .. }, AgentId::Opponent(_)) => false,
+        (EventKind::Shot { by, hit }, AgentId::Robot(_)) => {
+            robot(by) || hit.as_ref().is_some_and(robot) || seen(&[*by])
+        }
+        (EventKind::Tag { .. } | EventKind::RobotTagged { .. }, AgentId::Robot(_)) => true,
+        (EventKind::Shot { by, hit: None }, AgentId::Opponent(_)) => seen(&[*by]),
+        (EventKind::Shot { by, hit: Some(hit) }, AgentId::Opponent(_)) => match (by, hit) {
+            (AgentId::Robot(_), AgentId::Opponent(_)) if *hit != you => seen(&[*by]),
             _ => seen(&[*by, *hit]),
         },
-        EventKind::Tag { by, target } => *target == me || seen(&[*by]),
-        EventKind::RobotTagged { by, target } => seen(&[*by, *target]),
-        EventKind::RoleSplit { .. } | EventKind::RoleMerge { .. } => false,
-        EventKind::PlayerJoined { .. }
-        | EventKind::PlayerLeft { .. }
-        | EventKind::Finished { .. } => true,
+        (EventKind::Tag { by, target }, AgentId::Opponent(_)) => *target == you || seen(&[*by]),
+        (EventKind::RobotTagged { by, target }, AgentId::Opponent(_)) => seen(&[*by, *target]),
     }
 }
 
@@ -500,6 +572,8 @@ pub struct MatchMeta {
     pub spectators: usize,
     /// Opponent slots a person can take now.
     pub free_slots: usize,
+    /// Robots of the team's pursuer slots a person can take now.
+    pub free_pursuer_slots: usize,
     /// Whether people may take over bot opponents (the showcase).
     pub bots_joinable: bool,
     /// How far behind the match its truth is shown to all but its owner (0: live). Set
@@ -519,12 +593,12 @@ pub struct MatchMeta {
     pub rated: bool,
 }
 
-/// Whether people may play a match: human opponent slots, or bot opponents people may take
-/// over (`bots_joinable`, the showcase). Such a match shows its truth `spectator_delay_s`
+/// Whether people may play a match: human opponent slots, bot opponents people may take
+/// over (`bots_joinable`, the showcase), or seats on the robot team (`pursuer_slots`). Such a match shows its truth `spectator_delay_s`
 /// late and keeps its seed secret while it runs: a match is a pure function of its
 /// settings, seed and inputs, so a public seed would let anyone rebuild it live.
 pub fn people_may_play(config: &MatchConfig, bots_joinable: bool) -> bool {
-    bots_joinable || config.opponent_control == ControlKind::Human
+    bots_joinable || config.opponent_control == ControlKind::Human || config.pursuer_slots > 0
 }
 
 /// A match as listings show it, published with every frame so that a listing never waits
@@ -589,12 +663,22 @@ pub struct Stats {
     pub players_connected: usize,
 }
 
-/// A person's place at a match, as `join` gives it: the player, the opponent slot and the
-/// secret its WebSocket connects with.
+/// Which side a person asks to play (`POST /api/matches/{id}/players`, `team`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Team {
+    /// An opponent slot: the hunted.
+    #[default]
+    Opponents,
+    /// A robot of the team's pursuer slots: a hunter beside the robots.
+    Robots,
+}
+
+/// A person's place at a match, as `join` gives it: the player, the body they play (an
+/// opponent slot or a robot) and the secret its WebSocket connects with.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Joined {
     pub player_id: String,
-    pub slot: usize,
+    pub body: AgentId,
     pub token: String,
 }
 

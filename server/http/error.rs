@@ -69,6 +69,7 @@ fn input_status(e: &InputError) -> StatusCode {
         InputError::Opponent(OrderError::UnknownOpponent(_))
         | InputError::Robot(RobotOrderError::UnknownRobot(_))
         | InputError::NoSlot(_) => StatusCode::NOT_FOUND,
+        InputError::NoRobotSeat(_) => StatusCode::CONFLICT,
         InputError::Opponent(OrderError::OutsideArena { .. }) => StatusCode::BAD_REQUEST,
         InputError::Opponent(_) | InputError::Robot(RobotOrderError::NotApiDriven) => {
             StatusCode::CONFLICT

@@ -182,7 +182,7 @@ pub async fn export(
                 let world = cursor.world();
                 let tick = world.tick;
                 if tick == next {
-                    let frame = Frame::build(world, &[], 0, 0, true);
+                    let frame = Frame::build(world, &Default::default(), 0, 0, true);
                     let state = protocol::state(&frame, &r.meta, r.config());
                     let belief = if belief {
                         protocol::belief_of(world, None)

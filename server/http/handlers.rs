@@ -298,7 +298,7 @@ pub async fn command(
 
 #[utoipa::path(post, path = "/api/matches/{id}/players", params(("id" = String, Path)), request_body = JoinRequest,
     responses((status = 201, body = Joined), (status = 400, body = ErrorBody), (status = 404, body = ErrorBody),
-              (status = 409, body = ErrorBody, description = "no free slot, or the match is at the server's limit of players"),
+              (status = 409, body = ErrorBody, description = "no free slot on that team, or the match is at the server's limit of players"),
               (status = 429, body = ErrorBody, description = "this client holds as many slots of the match as it may without playing them")))]
 pub async fn join(
     State(state): State<AppState>,
@@ -307,7 +307,10 @@ pub async fn join(
     JsonBody(body): JsonBody<JoinRequest>,
 ) -> Result<impl IntoResponse, ApiError> {
     let handle = find(&state, &id)?;
-    let joined = handle.join(body.name, Some(ClientKey::of(ip))).await?;
+    let team = crate::protocol::JoinTeam::team(body.team);
+    let joined = handle
+        .join(body.name, team, Some(ClientKey::of(ip)))
+        .await?;
     Ok((StatusCode::CREATED, Json(Joined::from(joined))))
 }
 

@@ -89,6 +89,7 @@ use crate::protocol::*;
         replays::PlayerDetail,
         replays::Leaderboard,
         JoinRequest,
+        crate::protocol::JoinTeam,
         Joined,
         MatchStats,
         fleet::NodeRef,

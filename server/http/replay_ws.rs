@@ -104,8 +104,8 @@ fn hold_cursor(state: &AppState, ip: IpAddr, replay: &Replay) -> Result<CursorHo
 struct Options {
     tick: u64,
     speed: f64,
-    /// The opponent slot whose view is shown, or everything.
-    view: Option<usize>,
+    /// The agent whose view is shown (an opponent, or a robot), or everything.
+    view: Option<AgentId>,
     compact: bool,
 }
 
@@ -134,19 +134,28 @@ impl Options {
                 rwire::check_speed("speed", n)?
             }
         };
+        let config = replay.config();
         let view = match query.get("as") {
             None => None,
             Some(v) => match v.parse::<AgentId>() {
-                Ok(AgentId::Opponent(i)) if i < replay.config().opponents => Some(i),
+                Ok(AgentId::Opponent(i)) if i < config.opponents => Some(AgentId::Opponent(i)),
                 Ok(AgentId::Opponent(_)) => {
                     return Err(ApiError::not_found(format!(
                         "as: no opponent {v} in this match (o0 to o{})",
-                        replay.config().opponents.saturating_sub(1)
+                        config.opponents.saturating_sub(1)
                     )));
                 }
-                _ => {
+                // A robot's view is a person's on the robot team: its laser and the belief.
+                Ok(AgentId::Robot(i)) if i < config.robots => Some(AgentId::Robot(i)),
+                Ok(AgentId::Robot(_)) => {
+                    return Err(ApiError::not_found(format!(
+                        "as: no robot {v} in this match (r0 to r{})",
+                        config.robots.saturating_sub(1)
+                    )));
+                }
+                Err(_) => {
                     return Err(ApiError::bad_request(format!(
-                        "as: {v:?} is not an opponent id (o0, o1, …)"
+                        "as: {v:?} is not an agent id (o0, o1, … or r0, r1, …)"
                     )));
                 }
             },
@@ -198,8 +207,9 @@ impl Viewer {
             tick: options.tick,
             playing: options.tick < replay.last_tick,
             speed: options.speed,
-            // As on the live socket: spectators start with the belief, players without.
-            belief: options.view.is_none(),
+            // As on the live socket: spectators and people on the robot team start with the
+            // belief, opponents' players without.
+            belief: !matches!(options.view, Some(AgentId::Opponent(_))),
             belief_at: None,
             last_seq: 0,
             carry: 0.0,
@@ -284,18 +294,20 @@ impl Viewer {
         let first = self.show_options(true, false);
         let replay = self.replay.clone();
         let start = self.options.tick;
+        let view = self.options.view;
         let (cursor, welcome) = blocking(self.state.clone(), move || {
             let cursor = replay.cursor(start).map_err(|e| e.to_string())?;
             let w = cursor.world();
             let map = crate::maps::to_file(&w.arena.def);
-            let kinematics = wire::Kinematics::of(&w.config.physics);
+            let kinematics =
+                wire::Kinematics::of(&w.config.physics, view.unwrap_or(AgentId::Opponent(0)));
             let time_limit_s = w.config.time_limit_ticks as f64 / TICK_HZ as f64;
             let seated = seats(w);
             Ok::<_, String>((cursor, (map, kinematics, time_limit_s, seated)))
         })
         .await?;
         let (map, kinematics, time_limit_s, seated) = welcome;
-        let you = self.options.view.map(|i| AgentId::Opponent(i).to_string());
+        let you = self.options.view.map(|a| a.to_string());
         let welcome = ReplayWelcome {
             kind: "replay",
             id: &self.replay.meta.id,
@@ -311,7 +323,10 @@ impl Viewer {
             name: self
                 .options
                 .view
-                .and_then(|i| seated.get(i).cloned().flatten())
+                .and_then(|a| match a {
+                    AgentId::Opponent(i) => seated.opponents.get(i).cloned().flatten(),
+                    AgentId::Robot(i) => seated.robots.get(i).cloned().flatten(),
+                })
                 .map(|s| s.name.to_string()),
             you,
             belief_every: BELIEF_EVERY,

@@ -38,6 +38,24 @@ fn charge(
     Ok(registry.work.take(&registry.config, client, work)?)
 }
 
+/// Refuses orders for robots that are pursuer slots: a person's keys drive those, and the
+/// owner's API must not take their body from them (409).
+fn not_seats(handle: &MatchHandle, inputs: &[WorldInput]) -> Result<(), ApiError> {
+    let config = handle.hub.summary.borrow().config.clone();
+    let seats = config.robots.saturating_sub(config.pursuer_slots)..config.robots;
+    for input in inputs {
+        if let WorldInput::Robot { robot, .. } = input
+            && seats.contains(robot)
+        {
+            return Err(ApiError::new(
+                StatusCode::CONFLICT,
+                format!("r{robot} is a pursuer slot: a person drives it, not the API"),
+            ));
+        }
+    }
+    Ok(())
+}
+
 /// The index of robot `rid`, or a 404 naming it.
 fn robot(id: &str, rid: &str) -> Result<usize, ApiError> {
     // Like the belief's `?robot=`, anything that is not a robot id names no robot here.
@@ -50,7 +68,7 @@ fn robot(id: &str, rid: &str) -> Result<usize, ApiError> {
     security(("owner_token" = [])),
     responses((status = 204), (status = 400, body = ErrorBody), (status = 401, body = ErrorBody),
               (status = 403, body = ErrorBody), (status = 404, body = ErrorBody),
-              (status = 409, body = ErrorBody, description = "the match's robots are not driven from outside"),
+              (status = 409, body = ErrorBody, description = "the robot is not driven from outside, or is a person's (a pursuer slot)"),
               (status = 429, body = ErrorBody, description = "this client's share of the path search for waypoints is taken for now"),
               (status = 503, body = ErrorBody, description = "the server's path search for waypoints is taken for now")))]
 pub async fn command(
@@ -64,6 +82,7 @@ pub async fn command(
     let order = body.order("")?;
     let robot = robot(&id, &rid)?;
     let input = WorldInput::Robot { robot, order };
+    not_seats(&handle, std::slice::from_ref(&input))?;
     charge(&state, &bearer, ip, &handle, std::slice::from_ref(&input))?;
     handle.apply(input).await?;
     Ok(StatusCode::NO_CONTENT)
@@ -121,6 +140,7 @@ pub async fn act(
         .into_iter()
         .map(|(robot, order)| WorldInput::Robot { robot, order })
         .collect();
+    not_seats(&handle, &inputs)?;
     charge(&state, &bearer, ip, &handle, &inputs)?;
     let mut answer = handle.step("act", inputs, ticks, robots::read_act).await?;
     answer.encode_scans(scans);

@@ -33,6 +33,7 @@ use crate::http::state::AppState;
 use crate::metrics::Refusal;
 use crate::protocol::socket::{self as common, Limits};
 use crate::protocol::ws::{self as wire, ClientMessage, Welcome};
+use lasertag_core::sim::AgentId;
 use lasertag_core::world::MatchStatus;
 use lasertag_core::world::{Event, HumanInput};
 
@@ -146,7 +147,11 @@ impl Connection {
         Connection {
             sock,
             watching: seat.is_none(),
-            belief: seat.is_none(),
+            // A person on the robot team hunts with the team's belief; an opponent's player
+            // switches the (late) overlay on.
+            belief: seat
+                .as_ref()
+                .is_none_or(|s| matches!(s.body, AgentId::Robot(_))),
             compact: false,
             schedule: Schedule::default(),
             seat,
@@ -185,7 +190,11 @@ impl Connection {
             } else {
                 "spectator"
             },
-            you: self.seat.as_ref().map(|s| s.opponent_id.clone()),
+            you: self.seat.as_ref().map(|s| s.body.to_string()),
+            team: self.seat.as_ref().map(|s| match s.body {
+                AgentId::Opponent(_) => "opponents",
+                AgentId::Robot(_) => "robots",
+            }),
             name: self.seat.as_ref().map(|s| s.name.clone()),
             map: crate::maps::to_file(&self.handle.hub.arena.def),
             tick_hz: lasertag_core::sim::TICK_HZ,
@@ -200,7 +209,10 @@ impl Connection {
             } else {
                 0.0
             },
-            kinematics: wire::Kinematics::of(&self.handle.hub.physics),
+            kinematics: wire::Kinematics::of(
+                &self.handle.hub.physics,
+                self.seat.as_ref().map_or(AgentId::Opponent(0), |s| s.body),
+            ),
             rated: hub.summary.borrow().meta.rated,
             protocol: 2,
             format: if self.compact { "compact" } else { "json" },
@@ -305,12 +317,12 @@ impl Connection {
         }
     }
 
-    /// Whether this connection's opponent is tagged in `frame`.
+    /// Whether this connection's opponent is tagged in `frame` (a robot is never removed).
     fn tagged(&self, frame: &Frame) -> bool {
-        self.seat
-            .as_ref()
-            .and_then(|s| frame.opponents.get(s.slot))
-            .is_some_and(|o| o.tagged)
+        match self.seat.as_ref().map(|s| s.body) {
+            Some(AgentId::Opponent(slot)) => frame.opponents.get(slot).is_some_and(|o| o.tagged),
+            _ => false,
+        }
     }
 
     /// How to close once the match has ended.
@@ -324,7 +336,7 @@ impl Connection {
 
     /// Sends a frame's snapshot, the events since the last one sent, and `finished` once.
     /// A spectator's hub sees how long that takes: one stuck in it does not read.
-    async fn deliver(&mut self, frame: &Frame, with_events: bool) -> Result<(), End> {
+    async fn deliver(&mut self, frame: &Arc<Frame>, with_events: bool) -> Result<(), End> {
         if let Some(s) = &self.spectator {
             s.watcher.sending(true);
         }
@@ -347,26 +359,31 @@ impl Connection {
         sent
     }
 
-    async fn deliver_parts(&mut self, frame: &Frame, with_events: bool) -> Result<(), End> {
+    async fn deliver_parts(&mut self, frame: &Arc<Frame>, with_events: bool) -> Result<(), End> {
         // What a player sees of the live frame; `None` for a spectator, or a player watching.
+        let hub = &self.handle.hub;
         let sight = match &self.seat {
             Some(seat) if !self.watching => Some((
-                seat.slot,
-                visible_to(frame, &self.handle.hub.arena, seat.slot),
+                seat.body,
+                visible_to(frame, &hub.arena, &hub.physics, seat.body),
             )),
             _ => None,
         };
+        if self.on_robot_team() {
+            // The team's belief is its own knowledge: a person on the team sees it live.
+            self.keep_belief(frame);
+        }
         let ended = frame.status == MatchStatus::Finished;
         match &sight {
             // Its opponent was tagged in this frame: the player watches from the next one
             // on, late, and this live frame shows it nothing (unless the match has ended:
             // then nothing is hidden).
             Some((_, None)) if !ended => {}
-            Some((slot, Some(v))) => self.deliver_player(frame, *slot, v).await?,
+            Some((you, Some(v))) => self.deliver_player(frame, *you, v).await?,
             _ if self.compact => self.deliver_compact(frame).await?,
             _ => self.deliver_json(frame).await?,
         }
-        let sight = sight.map(|(slot, v)| (slot, v.unwrap_or_else(Visible::nothing)));
+        let sight = sight.map(|(you, v)| (you, v.unwrap_or_else(Visible::nothing)));
         self.deliver_events(frame, with_events, sight.as_ref())
             .await
     }
@@ -389,9 +406,15 @@ impl Connection {
         self.sock.text(snapshot).await
     }
 
-    /// A player's snapshot of the live `frame`: what `visible` holds, and the belief
-    /// spectators see when switched on.
-    async fn deliver_player(&mut self, frame: &Frame, slot: usize, v: &Visible) -> Result<(), End> {
+    /// A player's snapshot of the live `frame`: what `visible` holds, and the belief when
+    /// switched on (an opponent's player: the one spectators see, as late; a person on the
+    /// robot team: the team's own, live).
+    async fn deliver_player(
+        &mut self,
+        frame: &Frame,
+        you: AgentId,
+        v: &Visible,
+    ) -> Result<(), End> {
         let Some(seat) = &self.seat else {
             return Ok(());
         };
@@ -405,14 +428,14 @@ impl Connection {
             let belief = held
                 .and_then(|f| f.belief.as_deref())
                 .filter(|_| parts.belief);
-            let whole = compact::snapshot(frame, Some(slot), Some(v), belief, false).into();
+            let whole = compact::snapshot(frame, Some(you), Some(v), belief, false).into();
             let bytes = self.schedule.sent(frame.tick, parts, whole);
             self.sock.count_snapshot(bytes.len());
             self.sock.send(Message::Binary(bytes)).await
         } else {
             // On the live frames' belief ticks, as spectators get theirs.
             let belief = held.filter(|_| frame.belief.is_some());
-            let snapshot = wire::player_snapshot(frame, &seat.opponent_id, v, belief);
+            let snapshot = wire::player_snapshot(frame, seat.body, v, belief);
             self.sock.count_snapshot(snapshot.len());
             self.sock.text(snapshot).await
         }
@@ -425,7 +448,7 @@ impl Connection {
         &mut self,
         frame: &Frame,
         with_events: bool,
-        sight: Option<&(usize, Visible)>,
+        sight: Option<&(AgentId, Visible)>,
     ) -> Result<(), End> {
         if with_events && frame.last_seq > self.last_seq {
             let mut events = Vec::new();
@@ -437,8 +460,8 @@ impl Connection {
             events.extend(frame.events.iter().filter(|e| e.seq > last).cloned());
             for e in &events {
                 match sight {
-                    Some((slot, v)) => {
-                        if event_seen(e, v, *slot) {
+                    Some((you, v)) => {
+                        if event_seen(e, v, *you) {
                             self.sock.text(wire::event(e)).await?;
                             self.sent_live.push_back(e.seq);
                         }
@@ -474,7 +497,9 @@ impl Connection {
     /// A player's share of a spectators' frame: the events up to it that it did not see
     /// live, and its belief.
     async fn deliver_held(&mut self, shown: &Arc<Frame>) -> Result<(), End> {
-        self.keep_belief(shown);
+        if !self.on_robot_team() {
+            self.keep_belief(shown);
+        }
         if shown.last_seq <= self.held_seq {
             return Ok(());
         }
@@ -521,7 +546,15 @@ impl Connection {
         missed.into_iter().filter(|e| e.seq <= last).collect()
     }
 
-    /// Keeps `shown`, a spectators' frame, when it carries a belief: a player's overlay.
+    /// Whether this connection plays a robot (a pursuer slot).
+    fn on_robot_team(&self) -> bool {
+        self.seat
+            .as_ref()
+            .is_some_and(|s| matches!(s.body, AgentId::Robot(_)))
+    }
+
+    /// Keeps `shown`, a frame that spectators see (or, for a person on the robot team, a
+    /// live one), when it carries a belief: a player's overlay.
     fn keep_belief(&mut self, shown: &Arc<Frame>) {
         if shown.belief.is_some() {
             self.held_belief = Some(shown.clone());
@@ -551,10 +584,12 @@ impl Connection {
                         )
                         .await;
                 };
-                let (slot, generation) = (seat.slot, seat.generation);
+                let (seat_no, generation) = (seat.seat, seat.generation);
                 let frame = self.handle.hub.frames.borrow().clone();
-                if frame.opponents.get(slot).is_some_and(|o| o.tagged) {
-                    let why = format!("input: {} has been tagged", seat.opponent_id);
+                if let AgentId::Opponent(slot) = seat.body
+                    && frame.opponents.get(slot).is_some_and(|o| o.tagged)
+                {
+                    let why = format!("input: {} has been tagged", seat.body);
                     return self.sock.error(&why).await;
                 }
                 let input = HumanInput {
@@ -563,7 +598,7 @@ impl Connection {
                     tag,
                     seen_tick: view_tick,
                 };
-                if !self.handle.input(slot, generation, input, seq).await {
+                if !self.handle.input(seat_no, generation, input, seq).await {
                     return Err(End::normal("the match has ended"));
                 }
                 Ok(())

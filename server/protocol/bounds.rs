@@ -55,6 +55,15 @@ pub const OPPONENTS: Bound = Bound {
     doc: "Opponents the robots hunt.",
 };
 
+/// `pursuer_slots` of `POST /api/matches`.
+pub const PURSUER_SLOTS: Bound = Bound {
+    name: "pursuer_slots",
+    kind: Kind::Integer,
+    range: closed(0.0, 8.0),
+    default: Some(0.0),
+    doc: "The last this many robots are seats for people on the robot team (`POST /api/matches/{id}/players` with `team: robots`); at most `robots`.",
+};
+
 /// `time_limit_s` of `POST /api/matches`.
 pub const TIME_LIMIT_S: Bound = Bound {
     name: "time_limit_s",
@@ -75,8 +84,8 @@ pub const SPECTATOR_DELAY_S: Bound = Bound {
     range: closed(0.0, 600.0),
     default: Some(30.0),
     doc: "Seconds the match's state, belief, events and spectator WebSocket run behind for \
-          everyone but its owner when people may play it (human opponents, or \
-          `bots_joinable`); ignored, and echoed as 0, when they may not.",
+          everyone but its owner when people may play it (human opponents, `bots_joinable`, \
+          or `pursuer_slots`); ignored, and echoed as 0, when they may not.",
 };
 
 /// `ticks` of `POST /api/matches/{id}/step` (required there).
@@ -96,9 +105,10 @@ pub const ACT_TICKS: Bound = Bound {
 };
 
 /// Every bound, in the order of the docs' table.
-pub const BOUNDS: [(&str, Bound); 6] = [
+pub const BOUNDS: [(&str, Bound); 7] = [
     ("POST /api/matches", ROBOTS),
     ("POST /api/matches", OPPONENTS),
+    ("POST /api/matches", PURSUER_SLOTS),
     ("POST /api/matches", TIME_LIMIT_S),
     ("POST /api/matches", SPECTATOR_DELAY_S),
     ("POST /api/matches/{id}/step", STEP_TICKS),
@@ -221,6 +231,10 @@ pub fn robots_schema() -> RefOr<Schema> {
 
 pub fn opponents_schema() -> RefOr<Schema> {
     OPPONENTS.schema(true)
+}
+
+pub fn pursuer_slots_schema() -> RefOr<Schema> {
+    PURSUER_SLOTS.schema(true)
 }
 
 pub fn time_limit_s_schema() -> RefOr<Schema> {

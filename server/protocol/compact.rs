@@ -12,11 +12,13 @@
 //! All integers little-endian. A message is one snapshot:
 //!
 //! ```text
-//! u8 kind = 1 | u8 flags | u32 tick | u16 time_left (1/10 s) | u32 ack | u8 you (slot+1, 0)
+//! u8 kind = 1 | u8 flags | u32 tick | u16 time_left (1/10 s) | u32 ack | u8 you (index+1, 0)
 //! u8 tags | u16 robot_tags | u8 opponents | u8 opponents_left | u8 robots_frozen
-//! u8 robots, each: u8 index | u16 x | u16 y | u16 theta | u8 bits (frozen, goal, extras)
+//! u8 robots, each: u8 index | u16 x | u16 y | u16 theta | u8 bits (frozen, goal, extras,
+//!     slow, name)
 //!     [goal: u16 x, y, theta] [extras: u16 estimate x, y, theta | u16 spread (mm)]
 //!     [slow: u8 cloud points, each u16 x, y | u8 beams, each u8 range]
+//!     [name: u8 bytes, UTF-8]
 //! u8 opponents, each: u8 index | u16 x | u16 y | u16 theta | u8 bits (tagged, control ×2,
 //!     name, connected) [name: u8 bytes, UTF-8]
 //! [belief: u32 tick | u8 roles, each: u32 id | u8 count | u8 bits (tagged, state ×2) |
@@ -24,7 +26,9 @@
 //! ```
 //!
 //! `flags`: 1 spectator view, 2 belief, 4 slow parts, 8 finished, 16 robots won, 32
-//! opponents won.
+//! opponents won, 64 `you` is a robot (a person on the robot team; else an opponent). A
+//! robot's slow part comes when its `slow` bit is set: in a spectator's slow snapshots, and
+//! for a person's own robot in every one of theirs (its scan is their laser's view).
 //!
 //! A snapshot the same length as the one before it on the connection comes as a delta
 //! against it ([`delta`], kind 2) when that is shorter: a WebSocket loses nothing and keeps
@@ -40,6 +44,7 @@
 //! Bytes after the last run are the baseline's.
 
 use crate::game::view::{BeliefView, Frame, Visible};
+use lasertag_core::sim::AgentId;
 use lasertag_core::world::{ControlKind, MatchStatus, Side};
 
 /// Scans and clouds come with every this many ticks' snapshot (5 Hz).
@@ -86,17 +91,21 @@ impl Out {
 }
 
 /// The compact form of `frame` for a viewer: everything (`visible` is `None`), or what the
-/// player of slot `you` sees; with `belief` when given (the frame's own for spectators, the
+/// player of `you` sees; with `belief` when given (the frame's own for spectators, the
 /// one spectators see for a player), and with the scans and clouds when `slow`
 /// (spectators). Each connection decides when those are due ([`SLOW_EVERY`],
 /// [`BELIEF_COMPACT_EVERY`]).
 pub fn snapshot(
     frame: &Frame,
-    you: Option<usize>,
+    you: Option<AgentId>,
     visible: Option<&Visible>,
     belief: Option<&BeliefView>,
     slow: bool,
 ) -> Vec<u8> {
+    let you_robot = match you {
+        Some(AgentId::Robot(i)) => Some(i),
+        _ => None,
+    };
     let spectator = visible.is_none();
     let slow = spectator && slow;
     let mut o = Out(Vec::with_capacity(256));
@@ -118,16 +127,21 @@ pub fn snapshot(
         Some(Side::Opponents) => flags |= 32,
         None => {}
     }
+    if you_robot.is_some() {
+        flags |= 64;
+    }
     o.u8(KIND_WHOLE);
     o.u8(flags);
     o.u32(frame.tick.min(u32::MAX as u64) as u32);
     let left = (frame.time_limit_s - frame.time_s).max(0.0) * 10.0;
     o.u16(left.round().min(u16::MAX as f64) as u16);
-    let ack = you
-        .and_then(|i| frame.opponents.get(i))
-        .map_or(0, |p| p.ack);
+    let ack = match you {
+        Some(AgentId::Opponent(i)) => frame.opponents.get(i).map_or(0, |p| p.ack),
+        Some(AgentId::Robot(i)) => frame.robots.get(i).map_or(0, |r| r.ack),
+        None => 0,
+    };
     o.u32(ack.min(u32::MAX as u64) as u32);
-    o.u8(you.map_or(0, |i| (i + 1).min(u8::MAX as usize) as u8));
+    o.u8(you.map_or(0, |a| (a.index() + 1).min(u8::MAX as usize) as u8));
     o.count(frame.opponents.iter().filter(|p| p.tagged).count());
     o.u16(frame.robot_tags.min(u16::MAX as u32) as u16);
     o.count(frame.opponents.len());
@@ -139,7 +153,16 @@ pub fn snapshot(
         o.u8(i as u8);
         o.pose(r.pose.pos.x, r.pose.pos.y, r.pose.theta);
         let goal = r.goal.filter(|_| spectator);
-        o.u8(r.frozen as u8 | (goal.is_some() as u8) << 1 | (spectator as u8) << 2);
+        let slow = slow || you_robot == Some(i);
+        let name = r
+            .player
+            .as_deref()
+            .map(|n| &n.as_bytes()[..n.len().min(64)]);
+        o.u8(r.frozen as u8
+            | (goal.is_some() as u8) << 1
+            | (spectator as u8) << 2
+            | (slow as u8) << 3
+            | (name.is_some() as u8) << 4);
         if let Some(g) = goal {
             o.pose(g.pos.x, g.pos.y, g.theta);
         }
@@ -156,6 +179,10 @@ pub fn snapshot(
             for v in r.scan.iter().take(u8::MAX as usize) {
                 o.u8((v * 32.0).round().clamp(0.0, 255.0) as u8);
             }
+        }
+        if let Some(n) = name {
+            o.count(n.len());
+            o.0.extend_from_slice(n);
         }
     }
     let opponents = shown(&frame.opponents, visible.map(|v| &v.opponents[..]));

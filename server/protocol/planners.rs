@@ -158,14 +158,36 @@ pub(crate) fn planner_dto(p: PlannerKind) -> Planner {
     }
 }
 
-/// Each robot's controller as a summary shows it: the team's planner, or `api`.
-pub fn per_robot(planner: PlannerKind, outside: &[bool], robots: usize) -> Vec<Planner> {
-    (0..robots)
+/// What drives one robot, as summaries and states show it: the team's built-in planner,
+/// a client of the API, or a person (a pursuer slot).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, ToSchema)]
+#[serde(rename_all = "lowercase")]
+pub enum Controller {
+    Coordinated,
+    Baseline,
+    Idle,
+    Api,
+    Person,
+}
+
+/// Each robot's controller in a match set up as `config` is.
+pub fn per_robot(config: &lasertag_core::world::MatchConfig) -> Vec<Controller> {
+    let seats = config.robots.saturating_sub(config.pursuer_slots);
+    (0..config.robots)
         .map(|i| {
-            if outside.get(i) == Some(&true) {
-                Planner::Api
+            if i >= seats {
+                Controller::Person
+            } else if config.planner == PlannerKind::Api
+                || config.outside_robots.get(i) == Some(&true)
+            {
+                Controller::Api
             } else {
-                planner_dto(planner)
+                match config.planner {
+                    PlannerKind::Coordinated => Controller::Coordinated,
+                    PlannerKind::Baseline => Controller::Baseline,
+                    PlannerKind::Idle => Controller::Idle,
+                    PlannerKind::Api => Controller::Api,
+                }
             }
         })
         .collect()

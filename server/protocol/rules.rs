@@ -215,7 +215,10 @@ mod tests {
     #[test]
     fn the_opponents_motion_is_the_welcomes() {
         let physics = Physics::default();
-        let (rules, k) = (Rules::of(&physics), Kinematics::of(&physics));
+        let (rules, k) = (
+            Rules::of(&physics),
+            Kinematics::of(&physics, lasertag_core::sim::AgentId::Opponent(0)),
+        );
         assert_eq!(
             (rules.opponent.speed, rules.opponent.turn_rate),
             (k.speed, k.turn_rate)

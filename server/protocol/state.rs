@@ -27,9 +27,9 @@ pub struct MatchSummary {
     /// The planner asked for (the team's: robots driven from outside beside it are
     /// `robot_planners`' `api` ones).
     pub planner: Planner,
-    /// Each robot's controller, `r0` first: the team's planner, or `api` for one driven
-    /// from outside.
-    pub robot_planners: Vec<Planner>,
+    /// Each robot's controller, `r0` first: the team's planner, `api` for one driven from
+    /// outside, or `person` for a pursuer slot.
+    pub robot_planners: Vec<Controller>,
     /// Deprecated: always equal to `planner` (no planner falls back to another); kept so
     /// that clients reading it do not break.
     #[schema(deprecated)]
@@ -59,6 +59,11 @@ pub struct MatchSummary {
     pub spectators: usize,
     /// Opponent slots a person can take now (`POST /api/matches/{id}/players`).
     pub free_slots: usize,
+    /// Robots that are seats for people on the robot team (the last ones).
+    pub pursuer_slots: usize,
+    /// Of those, the ones a person can take now (`POST /api/matches/{id}/players` with
+    /// `"team": "robots"`).
+    pub free_pursuer_slots: usize,
     pub bots_joinable: bool,
     /// The robot team's preset, when the match was created with one.
     pub difficulty: Option<DifficultyName>,
@@ -142,7 +147,7 @@ fn summary_showing(s: &view::Summary, seed: bool) -> MatchSummary {
             BotKind::Idle => OpponentBot::Idle,
         },
         planner: planner_dto(s.planner),
-        robot_planners: super::planners::per_robot(s.planner, &c.outside_robots, s.robots),
+        robot_planners: super::planners::per_robot(c),
         planner_active: planner_dto(s.planner),
         tracker: Echo(c.tracker.clone()),
         coordination: Echo(c.coordination.clone()),
@@ -154,6 +159,8 @@ fn summary_showing(s: &view::Summary, seed: bool) -> MatchSummary {
         players: meta.players,
         spectators: meta.spectators,
         free_slots: meta.free_slots,
+        pursuer_slots: c.pursuer_slots,
+        free_pursuer_slots: meta.free_pursuer_slots,
         bots_joinable: meta.bots_joinable,
         difficulty: meta.difficulty.map(DifficultyName::of),
         rated: meta.rated,
@@ -264,7 +271,7 @@ pub struct MatchState {
     pub winner: Option<Winner>,
     pub planner: Planner,
     /// Each robot's controller, as in the summary.
-    pub robot_planners: Vec<Planner>,
+    pub robot_planners: Vec<Controller>,
     pub planner_active: Planner,
     pub notes: Vec<String>,
     pub robots: Vec<RobotState>,
@@ -318,11 +325,7 @@ pub fn state(frame: &Frame, meta: &MatchMeta, config: &MatchConfig) -> MatchStat
         status: status(frame.status),
         winner: winner(frame.winner),
         planner: planner_dto(config.planner),
-        robot_planners: super::planners::per_robot(
-            config.planner,
-            &config.outside_robots,
-            config.robots,
-        ),
+        robot_planners: super::planners::per_robot(config),
         planner_active: planner_dto(config.planner),
         notes: notes(config),
         robots: frame
@@ -450,8 +453,12 @@ pub struct EventDto {
     /// For `shot`: the agent hit, or null for a miss.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub hit: Option<Option<String>>,
+    /// For `player_joined` and `player_left`: the opponent slot the person took or left, ...
     #[serde(skip_serializing_if = "Option::is_none")]
     pub opponent: Option<String>,
+    /// ... or the robot, for a person on the robot team (a pursuer seat).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub robot: Option<String>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub name: Option<String>,
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -482,6 +489,7 @@ pub fn event(e: &lasertag_core::world::Event) -> EventDto {
         target: None,
         hit: None,
         opponent: None,
+        robot: None,
         name: None,
         winner: None,
         reason: None,
@@ -517,14 +525,16 @@ pub fn event(e: &lasertag_core::world::Event) -> EventDto {
             dto.from = Some(*from);
             dto.count = Some(*count);
         }
-        EventKind::PlayerJoined { opponent, name } => {
-            dto.kind = "player_joined";
-            dto.opponent = Some(opponent.to_string());
-            dto.name = Some(name.clone());
-        }
-        EventKind::PlayerLeft { opponent, name } => {
-            dto.kind = "player_left";
-            dto.opponent = Some(opponent.to_string());
+        EventKind::PlayerJoined { agent, name } | EventKind::PlayerLeft { agent, name } => {
+            dto.kind = if matches!(e.kind, EventKind::PlayerJoined { .. }) {
+                "player_joined"
+            } else {
+                "player_left"
+            };
+            match agent {
+                AgentId::Opponent(_) => dto.opponent = Some(agent.to_string()),
+                AgentId::Robot(_) => dto.robot = Some(agent.to_string()),
+            }
             dto.name = Some(name.clone());
         }
         EventKind::Finished { winner: w, reason } => {

@@ -104,8 +104,11 @@ pub struct Welcome<'a> {
     pub match_id: &'a str,
     /// `player` or `spectator`.
     pub role: &'static str,
-    /// The opponent this connection plays, for a player.
+    /// The agent this connection plays, for a player: an opponent (`o0`) or a robot of the
+    /// team's pursuer slots (`r1`).
     pub you: Option<String>,
+    /// A player's side: `opponents` or `robots`.
+    pub team: Option<&'static str>,
     pub name: Option<String>,
     pub map: MapFile,
     pub tick_hz: u32,
@@ -121,7 +124,7 @@ pub struct Welcome<'a> {
     /// view starts to move (until then it shows the match's first frame, the agents at their
     /// starts). 0 once it moves, and for a live view.
     pub view_starts_in_s: f64,
-    /// How the player's opponent moves, for prediction on the client.
+    /// How the player's body (an opponent, or a robot) moves, for prediction on the client.
     pub kinematics: Kinematics,
     /// Whether the match counts for ratings (docs/ratings.md): the page shows the player's
     /// rating change at the end.
@@ -133,7 +136,7 @@ pub struct Welcome<'a> {
     pub limits: Limits,
 }
 
-/// The motion of an opponent, as the server simulates it (`core/sim/motion.rs`): each tick
+/// The motion of an agent, as the server simulates it (`core/sim/motion.rs`): each tick
 /// of `dt` seconds it turns by `turn × turn_rate × dt` and moves `forward × speed × dt` along
 /// the mean heading of the tick, then its disc of `radius` slides out of walls and agents.
 #[derive(Debug, Clone, Copy, Serialize)]
@@ -147,13 +150,18 @@ pub struct Kinematics {
 }
 
 impl Kinematics {
-    pub fn of(physics: &lasertag_core::sim::Physics) -> Kinematics {
+    /// How `body` moves: an opponent, or a robot (its speed and turn rate).
+    pub fn of(physics: &lasertag_core::sim::Physics, body: AgentId) -> Kinematics {
         // The core's `f32`s, as the decimals they were written as (no `0.05000000074505806`).
         let exact = |v: f32| ((v as f64) * 1e6).round() / 1e6;
+        let (speed, turn_rate) = match body {
+            AgentId::Opponent(_) => (physics.opponent_speed, physics.opponent_turn_rate),
+            AgentId::Robot(_) => (physics.robot_speed, physics.robot_turn_rate),
+        };
         Kinematics {
             dt: 1.0 / lasertag_core::sim::TICK_HZ as f64,
-            speed: exact(physics.opponent_speed),
-            turn_rate: exact(physics.opponent_turn_rate),
+            speed: exact(speed),
+            turn_rate: exact(turn_rate),
             radius: exact(lasertag_core::sim::AGENT_RADIUS),
         }
     }
@@ -166,10 +174,14 @@ struct RobotWire {
     y: f64,
     theta: f64,
     frozen: bool,
+    /// The person driving it (a pursuer slot somebody holds).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    name: Option<String>,
     /// Spectators only: where its planner sends it.
     #[serde(skip_serializing_if = "Option::is_none")]
     goal: Option<PoseDto>,
-    /// Spectators only: this tick's ranges in centimetres, beam i at bearing (i - 90)°.
+    /// Spectators, and the person driving it: this tick's ranges in centimetres, beam i at
+    /// bearing (i - 90)°.
     #[serde(skip_serializing_if = "Option::is_none")]
     scan: Option<Vec<u16>>,
     /// Spectators only: where the robot believes it is, and how spread out that belief is.
@@ -280,8 +292,9 @@ fn pose(p: Pose) -> PoseDto {
     }
 }
 
-fn snapshot_json(frame: &Frame, you: Option<&str>, visible: Option<&Visible>) -> String {
+fn snapshot_json(frame: &Frame, you: Option<AgentId>, visible: Option<&Visible>) -> String {
     let spectator = visible.is_none();
+    let you_name = you.map(|y| y.to_string());
     let snap = Snapshot {
         kind: "snapshot",
         tick: frame.tick,
@@ -290,13 +303,11 @@ fn snapshot_json(frame: &Frame, you: Option<&str>, visible: Option<&Visible>) ->
         status: status(frame.status),
         winner: winner(frame.winner),
         view: if spectator { "spectator" } else { "player" },
-        you,
-        ack: you
-            .and_then(|y| y.parse::<AgentId>().ok())
-            .and_then(|id| match id {
-                AgentId::Opponent(i) => frame.opponents.get(i).map(|o| o.ack),
-                AgentId::Robot(_) => None,
-            }),
+        you: you_name.as_deref(),
+        ack: you.and_then(|id| match id {
+            AgentId::Opponent(i) => frame.opponents.get(i).map(|o| o.ack),
+            AgentId::Robot(i) => frame.robots.get(i).map(|r| r.ack),
+        }),
         robots: frame
             .robots
             .iter()
@@ -308,8 +319,9 @@ fn snapshot_json(frame: &Frame, you: Option<&str>, visible: Option<&Visible>) ->
                 y: mm(r.pose.pos.y),
                 theta: rad(r.pose.theta),
                 frozen: r.frozen,
+                name: r.player.as_deref().map(str::to_string),
                 goal: if spectator { r.goal.map(pose) } else { None },
-                scan: spectator.then(|| {
+                scan: (spectator || you == Some(AgentId::Robot(i))).then(|| {
                     r.scan
                         .iter()
                         .map(|v| (v * 100.0).round().clamp(0.0, u16::MAX as f32) as u16)
@@ -422,12 +434,12 @@ pub fn spectator_compact(frame: &Frame, belief: bool, slow: bool) -> axum::body:
     )
 }
 
-/// A player's snapshot: what its opponent sees, plus the belief that `belief` (a frame
-/// carrying one) holds, when given: on a live socket the one spectators see, as late as
-/// they see it.
+/// A player's snapshot: what its body sees (an opponent's line of sight, a robot's laser,
+/// [`crate::game::view::visible_to`]), plus the belief that `belief` (a frame carrying one)
+/// holds, when given.
 pub fn player_snapshot(
     frame: &Frame,
-    you: &str,
+    you: AgentId,
     visible: &Visible,
     belief: Option<&Frame>,
 ) -> Utf8Bytes {

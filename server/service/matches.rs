@@ -156,6 +156,7 @@ pub async fn create<R>(
         players: 0,
         spectators: 0,
         free_slots: 0,
+        free_pursuer_slots: 0,
         bots_joinable: req.bots_joinable,
         spectator_delay_ticks: req.spectator_delay_ticks,
         head_start_ticks: 0,

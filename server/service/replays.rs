@@ -139,7 +139,7 @@ pub async fn state_at(
     tick: u64,
 ) -> Result<MatchState, ReplaysError> {
     let world = world_at(service, client, r.clone(), tick).await?;
-    let frame = Frame::build(&world, &[], 0, 0, true);
+    let frame = Frame::build(&world, &Default::default(), 0, 0, true);
     Ok(protocol::state(&frame, &r.meta, r.config()))
 }
 

@@ -39,6 +39,10 @@ pub enum CodecError {
 /// The version of [`StoredSettings`] this build writes and reads.
 const SETTINGS_VERSION: u32 = 1;
 
+fn is_zero(n: &usize) -> bool {
+    *n == 0
+}
+
 /// Everything that defines a match besides its map, as the store keeps it.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct StoredSettings {
@@ -51,6 +55,9 @@ pub struct StoredSettings {
     /// Robots driven from outside beside planned ones (`MatchConfig::outside_robots`).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     outside_robots: Vec<bool>,
+    /// Robots that are seats for people (`MatchConfig::pursuer_slots`).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pursuer_slots: usize,
     seed: u64,
     time_limit_ticks: u64,
     placement: StoredPlacement,
@@ -260,6 +267,7 @@ impl StoredSettings {
             opponent_bot: StoredBot::of(config.opponent_bot),
             planner: StoredPlanner::of(config.planner),
             outside_robots: config.outside_robots.clone(),
+            pursuer_slots: config.pursuer_slots,
             seed: config.seed,
             time_limit_ticks: config.time_limit_ticks,
             placement: match &config.placement {
@@ -312,6 +320,7 @@ impl StoredSettings {
             opponent_bot: self.opponent_bot.kind(),
             planner: self.planner.kind(),
             outside_robots: self.outside_robots.clone(),
+            pursuer_slots: self.pursuer_slots,
             seed: self.seed,
             time_limit_ticks: self.time_limit_ticks,
             placement: match &self.placement {
@@ -368,6 +377,16 @@ enum StoredInput {
     Unseat {
         t: u64,
         s: usize,
+        name: String,
+    },
+    SeatRobot {
+        t: u64,
+        r: usize,
+        name: String,
+    },
+    UnseatRobot {
+        t: u64,
+        r: usize,
         name: String,
     },
     End {
@@ -443,6 +462,16 @@ impl StoredInput {
                 s: *slot,
                 name: name.clone(),
             },
+            WorldInput::SeatRobot { robot, name } => StoredInput::SeatRobot {
+                t,
+                r: *robot,
+                name: name.clone(),
+            },
+            WorldInput::UnseatRobot { robot, name } => StoredInput::UnseatRobot {
+                t,
+                r: *robot,
+                name: name.clone(),
+            },
             WorldInput::End(reason) => StoredInput::End {
                 t,
                 reason: reason.name().to_string(),
@@ -488,6 +517,10 @@ impl StoredInput {
             }
             StoredInput::Seat { t, s, name } => (t, WorldInput::Seat { slot: s, name }),
             StoredInput::Unseat { t, s, name } => (t, WorldInput::Unseat { slot: s, name }),
+            StoredInput::SeatRobot { t, r, name } => (t, WorldInput::SeatRobot { robot: r, name }),
+            StoredInput::UnseatRobot { t, r, name } => {
+                (t, WorldInput::UnseatRobot { robot: r, name })
+            }
             StoredInput::End { t, reason } => (
                 t,
                 WorldInput::End(

@@ -39,12 +39,14 @@ use crate::game::error::MatchError;
 use crate::game::hub::{Hub, Seat};
 use crate::game::record::Recording;
 use crate::game::view::Sight;
-use crate::game::view::{BELIEF_EVERY, Clock, Frame, Joined, MatchMeta, SeatView, Stats, Summary};
+use crate::game::view::{
+    BELIEF_EVERY, Clock, Frame, Joined, MatchMeta, SeatView, SeatViews, Stats, Summary, Team,
+};
 use crate::metrics::{Metrics, Refusal, TickHistograms};
 use lasertag_core::sim::AgentId;
 use lasertag_core::sim::TICK_HZ;
 use lasertag_core::world::{Control, FinishReason, HumanInput, InputError, StepMark, WorldInput};
-use lasertag_core::world::{Event, RobotObservation, RobotOrderError};
+use lasertag_core::world::{Event, RobotObservation, RobotOrder, RobotOrderError};
 use lasertag_core::world::{MatchConfig, MatchStatus, World};
 
 /// Ticks over which overruns are counted, and how many of them may overrun before the match
@@ -96,6 +98,7 @@ pub enum Request {
     },
     Join {
         name: String,
+        team: Team,
         /// Who asks (for the rule of one unplayed hold per client).
         client: Option<ClientKey>,
         reply: oneshot::Sender<Result<Joined, MatchError>>,
@@ -108,7 +111,7 @@ pub enum Request {
     /// A seated connection's keys (ignored unless `generation` is the slot's current one):
     /// numbered ones are queued and applied one per tick; others hold until the next.
     Input {
-        slot: usize,
+        seat: usize,
         generation: u64,
         input: HumanInput,
         seq: Option<u64>,
@@ -147,9 +150,9 @@ impl std::fmt::Debug for Request {
                 .finish(),
             Request::Join { name, .. } => f.debug_struct("Join").field("name", name).finish(),
             Request::Connect { .. } => f.write_str("Connect"),
-            Request::Input { slot, seq, .. } => f
+            Request::Input { seat, seq, .. } => f
                 .debug_struct("Input")
-                .field("slot", slot)
+                .field("seat", seat)
                 .field("seq", seq)
                 .finish(),
             Request::Stop(reason) => f.debug_tuple("Stop").field(reason).finish(),
@@ -327,7 +330,7 @@ pub fn spawn_match(
     settings: TaskSettings,
 ) -> (mpsc::Sender<Request>, Hub) {
     let (tx, rx) = mpsc::channel(256);
-    let first = Arc::new(Frame::build(&world, &[], 0, 0, true));
+    let first = Arc::new(Frame::build(&world, &Default::default(), 0, 0, true));
     let (frames_tx, frames) = watch::channel(first.clone());
     let (held, spectate) = match meta.spectator_delay_ticks {
         0 => (None, frames.clone()),
@@ -370,7 +373,8 @@ pub fn spawn_match(
         archived: false,
         store: StoreProgress::default(),
         started_at: std::time::SystemTime::now(),
-        players: (0..world.opponents.len()).map(|_| None).collect(),
+        players: MatchTask::bodies(&world).iter().map(|_| None).collect(),
+        bodies: MatchTask::bodies(&world),
         finished_at: None,
         last_activity: now,
         last_change: now,
@@ -456,7 +460,9 @@ struct MatchTask {
     histograms: TickHistograms,
     meta: MatchMeta,
     settings: TaskSettings,
+    /// Who holds each seat, and the body each seat plays (see `seats`).
     players: Vec<Option<Player>>,
+    bodies: Vec<AgentId>,
     frames: watch::Sender<Arc<Frame>>,
     /// What spectators see, when people play (see `delay`).
     held: Option<HeldBack>,
@@ -687,10 +693,11 @@ impl MatchTask {
             } => self.begin_step(inputs, ticks, what, answer, realtime, pending),
             Request::Join {
                 name,
+                team,
                 client,
                 reply,
             } => {
-                let result = self.join(name, client);
+                let result = self.join(name, team, client);
                 if result.is_ok() {
                     self.publish();
                 }
@@ -704,29 +711,36 @@ impl MatchTask {
                 let _ = reply.send(seat);
             }
             Request::Input {
-                slot,
+                seat,
                 generation,
                 input,
                 seq,
             } => {
-                self.queue_input(slot, generation, input, seq);
+                self.queue_input(seat, generation, input, seq);
             }
         }
     }
 
     /// Builds and publishes the frame of the world as it is now. O(agents + belief points).
     fn publish(&mut self) {
-        let players: Vec<Option<SeatView>> = self
-            .players
-            .iter()
-            .map(|p| {
-                p.as_ref().map(|p| SeatView {
-                    name: p.name.clone(),
-                    connected: p.connected(),
-                    ack: p.applied,
-                })
-            })
-            .collect();
+        let mut seats = SeatViews {
+            opponents: vec![None; self.world.opponents.len()],
+            robots: vec![None; self.world.robots.len()],
+        };
+        for (p, body) in self.players.iter().zip(&self.bodies) {
+            let view = p.as_ref().map(|p| SeatView {
+                name: p.name.clone(),
+                connected: p.connected(),
+                ack: p.applied,
+            });
+            let place = match body {
+                AgentId::Opponent(i) => seats.opponents.get_mut(*i),
+                AgentId::Robot(i) => seats.robots.get_mut(*i),
+            };
+            if let Some(place) = place {
+                *place = view;
+            }
+        }
         let tick = self.world.tick;
         let finished = self.world.status == MatchStatus::Finished;
         let with_belief = tick == 0 || finished || tick >= self.last_belief_tick + BELIEF_EVERY;
@@ -735,7 +749,7 @@ impl MatchTask {
         }
         let frame = Frame::build(
             &self.world,
-            &players,
+            &seats,
             self.published_seq,
             self.robot_tags,
             with_belief,
@@ -838,9 +852,8 @@ impl MatchTask {
     fn refresh_meta(&mut self) {
         self.meta.players = self.players.iter().flatten().count();
         self.meta.spectators = self.spectators.load(Ordering::Relaxed);
-        self.meta.free_slots = (0..self.players.len())
-            .filter(|&i| self.slot_free(i))
-            .count();
+        self.meta.free_slots = self.free_seats(Team::Opponents);
+        self.meta.free_pursuer_slots = self.free_seats(Team::Robots);
     }
 
     /// Notices dropped players (they stand still), frees the slots of those gone too long,
@@ -882,15 +895,16 @@ impl MatchTask {
         // Told once the slot is free and published: a client that hears of the lapse and
         // looks at the lobby finds the slot there.
         let mut kicks = Vec::new();
-        for slot in 0..self.players.len() {
-            let Some(p) = self.players[slot].as_mut() else {
+        for seat in 0..self.players.len() {
+            let body = self.bodies[seat];
+            let Some(p) = self.players[seat].as_mut() else {
                 continue;
             };
             let dropped = p.kick.as_ref().is_some_and(|k| k.is_closed());
             if dropped {
                 p.kick = None;
                 p.away_since = Some(now);
-                tracing::info!(player = %p.name, slot, "player dropped");
+                tracing::info!(player = %p.name, %body, "player dropped");
             }
             // A slot nobody has played lapses `join_hold` after the join, connected or
             // not; a played one `reconnect_grace` after its player dropped.
@@ -899,14 +913,13 @@ impl MatchTask {
                 || p.away_since
                     .is_some_and(|t| now - t >= self.settings.reconnect_grace);
             if dropped {
-                self.set_keys(slot, HumanInput::default());
+                self.set_keys(seat, HumanInput::default());
                 changed = true;
             }
-            if gone && let Some(mut p) = self.players[slot].take() {
+            if gone && let Some(mut p) = self.players[seat].take() {
                 kicks.extend(p.kick.take());
-                tracing::info!(player = %p.name, slot, lapsed, "player slot freed");
-                let name = p.name.to_string();
-                let _ = self.apply(WorldInput::Unseat { slot, name });
+                tracing::info!(player = %p.name, %body, lapsed, "player slot freed");
+                self.unseat(seat, p.name.to_string());
                 changed = true;
             }
         }

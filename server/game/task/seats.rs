@@ -1,5 +1,9 @@
-//! The people at a match: who holds which opponent slot, joining and connecting, and the
-//! numbered inputs each one's connection sends, queued and applied one per tick.
+//! The people at a match: who holds which seat (an opponent slot, or a robot of the team's
+//! pursuer slots), joining and connecting, and the numbered inputs each one's connection
+//! sends, queued and applied one per tick.
+//!
+//! Seats are numbered: the opponent slots first (seat `i` is opponent `i`), then the robots
+//! that are pursuer slots, in order ([`MatchTask::bodies`]).
 
 use super::*;
 
@@ -8,7 +12,7 @@ use super::*;
 /// its own; past this the oldest are merged away.
 const MAX_QUEUED_INPUTS: usize = 8;
 
-/// A person holding an opponent slot.
+/// A person holding a seat.
 #[derive(Debug)]
 pub(super) struct Player {
     pub(super) id: String,
@@ -35,6 +39,8 @@ pub(super) struct Player {
     /// The `seq` of the newest numbered input received, and of the last applied.
     pub(super) received: u64,
     pub(super) applied: u64,
+    /// The keys last applied to a robot's seat (a robot's order holds until the next).
+    pub(super) drive: Option<HumanInput>,
 }
 
 impl Player {
@@ -48,24 +54,62 @@ impl MatchTask {
     /// none queued, the last one holds (keys still down).
     pub(super) fn feed_inputs(&mut self) {
         let mut keys = Vec::new();
-        for (slot, p) in self.players.iter_mut().enumerate() {
+        for (seat, p) in self.players.iter_mut().enumerate() {
             if let Some(p) = p
                 && let Some((seq, input)) = p.inputs.pop_front()
             {
                 p.applied = seq;
-                keys.push((slot, input));
+                keys.push((seat, input));
             }
         }
-        for (slot, input) in keys {
-            self.set_keys(slot, input);
+        for (seat, input) in keys {
+            self.set_keys(seat, input);
         }
     }
 
-    /// A person's keys for `slot`, applied (and recorded) when they change anything.
-    pub(super) fn set_keys(&mut self, slot: usize, input: HumanInput) {
+    /// The body each seat plays: opponent slots, then the robots that are pursuer slots.
+    pub(super) fn bodies(world: &World) -> Vec<AgentId> {
+        (0..world.opponents.len())
+            .map(AgentId::Opponent)
+            .chain(
+                (0..world.robots.len())
+                    .filter(|&r| world.robot_seat(r))
+                    .map(AgentId::Robot),
+            )
+            .collect()
+    }
+
+    /// A person's keys for `seat`, applied (and recorded) when they change anything. On a
+    /// robot they are its drive order; a pressed trigger is given again each tick it is
+    /// held (the device fires when it is ready).
+    pub(super) fn set_keys(&mut self, seat: usize, input: HumanInput) {
         let input = crate::game::record::normalised(input);
-        if self.world.human_input(slot) != Some(input) {
-            let _ = self.apply(WorldInput::Keys { slot, input });
+        match self.bodies[seat] {
+            AgentId::Opponent(slot) => {
+                if self.world.human_input(slot) != Some(input) {
+                    let _ = self.apply(WorldInput::Keys { slot, input });
+                }
+            }
+            AgentId::Robot(robot) => {
+                let Some(p) = self.players[seat].as_mut() else {
+                    return;
+                };
+                let same = p
+                    .drive
+                    .is_some_and(|d| d.forward == input.forward && d.turn == input.turn);
+                if same && !input.tag {
+                    return;
+                }
+                p.drive = Some(input);
+                let _ = self.apply(WorldInput::Robot {
+                    robot,
+                    order: RobotOrder::Drive {
+                        forward: input.forward,
+                        turn: input.turn,
+                        tag: input.tag,
+                    },
+                });
+            }
         }
     }
 
@@ -73,20 +117,22 @@ impl MatchTask {
     /// hold from the next tick. Ignored unless `generation` is the slot's current one.
     pub(super) fn queue_input(
         &mut self,
-        slot: usize,
+        seat: usize,
         generation: u64,
         input: HumanInput,
         seq: Option<u64>,
     ) {
-        let Some(p) = self.players[slot]
-            .as_mut()
+        let Some(p) = self
+            .players
+            .get_mut(seat)
+            .and_then(Option::as_mut)
             .filter(|p| p.generation == generation && p.connected())
         else {
             return;
         };
         p.played = true;
         match seq {
-            None => self.set_keys(slot, input),
+            None => self.set_keys(seat, input),
             // Late or repeated: already applied or queued.
             Some(s) if s <= p.received => {}
             Some(s) => {
@@ -107,21 +153,43 @@ impl MatchTask {
         }
     }
 
-    pub(super) fn slot_free(&self, i: usize) -> bool {
-        let o = &self.world.opponents[i];
-        self.world.status == MatchStatus::Running
-            && self.players[i].is_none()
-            && !o.tagged
-            && match o.control {
-                Control::Human(_) => true,
-                Control::Bot(_) => self.meta.bots_joinable,
-                Control::Api(_) => false,
+    /// Whether a person may take `seat` now.
+    pub(super) fn seat_free(&self, seat: usize) -> bool {
+        if self.world.status != MatchStatus::Running || self.players[seat].is_some() {
+            return false;
+        }
+        match self.bodies[seat] {
+            AgentId::Opponent(i) => {
+                let o = &self.world.opponents[i];
+                !o.tagged
+                    && match o.control {
+                        Control::Human(_) => true,
+                        Control::Bot(_) => self.meta.bots_joinable,
+                        Control::Api(_) => false,
+                    }
             }
+            AgentId::Robot(_) => true,
+        }
+    }
+
+    /// Free seats on `team`.
+    pub(super) fn free_seats(&self, team: Team) -> usize {
+        (0..self.players.len())
+            .filter(|&i| self.seat_free(i) && Self::on(self.bodies[i], team))
+            .count()
+    }
+
+    fn on(body: AgentId, team: Team) -> bool {
+        matches!(
+            (body, team),
+            (AgentId::Opponent(_), Team::Opponents) | (AgentId::Robot(_), Team::Robots)
+        )
     }
 
     pub(super) fn join(
         &mut self,
         name: String,
+        team: Team,
         client: Option<ClientKey>,
     ) -> Result<Joined, MatchError> {
         let id = &self.meta.id;
@@ -163,9 +231,17 @@ impl MatchTask {
                 )));
             }
         }
-        let slot = (0..self.players.len())
-            .find(|&i| self.slot_free(i))
-            .ok_or_else(|| MatchError::Full(format!("match {id} has no free opponent slot")))?;
+        let seat = (0..self.players.len())
+            .find(|&i| self.seat_free(i) && Self::on(self.bodies[i], team))
+            .ok_or_else(|| {
+                MatchError::Full(match team {
+                    Team::Opponents => format!("match {id} has no free opponent slot"),
+                    Team::Robots => format!(
+                        "team: match {id} has no free pursuer slot (its pursuer_slots are {})",
+                        self.world.config.pursuer_slots
+                    ),
+                })
+            })?;
         // Over every match too: a client takes at most a few seats at once.
         let ledger = match client {
             Some(c) => match self.settings.seats.take(c, self.settings.max_seats) {
@@ -193,29 +269,42 @@ impl MatchTask {
             inputs: Default::default(),
             received: 0,
             applied: 0,
+            drive: None,
         };
-        tracing::info!(player = %player.name, slot, "player joined");
+        let body = self.bodies[seat];
+        tracing::info!(player = %player.name, %body, "player joined");
         let joined = Joined {
             player_id: player.id.clone(),
-            slot,
+            body,
             token: player.token.clone(),
         };
-        self.players[slot] = Some(player);
-        let _ = self.apply(WorldInput::Seat { slot, name });
+        self.players[seat] = Some(player);
+        let _ = self.apply(match body {
+            AgentId::Opponent(slot) => WorldInput::Seat { slot, name },
+            AgentId::Robot(robot) => WorldInput::SeatRobot { robot, name },
+        });
         Ok(joined)
     }
 
-    /// Seats a WebSocket connection on the slot `token` belongs to; an older connection with
+    /// The person in `seat` leaves it (their body stands still, a bot kept aside comes back).
+    pub(super) fn unseat(&mut self, seat: usize, name: String) {
+        let _ = self.apply(match self.bodies[seat] {
+            AgentId::Opponent(slot) => WorldInput::Unseat { slot, name },
+            AgentId::Robot(robot) => WorldInput::UnseatRobot { robot, name },
+        });
+    }
+
+    /// Seats a WebSocket connection on the seat `token` belongs to; an older connection with
     /// the same token is closed.
     pub(super) fn connect(&mut self, token: &str) -> Result<Seat, MatchError> {
-        let slot = self
+        let seat = self
             .players
             .iter()
             .position(|p| p.as_ref().is_some_and(|p| same_secret(&p.token, token)))
             .ok_or_else(|| {
                 MatchError::NotAPlayer(format!("token: not a player of match {}", self.meta.id))
             })?;
-        let Some(p) = self.players[slot].as_mut() else {
+        let Some(p) = self.players[seat].as_mut() else {
             return Err(MatchError::NotAPlayer("token: slot was freed".into()));
         };
         if let Some(old) = p.kick.take() {
@@ -228,11 +317,13 @@ impl MatchTask {
         p.inputs.clear();
         p.received = 0;
         p.applied = 0;
+        p.drive = None;
         p.away_since = None;
-        tracing::info!(player = %p.name, slot, generation = p.generation, "player connected");
+        let body = self.bodies[seat];
+        tracing::info!(player = %p.name, %body, generation = p.generation, "player connected");
         Ok(Seat {
-            slot,
-            opponent_id: lasertag_core::sim::AgentId::Opponent(slot).to_string(),
+            seat,
+            body,
             name: p.name.to_string(),
             generation: p.generation,
             kicked,

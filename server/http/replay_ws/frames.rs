@@ -6,7 +6,7 @@
 use axum::extract::ws::Message;
 
 use crate::game::replay::Replay;
-use crate::game::view::{BELIEF_EVERY, Frame, SeatView, visible_to};
+use crate::game::view::{BELIEF_EVERY, Frame, SeatView, SeatViews, visible_to};
 use crate::http::socket::schedule::due;
 use crate::protocol::{compact, ws as wire};
 use lasertag_core::sim::AgentId;
@@ -15,7 +15,8 @@ use lasertag_core::world::{EventKind, MatchStatus, World};
 /// How one snapshot is to be made: everything a blocking job needs to know.
 #[derive(Debug, Clone, Copy)]
 pub struct Show {
-    pub view: Option<usize>,
+    /// The player whose view is shown (an opponent, or a robot a person drove), or everything.
+    pub view: Option<AgentId>,
     pub compact: bool,
     /// Whether the belief is switched on, and the tick of the last snapshot that carried it.
     pub belief: bool,
@@ -36,33 +37,32 @@ pub struct Shown {
     pub at_end: bool,
 }
 
-/// The people seated at `world`'s opponents, from its joins and leaves (frames show their
-/// names as the live ones did).
-pub fn seats(world: &World) -> Vec<Option<SeatView>> {
-    let mut seats: Vec<Option<SeatView>> = vec![None; world.opponents.len()];
+/// The people seated at `world`'s opponents and robots, from its joins and leaves (frames
+/// show their names as the live ones did).
+pub fn seats(world: &World) -> SeatViews {
+    let mut seats = SeatViews {
+        opponents: vec![None; world.opponents.len()],
+        robots: vec![None; world.robots.len()],
+    };
     for e in world.events() {
-        match &e.kind {
-            EventKind::PlayerJoined {
-                opponent: AgentId::Opponent(i),
-                name,
-            } => {
-                if let Some(s) = seats.get_mut(*i) {
-                    *s = Some(SeatView {
-                        name: name.as_str().into(),
-                        connected: true,
-                        ack: 0,
-                    });
-                }
-            }
-            EventKind::PlayerLeft {
-                opponent: AgentId::Opponent(i),
-                ..
-            } => {
-                if let Some(s) = seats.get_mut(*i) {
-                    *s = None;
-                }
-            }
-            _ => {}
+        let (agent, view) = match &e.kind {
+            EventKind::PlayerJoined { agent, name } => (
+                agent,
+                Some(SeatView {
+                    name: name.as_str().into(),
+                    connected: true,
+                    ack: 0,
+                }),
+            ),
+            EventKind::PlayerLeft { agent, .. } => (agent, None),
+            _ => continue,
+        };
+        let place = match agent {
+            AgentId::Opponent(i) => seats.opponents.get_mut(*i),
+            AgentId::Robot(i) => seats.robots.get_mut(*i),
+        };
+        if let Some(place) = place {
+            *place = view;
         }
     }
     seats
@@ -90,21 +90,21 @@ pub fn show(replay: &Replay, world: &World, show: Show) -> Shown {
         .filter(|e| matches!(e.kind, EventKind::RobotTagged { .. }))
         .count() as u32;
     let frame = Frame::build(world, &seats(world), since, robot_tags, belief);
-    let visible = show
-        .view
-        .and_then(|slot| visible_to(&frame, &world.arena, slot).map(|v| (slot, v)));
+    let visible = show.view.and_then(|you| {
+        visible_to(&frame, &world.arena, &world.config.physics, you).map(|v| (you, v))
+    });
     let snapshot = match (&visible, show.compact) {
         (None, false) => Message::Text(wire::spectator_snapshot(&frame, belief)),
         (None, true) => Message::Binary(wire::spectator_compact(&frame, belief, true)),
-        (Some((slot, v)), false) => Message::Text(wire::player_snapshot(
+        (Some((you, v)), false) => Message::Text(wire::player_snapshot(
             &frame,
-            &AgentId::Opponent(*slot).to_string(),
+            *you,
             v,
             belief.then_some(&frame),
         )),
-        (Some((slot, v)), true) => {
+        (Some((you, v)), true) => {
             let belief = frame.belief.as_deref().filter(|_| belief);
-            Message::Binary(compact::snapshot(&frame, Some(*slot), Some(v), belief, false).into())
+            Message::Binary(compact::snapshot(&frame, Some(*you), Some(v), belief, false).into())
         }
     };
     let mut messages = vec![snapshot];

@@ -1,0 +1,331 @@
+//! People on the robot team (`pursuer_slots`) over a real server: joining a robot, driving
+//! it from a WebSocket with the team's belief live, its sightings feeding the team's
+//! tracker, its tag, and the fog on both sides of a match people play on both teams.
+
+mod common;
+
+use std::collections::BTreeSet;
+use std::f64::consts::PI;
+use std::time::Duration;
+
+use common::{TestServer, Ws, assert_error, duel_map, shipped_arena};
+use nalgebra::Point2;
+use serde_json::{Value, json};
+
+fn ids(list: &Value) -> BTreeSet<String> {
+    list.as_array()
+        .unwrap()
+        .iter()
+        .map(|a| a["id"].as_str().unwrap().to_string())
+        .collect()
+}
+
+/// Joins `id` on `team`: (the agent taken, its token).
+async fn join_team(s: &TestServer, id: &str, name: &str, team: &str) -> (String, String) {
+    let r = s
+        .post(
+            &format!("/api/matches/{id}/players"),
+            &json!({"name": name, "team": team}),
+        )
+        .await;
+    assert_eq!(r.status, 201, "{}", r.body);
+    let agent = r.body["robot_id"]
+        .as_str()
+        .or(r.body["opponent_id"].as_str())
+        .unwrap();
+    (
+        agent.to_string(),
+        r.body["token"].as_str().unwrap().to_string(),
+    )
+}
+
+/// Match `id` as the listing shows it to the owner (`token`) or anybody.
+async fn listed(s: &TestServer, id: &str, token: Option<&str>) -> Value {
+    let all = s.get_as("/api/matches", token).await.body;
+    all.as_array()
+        .unwrap()
+        .iter()
+        .find(|m| m["id"] == id)
+        .cloned()
+        .unwrap()
+}
+
+/// The messages up to the snapshot of tick `tick` (or later): that snapshot and the events
+/// that came before it (a frame's events follow its snapshot: those of tick `tick` come
+/// with the next one).
+async fn until_tick(ws: &mut Ws, tick: u64) -> (Value, Vec<Value>) {
+    let mut events = Vec::new();
+    loop {
+        let v = ws.json().await;
+        match v["type"].as_str() {
+            Some("event") => events.push(v),
+            Some("snapshot") if v["tick"].as_u64().unwrap() >= tick => return (v, events),
+            _ => {}
+        }
+    }
+}
+
+#[tokio::test]
+async fn a_person_drives_a_robot_sees_through_its_laser_and_tags() {
+    let s = TestServer::start().await;
+    // r1, the seat, stands at (1, 2) facing west, with o1 4 m behind it; r0 (idle) faces
+    // the east wall, o0 behind it: nobody sees anybody until the person turns round.
+    let id = s
+        .create_match(json!({"map": duel_map(), "robots": 2, "opponents": 2,
+            "opponent_control": "api", "planner": "idle", "pursuer_slots": 1,
+            "clock": "manual", "time_limit_s": 60,
+            "robot_starts": [[13.0, 1.0, 0.0], [1.0, 2.0, PI]],
+            "opponent_starts": [[10.0, 7.0], [5.0, 2.0]]}))
+        .await;
+    let owner = s.owner_token(&format!("/api/matches/{id}"));
+    let summary = listed(&s, &id, owner.as_deref()).await;
+    assert_eq!(summary["pursuer_slots"], 1);
+    assert_eq!(summary["free_pursuer_slots"], 1);
+    assert_eq!(summary["robot_planners"], json!(["idle", "person"]));
+    // People play it: delayed for the public, its seed secret.
+    assert!(summary["spectator_delay_s"].as_f64().unwrap() > 0.0);
+    assert!(
+        summary["seed"].is_u64(),
+        "the owner sees the seed: {summary}"
+    );
+    let public = listed(&s, &id, None).await;
+    assert!(public["seed"].is_null(), "{public}");
+    // The owner's API does not take the person's body.
+    let r = s
+        .post(
+            &format!("/api/matches/{id}/robots/r1/command"),
+            &json!({"forward": 1.0, "turn": 0.0}),
+        )
+        .await;
+    assert_error(&r, 409, "pursuer slot");
+
+    let (me, token) = join_team(&s, &id, "alice", "robots").await;
+    assert_eq!(me, "r1");
+    let r = s
+        .post(
+            &format!("/api/matches/{id}/players"),
+            &json!({"name": "bob", "team": "robots"}),
+        )
+        .await;
+    assert_error(&r, 409, "no free pursuer slot");
+    let r = s
+        .post(
+            &format!("/api/matches/{id}/players"),
+            &json!({"name": "bob", "team": "hunters"}),
+        )
+        .await;
+    assert_eq!(r.status, 400, "{}", r.body);
+    assert_eq!(listed(&s, &id, None).await["free_pursuer_slots"], 0);
+
+    let mut ws = s.ws(&id, Some(&token)).await.unwrap();
+    let welcome = ws.json().await;
+    assert_eq!(welcome["you"], "r1");
+    assert_eq!(welcome["team"], "robots");
+    assert_eq!(
+        welcome["belief"], true,
+        "a person on the team hunts with its belief"
+    );
+    assert_eq!(
+        welcome["kinematics"]["turn_rate"], 2.0,
+        "a robot's turn rate"
+    );
+    s.step(&id, 1).await;
+    let (snap, _) = until_tick(&mut ws, 1).await;
+    assert_eq!(snap["view"], "player");
+    assert_eq!(snap["you"], "r1");
+    assert_eq!(ids(&snap["robots"]), ["r0", "r1"].map(String::from).into());
+    assert!(ids(&snap["opponents"]).is_empty(), "{snap}");
+    let r1 = snap["robots"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|r| r["id"] == "r1")
+        .unwrap();
+    assert_eq!(
+        r1["scan"].as_array().unwrap().len(),
+        181,
+        "its own laser's ranges"
+    );
+    assert_eq!(r1["name"], "alice");
+    let r0 = snap["robots"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|r| r["id"] == "r0")
+        .unwrap();
+    assert!(r0.get("scan").is_none() && r0.get("goal").is_none(), "{r0}");
+    // She turns round at the robot's full turn rate (0.1 rad a tick): 31 ticks face east.
+    ws.send_json(&json!({"type": "input", "forward": 0.0, "turn": 1.0}))
+        .await
+        .unwrap();
+    tokio::time::sleep(Duration::from_millis(100)).await;
+    s.step(&id, 31).await;
+    let (snap, _) = until_tick(&mut ws, 32).await;
+    assert_eq!(
+        ids(&snap["opponents"]),
+        ["o1"].map(String::from).into(),
+        "{snap}"
+    );
+    let belief = &snap["belief"];
+    assert_eq!(
+        belief["tick"], snap["tick"],
+        "the team's belief, live: {snap}"
+    );
+    assert_eq!(belief["roles"].as_array().unwrap().len(), 2, "{belief}");
+    ws.send_json(&json!({"type": "input", "forward": 0.0, "turn": 0.0}))
+        .await
+        .unwrap();
+    tokio::time::sleep(Duration::from_millis(100)).await;
+    s.step(&id, 1).await;
+    let (_, events) = until_tick(&mut ws, 33).await;
+    assert!(
+        events.iter().any(|e| e["kind"] == "role_split"),
+        "her sighting splits a role, and she is told at once: {events:?}"
+    );
+    // The trigger: o1 is tagged by r1.
+    ws.send_json(&json!({"type": "input", "forward": 0.0, "turn": 0.0, "tag": true}))
+        .await
+        .unwrap();
+    tokio::time::sleep(Duration::from_millis(100)).await;
+    s.step(&id, 2).await;
+    until_tick(&mut ws, 35).await;
+    s.step(&id, 1).await;
+    let (snap, events) = until_tick(&mut ws, 36).await;
+    assert!(
+        events
+            .iter()
+            .any(|e| e["kind"] == "tag" && e["by"] == "r1" && e["target"] == "o1"),
+        "{events:?}"
+    );
+    assert_eq!(snap["score"]["tags"], 1);
+    let log = s.events(&id).await;
+    assert!(
+        log.iter()
+            .any(|e| e["kind"] == "player_joined" && e["robot"] == "r1" && e["name"] == "alice"),
+        "{log:?}"
+    );
+}
+
+/// Whether a robot at `me` facing `theta` has `at` in its laser's view on `arena`.
+fn in_laser(arena: &lasertag_core::sim::arena::Arena, me: [f64; 3], at: [f64; 2]) -> bool {
+    let (dx, dy) = (at[0] - me[0], at[1] - me[1]);
+    let bearing = (dy.atan2(dx) - me[2] + PI).rem_euclid(2.0 * PI) - PI;
+    dx.hypot(dy) <= 8.0
+        && bearing.abs() <= PI / 2.0
+        && arena.line_of_sight(
+            Point2::new(me[0] as f32, me[1] as f32),
+            Point2::new(at[0] as f32, at[1] as f32),
+        )
+}
+
+fn xy(v: &Value) -> [f64; 2] {
+    [v["x"].as_f64().unwrap(), v["y"].as_f64().unwrap()]
+}
+
+#[tokio::test]
+async fn the_fog_holds_on_both_sides_of_a_versus_match() {
+    let s = TestServer::start().await;
+    let arena = shipped_arena("office");
+    // Versus: alice hunts on r1 beside a planned r0; bob is the hunted, o0.
+    let id = s
+        .create_match(json!({"map": "office", "robots": 2, "opponents": 1,
+            "opponent_control": "human", "planner": "baseline", "pursuer_slots": 1,
+            "clock": "manual", "time_limit_s": 40,
+            "robot_starts": [[22.0, 1.5, 0.0], [7.0, 8.0, std::f64::consts::PI]],
+            "opponent_starts": [[3.0, 8.0]]}))
+        .await;
+    let (alice_is, alice_token) = join_team(&s, &id, "alice", "robots").await;
+    let (bob_is, bob_token) = join_team(&s, &id, "bob", "opponents").await;
+    assert_eq!((alice_is.as_str(), bob_is.as_str()), ("r1", "o0"));
+    let mut alice = s.ws(&id, Some(&alice_token)).await.unwrap();
+    let mut bob = s.ws(&id, Some(&bob_token)).await.unwrap();
+    let (mut alice_saw, mut alice_missed, mut bob_saw, mut bob_missed) = (0, 0, 0, 0);
+    for t in 0..600u64 {
+        if t % 40 == 0 {
+            // Both wander: forward, turning one way then the other.
+            let turn = if (t / 40) % 2 == 0 { 0.6 } else { -0.4 };
+            for ws in [&mut alice, &mut bob] {
+                ws.send_json(&json!({"type": "input", "forward": 1.0, "turn": turn}))
+                    .await
+                    .unwrap();
+            }
+            tokio::time::sleep(Duration::from_millis(30)).await;
+        }
+        let truth = s.step(&id, 1).await;
+        let tick = truth["tick"].as_u64().unwrap();
+        let (a, _) = until_tick(&mut alice, tick).await;
+        let (b, _) = until_tick(&mut bob, tick).await;
+        let robot = truth["robots"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|r| r["id"] == "r1")
+            .unwrap();
+        let me = [xy(robot)[0], xy(robot)[1], robot["theta"].as_f64().unwrap()];
+        let opp = &truth["opponents"][0];
+        if opp["tagged"] == true || truth["status"] == "finished" {
+            break;
+        }
+        // Alice's socket: o0 exactly when r1's laser has it (skipping what millimetre
+        // rounding could flip: the edges of the range, the field of view and the walls).
+        let at = xy(opp);
+        let expected = in_laser(&arena, me, at);
+        let steady = [
+            (0.003, 0.0, 0.0),
+            (-0.003, 0.0, 0.0),
+            (0.0, 0.003, 0.0),
+            (0.0, 0.0, 0.002),
+            (0.0, 0.0, -0.002),
+        ]
+        .iter()
+        .all(|(dx, dy, dt)| in_laser(&arena, [me[0] + dx, me[1] + dy, me[2] + dt], at) == expected);
+        if steady {
+            assert_eq!(
+                ids(&a["opponents"]).contains("o0"),
+                expected,
+                "tick {tick}: alice on r1 at {me:?}, o0 at {at:?}"
+            );
+            if expected {
+                alice_saw += 1
+            } else {
+                alice_missed += 1
+            }
+        }
+        assert_eq!(ids(&a["robots"]).len(), 2, "her own team, always");
+        // Bob's socket: each robot exactly when in his line of sight.
+        for r in truth["robots"].as_array().unwrap() {
+            let los = |p: [f64; 2]| {
+                arena.line_of_sight(
+                    Point2::new(at[0] as f32, at[1] as f32),
+                    Point2::new(p[0] as f32, p[1] as f32),
+                )
+            };
+            let p = xy(r);
+            let expected = los(p);
+            let steady = [(0.003, 0.0), (-0.003, 0.0), (0.0, 0.003), (0.0, -0.003)]
+                .iter()
+                .all(|(dx, dy)| los([p[0] + dx, p[1] + dy]) == expected);
+            if steady {
+                let rid = r["id"].as_str().unwrap();
+                assert_eq!(
+                    ids(&b["robots"]).contains(rid),
+                    expected,
+                    "tick {tick}: {rid} for bob"
+                );
+                if expected {
+                    bob_saw += 1
+                } else {
+                    bob_missed += 1
+                }
+            }
+        }
+        assert!(
+            b.get("belief").is_none(),
+            "bob has no belief unless he asks"
+        );
+    }
+    assert!(
+        alice_saw > 0 && alice_missed > 0 && bob_saw > 0 && bob_missed > 0,
+        "alice saw {alice_saw}, missed {alice_missed}; bob saw {bob_saw}, missed {bob_missed}"
+    );
+}
