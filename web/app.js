@@ -70,12 +70,14 @@ async function homeOf(id) {
   return homes.get(id) || "";
 }
 
-/** Takes a slot of match `id` (once per tab) and returns the token. */
-async function tokenFor(id, base) {
-  const key = `lasertag.token.${id}`;
+/** Takes a seat of match `id` on `team` (once per tab: `opponents`, or `robots` for a pursuer
+ * slot) and returns the token. */
+async function tokenFor(id, base, team = "opponents") {
+  const key = `lasertag.token.${id}${team === "robots" ? ".robots" : ""}`;
   let token = sessionStorage.getItem(key);
   if (!token) {
-    const joined = await api("POST", `/api/matches/${encodeURIComponent(id)}/players`, { name: playerName() }, base);
+    const body = team === "robots" ? { name: playerName(), team } : { name: playerName() };
+    const joined = await api("POST", `/api/matches/${encodeURIComponent(id)}/players`, body, base);
     token = joined.token;
     sessionStorage.setItem(key, token);
   }
@@ -125,10 +127,11 @@ async function refreshLobby() {
     const where = m.node ? ` · ${m.node.id}${m.node.draining ? " (closing)" : ""}` : "";
     // The team: its preset (★ when the match is rated), or its planner; a mixed team names
     // each robot's controller.
-    const mixed = (m.robot_planners || []).some((p) => p !== m.planner);
+    const mixed = (m.robot_planners || []).some((p) => p !== m.planner && p !== "person");
     const team = m.difficulty ? `${m.difficulty}${m.rated ? " ★ rated" : ""}`
       : mixed ? m.robot_planners.join(" + ") : m.planner;
-    const cells = [short + where, m.map, `${m.robots} · ${team}`,
+    const people = m.pursuer_slots ? ` (${m.pursuer_slots} for people)` : "";
+    const cells = [short + where, m.map, `${m.robots}${people} · ${team}`,
       `${m.opponents_left}/${m.opponents} ${m.opponent_control}`, m.players, m.spectators, left];
     for (const c of cells) {
       const td = document.createElement("td");
@@ -140,6 +143,10 @@ async function refreshLobby() {
     div.className = "buttons";
     div.append(button("Watch", () => (location.hash = `#/watch/${m.id}`), "secondary watch"));
     if (m.free_slots > 0) div.append(button("Play", () => (location.hash = `#/play/${m.id}`), "play"));
+    // A free robot of the team: hunt beside the robots.
+    if (m.free_pursuer_slots > 0) {
+      div.append(button("Hunt", () => (location.hash = `#/play/${m.id}?team=robots`), "play hunt"));
+    }
     td.append(div);
     tr.append(td);
     return tr;
@@ -215,6 +222,9 @@ async function create(e) {
   const f = new FormData($("create"));
   $("create-error").textContent = "";
   const preset = difficulties.find((d) => d.name === f.get("difficulty"));
+  // Co-op and versus: the creator hunts on the team's last robot (a pursuer slot).
+  const mode = f.get("mode");
+  const hunter = mode === "coop" || mode === "versus";
   try {
     // A preset decides the team and the clock (FormData leaves the disabled fields out).
     const team = preset ? { difficulty: preset.name } : {
@@ -222,14 +232,21 @@ async function create(e) {
       planner: f.get("planner"),
       time_limit_s: Number(f.get("minutes")) * 60,
     };
+    const control = mode === "coop" ? "bots" : mode === "versus" ? "human" : f.get("control");
+    // The hunter's robot joins the team: one robot more than the preset or the form says.
+    if (hunter) {
+      const robots = preset ? preset.robots : Number(f.get("robots"));
+      team.robots = Math.min(rules.bounds.robots.maximum, robots + 1);
+    }
     const m = await createMatch({
       map: f.get("map"),
       opponents: Number(f.get("opponents")),
-      opponent_control: f.get("control") === "human" ? "human" : "bot",
-      bots_joinable: f.get("control") === "bots",
+      opponent_control: control === "human" ? "human" : "bot",
+      bots_joinable: control === "bots" && mode === "hunted",
+      ...(hunter ? { pursuer_slots: 1, opponent_bot: "evade" } : {}),
       ...team,
     });
-    location.hash = `#/play/${m.id}`;
+    location.hash = `#/play/${m.id}${hunter ? "?team=robots" : ""}`;
   } catch (err) {
     $("create-error").textContent = err.message;
   }
@@ -248,10 +265,12 @@ async function replay(g) {
   const fresh = await createMatch({
     map: m.map, opponents: m.opponents, opponent_control: m.opponent_control,
     opponent_bot: m.opponent_bot, bots_joinable: m.bots_joinable,
+    ...(m.pursuer_slots ? { pursuer_slots: m.pursuer_slots } : {}),
     ...(m.difficulty ? { difficulty: m.difficulty }
       : { robots: m.robots, planner: m.planner, time_limit_s: m.time_limit_s }),
   });
-  location.hash = g.role === "player" || m.free_slots > 0 ? `#/play/${fresh.id}` : `#/watch/${fresh.id}`;
+  const hunt = g.team === "robots" ? "?team=robots" : "";
+  location.hash = g.role === "player" || m.free_slots > 0 ? `#/play/${fresh.id}${hunt}` : `#/watch/${fresh.id}`;
 }
 
 async function route() {
@@ -305,7 +324,7 @@ async function route() {
     let token = null;
     if (page === "play") {
       try {
-        token = await tokenFor(decodeURIComponent(id), base);
+        token = await tokenFor(decodeURIComponent(id), base, params.get("team") === "robots" ? "robots" : "opponents");
       } catch (e) {
         debug.joinError = e.message;
         location.hash = "#/";
@@ -318,7 +337,8 @@ async function route() {
       onLobby: () => (location.hash = "#/"),
       onReplay: (g) => replay(g).catch((e) => { $("end-text").textContent = e.message; }),
       onStaleToken: token ? () => {
-        sessionStorage.removeItem(`lasertag.token.${decodeURIComponent(id)}`);
+        const team = params.get("team") === "robots" ? ".robots" : "";
+        sessionStorage.removeItem(`lasertag.token.${decodeURIComponent(id)}${team}`);
         route();
       } : null,
     });
@@ -343,5 +363,13 @@ for (const name of ["robots", "opponents"]) {
   if (!input.max) input.max = bound.maximum;
 }
 $("create").addEventListener("submit", create);
+// Co-op and versus decide who the opponents are.
+$("create").elements.mode.addEventListener("change", (e) => {
+  const mode = e.target.value;
+  const control = $("create").elements.control;
+  control.disabled = mode !== "hunted";
+  if (mode !== "hunted") control.value = mode === "coop" ? "bots" : "human";
+  debug.mode = mode;
+});
 window.addEventListener("hashchange", route);
 route();

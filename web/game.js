@@ -1,8 +1,9 @@
 // One match in the browser: its WebSocket (socket.js), smooth motion between snapshots, the
 // keyboard, the HUD (score, timer, ping, tag feed) and the end screen.
 
-import { segments, visibility } from "./geometry.js";
+import { segments, sight } from "./geometry.js";
 import { draw, fit } from "./render.js";
+import { laserFov, rules } from "./rules.js";
 import { addBeam, between, copyLink, feedLine, fmtTime, legend, replayLink } from "./hud.js";
 import { Predictor } from "./predict.js";
 import { PageSocket, socketUrl } from "./socket.js";
@@ -136,6 +137,12 @@ export class Game {
     this.you = w.you;
     this.role = w.role;
     this.name = w.name;
+    // A person on the robot team drives a robot (`r1`): they hunt with the team's belief,
+    // live, and see what its laser sees; an opponent's player is the hunted.
+    this.team = w.team || (w.role === "player" ? "opponents" : null);
+    debug.team = this.team;
+    if (this.team === "robots" && !this.beliefSet) this.beliefOn = true;
+    debug.belief = this.beliefOn;
     this.rated = Boolean(w.rated);
     debug.rated = this.rated;
     this.tickHz = w.tick_hz;
@@ -157,7 +164,8 @@ export class Game {
     const predict = w.role === "player" && w.kinematics && localStorage.getItem("lasertag.predict") !== "off";
     this.predictor = predict ? new Predictor(w.map, this.segs, w.kinematics) : null;
     const watching = this.delay ? `spectating, delayed ${this.delay}` : "spectating";
-    $("hud-match").textContent = `${w.map.name} · ${w.role === "player" ? `playing ${w.you} (${w.name})` : watching}`;
+    const playing = this.team === "robots" ? `hunting as robot ${w.you} (${w.name})` : `playing ${w.you} (${w.name})`;
+    $("hud-match").textContent = `${w.map.name} · ${w.role === "player" ? playing : watching}`;
     $("hud-status").textContent = "";
     // On a touch screen a player drives with a stick and a tag button instead of keys.
     if (w.role === "player" && !this.touch && touchScreen()) {
@@ -168,7 +176,7 @@ export class Game {
     $("hud-sound").hidden = w.role !== "player";
     $("controls").hidden = Boolean(this.touch);
     $("controls").innerHTML = w.role === "player"
-      ? "<kbd>W</kbd><kbd>A</kbd><kbd>S</kbd><kbd>D</kbd> / arrows move and turn · <kbd>Space</kbd> tag · <kbd>B</kbd> robots' belief · <kbd>M</kbd> sound"
+      ? `<kbd>W</kbd><kbd>A</kbd><kbd>S</kbd><kbd>D</kbd> / arrows move and turn · <kbd>Space</kbd> tag · <kbd>B</kbd> ${this.team === "robots" ? "your team's" : "robots'"} belief · <kbd>M</kbd> sound`
       : `spectating${this.delay ? ` (delayed ${this.delay}: people are playing)` : ""}: true positions, scans, goals and belief · <kbd>B</kbd> belief on/off`;
   }
 
@@ -200,7 +208,7 @@ export class Game {
     if (this.snaps.length > 12) this.snaps.shift();
     if (s.belief) this.belief = s.belief;
     if (this.predictor && s.view === "player" && s.ack !== undefined) {
-      const me = s.opponents.find((o) => o.id === this.you);
+      const me = this.mine(s);
       const others = [...s.robots, ...s.opponents].filter((a) => a !== me && !a.tagged).map((a) => [a.x, a.y]);
       if (me) this.predictor.reconcile(me, s.ack, others);
       debug.ack = s.ack;
@@ -208,14 +216,14 @@ export class Game {
     } else if (s.view === "spectator") {
       this.predictor = null; // tagged: nothing of ours moves any more
     }
-    // A player's snapshot holds only the robots in its sight: one more is a robot come
-    // into view.
+    // A player's snapshot holds only the other side's agents in its sight: one more is one
+    // come into view.
     if (s.view === "player") {
-      const inSight = s.robots.length;
+      const inSight = this.team === "robots" ? s.opponents.length : s.robots.length;
       if (inSight > this.inSight) this.sound.play("seen");
       this.inSight = inSight;
     }
-    for (const o of s.opponents) if (o.name) this.names[o.id] = o.name;
+    for (const a of [...s.opponents, ...s.robots]) if (a.name) this.names[a.id] = a.name;
     debug.snapshots++;
     debug.lastTick = s.tick;
     debug.view = s.view;
@@ -229,6 +237,11 @@ export class Game {
     this.legend();
   }
 
+  /** This player's own agent in snapshot `s`: a robot or an opponent. */
+  mine(s) {
+    return (this.team === "robots" ? s.robots : s.opponents).find((a) => a.id === this.you);
+  }
+
   who(id) {
     return this.names[id] ? `${this.names[id]}` : id;
   }
@@ -240,16 +253,23 @@ export class Game {
     switch (e.kind) {
       case "shot": addBeam(this.beams, e, latest, this.segs); break;
       case "tag":
-        text = `${this.who(e.by)} tagged ${e.target === this.you ? "you" : this.who(e.target)}`;
+        text = `${e.by === this.you ? "you" : this.who(e.by)} tagged ${e.target === this.you ? "you" : this.who(e.target)}`;
         if (e.target === this.you) this.sound.play("tagged");
+        if (e.by === this.you) this.sound.play("tag");
         break;
       case "robot_tagged":
-        text = `${e.by === this.you ? "you" : this.who(e.by)} tagged ${e.target} (frozen 10 s)`;
+        text = `${e.by === this.you ? "you" : this.who(e.by)} tagged ${e.target === this.you ? "you" : this.who(e.target)} (frozen 10 s)`;
         if (e.by === this.you) this.sound.play("tag");
+        if (e.target === this.you) this.sound.play("tagged");
         break;
       case "role_split": text = `belief: role ${e.role} split from ${e.from}`; cls = "role"; break;
       case "role_merge": text = `belief: role ${e.from} merged into ${e.role} (${e.count})`; cls = "role"; break;
-      case "player_joined": text = `${e.name} joined as ${e.opponent}`; this.names[e.opponent] = e.name; break;
+      case "player_joined": {
+        const as = e.robot || e.opponent;
+        text = e.robot ? `${e.name} joined the robot team as ${as}` : `${e.name} joined as ${as}`;
+        this.names[as] = e.name;
+        break;
+      }
       case "player_left": text = `${e.name} left`; break;
       case "finished":
         text = e.winner ? `match over: ${e.winner} win` : `match over: ${e.reason.replace("_", " ")}`;
@@ -275,7 +295,7 @@ export class Game {
     }[f.reason] || `at ${fmtTime(f.time_s)}`;
     let you = "";
     if (this.role === "player" && f.winner) {
-      you = f.winner === "opponents" ? " — you win!" : " — you lose.";
+      you = f.winner === (this.team === "robots" ? "robots" : "opponents") ? " — you win!" : " — you lose.";
     }
     // The replay from this player's own view: how the robots found it (see replay.js).
     const watch = $("end-watch");
@@ -338,6 +358,7 @@ export class Game {
     }
     if (e.code === "KeyB" && e.type === "keydown" && !e.repeat) {
       this.beliefOn = !this.beliefOn;
+      this.beliefSet = true;
       debug.belief = this.beliefOn;
       this.send({ type: "belief", on: this.beliefOn });
       this.legend();
@@ -436,29 +457,35 @@ export class Game {
     const robots = w ? w.robots : [];
     const opponents = w ? [...w.opponents] : [];
     let visible = null;
+    let robotsDrawn = robots;
     if (w && w.snap.view === "player") {
       this.inputTicks(now);
-      let me = opponents.find((o) => o.id === this.you);
+      const team = this.team === "robots" ? (robotsDrawn = [...robots]) : opponents;
+      let me = team.find((a) => a.id === this.you);
       // Our own disc where we predict it (drawn from the keys held this very frame).
       const { forward, turn } = this.held();
-      const own = this.predictor && this.predictor.drawn(now, (now - this.tickAt) / TICK_MS, forward, turn);
+      // (A frozen robot does not move, whatever the keys say.)
+      const own = this.predictor && !(me && me.frozen) &&
+        this.predictor.drawn(now, (now - this.tickAt) / TICK_MS, forward, turn);
       if (me && own) {
-        const i = opponents.indexOf(me);
+        const i = team.indexOf(me);
         me = { ...me, ...own };
-        opponents.splice(i, 1, me);
+        team.splice(i, 1, me);
       }
       // Where the player's own disc is drawn (what a latency measurement watches).
       if (me) debug.own = { x: me.x, y: me.y, theta: me.theta };
-      if (me) visible = visibility(this.segs, me.x, me.y);
+      // A robot sees what its laser sees; an opponent, what is in its line of sight.
+      const laser = this.team === "robots" ? { range: rules.laser.range, fov: laserFov } : null;
+      if (me) visible = sight(this.segs, me, laser);
     }
     this.countdown(now);
     this.beams = this.beams.filter((b) => now - b.t0 < 450);
     const counts = draw(this.ctx, v, {
-      map: this.map, segs: this.segs, you: this.you, robots, opponents, visible,
+      map: this.map, segs: this.segs, you: this.you, robots: robotsDrawn, opponents, visible,
       belief: this.beliefOn ? this.belief : null, beams: this.beams, now,
     });
     debug.drawn = counts;
-    debug.drawnAgents = [...robots, ...opponents].map((a) => [a.id, +a.x.toFixed(2), +a.y.toFixed(2)]);
+    debug.drawnAgents = [...robotsDrawn, ...opponents].map((a) => [a.id, +a.x.toFixed(2), +a.y.toFixed(2)]);
     debug.frames = (debug.frames || 0) + 1;
   }
 }

@@ -63,3 +63,11 @@ export function angleDiff(a, b) {
   if (d < -Math.PI) d += Math.PI * 2;
   return d;
 }
+
+/** What a player sees from `me`: an opponent everything in its line of sight; a robot (`laser`:
+ * its `{range, fov}`) the fan of its laser, stopped by walls, and nothing while frozen. */
+export function sight(segs, me, laser) {
+  if (!laser) return visibility(segs, me.x, me.y);
+  const reach = me.frozen ? 0.01 : laser.range;
+  return [[me.x, me.y], ...fan(segs, me.x, me.y, me.theta, 91, reach, laser.fov)];
+}

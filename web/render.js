@@ -280,9 +280,11 @@ export function draw(ctx, v, scene) {
 
   // Agents.
   for (const r of scene.robots) {
+    // A person on the robot team: their own robot in the player's colour.
+    const mine = r.id === scene.you;
     const color = r.frozen ? COLORS.robotFrozen : COLORS.robot;
-    disc(ctx, v, r.x, r.y, rules.agent_radius, color, "#e6f1ff", 2);
-    heading(ctx, v, r.x, r.y, r.theta, 0.45, "#e6f1ff");
+    disc(ctx, v, r.x, r.y, rules.agent_radius, color, mine ? COLORS.you : "#e6f1ff", mine ? 3 : 2);
+    heading(ctx, v, r.x, r.y, r.theta, 0.45, mine ? COLORS.you : "#e6f1ff");
     if (r.frozen) {
       ctx.beginPath();
       ctx.arc(v.x(r.x), v.y(r.y), 0.4 * v.s, 0, Math.PI * 2);
@@ -292,7 +294,8 @@ export function draw(ctx, v, scene) {
       ctx.stroke();
       ctx.setLineDash([]);
     }
-    label(ctx, v, r.x, r.y, r.frozen ? `${r.id} ❄` : r.id, "#cfe3ff");
+    const who = mine ? "you" : r.name ? `${r.name} (${r.id})` : r.id;
+    label(ctx, v, r.x, r.y, r.frozen ? `${who} ❄` : who, mine ? COLORS.you : "#cfe3ff");
     counts.robots++;
   }
   for (const o of scene.opponents) {

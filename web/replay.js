@@ -4,7 +4,8 @@
 // live match is, and the controls: play and pause, the speed, a timeline marked with the
 // match's events, the robots' belief (B) and, from a player's view, a switch to everyone's.
 
-import { segments, visibility } from "./geometry.js";
+import { segments, sight } from "./geometry.js";
+import { laserFov, rules } from "./rules.js";
 import { draw, fit } from "./render.js";
 import { addBeam, between, copyLink, feedLine, fmtTime, legend, replayLink } from "./hud.js";
 import { PageSocket, socketUrl } from "./socket.js";
@@ -116,7 +117,7 @@ export class Replay {
       if (this.stopped) return;
     }
     for (const p of this.detail.events || []) {
-      if (p.kind === "player_joined") this.names[p.opponent] = p.name;
+      if (p.kind === "player_joined") this.names[p.robot || p.opponent] = p.name;
     }
     this.markers();
     this.connect(this.from);
@@ -204,7 +205,7 @@ export class Replay {
       $("feed").replaceChildren();
     }
     if (s.belief) this.belief = s.belief;
-    for (const o of s.opponents) if (o.name) this.names[o.id] = o.name;
+    for (const a of [...s.opponents, ...s.robots]) if (a.name) this.names[a.id] = a.name;
     debug.snapshots++;
     debug.lastTick = s.tick;
     debug.snapView = s.view;
@@ -233,7 +234,7 @@ export class Replay {
       robot_tagged: () => `${this.who(e.by)} tagged ${e.target} (frozen 10 s)`,
       role_split: () => `belief: role ${e.role} split from ${e.from}`,
       role_merge: () => `belief: role ${e.from} merged into ${e.role} (${e.count})`,
-      player_joined: () => `${e.name} joined as ${e.opponent}`,
+      player_joined: () => `${e.name} joined as ${e.robot || e.opponent}`,
       player_left: () => `${e.name} left`,
       finished: () => (e.winner ? `match over: ${e.winner} win` : `match over: ${e.reason.replace("_", " ")}`),
     }[e.kind];
@@ -386,8 +387,11 @@ export class Replay {
     const { robots, opponents } = this.agents(now);
     let visible = null;
     if (this.latest.view === "player") {
-      const me = opponents.find((o) => o.id === this.you);
-      if (me) visible = visibility(this.segs, me.x, me.y);
+      // A person on the robot team saw through their robot's laser.
+      const robot = String(this.you).startsWith("r");
+      const me = (robot ? robots : opponents).find((a) => a.id === this.you);
+      const laser = robot ? { range: rules.laser.range, fov: laserFov } : null;
+      if (me) visible = sight(this.segs, me, laser);
     }
     this.beams = this.beams.filter((b) => now - b.t0 < 450);
     const counts = draw(this.ctx, v, {
