@@ -15,6 +15,7 @@ pub mod compact;
 pub mod difficulties;
 mod difficulty_name;
 pub mod fleet;
+mod join;
 mod planners;
 mod refusal;
 pub mod replay_ws;
@@ -52,6 +53,7 @@ use lasertag_core::world::{ControlKind, FinishReason, MatchConfig, Placement};
 use lasertag_core::world::{EventKind, MatchStatus, Side, World};
 
 pub use difficulty_name::DifficultyName;
+pub use join::{JoinRequest, JoinTeam, Joined};
 pub(crate) use planners::planner_dto;
 pub use planners::{Controller, Planner, PlannerChoice, planner_name};
 pub use refusal::{Invalid, invalid};
@@ -567,64 +569,6 @@ impl OpponentCommand {
             (None, Some(false), None) => Err(invalid("stop", "must be true")),
             (None, None, Some(false)) => Err(invalid("tag", "must be true")),
             _ => Err(invalid("body", "give exactly one of waypoints, stop, tag")),
-        }
-    }
-}
-
-/// Body of `POST /api/matches/{id}/players`.
-#[derive(Debug, Clone, Deserialize, ToSchema)]
-#[serde(deny_unknown_fields)]
-pub struct JoinRequest {
-    /// 1 to 32 characters, none of them control characters, not all whitespace (leading
-    /// and trailing whitespace is trimmed off).
-    #[schema(
-        min_length = 1,
-        max_length = 32,
-        pattern = r"^[^\u0000-\u001F\u007F-\u009F]*[^\s\u0000-\u001F\u007F-\u009F][^\u0000-\u001F\u007F-\u009F]*$"
-    )]
-    pub name: String,
-    /// `opponents` (default: a free opponent slot, the hunted) or `robots` (a free pursuer
-    /// slot: a robot of the team, hunting beside the others).
-    pub team: Option<JoinTeam>,
-}
-
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, ToSchema)]
-#[serde(rename_all = "lowercase")]
-pub enum JoinTeam {
-    Opponents,
-    Robots,
-}
-
-impl JoinTeam {
-    pub fn team(team: Option<JoinTeam>) -> crate::game::view::Team {
-        match team {
-            None | Some(JoinTeam::Opponents) => crate::game::view::Team::Opponents,
-            Some(JoinTeam::Robots) => crate::game::view::Team::Robots,
-        }
-    }
-}
-
-#[derive(Debug, Clone, Serialize, ToSchema)]
-pub struct Joined {
-    pub player_id: String,
-    /// The opponent taken (`o0`, …), for a seat on the opponents' side ...
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub opponent_id: Option<String>,
-    /// ... or the robot (`r1`, …), for a pursuer slot.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub robot_id: Option<String>,
-    pub token: String,
-}
-
-impl From<crate::game::view::Joined> for Joined {
-    fn from(j: crate::game::view::Joined) -> Self {
-        let id = Some(j.body.to_string());
-        let robot = matches!(j.body, AgentId::Robot(_));
-        Joined {
-            player_id: j.player_id,
-            opponent_id: if robot { None } else { id.clone() },
-            robot_id: if robot { id } else { None },
-            token: j.token,
         }
     }
 }

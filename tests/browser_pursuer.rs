@@ -1,7 +1,7 @@
 //! A person on the robot team in headless Chromium against a real server: they take a robot
-//! from the lobby (co-op), and in a staged match they turn their robot round with the
-//! keyboard, see the team's belief, split a role with their own sighting and tag the
-//! opponent they found.
+//! from the lobby (co-op), and in a staged match, over a network with a 150 ms round trip,
+//! they turn their robot round with the keyboard, see the team's belief, split a role with
+//! their own sighting and tag the opponent they found.
 //!
 //! Needs Chromium (`bash tests/run.sh` installs Debian's package when it is missing). With
 //! `LASERTAG_SCREENSHOTS=<dir>` set, the test also saves its screenshot there.
@@ -9,6 +9,8 @@
 #[path = "common/cdp.rs"]
 mod cdp;
 mod common;
+#[path = "common/netem.rs"]
+mod netem;
 
 use std::time::{Duration, Instant};
 
@@ -48,8 +50,11 @@ async fn a_person_hunts_with_the_robots_in_headless_chromium() {
     assert_eq!(m["robot_planners"], json!(["coordinated", "person"]), "{m}");
     assert_eq!(m["opponent_control"], "bot", "{m}");
 
-    // 2. A staged hunt: r1 (the person's) at (1, 2) faces west; o1 stands 4 m behind it, o0
-    // far off; r0 stands still facing the east wall. Nobody sees anybody yet.
+    // 2. A staged hunt, over a network with a 150 ms round trip: r1 (the person's) at (1, 2)
+    // faces west; o1 stands 4 m behind it, o0 far off; r0 stands still facing the east wall.
+    // Nobody sees anybody yet.
+    let net = netem::Netem::start(s.addr, netem::Conditions::rtt_ms(150)).await;
+    let slow = format!("http://{}", net.addr);
     let id = s
         .create_match(json!({"map": duel_map(), "robots": 2, "opponents": 2,
             "opponent_control": "api", "planner": "idle", "pursuer_slots": 1,
@@ -57,7 +62,7 @@ async fn a_person_hunts_with_the_robots_in_headless_chromium() {
             "robot_starts": [[13.0, 1.0, 0.0], [1.0, 2.0, std::f64::consts::PI]],
             "opponent_starts": [[10.0, 7.0], [5.0, 2.0]]}))
         .await;
-    b.navigate(&format!("{base}/#/play/{id}?team=robots")).await;
+    b.navigate(&format!("{slow}/#/play/{id}?team=robots")).await;
     b.wait_for(
         &format!(
             "__lasertag.matchId === '{id}' && __lasertag.you === 'r1' && __lasertag.snapshots > 3"
@@ -73,20 +78,25 @@ async fn a_person_hunts_with_the_robots_in_headless_chromium() {
         "{hud}"
     );
     assert_eq!(b.eval("__lasertag.drawn.opponents").await, json!(0));
-    // Turn left (the robot turns 0.1 rad a tick) until it faces east, within its tag cone.
+    // Turn left for 31 input ticks (0.1 rad each, from west): it faces east within its tag
+    // cone. The page sends one input per 50 ms tick with the keys held then (`sent` counts
+    // them), so the key is let go as soon as the 31st has gone.
+    let sent = |v: serde_json::Value| v.as_u64().unwrap_or(0);
+    let first = sent(b.eval("__lasertag.sent").await);
     b.key("ArrowLeft", true).await;
     let deadline = Instant::now() + Duration::from_secs(10);
-    loop {
-        let theta = b.eval("__lasertag.own ? __lasertag.own.theta : null").await;
-        if let Some(t) = theta.as_f64()
-            && (-0.07..0.07).contains(&t)
-        {
-            break;
-        }
-        assert!(Instant::now() < deadline, "never faced east: {theta}");
-        tokio::time::sleep(Duration::from_millis(5)).await;
+    while sent(b.eval("__lasertag.sent").await) < first + 31 {
+        assert!(Instant::now() < deadline, "the page stopped sending inputs");
+        tokio::time::sleep(Duration::from_millis(2)).await;
     }
     b.key("ArrowLeft", false).await;
+    // (The inputs keep flowing, so `ack` stays a round trip behind `sent`: wait that out.)
+    tokio::time::sleep(Duration::from_millis(500)).await;
+    let theta = b.eval("__lasertag.own.theta").await.as_f64().unwrap();
+    assert!(
+        theta.abs() < 5f64.to_radians(),
+        "faces {theta} rad, not east"
+    );
     // Its laser has o1 now: drawn on the page, and the team's belief split a role for it.
     b.wait_for("__lasertag.drawn.opponents === 1", 5).await;
     b.wait_for(

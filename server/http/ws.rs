@@ -14,6 +14,8 @@
 //! as on every socket ([`crate::http::socket`]); which compact snapshot carries what is the
 //! connection's [`Schedule`].
 
+mod events;
+
 use std::collections::VecDeque;
 use std::sync::Arc;
 use std::time::Duration;
@@ -24,8 +26,8 @@ use axum::http::StatusCode;
 use axum::response::Response;
 
 use crate::config::Config;
-use crate::game::view::{BELIEF_EVERY, Frame, Visible, event_seen, visible_to};
-use crate::game::{MatchHandle, Seat, Sight, SpectatorSeat};
+use crate::game::view::{BELIEF_EVERY, Frame, Visible, visible_to};
+use crate::game::{MatchHandle, Seat, SpectatorSeat};
 use crate::http::error::ApiError;
 use crate::http::socket::schedule::Schedule;
 use crate::http::socket::{self, Asked, End, Manner, Socket};
@@ -34,8 +36,8 @@ use crate::metrics::Refusal;
 use crate::protocol::socket::{self as common, Limits};
 use crate::protocol::ws::{self as wire, ClientMessage, Welcome};
 use lasertag_core::sim::AgentId;
+use lasertag_core::world::HumanInput;
 use lasertag_core::world::MatchStatus;
-use lasertag_core::world::{Event, HumanInput};
 
 /// How long a closing connection waits for the client's close reply.
 const CLOSE_DRAIN: Duration = Duration::from_secs(3);
@@ -439,111 +441,6 @@ impl Connection {
             self.sock.count_snapshot(snapshot.len());
             self.sock.text(snapshot).await
         }
-    }
-
-    /// The events since the last one sent, and `finished` once. A player (`sight`: its slot
-    /// and what it sees in `frame`) gets those it saw now; the others come with the
-    /// spectators' frames ([`Connection::deliver_held`]).
-    async fn deliver_events(
-        &mut self,
-        frame: &Frame,
-        with_events: bool,
-        sight: Option<&(AgentId, Visible)>,
-    ) -> Result<(), End> {
-        if with_events && frame.last_seq > self.last_seq {
-            let mut events = Vec::new();
-            if self.last_seq < frame.since_seq {
-                // Frames were skipped while this client was slow: fetch what it missed.
-                events = self.logged(self.last_seq, frame.since_seq).await;
-            }
-            let last = self.last_seq;
-            events.extend(frame.events.iter().filter(|e| e.seq > last).cloned());
-            for e in &events {
-                match sight {
-                    Some((you, v)) => {
-                        if event_seen(e, v, *you) {
-                            self.sock.text(wire::event(e)).await?;
-                            self.sent_live.push_back(e.seq);
-                        }
-                    }
-                    None => {
-                        // A player gone over to watching has had some of these live.
-                        if !self.already_sent(e.seq) {
-                            self.sock.text(wire::event(e)).await?;
-                        }
-                    }
-                }
-            }
-            self.last_seq = frame.last_seq;
-        }
-        if frame.status == MatchStatus::Finished && !self.finished_sent {
-            if sight.is_some() {
-                self.deliver_unseen(frame.last_seq).await?;
-            }
-            self.finished_sent = true;
-            self.sock.text(wire::finished(frame)).await?;
-        }
-        Ok(())
-    }
-
-    /// Whether event `seq` came live already (and forgets those before it).
-    fn already_sent(&mut self, seq: u64) -> bool {
-        while self.sent_live.front().is_some_and(|s| *s < seq) {
-            self.sent_live.pop_front();
-        }
-        self.sent_live.front() == Some(&seq)
-    }
-
-    /// A player's share of a spectators' frame: the events up to it that it did not see
-    /// live, and its belief.
-    async fn deliver_held(&mut self, shown: &Arc<Frame>) -> Result<(), End> {
-        if !self.on_robot_team() {
-            self.keep_belief(shown);
-        }
-        if shown.last_seq <= self.held_seq {
-            return Ok(());
-        }
-        let mut events = Vec::new();
-        if self.held_seq < shown.since_seq {
-            // Released several frames at once, or skipped: the rest from the match's log.
-            events = self.logged(self.held_seq, shown.since_seq).await;
-        }
-        let last = self.held_seq;
-        events.extend(shown.events.iter().filter(|e| e.seq > last).cloned());
-        self.send_unseen(&events).await?;
-        self.held_seq = shown.last_seq;
-        Ok(())
-    }
-
-    /// A player's events after `held_seq` up to `last` that it has not had: once the match
-    /// has ended nothing is hidden, so they come before `finished`.
-    async fn deliver_unseen(&mut self, last: u64) -> Result<(), End> {
-        if last > self.held_seq {
-            let events = self.logged(self.held_seq, last).await;
-            self.send_unseen(&events).await?;
-            self.held_seq = last;
-        }
-        Ok(())
-    }
-
-    /// `events` (in order), but those that came live.
-    async fn send_unseen(&mut self, events: &[Event]) -> Result<(), End> {
-        for e in events {
-            if !self.already_sent(e.seq) {
-                self.sock.text(wire::event(e)).await?;
-            }
-        }
-        Ok(())
-    }
-
-    /// The match's events after `since` up to `last`, from its log.
-    async fn logged(&mut self, since: u64, last: u64) -> Vec<Event> {
-        let missed = self
-            .handle
-            .read(Sight::Live, move |r| Ok(r.events(since).to_vec()))
-            .await
-            .unwrap_or_default();
-        missed.into_iter().filter(|e| e.seq <= last).collect()
     }
 
     /// Whether this connection plays a robot (a pursuer slot).
