@@ -325,6 +325,9 @@ impl Episode {
             .chunks_exact(ACTION_SIZE)
             .take(self.world.robots.len())
             .enumerate()
+            // A team's planned robots (a mixed team, or a built-in planner measured in the
+            // harness) ignore their rows: only robots driven from outside take orders.
+            .filter(|(robot, _)| self.world.robot_outside(*robot))
             .map(|(robot, a)| WorldInput::Robot {
                 robot,
                 order: RobotOrder::Drive {

@@ -139,6 +139,7 @@ pub fn match_config(settings: &Bound<'_, PyDict>) -> PyResult<MatchConfig> {
     let mut localiser = None;
     let (mut robot_starts, mut opponent_starts) = (Vec::new(), Vec::new());
     let mut random = false;
+    let mut planners = None;
     for (key, value) in settings.iter() {
         let key: String = get(&key, "settings")?;
         if value.is_none() {
@@ -186,18 +187,42 @@ pub fn match_config(settings: &Bound<'_, PyDict>) -> PyResult<MatchConfig> {
             // The built-in planners drive the robots and the actions are ignored: the
             // paper's planners measured on the environment's own episodes.
             "planner" => {
-                let name: String = get(&value, &key)?;
-                config.planner = match name.as_str() {
-                    "api" => PlannerKind::Api,
-                    "coordinated" => PlannerKind::Coordinated,
-                    "baseline" => PlannerKind::Baseline,
-                    _ => {
-                        return Err(refuse(
+                // One name for the team, or one per robot (a mixed team: the built-in ones
+                // plan, the `api` ones take the actions).
+                let names: Vec<String> = match get::<String>(&value, &key) {
+                    Ok(name) => vec![name],
+                    Err(_) => get(&value, &key)?,
+                };
+                let kinds = names
+                    .iter()
+                    .map(|name| match name.as_str() {
+                        "api" => Ok(PlannerKind::Api),
+                        "coordinated" => Ok(PlannerKind::Coordinated),
+                        "baseline" => Ok(PlannerKind::Baseline),
+                        _ => Err(refuse(
                             &key,
                             format!("{name:?}: the planners are api, coordinated, baseline"),
-                        ));
-                    }
+                        )),
+                    })
+                    .collect::<PyResult<Vec<_>>>()?;
+                let built_in: Vec<PlannerKind> = kinds
+                    .iter()
+                    .copied()
+                    .filter(|k| *k != PlannerKind::Api)
+                    .collect();
+                if built_in.windows(2).any(|w| w[0] != w[1]) {
+                    return Err(refuse(
+                        &key,
+                        "the robots a team plans share one planner (the others are \"api\")",
+                    ));
+                }
+                config.planner = built_in.first().copied().unwrap_or(PlannerKind::Api);
+                config.outside_robots = if kinds.len() > 1 && config.planner != PlannerKind::Api {
+                    kinds.iter().map(|k| *k == PlannerKind::Api).collect()
+                } else {
+                    Vec::new()
                 };
+                planners = Some(kinds.len());
             }
             "tracker" => config.tracker = group(config.tracker.clone(), &value)?,
             "coordination" => config.coordination = group(config.coordination.clone(), &value)?,
@@ -214,6 +239,18 @@ pub fn match_config(settings: &Bound<'_, PyDict>) -> PyResult<MatchConfig> {
                 ));
             }
         }
+    }
+    if let Some(n) = planners
+        && n > 1
+        && n != config.robots
+    {
+        return Err(refuse(
+            "planner",
+            format!(
+                "{n} planners for {} robots: give one per robot",
+                config.robots
+            ),
+        ));
     }
     config.placement = if !robot_starts.is_empty() || !opponent_starts.is_empty() {
         Placement::Given {

@@ -27,7 +27,7 @@ from .args import DEFAULT_REWARDS, check_arguments, check_seed
 from .observation import ObservationLayout
 from .render import Renderer
 from .rules import SHIPPED, check_bound
-from .team import TeamEnv, action_space
+from .team import TeamEnv, action_space, agent_robots
 
 __all__ = ["NativeParallelEnv", "LasertagVectorEnv", "vector_env", "shipped_map", "SHIPPED_MAPS"]
 
@@ -70,7 +70,7 @@ class _Setup:
             "robots": robots, "opponents": opponents, "opponent_bot": opponent_bot,
         }
         if planner != "api":
-            settings["planner"] = planner
+            settings["planner"] = planner if isinstance(planner, str) else list(planner)
         if time_limit_s is not None:
             settings["time_limit_s"] = time_limit_s
         if placement is not None:
@@ -137,19 +137,22 @@ class NativeParallelEnv(TeamEnv):
         match_settings: dict | None = None,
         team_tracker: bool = False,
         pixels_per_metre: float = 20.0,
+        planner: str | list = "api",
     ):
+        agent_robots(robots, planner)  # a bad choice is refused before the engine is built
         self._setup = _Setup(
             worlds=1, map=map, robots=robots, opponents=opponents, seed=seed,
             opponent_bot=opponent_bot, max_steps=max_steps, ticks_per_step=ticks_per_step,
             render_mode=render_mode, render_modes=self.metadata["render_modes"],
             time_limit_s=time_limit_s, placement=placement, detections=detections,
             rewards=rewards, match_settings=match_settings, team_tracker=team_tracker,
+            planner=planner,
         )
         self._engine = self._setup.engine
         self.rules = self._setup.rules
         self.map_def = self._setup.map_def
         self.rewards = self._setup.rewards
-        self._init_team(robots, self._setup.layout, seed)
+        self._init_team(robots, self._setup.layout, seed, planner)
         self.render_mode = render_mode
         self.max_steps = max_steps
         self.ticks_per_step = ticks_per_step
@@ -177,7 +180,7 @@ class NativeParallelEnv(TeamEnv):
         self.steps = 0
         self.agents = list(self.possible_agents)
         obs = self._obs.copy()
-        observations = {a: obs[i] for i, a in enumerate(self.possible_agents)}
+        observations = {a: obs[i] for i, a in zip(self._robots, self.possible_agents)}
         infos = {a: {"tick": 0} for a in self.possible_agents}
         return observations, infos
 
@@ -187,7 +190,8 @@ class NativeParallelEnv(TeamEnv):
         if not self.agents:
             raise RuntimeError("the episode has ended (or never began): call reset()")
         act = self._act
-        for i, (_, a) in enumerate(self._team_actions(actions)):
+        # (The rows of robots the team plans stay 0: the engine gives them no orders.)
+        for i, (_, a) in zip(self._robots, self._team_actions(actions)):
             if a is None:
                 act[i] = 0.0
             else:
@@ -199,9 +203,10 @@ class NativeParallelEnv(TeamEnv):
         self.tick = tick
         self.steps += 1
         obs = self._obs.copy()
-        rewards = dict(zip(self.possible_agents, self._rew.tolist()))
+        rew = self._rew.tolist()
+        rewards = {a: rew[i] for i, a in zip(self._robots, self.possible_agents)}
         observations, infos = {}, {}
-        for i, agent in enumerate(self.possible_agents):
+        for i, agent in zip(self._robots, self.possible_agents):
             observations[agent] = obs[i]
             info = {"tick": tick, "tags": tags[i]}
             if winner is not None or reason is not None:
@@ -218,7 +223,7 @@ class NativeParallelEnv(TeamEnv):
         """What robot ``agent`` knows now, as the HTTP API's observation object."""
         self._check_started()
         try:
-            robot = self.possible_agents.index(agent)
+            robot = self._robots[self.possible_agents.index(agent)]
         except ValueError:
             raise KeyError(f"no agent {agent!r}; the agents are {self.possible_agents}") from None
         return self._engine.observation(0, robot)

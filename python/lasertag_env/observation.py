@@ -115,12 +115,15 @@ class ObservationLayout:
         v[0, self.beams:] = self._tail(obs, robot, time_fraction)
         return self._bound(v)[0]
 
-    def encode_all(self, observations: list, time_fraction: float) -> np.ndarray:
-        """The vectors of robots 0, 1, … (the observations in id order), as the rows of one
-        array: a few numpy calls for the whole team rather than a few per robot."""
+    def encode_all(self, observations: list, time_fraction: float,
+                   robots: list | None = None) -> np.ndarray:
+        """The vectors of robots ``robots`` (default 0, 1, …; the observations in that
+        order), as the rows of one array: a few numpy calls for the whole team rather than a
+        few per robot."""
         v = np.empty((len(observations), self.size), dtype=np.float32)
         self._scans_into(v, observations)
-        v[:, self.beams:] = [self._tail(o, i, time_fraction) for i, o in enumerate(observations)]
+        index = robots if robots is not None else range(len(observations))
+        v[:, self.beams:] = [self._tail(o, i, time_fraction) for i, o in zip(index, observations)]
         return self._bound(v)
 
     def _bound(self, v: np.ndarray) -> np.ndarray:

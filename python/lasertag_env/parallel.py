@@ -51,6 +51,7 @@ class LasertagParallelEnv(TeamEnv):
         team_tracker: bool = False,
         pixels_per_metre: float = 20.0,
         packed_scans: bool = True,
+        planner: str | list = "api",
     ):
         # Types here; ranges once the server has said its bounds (below).
         check_arguments(
@@ -102,7 +103,7 @@ class LasertagParallelEnv(TeamEnv):
             "robots": robots,
             "opponents": opponents,
             "opponent_bot": opponent_bot,
-            "planner": "api",
+            "planner": planner if isinstance(planner, str) else list(planner),
             "clock": "manual",
         }
         if time_limit_s is not None:
@@ -117,10 +118,14 @@ class LasertagParallelEnv(TeamEnv):
             self._create["tracker"] = {"particles_per_role": 10}
         self._create.update(match_settings or {})
 
-        self._init_team(robots, ObservationLayout(
-            robots, opponents if detections is None else detections,
-            self.map_def["width"], self.map_def["height"], self.rules,
-        ), seed)
+        try:
+            self._init_team(robots, ObservationLayout(
+                robots, opponents if detections is None else detections,
+                self.map_def["width"], self.map_def["height"], self.rules,
+            ), seed, planner)
+        except BaseException:
+            self.close()
+            raise
         self._owner: str | None = None
         self._act_path = ""
         # The end of every act body: ticks, and packed scans when the server offers them
@@ -166,7 +171,7 @@ class LasertagParallelEnv(TeamEnv):
         self.last_events = []
         self.agents = list(self.possible_agents)
         observations, infos = {}, {}
-        for i, agent in enumerate(self.possible_agents):
+        for i, agent in zip(self._robots, self.possible_agents):
             raw = self._client.call(
                 "GET", f"/api/matches/{self.match_id}/robots/{agent}/observation", token=self._owner
             )
@@ -226,7 +231,7 @@ class LasertagParallelEnv(TeamEnv):
 
         raw_obs = answer["observations"]
         raws = [raw_obs[agent] for agent in self.possible_agents]
-        vectors = self.layout.encode_all(raws, frac)
+        vectors = self.layout.encode_all(raws, frac, self._robots)
         observations, infos = {}, {}
         for i, agent in enumerate(self.possible_agents):
             raw = raws[i]
@@ -391,7 +396,10 @@ def parallel_env(
       (weights, see ``DEFAULT_REWARDS``), ``match_settings`` (further fields of
       ``POST /api/matches``: ``localisation``, ``tracker``, ``radio``, …),
       ``team_tracker`` (True: the team tracker at its default size rather than its
-      minimum; the observations are the same), ``pixels_per_metre`` (rendering); over
+      minimum; the observations are the same), ``planner`` (``"api"``: every robot is an
+      agent; one per robot, e.g. ``["coordinated", "api"]``: a mixed team, whose agents
+      are the ``"api"`` robots, ``r1`` here, beside robots the team's planner drives and
+      plans around), ``pixels_per_metre`` (rendering); over
       HTTP also ``admin_token`` and ``packed_scans`` (False: the server writes the scans as
       JSON numbers rather than hex; the observations are the same, bit for bit, and
       slower to get).

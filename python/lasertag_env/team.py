@@ -13,7 +13,36 @@ from .args import check_seed, unpack
 from .observation import ObservationLayout
 from .rules import SHIPPED
 
-__all__ = ["TeamEnv", "action_space"]
+__all__ = ["TeamEnv", "action_space", "agent_robots"]
+
+
+PLANNERS = ("api", "coordinated", "baseline")
+
+
+def agent_robots(robots: int, planner) -> list[int]:
+    """The indices of the robots a policy drives: all with ``planner="api"``; with one
+    planner per robot, those listed ``"api"`` (the others are the team's built-in planner's,
+    which must be the same one). A ValueError names what is wrong."""
+    if isinstance(planner, str):
+        if planner != "api":
+            raise ValueError(
+                f"planner {planner!r}: a team the built-in planner drives has no agents; give "
+                "one planner per robot, e.g. ['coordinated', 'api'], or measure it with "
+                "vector_env(planner=...)"
+            )
+        return list(range(robots))
+    names = list(planner)
+    if len(names) != robots or any(n not in PLANNERS for n in names):
+        raise ValueError(
+            f"planner {planner!r}: give one of {PLANNERS} for each of the {robots} robots"
+        )
+    built_in = {n for n in names if n != "api"}
+    if len(built_in) > 1:
+        raise ValueError(f"planner {planner!r}: the robots a team plans share one planner")
+    agents = [i for i, n in enumerate(names) if n == "api"]
+    if not agents:
+        raise ValueError(f"planner {planner!r}: no robot is 'api', so the policy drives none")
+    return agents
 
 
 def action_space() -> spaces.Box:
@@ -36,8 +65,12 @@ class TeamEnv(ParallelEnv):
         "is_parallelizable": True,
     }
 
-    def _init_team(self, robots: int, layout: ObservationLayout, seed: int) -> None:
-        self.possible_agents = [f"r{i}" for i in range(robots)]
+    def _init_team(self, robots: int, layout: ObservationLayout, seed: int,
+                   planner: str | list = "api") -> None:
+        # The agents are the robots the policy drives: every one, or in a mixed team
+        # (``planner=["coordinated", "api"]``) those listed ``"api"``, named by their ids.
+        self._robots = agent_robots(robots, planner)
+        self.possible_agents = [f"r{i}" for i in self._robots]
         self.layout = layout
         self._obs_spaces = {a: layout.space() for a in self.possible_agents}
         self._act_spaces = {a: action_space() for a in self.possible_agents}

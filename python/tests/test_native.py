@@ -60,6 +60,9 @@ CASES = [
           match_settings={"radio": {"latency_ticks": 3, "loss": 0.3},
                           "localisation": False}), 8, scripted(8)),
     (dict(map="warehouse", robots=3, ticks_per_step=3, max_steps=80), 13, hunter),
+    # A mixed team: r0 coordinated, the policy drives r1 and r2.
+    (dict(robots=3, opponents=2, planner=["coordinated", "api", "api"], max_steps=150,
+          team_tracker=True), 21, scripted(21)),
 ]
 
 
@@ -74,10 +77,39 @@ def test_both_backends_give_the_same_episodes(server, kwargs, seed, policy):
             dh, m = episode_digest(http, s, policy)
             assert (dn, n) == (dh, m), f"seed {s}: the backends' episodes differ"
             assert n > 0
-            assert native.raw_observation("r0") == http.raw_observation("r0")
+            first = native.possible_agents[0]
+            assert native.raw_observation(first) == http.raw_observation(first)
     finally:
         native.close()
         http.close()
+
+
+@pytest.mark.parametrize("backend", ["native", "http"])
+def test_a_mixed_teams_agents_are_its_api_robots(server, backend):
+    kwargs = dict(robots=2, planner=["coordinated", "api"], max_steps=40)
+    env = lasertag_env.parallel_env(**kwargs, **({"server": server} if backend == "http" else {}))
+    try:
+        assert env.possible_agents == ["r1"]
+        obs, _ = env.reset(seed=4)
+        assert list(obs) == ["r1"]
+        start = env.truth()["robots"][0]
+        for _ in range(40):
+            if not env.agents:
+                break
+            env.step({"r1": np.array([0.0, 0.0, 0.0], dtype=np.float32)})
+        # r0 is the team's planner's: it went somewhere on its own.
+        moved = env.truth()["robots"][0]
+        assert (moved["x"], moved["y"]) != (start["x"], start["y"])
+        with pytest.raises(KeyError):
+            env.raw_observation("r0")
+    finally:
+        env.close()
+    for bad, why in ((["coordinated", "baseline"], "share one planner"),
+                     (["coordinated"], "each of the 2 robots"),
+                     ("coordinated", "no agents"),
+                     (["coordinated", "coordinated"], "no robot is 'api'")):
+        with pytest.raises(ValueError, match=why):
+            lasertag_env.parallel_env(robots=2, planner=bad)
 
 
 def test_a_hunting_episode_ends_in_a_tag_in_process():
