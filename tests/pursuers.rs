@@ -4,21 +4,12 @@
 
 mod common;
 
-use std::collections::BTreeSet;
 use std::f64::consts::PI;
 use std::time::Duration;
 
-use common::{TestServer, Ws, assert_error, duel_map, shipped_arena};
+use common::{TestServer, Ws, assert_error, duel_map, ids, shipped_arena};
 use nalgebra::Point2;
 use serde_json::{Value, json};
-
-fn ids(list: &Value) -> BTreeSet<String> {
-    list.as_array()
-        .unwrap()
-        .iter()
-        .map(|a| a["id"].as_str().unwrap().to_string())
-        .collect()
-}
 
 /// Joins `id` on `team`: (the agent taken, its token).
 async fn join_team(s: &TestServer, id: &str, name: &str, team: &str) -> (String, String) {

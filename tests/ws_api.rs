@@ -6,19 +6,11 @@ use std::collections::BTreeSet;
 use std::path::Path;
 use std::time::Duration;
 
-use common::{Got, TestServer, WsError, duel_map, idle_human_match};
+use common::{Got, TestServer, WsError, duel_map, idle_human_match, ids};
 use lasertag::config::Config;
 use lasertag::maps::MapStore;
 use nalgebra::Point2;
-use serde_json::{Value, json};
-
-fn ids(list: &Value) -> BTreeSet<String> {
-    list.as_array()
-        .unwrap()
-        .iter()
-        .map(|a| a["id"].as_str().unwrap().to_string())
-        .collect()
-}
+use serde_json::json;
 
 #[tokio::test]
 async fn a_spectator_gets_every_tick_with_everything() {

@@ -12,6 +12,15 @@ use lasertag::game::Registry;
 use lasertag::maps::MapStore;
 use serde_json::{Value, json};
 
+/// The `id`s of a list of agents in a snapshot or a state.
+pub fn ids(list: &Value) -> std::collections::BTreeSet<String> {
+    list.as_array()
+        .unwrap()
+        .iter()
+        .map(|a| a["id"].as_str().unwrap().to_string())
+        .collect()
+}
+
 /// The shipped map `name`, loaded and validated as the server does at start-up.
 pub fn shipped_arena(name: &str) -> std::sync::Arc<lasertag_core::sim::arena::Arena> {
     let store = MapStore::load_dir(&Path::new(env!("CARGO_MANIFEST_DIR")).join("maps"))
