@@ -313,6 +313,12 @@ pub struct Config {
     #[arg(long, env = "LASERTAG_MAX_SEATS_PER_ADDRESS", default_value_t = defaults::MAX_SEATS_PER_ADDRESS,
           value_parser = clap::value_parser!(u64).range(1..).map(|v| v as usize))]
     pub max_seats_per_address: usize,
+    /// Let one client (an IPv4 address, or an IPv6 /64) hold seats on both sides of one
+    /// match (an opponent slot and a pursuer slot). Off: a second join on the other side is
+    /// refused with 409, since one person on both would see the hunters' belief live while
+    /// being hunted (people behind one address then play on one side of a match).
+    #[arg(long, env = "LASERTAG_BOTH_SIDES_PER_ADDRESS")]
+    pub both_sides_per_address: bool,
 }
 
 impl Default for Config {
@@ -360,6 +366,7 @@ impl Default for Config {
             export_budget: secs(defaults::EXPORT_BUDGET),
             max_tcp_per_address: defaults::MAX_TCP_PER_ADDRESS,
             max_seats_per_address: defaults::MAX_SEATS_PER_ADDRESS,
+            both_sides_per_address: false,
         }
     }
 }

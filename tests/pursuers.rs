@@ -320,3 +320,32 @@ async fn the_fog_holds_on_both_sides_of_a_versus_match() {
         "alice saw {alice_saw}, missed {alice_missed}; bob saw {bob_saw}, missed {bob_missed}"
     );
 }
+
+#[tokio::test]
+async fn one_address_plays_one_side_of_a_match() {
+    let s = TestServer::start_with(lasertag::config::Config {
+        both_sides_per_address: false,
+        ..common::test_config()
+    })
+    .await;
+    let id = s
+        .create_match(json!({"map": "office", "robots": 2, "opponents": 2,
+            "opponent_control": "human", "pursuer_slots": 1}))
+        .await;
+    let (me, _) = join_team(&s, &id, "alice", "robots").await;
+    assert_eq!(me, "r1");
+    // Seen from both sides, the hunted would read the hunters' belief live.
+    let r = s
+        .post(
+            &format!("/api/matches/{id}/players"),
+            &json!({"name": "mallory", "team": "opponents"}),
+        )
+        .await;
+    assert_error(&r, 409, "one address plays one side");
+    // Another match is another match.
+    let other = s
+        .create_match(json!({"map": "office", "opponent_control": "human"}))
+        .await;
+    let (o, _) = join_team(&s, &other, "alice", "opponents").await;
+    assert_eq!(o, "o0");
+}

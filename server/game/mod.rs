@@ -267,6 +267,7 @@ impl Registry {
                 max_holds: self.config.max_holds_per_address,
                 seats: self.seats.clone(),
                 max_seats: self.config.max_seats_per_address,
+                both_sides: self.config.both_sides_per_address,
                 tick_overrun: Duration::from_secs_f64(self.config.tick_overrun_ms / 1e3),
                 max_command_work: self.config.max_command_work,
                 metrics: self.metrics.clone(),

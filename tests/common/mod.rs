@@ -70,6 +70,9 @@ pub fn test_config() -> Config {
         max_maps_per_address: 1000,
         max_holds_per_address: 1000,
         max_seats_per_address: 1000,
+        // One address plays both sides of a match in the tests; tests/pursuers.rs crosses
+        // the rule.
+        both_sides_per_address: true,
         max_exports_per_address: 1000,
         client_budget_share: 1.0,
         ..Config::default()

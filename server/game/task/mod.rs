@@ -299,6 +299,8 @@ pub struct TaskSettings {
     /// The seats of every client over all matches, and how many one may hold.
     pub seats: Arc<crate::game::hub::SeatLedger>,
     pub max_seats: usize,
+    /// Whether one client may hold seats on both sides of this match.
+    pub both_sides: bool,
     /// A tick that takes longer overruns (see [`OVERRUN_WINDOW`]).
     pub tick_overrun: Duration,
     /// The path search one request's robot orders may take (`Config::max_command_work`).
@@ -632,6 +634,13 @@ impl MatchTask {
         Ok(())
     }
 
+    /// [`MatchTask::apply`] for a person's keys (see `Recording::note_keys`).
+    fn apply_keys(&mut self, input: WorldInput) -> Result<(), InputError> {
+        self.world.apply(&input)?;
+        self.recording.note_keys(&self.world, input);
+        Ok(())
+    }
+
     /// Bounds the path search of the robot orders among `inputs` by what their request
     /// was charged (`game::work`), and says whether there is any.
     fn budget_routes(&mut self, inputs: &[WorldInput]) -> bool {
@@ -932,16 +941,19 @@ impl MatchTask {
         None
     }
 
-    /// A match is abandoned when it has human-controlled opponents and for
+    /// A match is abandoned when it has seats for people (human-controlled opponents or
+    /// pursuer slots) and for
     /// `abandoned_after` nobody has been connected (player or spectator) and no request has
     /// come for it. Matches of bots and API-driven opponents are never abandoned: headless
     /// users may run them unattended until their time limit.
     fn abandoned(&mut self, now: Instant) -> bool {
-        let human = self
-            .world
-            .opponents
-            .iter()
-            .any(|o| matches!(o.control, Control::Human(_)));
+        // Seats for people: human opponent slots, or robots of the team's pursuer slots.
+        let human = self.world.config.pursuer_slots > 0
+            || self
+                .world
+                .opponents
+                .iter()
+                .any(|o| matches!(o.control, Control::Human(_)));
         if !human {
             return false;
         }

@@ -101,7 +101,7 @@ impl MatchTask {
                     return;
                 }
                 p.drive = Some(input);
-                let _ = self.apply(WorldInput::Robot {
+                let _ = self.apply_keys(WorldInput::Robot {
                     robot,
                     order: RobotOrder::Drive {
                         forward: input.forward,
@@ -230,6 +230,23 @@ impl MatchTask {
                     self.settings.join_hold.as_secs_f64()
                 )));
             }
+        }
+        // One client plays one side of a match: a seat on each would show the hunted the
+        // hunters' belief live (two people behind one address play on one side).
+        if let Some(c) = client.filter(|_| !self.settings.both_sides)
+            && let Some(other) = self
+                .players
+                .iter()
+                .zip(&self.bodies)
+                .find(|(p, body)| {
+                    p.as_ref().is_some_and(|p| p.client == Some(c)) && !Self::on(**body, team)
+                })
+                .map(|(_, body)| *body)
+        {
+            self.settings.metrics.refuse(Refusal::ClientQuota);
+            return Err(MatchError::Full(format!(
+                "team: {c} plays {other} on the other side of match {id}; one address plays one side of a match"
+            )));
         }
         let seat = (0..self.players.len())
             .find(|&i| self.seat_free(i) && Self::on(self.bodies[i], team))
