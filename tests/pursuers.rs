@@ -195,6 +195,32 @@ async fn a_person_drives_a_robot_sees_through_its_laser_and_tags() {
             .any(|e| e["kind"] == "player_joined" && e["robot"] == "r1" && e["name"] == "alice"),
         "{log:?}"
     );
+
+    // Ended, the replay shows the match as she saw it from r1: her laser's view, the belief.
+    assert_eq!(s.delete(&format!("/api/matches/{id}")).await.status, 204);
+    let url = format!("ws://{}/ws/replays/{id}?as=r1&tick=1", s.addr);
+    let (stream, _) = tokio_tungstenite::connect_async(url).await.unwrap();
+    let mut replay = Ws { stream };
+    let welcome = replay.json().await;
+    assert_eq!(welcome["view"], "r1", "{welcome}");
+    assert_eq!(welcome["name"], "alice");
+    assert_eq!(welcome["belief"], true);
+    let snap = replay.next_of("snapshot").await;
+    assert_eq!(snap["view"], "player", "{snap}");
+    assert!(
+        ids(&snap["opponents"]).is_empty(),
+        "facing west at tick 1: {snap}"
+    );
+    assert!(snap["belief"]["roles"].is_array(), "{snap}");
+    let state = s
+        .get(&format!("/api/replays/{id}/state?tick=30"))
+        .await
+        .body;
+    assert_eq!(
+        state["robot_planners"],
+        json!(["idle", "person"]),
+        "{state}"
+    );
 }
 
 /// Whether a robot at `me` facing `theta` has `at` in its laser's view on `arena`.
