@@ -375,3 +375,49 @@ async fn one_address_plays_one_side_of_a_match() {
     let (o, _) = join_team(&s, &other, "alice", "opponents").await;
     assert_eq!(o, "o0");
 }
+
+#[tokio::test]
+async fn over_a_late_radio_a_hunter_sees_their_own_robots_belief() {
+    let s = TestServer::start().await;
+    // Each robot keeps its own tracker: the hunter is shown r1's, not the team's pooled one.
+    let id = s
+        .create_match(json!({"map": "office", "robots": 2, "opponents": 2,
+            "opponent_control": "api", "pursuer_slots": 1, "clock": "manual",
+            "radio": {"latency_ticks": 5, "loss": 0.2}}))
+        .await;
+    let (_, token) = join_team(&s, &id, "alice", "robots").await;
+    let mut ws = s.ws(&id, Some(&token)).await.unwrap();
+    ws.json().await;
+    s.step(&id, 8).await;
+    let (snap, _) = until_tick(&mut ws, 8).await;
+    let shown = &snap["belief"];
+    assert!(shown.is_object(), "{snap}");
+    let own = s
+        .get(&format!("/api/matches/{id}/belief?robot=r1"))
+        .await
+        .body;
+    let pooled = s.get(&format!("/api/matches/{id}/belief")).await.body;
+    // Each role's particles: a count in a snapshot, the particles themselves over REST.
+    let particles = |b: &Value| -> Vec<u64> {
+        b["roles"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|r| {
+                let p = &r["particles"];
+                p.as_u64()
+                    .unwrap_or_else(|| p.as_array().unwrap().len() as u64)
+            })
+            .collect()
+    };
+    assert_eq!(
+        particles(shown),
+        particles(&own),
+        "shown {shown}, r1's {own}"
+    );
+    assert_ne!(
+        particles(shown),
+        particles(&pooled),
+        "the pooled belief sums both trackers"
+    );
+}

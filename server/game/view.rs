@@ -186,6 +186,11 @@ pub struct Frame {
     pub opponents: Vec<OpponentFrame>,
     /// Present on belief ticks (every [`BELIEF_EVERY`] ticks and on the last one).
     pub belief: Option<Arc<BeliefView>>,
+    /// On belief ticks, with an imperfect radio (each robot its own tracker): the belief of
+    /// each robot a person drives, by robot (`None` for the others). What that person is
+    /// shown: their robot's knowledge, with what the radio has delivered of the team's, not
+    /// the team's pooled one.
+    pub robot_beliefs: Vec<Option<Arc<BeliefView>>>,
     /// The belief measured against the truth, every tick.
     pub tracking: TrackingFrame,
     /// Events logged since the previous frame, oldest first.
@@ -281,6 +286,18 @@ impl Frame {
                 })
                 .collect(),
             belief: with_belief.then(|| Arc::new(belief_view_of(world.tick, &roles))),
+            robot_beliefs: if with_belief && world.team.per_robot() {
+                (0..world.robots.len())
+                    .map(|r| {
+                        let seated = seats.robots.get(r).is_some_and(Option::is_some);
+                        let own = world.team.belief_of(r, world.robots.len());
+                        own.filter(|_| seated)
+                            .map(|t| Arc::new(belief_view_of(world.tick, &t.roles)))
+                    })
+                    .collect()
+            } else {
+                Vec::new()
+            },
             tracking: TrackingFrame::of(world, &roles),
             events,
             since_seq,
@@ -302,6 +319,15 @@ impl Frame {
 }
 
 impl Frame {
+    /// The belief this frame shows `you` in place of the team's pooled one: a person's own
+    /// robot's, when each robot keeps its own.
+    pub fn own_belief(&self, you: AgentId) -> Option<&BeliefView> {
+        match you {
+            AgentId::Robot(r) => self.robot_beliefs.get(r)?.as_deref(),
+            AgentId::Opponent(_) => None,
+        }
+    }
+
     /// Bytes it keeps (what a match holding frames back is priced by), its serialised
     /// forms aside: they are made only once a frame is shown.
     pub fn bytes(&self) -> usize {
@@ -315,12 +341,19 @@ impl Frame {
                     + r.cloud.capacity() * 8
             })
             .sum();
-        let belief = self.belief.as_ref().map_or(0, |b| {
+        let view = |b: &BeliefView| {
             b.roles
                 .iter()
                 .map(|r| std::mem::size_of::<RoleView>() + r.points.capacity() * 8)
                 .sum::<usize>()
-        });
+        };
+        let belief = self.belief.as_deref().map_or(0, view)
+            + self
+                .robot_beliefs
+                .iter()
+                .flatten()
+                .map(|b| view(b))
+                .sum::<usize>();
         std::mem::size_of::<Frame>()
             + robots
             + self.opponents.capacity() * std::mem::size_of::<OpponentFrame>()

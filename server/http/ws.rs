@@ -428,7 +428,7 @@ impl Connection {
             // A player's own view has no slow parts: they stay due.
             parts.slow = false;
             let belief = held
-                .and_then(|f| f.belief.as_deref())
+                .and_then(|f| f.own_belief(you).or(f.belief.as_deref()))
                 .filter(|_| parts.belief);
             let whole = compact::snapshot(frame, Some(you), Some(v), belief, false).into();
             let bytes = self.schedule.sent(frame.tick, parts, whole);

@@ -392,15 +392,23 @@ fn cached<T: Clone>(cell: Option<&OnceLock<T>>, make: impl FnOnce() -> T) -> T {
 }
 
 /// Appends `"belief": …`, the belief `frame` carries, to a serialised snapshot object.
-fn with_belief(mut snapshot: String, frame: &Frame) -> String {
-    if let Some(b) = &frame.belief {
-        let belief = cached(cache(frame).map(|c| &c.belief), || belief_json(b));
-        if snapshot.ends_with('}') {
-            snapshot.pop();
-            snapshot.push_str(",\"belief\":");
-            snapshot.push_str(&belief);
-            snapshot.push('}');
+fn with_belief(snapshot: String, frame: &Frame) -> String {
+    match &frame.belief {
+        Some(b) => {
+            let belief = cached(cache(frame).map(|c| &c.belief), || belief_json(b));
+            append_belief(snapshot, &belief)
         }
+        None => snapshot,
+    }
+}
+
+/// Appends `"belief": <belief>` (serialised) to a serialised snapshot object.
+fn append_belief(mut snapshot: String, belief: &str) -> String {
+    if snapshot.ends_with('}') {
+        snapshot.pop();
+        snapshot.push_str(",\"belief\":");
+        snapshot.push_str(belief);
+        snapshot.push('}');
     }
     snapshot
 }
@@ -445,7 +453,11 @@ pub fn player_snapshot(
 ) -> Utf8Bytes {
     let json = snapshot_json(frame, Some(you), Some(visible));
     Utf8Bytes::from(match belief {
-        Some(b) => with_belief(json, b),
+        // A robot's own belief is this player's alone: serialised for it, not shared.
+        Some(b) => match b.own_belief(you) {
+            Some(own) => append_belief(json, &belief_json(own)),
+            None => with_belief(json, b),
+        },
         None => json,
     })
 }

@@ -103,7 +103,8 @@ pub fn show(replay: &Replay, world: &World, show: Show) -> Shown {
             belief.then_some(&frame),
         )),
         (Some((you, v)), true) => {
-            let belief = frame.belief.as_deref().filter(|_| belief);
+            let own = frame.own_belief(*you);
+            let belief = own.or(frame.belief.as_deref()).filter(|_| belief);
             Message::Binary(compact::snapshot(&frame, Some(*you), Some(v), belief, false).into())
         }
     };
