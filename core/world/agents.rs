@@ -26,6 +26,9 @@ pub struct Robot {
     pub command: RobotCommand,
     /// Its last order, when the robots are driven from outside.
     pub api: ApiDrive,
+    /// This tick's shot, fired by a person's keys: the tick their screen showed (lag
+    /// compensation, as for an opponent's person).
+    pub aim_tick: Option<u64>,
 }
 
 /// A route given to an API-driven opponent.

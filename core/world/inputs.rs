@@ -21,8 +21,11 @@ pub enum WorldInput {
     /// The person leaves `slot` (a bot kept aside comes back).
     Unseat { slot: usize, name: String },
     /// A person named `name` takes the seat of robot `robot` (one of the team's pursuer
-    /// slots); their keys come as [`WorldInput::Robot`] orders.
+    /// slots); their keys come as [`WorldInput::RobotKeys`].
     SeatRobot { robot: usize, name: String },
+    /// A person's keys for robot `robot`, a pursuer slot: its drive order, and with the
+    /// trigger pulled the tick their screen showed.
+    RobotKeys { robot: usize, input: HumanInput },
     /// The person leaves robot `robot`'s seat: it stops where it is.
     UnseatRobot { robot: usize, name: String },
     /// The match ends from outside.
@@ -91,6 +94,7 @@ impl World {
                 self.log_player(AgentId::Opponent(*slot), name.clone(), false);
                 Ok(())
             }
+            WorldInput::RobotKeys { robot, input } => self.robot_keys(*robot, *input),
             WorldInput::SeatRobot { robot, name } => {
                 if !self.robot_seat(*robot) {
                     return Err(InputError::NoRobotSeat(*robot));

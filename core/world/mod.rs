@@ -58,6 +58,14 @@ pub enum SetupError {
     BadStart { field: String, message: String },
 }
 
+/// Where every agent stood at the end of one tick.
+#[derive(Debug, Clone)]
+struct Trail {
+    tick: u64,
+    robots: Vec<Point2<f32>>,
+    opponents: Vec<Point2<f32>>,
+}
+
 #[derive(Debug, Clone)]
 pub struct World {
     pub arena: Arc<Arena>,
@@ -69,9 +77,9 @@ pub struct World {
     pub opponents: Vec<Opponent>,
     pub team: Team,
     events: Vec<Event>,
-    /// Robot positions at the end of each of the last ticks (oldest first), to judge a
-    /// person's shot where its screen showed the robots (lag compensation).
-    robot_trail: std::collections::VecDeque<(u64, Vec<Point2<f32>>)>,
+    /// Every agent's position at the end of each of the last ticks (oldest first), to judge
+    /// a person's shot where their screen showed the other side (lag compensation).
+    trail: std::collections::VecDeque<Trail>,
     rng_sense: ChaCha8Rng,
     rng_bots: ChaCha8Rng,
     rng_odometry: ChaCha8Rng,
@@ -140,6 +148,7 @@ impl World {
                 scan: Scan::default(),
                 command: RobotCommand::default(),
                 api: ApiDrive::default(),
+                aim_tick: None,
             })
             .collect();
         let opponents = opponent_starts
@@ -196,7 +205,7 @@ impl World {
             status: MatchStatus::Running,
             winner: None,
             events: Vec::new(),
-            robot_trail: Default::default(),
+            trail: Default::default(),
             rng_sense: stream(config.seed, STREAM_SENSE),
             rng_bots: stream(config.seed, STREAM_BOTS),
             rng_odometry: stream(config.seed, STREAM_ODOMETRY),
@@ -271,22 +280,22 @@ impl World {
         self.keep_trail();
     }
 
-    /// Notes where the robots ended this tick, keeping [`MAX_REWIND_TICKS`] of them.
+    /// Notes where every agent ended this tick, keeping [`MAX_REWIND_TICKS`] of them.
     fn keep_trail(&mut self) {
-        if self.robot_trail.len() as u64 >= MAX_REWIND_TICKS {
-            self.robot_trail.pop_front();
+        if self.trail.len() as u64 >= MAX_REWIND_TICKS {
+            self.trail.pop_front();
         }
-        let at = self.robots.iter().map(|r| r.pose.pos).collect();
-        self.robot_trail.push_back((self.tick, at));
+        self.trail.push_back(Trail {
+            tick: self.tick,
+            robots: self.robots.iter().map(|r| r.pose.pos).collect(),
+            opponents: self.opponents.iter().map(|o| o.pose.pos).collect(),
+        });
     }
 
     /// Where the robots were at the end of tick `seen`, if it is one of the last
     /// [`MAX_REWIND_TICKS`] before this one.
-    fn robots_at(&self, seen: u64) -> Option<&[Point2<f32>]> {
-        self.robot_trail
-            .iter()
-            .find(|(t, _)| *t == seen)
-            .map(|(_, at)| at.as_slice())
+    fn trail_at(&self, seen: u64) -> Option<&Trail> {
+        self.trail.iter().find(|t| t.tick == seen)
     }
 
     /// Stage 1: this tick's motion of every agent (robots first, then opponents).
@@ -488,7 +497,8 @@ impl World {
         let mut shooters: Vec<(AgentId, Option<u64>)> = Vec::new();
         for (i, r) in self.robots.iter().enumerate() {
             if r.command.tag && !self.robot_frozen(i) && tick >= r.cooldown_until {
-                shooters.push((AgentId::Robot(i), None));
+                // A person's robot (a pursuer slot) aims where their screen showed.
+                shooters.push((AgentId::Robot(i), r.aim_tick));
             }
         }
         for (i, o) in self.opponents.iter_mut().enumerate() {
@@ -515,19 +525,22 @@ impl World {
                 .into_iter()
                 .filter(|(id, _)| *id != shooter)
                 .collect();
-            // A person aimed at the robots where its screen showed them: judge the shot
-            // there, at most MAX_REWIND_TICKS back (an older view is judged at the bound, as
-            // Source clamps to its limit). Everything else (walls, the other opponents, who
-            // is frozen) is as it is now.
+            // A person aimed at the other side where their screen showed it: judge the
+            // shot there, at most MAX_REWIND_TICKS back (an older view is judged at the
+            // bound, as Source clamps to its limit). Everything else (walls, their own side,
+            // who is frozen or tagged) is as it is now.
             if let Some(past) = seen
                 .filter(|s| *s < tick)
                 .map(|s| s.max(tick.saturating_sub(MAX_REWIND_TICKS)))
-                .and_then(|s| self.robots_at(s))
+                .and_then(|s| self.trail_at(s))
             {
                 for (id, at) in &mut others {
-                    if let AgentId::Robot(r) = id
-                        && let Some(p) = past.get(*r)
-                    {
+                    let then = match (shooter, *id) {
+                        (AgentId::Opponent(_), AgentId::Robot(r)) => past.robots.get(r),
+                        (AgentId::Robot(_), AgentId::Opponent(o)) => past.opponents.get(o),
+                        _ => None,
+                    };
+                    if let Some(p) = then {
                         *at = *p;
                     }
                 }

@@ -39,6 +39,8 @@ pub struct ApiDrive {
     motion: Motion,
     route: Option<PathFollower>,
     fire: bool,
+    /// With `fire`, for a person's keys: the tick whose opponents their screen showed.
+    aim_tick: Option<u64>,
 }
 
 /// Why an order for a robot was refused.
@@ -143,6 +145,7 @@ impl World {
                     },
                     route: None,
                     fire: tag,
+                    aim_tick: None,
                 }
             }
             RobotOrder::Waypoints(points) => ApiDrive {
@@ -152,6 +155,26 @@ impl World {
             RobotOrder::Stop => ApiDrive::default(),
         };
         self.robots[index].api = drive;
+        Ok(())
+    }
+
+    /// A person's keys for robot `index`, one of the team's pursuer slots: its drive order,
+    /// and with the trigger pulled the tick their screen showed (their shot is judged
+    /// against the opponents where they were then, as an opponent's person's is against the
+    /// robots).
+    pub fn robot_keys(&mut self, index: usize, input: HumanInput) -> Result<(), InputError> {
+        if !self.robot_seat(index) {
+            return Err(InputError::NoRobotSeat(index));
+        }
+        self.order_robot(
+            index,
+            RobotOrder::Drive {
+                forward: input.forward,
+                turn: input.turn,
+                tag: input.tag,
+            },
+        )?;
+        self.robots[index].api.aim_tick = input.seen_tick.filter(|_| input.tag);
         Ok(())
     }
 
@@ -234,9 +257,11 @@ impl World {
                         theta: r.estimate.theta,
                     })
             });
+            let fire = std::mem::take(&mut api.fire);
+            r.aim_tick = std::mem::take(&mut api.aim_tick).filter(|_| fire);
             r.command = RobotCommand {
                 motion,
-                tag: std::mem::take(&mut api.fire),
+                tag: fire,
                 goal,
             };
         }

@@ -504,3 +504,56 @@ fn a_persons_robot_seat_feeds_the_team_and_tags_like_a_robot() {
             name: "ada".into()
         }));
 }
+
+#[test]
+fn a_hunters_shot_is_judged_where_their_screen_showed_the_opponents() {
+    // r1, a person's robot, faces east at (1, 1); o0 walks north from 4 m ahead of it.
+    let config = MatchConfig {
+        robots: 2,
+        opponents: 1,
+        pursuer_slots: 1,
+        planner: PlannerKind::Idle,
+        opponent_control: ControlKind::Api,
+        placement: Placement::Given {
+            robots: vec![[11.0, 5.0, std::f32::consts::PI], [1.0, 1.0, 0.0]],
+            opponents: vec![[4.0, 1.0]],
+        },
+        ..MatchConfig::default()
+    };
+    let mut w = World::new(duel(), config).unwrap();
+    w.order_opponent(0, OpponentOrder::Waypoints(vec![Point2::new(4.0, 5.0)]))
+        .unwrap();
+    w.step();
+    let drawn = w.tick; // o0 a few centimetres north: in the tag cone
+    for _ in 0..9 {
+        w.step(); // half a metre north now: 9.5° off r1's heading, out of the 5° cone
+    }
+    let fire = |seen_tick: Option<u64>| {
+        let mut w = w.clone();
+        w.apply(&WorldInput::RobotKeys {
+            robot: 1,
+            input: HumanInput {
+                forward: 0.0,
+                turn: 0.0,
+                tag: true,
+                seen_tick,
+            },
+        })
+        .unwrap();
+        w.step();
+        w.opponents[0].tagged
+    };
+    assert!(!fire(None), "judged on the present, the shot misses");
+    assert!(
+        fire(Some(drawn)),
+        "judged where the screen showed o0, it hits"
+    );
+    // Only a pursuer slot takes a person's keys.
+    assert_eq!(
+        w.apply(&WorldInput::RobotKeys {
+            robot: 0,
+            input: HumanInput::default()
+        }),
+        Err(InputError::NoRobotSeat(0))
+    );
+}

@@ -60,13 +60,6 @@ impl Recording {
         self.inputs.push((world.tick, input));
     }
 
-    /// Notes a person's keys, just applied to `world`: on a robot of the team they are the
-    /// robot's drive orders, but they come at most one a tick, like an opponent's keys, so
-    /// they do not count against the bound of orders from outside.
-    pub fn note_keys(&mut self, world: &World, input: WorldInput) {
-        self.inputs.push((world.tick, input));
-    }
-
     /// Whether the orders among `inputs` fit in what the match may still record.
     pub fn room_for(&self, inputs: &[WorldInput]) -> Result<(), RecordingFull> {
         let more: usize = inputs.iter().filter_map(order_bytes).sum();

@@ -384,6 +384,16 @@ enum StoredInput {
         r: usize,
         name: String,
     },
+    /// A person's keys for robot `n` (a pursuer slot), as `Keys` are an opponent's.
+    RobotKeys {
+        t: u64,
+        n: usize,
+        f: f32,
+        r: f32,
+        g: bool,
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        v: Option<u64>,
+    },
     UnseatRobot {
         t: u64,
         r: usize,
@@ -462,6 +472,14 @@ impl StoredInput {
                 s: *slot,
                 name: name.clone(),
             },
+            WorldInput::RobotKeys { robot, input } => StoredInput::RobotKeys {
+                t,
+                n: *robot,
+                f: input.forward,
+                r: input.turn,
+                g: input.tag,
+                v: input.seen_tick,
+            },
             WorldInput::SeatRobot { robot, name } => StoredInput::SeatRobot {
                 t,
                 r: *robot,
@@ -518,6 +536,18 @@ impl StoredInput {
             StoredInput::Seat { t, s, name } => (t, WorldInput::Seat { slot: s, name }),
             StoredInput::Unseat { t, s, name } => (t, WorldInput::Unseat { slot: s, name }),
             StoredInput::SeatRobot { t, r, name } => (t, WorldInput::SeatRobot { robot: r, name }),
+            StoredInput::RobotKeys { t, n, f, r, g, v } => (
+                t,
+                WorldInput::RobotKeys {
+                    robot: n,
+                    input: HumanInput {
+                        forward: f,
+                        turn: r,
+                        tag: g,
+                        seen_tick: v,
+                    },
+                },
+            ),
             StoredInput::UnseatRobot { t, r, name } => {
                 (t, WorldInput::UnseatRobot { robot: r, name })
             }

@@ -46,7 +46,7 @@ use crate::metrics::{Metrics, Refusal, TickHistograms};
 use lasertag_core::sim::AgentId;
 use lasertag_core::sim::TICK_HZ;
 use lasertag_core::world::{Control, FinishReason, HumanInput, InputError, StepMark, WorldInput};
-use lasertag_core::world::{Event, RobotObservation, RobotOrder, RobotOrderError};
+use lasertag_core::world::{Event, RobotObservation, RobotOrderError};
 use lasertag_core::world::{MatchConfig, MatchStatus, World};
 
 /// Ticks over which overruns are counted, and how many of them may overrun before the match
@@ -631,13 +631,6 @@ impl MatchTask {
     fn apply(&mut self, input: WorldInput) -> Result<(), InputError> {
         self.world.apply(&input)?;
         self.recording.note(&self.world, input);
-        Ok(())
-    }
-
-    /// [`MatchTask::apply`] for a person's keys (see `Recording::note_keys`).
-    fn apply_keys(&mut self, input: WorldInput) -> Result<(), InputError> {
-        self.world.apply(&input)?;
-        self.recording.note_keys(&self.world, input);
         Ok(())
     }
 

@@ -80,8 +80,8 @@ impl MatchTask {
     }
 
     /// A person's keys for `seat`, applied (and recorded) when they change anything. On a
-    /// robot they are its drive order; a pressed trigger is given again each tick it is
-    /// held (the device fires when it is ready).
+    /// robot they are its drive order (`WorldInput::RobotKeys`); a pressed trigger is given
+    /// again each tick it is held (the device fires when it is ready).
     pub(super) fn set_keys(&mut self, seat: usize, input: HumanInput) {
         let input = crate::game::record::normalised(input);
         match self.bodies[seat] {
@@ -94,21 +94,13 @@ impl MatchTask {
                 let Some(p) = self.players[seat].as_mut() else {
                     return;
                 };
-                let same = p
-                    .drive
-                    .is_some_and(|d| d.forward == input.forward && d.turn == input.turn);
-                if same && !input.tag {
+                // A robot's order holds until the next, so unchanged keys are not given
+                // again; a held trigger is (the device fires once it is ready).
+                if p.drive == Some(input) && !input.tag {
                     return;
                 }
                 p.drive = Some(input);
-                let _ = self.apply_keys(WorldInput::Robot {
-                    robot,
-                    order: RobotOrder::Drive {
-                        forward: input.forward,
-                        turn: input.turn,
-                        tag: input.tag,
-                    },
-                });
+                let _ = self.apply(WorldInput::RobotKeys { robot, input });
             }
         }
     }

@@ -108,6 +108,32 @@ fn inputs_come_back_in_order() {
             },
         ),
         (
+            3,
+            WorldInput::SeatRobot {
+                robot: 1,
+                name: "bo".into(),
+            },
+        ),
+        (
+            3,
+            WorldInput::RobotKeys {
+                robot: 1,
+                input: HumanInput {
+                    forward: -0.5,
+                    turn: 1.0,
+                    tag: true,
+                    seen_tick: Some(1),
+                },
+            },
+        ),
+        (
+            4,
+            WorldInput::UnseatRobot {
+                robot: 1,
+                name: "bo".into(),
+            },
+        ),
+        (
             4,
             WorldInput::Opponent {
                 slot: 0,
