@@ -10,7 +10,9 @@
 //! drives as a person would (a random key held for half a second to two seconds, a tag now
 //! and then, one numbered input per tick as the page sends them) in the place of one of four
 //! evading bots. The player plays the first half of the match with compact snapshots and
-//! reconnects for the second half with JSON ones. Beside the player it connects spectators with the
+//! reconnects for the second half with JSON ones. A second match, the same but for a third
+//! robot that is a pursuer slot, has a hunter on the robot team played the same way (their
+//! own robot's scan and the team's belief come with their view). Beside the player it connects spectators with the
 //! belief on and off, in both formats, all live (`spectator_delay_s` 0). At the end it prints,
 //! for each client, the bytes per second the server sent it (WebSocket payloads: what the
 //! page's `__lasertag.rxBytes` counts), the snapshots per second and the mean snapshot size,
@@ -96,11 +98,36 @@ async fn run(args: Args) -> Result<(), String> {
         .as_str()
         .ok_or_else(|| format!("joining: {joined}"))?
         .to_string();
+    let hunted: Value = post(
+        &http,
+        &format!("{base}/api/matches"),
+        json!({"map": args.map, "robots": 3, "pursuer_slots": 1, "opponents": 4,
+            "opponent_control": "bot", "opponent_bot": "evade", "time_limit_s": args.seconds,
+            "spectator_delay_s": 0}),
+    )
+    .await?;
+    let hunted = hunted["id"]
+        .as_str()
+        .ok_or_else(|| format!("creating the hunters' match: {hunted}"))?
+        .to_string();
+    let hunter = post(
+        &http,
+        &format!("{base}/api/matches/{hunted}/players"),
+        json!({"name": "hunter", "team": "robots"}),
+    )
+    .await?;
+    let hunter = hunter["token"]
+        .as_str()
+        .ok_or_else(|| format!("joining the robot team: {hunter}"))?
+        .to_string();
     let until = Instant::now() + Duration::from_secs(args.seconds + 2);
     let ws = |q: String| format!("ws://{addr}/ws/matches/{id}?{q}");
+    let hunt = |q: String| format!("ws://{addr}/ws/matches/{hunted}?{q}");
     let clients = [
         ("player", "compact", true, Some(token.clone())),
         ("player", "json", true, Some(token.clone())),
+        ("hunter, belief on", "compact", true, Some(hunter.clone())),
+        ("hunter, belief on", "json", true, Some(hunter.clone())),
         ("spectator, belief on", "compact", true, None),
         ("spectator, belief off", "compact", false, None),
         ("spectator, belief on", "json", true, None),
@@ -112,7 +139,11 @@ async fn run(args: Args) -> Result<(), String> {
             Some(t) => format!("format={format}&token={t}"),
             None => format!("format={format}"),
         };
-        let url = ws(q);
+        let url = if who.starts_with("hunter") {
+            hunt(q)
+        } else {
+            ws(q)
+        };
         let seed = args.seed + k as u64;
         let half = Duration::from_secs(args.seconds / 2);
         tasks.push(tokio::spawn(async move {

@@ -425,12 +425,15 @@ impl Connection {
             use crate::protocol::compact;
             let finished = frame.status == MatchStatus::Finished;
             let mut parts = self.schedule.parts(frame.tick, finished, held.is_some());
-            // A player's own view has no slow parts: they stay due.
-            parts.slow = false;
+            // An opponent's player's view has no slow parts: they stay due. A person on the
+            // robot team gets their own robot's scan on the spectators' schedule.
+            if !self.on_robot_team() {
+                parts.slow = false;
+            }
             let belief = held
                 .and_then(|f| f.own_belief(you).or(f.belief.as_deref()))
                 .filter(|_| parts.belief);
-            let whole = compact::snapshot(frame, Some(you), Some(v), belief, false).into();
+            let whole = compact::snapshot(frame, Some(you), Some(v), belief, parts.slow).into();
             let bytes = self.schedule.sent(frame.tick, parts, whole);
             self.sock.count_snapshot(bytes.len());
             self.sock.send(Message::Binary(bytes)).await

@@ -28,7 +28,7 @@
 //! `flags`: 1 spectator view, 2 belief, 4 slow parts, 8 finished, 16 robots won, 32
 //! opponents won, 64 `you` is a robot (a person on the robot team; else an opponent). A
 //! robot's slow part comes when its `slow` bit is set: in a spectator's slow snapshots, and
-//! for a person's own robot in every one of theirs (its scan is their laser's view).
+//! for a person's own robot in their slow snapshots (its scan is their laser's view).
 //!
 //! A snapshot the same length as the one before it on the connection comes as a delta
 //! against it ([`delta`], kind 2) when that is shorter: a WebSocket loses nothing and keeps
@@ -107,6 +107,9 @@ pub fn snapshot(
         _ => None,
     };
     let spectator = visible.is_none();
+    // Scans and clouds: a spectator's of every robot; a person's on the robot team of their
+    // own robot (its scan is their view). An opponent's player gets none.
+    let own_slow = slow && you_robot.is_some();
     let slow = spectator && slow;
     let mut o = Out(Vec::with_capacity(256));
     let mut flags = 0u8;
@@ -116,7 +119,7 @@ pub fn snapshot(
     if belief.is_some() {
         flags |= 2;
     }
-    if slow {
+    if slow || own_slow {
         flags |= 4;
     }
     if frame.status == MatchStatus::Finished {
@@ -153,7 +156,7 @@ pub fn snapshot(
         o.u8(i as u8);
         o.pose(r.pose.pos.x, r.pose.pos.y, r.pose.theta);
         let goal = r.goal.filter(|_| spectator);
-        let slow = slow || you_robot == Some(i);
+        let slow = slow || (own_slow && you_robot == Some(i));
         let name = r
             .player
             .as_deref()
