@@ -104,6 +104,13 @@ async fn a_person_hunts_with_the_robots_in_headless_chromium() {
         5,
     )
     .await;
+    let legend = b
+        .eval("document.getElementById('legend').textContent")
+        .await;
+    assert!(
+        legend.as_str().unwrap().starts_with("your team's belief"),
+        "{legend}"
+    );
     b.save("pursuer.png").await;
     b.tap("Space", Duration::from_millis(60)).await;
     let feed = b

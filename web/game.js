@@ -347,7 +347,11 @@ export class Game {
   }
 
   legend() {
-    legend($("legend"), this.beliefOn ? this.belief : null, true);
+    // A hunter's is their team's, live; an opponent's player sees the robots' as late as
+    // spectators do.
+    const title = this.team === "robots" ? "your team's belief (B)"
+      : this.role === "player" && this.delay ? `robots' belief, ${this.delay} (B)` : "robots' belief (B)";
+    legend($("legend"), this.beliefOn ? this.belief : null, true, title);
   }
 
   key(e) {

@@ -17,8 +17,8 @@ export function fmtTime(s) {
 }
 
 /** The legend of `belief` in `el` (emptied without one): each role's count, its particles
- * when `particles`, and how far it is trusted. */
-export function legend(el, belief, particles) {
+ * when `particles`, and how far it is trusted; `title` heads it. */
+export function legend(el, belief, particles, title = "robots' belief (B)") {
   if (!belief) { el.replaceChildren(); return; }
   const rows = belief.roles.filter((r) => !r.tagged).map((r) => {
     const div = document.createElement("div");
@@ -30,7 +30,7 @@ export function legend(el, belief, particles) {
     return div;
   });
   const head = document.createElement("div");
-  head.textContent = "robots' belief (B)";
+  head.textContent = title;
   head.style.color = "#8b949e";
   el.replaceChildren(head, ...rows);
 }
