@@ -29,6 +29,9 @@ pub struct Robot {
     /// This tick's shot, fired by a person's keys: the tick their screen showed (lag
     /// compensation, as for an opponent's person).
     pub aim_tick: Option<u64>,
+    /// A person drives it now (a pursuer slot they took); a free pursuer slot is the team
+    /// planner's, as a free bot slot of a match people may take over is its bot's.
+    pub seated: bool,
 }
 
 /// A route given to an API-driven opponent.

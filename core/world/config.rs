@@ -37,8 +37,9 @@ pub struct MatchConfig {
     /// drives the rest: `outside_robots[i]` for robot `i`, none when shorter. With
     /// `planner` [`PlannerKind::Api`] every robot is driven from outside whatever this says.
     pub outside_robots: Vec<bool>,
-    /// The last this many robots are seats for people on the robot team (pursuers): driven
-    /// from outside, by a person's keys, whatever `outside_robots` says.
+    /// The last this many robots are seats for people on the robot team (pursuers): while a
+    /// person holds one it is driven from outside, by their keys; while it is free the
+    /// team's planner drives it.
     pub pursuer_slots: usize,
     pub seed: u64,
     pub time_limit_ticks: u64,

@@ -21,12 +21,13 @@ pub enum WorldInput {
     /// The person leaves `slot` (a bot kept aside comes back).
     Unseat { slot: usize, name: String },
     /// A person named `name` takes the seat of robot `robot` (one of the team's pursuer
-    /// slots); their keys come as [`WorldInput::RobotKeys`].
+    /// slots, which the team's planner drives while it is free); it stands still until
+    /// their keys come, as [`WorldInput::RobotKeys`].
     SeatRobot { robot: usize, name: String },
     /// A person's keys for robot `robot`, a pursuer slot: its drive order, and with the
     /// trigger pulled the tick their screen showed.
     RobotKeys { robot: usize, input: HumanInput },
-    /// The person leaves robot `robot`'s seat: it stops where it is.
+    /// The person leaves robot `robot`'s seat: the team's planner drives it again.
     UnseatRobot { robot: usize, name: String },
     /// The match ends from outside.
     End(FinishReason),
@@ -99,6 +100,8 @@ impl World {
                 if !self.robot_seat(*robot) {
                     return Err(InputError::NoRobotSeat(*robot));
                 }
+                self.robots[*robot].seated = true;
+                self.order_robot(*robot, RobotOrder::Stop)?;
                 self.log_player(AgentId::Robot(*robot), name.clone(), true);
                 Ok(())
             }
@@ -107,6 +110,7 @@ impl World {
                     return Err(InputError::NoRobotSeat(*robot));
                 }
                 self.order_robot(*robot, RobotOrder::Stop)?;
+                self.robots[*robot].seated = false;
                 self.log_player(AgentId::Robot(*robot), name.clone(), false);
                 Ok(())
             }

@@ -149,6 +149,7 @@ impl World {
                 command: RobotCommand::default(),
                 api: ApiDrive::default(),
                 aim_tick: None,
+                seated: false,
             })
             .collect();
         let opponents = opponent_starts

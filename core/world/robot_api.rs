@@ -104,11 +104,11 @@ impl World {
     pub fn robot_outside(&self, index: usize) -> bool {
         self.robots_api_driven()
             || self.config.outside_robots.get(index) == Some(&true)
-            || self.robot_seat(index)
+            || self.robots.get(index).is_some_and(|r| r.seated)
     }
 
     /// Whether robot `index` is a seat for a person on the robot team
-    /// (`MatchConfig::pursuer_slots`).
+    /// (`MatchConfig::pursuer_slots`), taken or not.
     pub fn robot_seat(&self, index: usize) -> bool {
         index < self.robots.len()
             && index + self.config.pursuer_slots.min(self.robots.len()) >= self.robots.len()

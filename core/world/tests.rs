@@ -457,7 +457,8 @@ fn a_persons_robot_seat_feeds_the_team_and_tags_like_a_robot() {
         ..MatchConfig::default()
     };
     let mut w = World::new(duel(), config).unwrap();
-    assert!(!w.robot_seat(0) && w.robot_seat(1) && w.robot_outside(1));
+    assert!(!w.robot_seat(0) && w.robot_seat(1));
+    assert!(!w.robot_outside(1), "a free seat is the planner's");
     assert_eq!(
         w.apply(&WorldInput::SeatRobot {
             robot: 0,
@@ -470,6 +471,7 @@ fn a_persons_robot_seat_feeds_the_team_and_tags_like_a_robot() {
         name: "ada".into(),
     })
     .unwrap();
+    assert!(w.robot_outside(1));
     let seat_start = w.robots[1].pose;
     w.step();
     // Its laser saw o1, and the team's tracker split a role off for it.
@@ -521,6 +523,11 @@ fn a_hunters_shot_is_judged_where_their_screen_showed_the_opponents() {
         ..MatchConfig::default()
     };
     let mut w = World::new(duel(), config).unwrap();
+    w.apply(&WorldInput::SeatRobot {
+        robot: 1,
+        name: "ada".into(),
+    })
+    .unwrap();
     w.order_opponent(0, OpponentOrder::Waypoints(vec![Point2::new(4.0, 5.0)]))
         .unwrap();
     w.step();
@@ -556,4 +563,37 @@ fn a_hunters_shot_is_judged_where_their_screen_showed_the_opponents() {
         }),
         Err(InputError::NoRobotSeat(0))
     );
+}
+
+#[test]
+fn a_free_pursuer_slot_is_the_planners_and_a_person_takes_it_over() {
+    let config = MatchConfig {
+        robots: 2,
+        opponents: 1,
+        pursuer_slots: 1,
+        planner: PlannerKind::Baseline,
+        opponent_control: ControlKind::Api,
+        ..MatchConfig::default()
+    };
+    let mut w = World::new(duel(), config).unwrap();
+    let moved = |w: &mut World| {
+        let before = w.robots[1].pose;
+        for _ in 0..40 {
+            w.step();
+        }
+        (w.robots[1].pose.pos - before.pos).norm() > 0.1
+    };
+    assert!(moved(&mut w), "free, the team's planner drives it");
+    let seat = |robot| WorldInput::SeatRobot {
+        robot,
+        name: "ada".into(),
+    };
+    w.apply(&seat(1)).unwrap();
+    assert!(!moved(&mut w), "taken, it waits for the person's keys");
+    w.apply(&WorldInput::UnseatRobot {
+        robot: 1,
+        name: "ada".into(),
+    })
+    .unwrap();
+    assert!(moved(&mut w), "left, the planner drives it again");
 }
