@@ -37,6 +37,7 @@ mod merge;
 mod observe;
 mod resample;
 mod role;
+mod seen;
 mod state;
 
 pub use resample::low_variance_resample;
@@ -52,8 +53,8 @@ use rand_chacha::ChaCha8Rng;
 
 use crate::sim::arena::Arena;
 use crate::sim::{AGENT_RADIUS, DT};
-use observe::would_be_seen;
 use role::{MIN_SPEED_FRACTION, TURN_PROBABILITY};
+use seen::would_be_seen;
 
 impl Tracker {
     /// A tracker with one role for all `opponents`, uniform over free space.
@@ -214,6 +215,11 @@ impl Tracker {
     /// Stage 1: each particle runs on in its direction, now and then picking a new direction
     /// and speed (at most top speed); a step that would leave free space is refused and the
     /// particle picks anew.
+    ///
+    /// In two passes over a role: first every particle's step (the only random draws, in
+    /// particle order), then every move. A particle's step depends only on its own step of
+    /// the tick before and the stream, so this is the same as doing both per particle, and
+    /// the moves, free of the stream, run without waiting on it.
     fn motion(&mut self, arena: &Arena) {
         if !self.settings.predict {
             return;
@@ -222,7 +228,7 @@ impl Tracker {
         let turn_below = (TURN_PROBABILITY * (1u32 << 16) as f32) as u32;
         let g = &arena.grid;
         for role in self.roles.iter_mut().filter(|r| !r.tagged) {
-            for (p, v) in role.particles.iter_mut().zip(role.steps.iter_mut()) {
+            for v in role.steps.iter_mut() {
                 let bits: u32 = self.rng.random();
                 if bits & 0xffff < turn_below || *v == Vector2::zeros() {
                     let more: u32 = self.rng.random();
@@ -230,8 +236,10 @@ impl Tracker {
                     let u = (more >> 8) as f32 / (1u32 << 24) as f32;
                     *v = dir * (max_step * (MIN_SPEED_FRACTION + (1.0 - MIN_SPEED_FRACTION) * u));
                 }
+            }
+            for (p, v) in role.particles.iter_mut().zip(role.steps.iter_mut()) {
                 let q = *p + *v;
-                if g.cell_of(q).is_some_and(|c| g.clearance[c] >= AGENT_RADIUS) {
+                if g.fits_agent(q) {
                     *p = q;
                 } else {
                     *v = Vector2::zeros(); // blocked: choose again next tick

@@ -12,6 +12,7 @@ use crate::tracker::role::{
     CONFIDENCE_LOOK_DECAY, CONFIDENCE_TIME_CONSTANT_S, CONTRADICTED_KEEP, LaserModel, Role,
     Sighting, TrackerEvent,
 };
+use crate::tracker::seen::down_weight_seen;
 use crate::tracker::state::Tracker;
 
 /// Lateral spread (m) of a detection's position: sensor noise plus the pose estimate's error.
@@ -26,97 +27,6 @@ const FAR_LIKELIHOOD: f32 = 3.354_626_3e-4; // exp(-4² / 2)
 /// Spread used to decide which role a detection belongs to: generous, because a tracked
 /// opponent's cloud lags a running opponent by a little.
 const ASSOCIATION_SIGMA: f32 = 0.75;
-
-/// Particles that a robot's scan would have seen: negative information.
-/// `reach`: how far an opponent may have moved since the scan (0 for a fresh one). A
-/// hypothesis at `p` is contradicted only if every point within `reach` of it was seen, so
-/// that an opponent there now could not have stood outside the seen area then.
-pub(super) fn would_be_seen(
-    p: Point2<f32>,
-    s: &Sighting,
-    laser: LaserModel,
-    cos: f32,
-    sin: f32,
-    reach: f32,
-) -> bool {
-    if s.scan.is_empty() {
-        return false; // a robot frozen while sensing saw nothing
-    }
-    let dx = p.x - s.pose.pos.x;
-    let dy = p.y - s.pose.pos.y;
-    let d2 = dx * dx + dy * dy;
-    let far = laser.range - reach;
-    if far <= 0.0 || d2 > far * far {
-        return false;
-    }
-    let forward = dx * cos + dy * sin;
-    let lateral = -dx * sin + dy * cos;
-    let half = laser.fov / 2.0;
-    // Behind the robot, with a field of view of at most π: outside it, so the arctangent is
-    // not needed. Exactly the answer the test below gives: there `fast_atan2` is at least
-    // π/2 plus one rounding step once |forward| exceeds a millionth of |lateral| (nearer
-    // the side, rounding could make it π/2 itself, so those go the long way).
-    if half <= std::f32::consts::FRAC_PI_2 && forward < -1e-6 * lateral.abs() {
-        return false;
-    }
-    let bearing = fast_atan2(lateral, forward);
-    let d = d2.sqrt();
-    // The bearings the disc of radius `reach` around `p` spans (all of them when it holds
-    // the robot).
-    let spread = if reach <= 0.0 {
-        0.0
-    } else if reach >= d {
-        return false;
-    } else {
-        (reach / d).asin()
-    };
-    if bearing.abs() + spread > half {
-        return false;
-    }
-    let n = s.scan.len();
-    let beam_at = |b: f32| -> f32 {
-        let i = (((b + half) / laser.fov) * (n - 1) as f32).round() as usize;
-        s.scan[i.min(n - 1)]
-    };
-    let mut beam = beam_at(bearing);
-    if spread > 0.0 {
-        // Every beam across the disc must have reached past its far side.
-        let beams = ((2.0 * spread / laser.fov) * (n - 1) as f32).ceil() as usize + 1;
-        for k in 0..=beams {
-            let b = bearing - spread + 2.0 * spread * k as f32 / beams as f32;
-            beam = beam.min(beam_at(b));
-        }
-    }
-    // An opponent centred at `p` would have stopped this beam at its near edge, d − R, and
-    // been detected. So the beam reaching past d − R (with a margin for the laser's noise and
-    // the beam not passing exactly through p) means nobody stands at `p`. Requiring the beam
-    // to reach d + R instead would hide every hypothesis hugging a wall from negative
-    // information for ever: robots would stare at an empty strip along a wall.
-    d + reach < beam + AGENT_RADIUS - SEEN_MARGIN
-}
-
-/// Laser noise (3σ = 0.06 m), the bit a beam that passes a little off a particle's centre
-/// meets the disc later (about 0.01 m), and some slack.
-const SEEN_MARGIN: f32 = 0.1;
-
-/// atan2 to within about 0.0015 rad (a beam is 0.017 rad wide), several times faster than libm.
-pub(super) fn fast_atan2(y: f32, x: f32) -> f32 {
-    use std::f32::consts::{FRAC_PI_2, PI};
-    if x == 0.0 && y == 0.0 {
-        return 0.0;
-    }
-    let (ax, ay) = (x.abs(), y.abs());
-    let a = ax.min(ay) / ax.max(ay);
-    let s = a * a;
-    let mut r = ((-0.046_496_473 * s + 0.159_314_22) * s - 0.327_622_77) * s * a + a;
-    if ay > ax {
-        r = FRAC_PI_2 - r;
-    }
-    if x < 0.0 {
-        r = PI - r;
-    }
-    if y < 0.0 { -r } else { r }
-}
 
 impl Tracker {
     /// Log-likelihood-ish score of `z` under role `r`, for association. A role standing for
@@ -256,11 +166,16 @@ impl Tracker {
             let (cos, sin) = (s.pose.theta.cos(), s.pose.theta.sin());
             let reach = s.reach(self.settings.opponent_speed);
             for role in self.roles.iter_mut().filter(|r| !r.tagged) {
-                for (p, w) in role.particles.iter().zip(role.weights.iter_mut()) {
-                    if would_be_seen(*p, s, laser, cos, sin, reach) {
-                        *w *= p_miss;
-                    }
-                }
+                down_weight_seen(
+                    &role.particles,
+                    &mut role.weights,
+                    s,
+                    laser,
+                    cos,
+                    sin,
+                    reach,
+                    p_miss,
+                );
             }
         }
         let time_decay = (-DT / CONFIDENCE_TIME_CONSTANT_S).exp();

@@ -1,8 +1,8 @@
 //! Unit tests of the tracker: negative and positive information, splits, merges, tags,
 //! late sightings from teammates and world-model confidence, on small arenas built in code.
 
-use super::observe::fast_atan2;
 use super::role::CONTRADICTED_TICKS;
+use super::seen::fast_atan2;
 use super::*;
 use crate::sim::Pose;
 use crate::sim::sensors::Detection;
