@@ -1,7 +1,8 @@
 //! One tick of a match on `office` — `baseline` and `coordinated` with 2 robots and 2
 //! wandering opponents, and `coordinated` at the planning size (4 robots, 8
-//! opponents) — averaged over ticks with and without negotiation rounds; and one robot's
-//! laser scan alone, so the share of ray casting in a tick can be read off.
+//! opponents) — averaged over ticks with and without negotiation rounds, with the robots
+//! localising and with true poses; and one robot's laser scan alone, so the share of ray
+//! casting in a tick can be read off.
 //!
 //! `cargo bench --bench tick`
 
@@ -17,7 +18,13 @@ use lasertag_core::world::{MatchConfig, Placement};
 use lasertag_core::world::{MatchStatus, World};
 use rand::SeedableRng;
 
-fn office_world(seed: u64, planner: PlannerKind, robots: usize, opponents: usize) -> World {
+fn office_world(
+    seed: u64,
+    planner: PlannerKind,
+    robots: usize,
+    opponents: usize,
+    localisation: bool,
+) -> World {
     let store = MapStore::load_dir(&Path::new(env!("CARGO_MANIFEST_DIR")).join("maps")).unwrap();
     let arena = store.get("office").unwrap().arena.clone();
     let config = MatchConfig {
@@ -27,16 +34,22 @@ fn office_world(seed: u64, planner: PlannerKind, robots: usize, opponents: usize
         placement: Placement::Random,
         time_limit_ticks: u64::MAX,
         seed,
+        localisation,
         ..MatchConfig::default()
     };
     World::new(arena, config).unwrap()
 }
 
 /// A match that is mid-game after 10 s (paths planned, robots moving, opponents at large).
-fn mid_game(planner: PlannerKind, robots: usize, opponents: usize) -> (World, World) {
+fn mid_game(
+    planner: PlannerKind,
+    robots: usize,
+    opponents: usize,
+    localisation: bool,
+) -> (World, World) {
     (1..)
         .find_map(|seed| {
-            let initial = office_world(seed, planner, robots, opponents);
+            let initial = office_world(seed, planner, robots, opponents, localisation);
             let mut start = initial.clone();
             for _ in 0..200 {
                 start.step();
@@ -47,22 +60,30 @@ fn mid_game(planner: PlannerKind, robots: usize, opponents: usize) -> (World, Wo
 }
 
 fn tick(c: &mut Criterion) {
-    for (name, planner, robots, opponents) in [
-        ("tick/baseline_office_2r_2o", PlannerKind::Baseline, 2, 2),
+    // Every robot localising (the default), then the same matches with the robots knowing
+    // their poses: the difference, divided by the robots, is what a robot's localiser costs
+    // a tick on average (it updates every 0.2 m or π/6 of motion, not every tick).
+    use PlannerKind::{Baseline, Coordinated};
+    for (name, planner, robots, opponents, localisation) in [
+        ("tick/baseline_office_2r_2o", Baseline, 2, 2, true),
+        ("tick/coordinated_office_2r_2o", Coordinated, 2, 2, true),
+        ("tick/coordinated_office_4r_8o", Coordinated, 4, 8, true),
         (
-            "tick/coordinated_office_2r_2o",
-            PlannerKind::Coordinated,
+            "tick/coordinated_office_2r_2o_true_poses",
+            Coordinated,
             2,
             2,
+            false,
         ),
         (
-            "tick/coordinated_office_4r_8o",
-            PlannerKind::Coordinated,
+            "tick/coordinated_office_4r_8o_true_poses",
+            Coordinated,
             4,
             8,
+            false,
         ),
     ] {
-        let (_, start) = mid_game(planner, robots, opponents);
+        let (_, start) = mid_game(planner, robots, opponents, localisation);
         let mut world = start.clone();
         c.bench_function(name, |b| {
             b.iter(|| {
@@ -75,7 +96,7 @@ fn tick(c: &mut Criterion) {
         });
     }
 
-    let (initial, _) = mid_game(PlannerKind::Baseline, 2, 2);
+    let (initial, _) = mid_game(Baseline, 2, 2, true);
     let physics = Physics::default();
     let robot = initial.robots[0].pose;
     let others: Vec<_> = initial

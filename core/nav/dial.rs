@@ -32,15 +32,8 @@ pub(super) struct OpenCells {
 
 impl OpenCells {
     pub(super) fn new(grid: &ClearanceGrid, avoid: &[(Point2<f32>, f32)]) -> OpenCells {
-        let (cols, rows) = (grid.cols, grid.rows);
-        let stride = cols + 2;
-        let mut open = vec![false; stride * (rows + 2)];
-        for r in 0..rows {
-            let row = &mut open[(r + 1) * stride + 1..][..cols];
-            for (c, o) in row.iter_mut().enumerate() {
-                *o = grid.passable(r * cols + c);
-            }
-        }
+        let stride = grid.cols + 2;
+        let open = grid.passable_bordered().to_vec();
         let mut cells = OpenCells { stride, open };
         for &(p, radius) in avoid {
             cells.close_disc(grid, p, radius);

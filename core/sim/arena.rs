@@ -244,6 +244,10 @@ pub struct ClearanceGrid {
     /// byte a cell rather than a float, so the tracker's motion stage, which asks it for
     /// every particle every tick, reads a table a quarter the size.
     agent_fits: Vec<bool>,
+    /// [`ClearanceGrid::passable`] for every cell, in a table with a closed border one cell
+    /// wide (`cols + 2` a row): the start of every path search's table of open cells, built
+    /// once per map rather than once per search.
+    passable_bordered: Vec<bool>,
 }
 
 /// Upper bound on grid cells, so that a 500 m × 500 m map does not cost gigabytes.
@@ -300,13 +304,24 @@ impl ClearanceGrid {
             }
         }
         let agent_fits = clearance.iter().map(|&d| d >= AGENT_RADIUS).collect();
-        ClearanceGrid {
+        let mut grid = ClearanceGrid {
             cell,
             cols,
             rows,
             clearance,
             agent_fits,
+            passable_bordered: Vec::new(),
+        };
+        let stride = cols + 2;
+        let mut bordered = vec![false; stride * (rows + 2)];
+        for r in 0..rows {
+            let row = &mut bordered[(r + 1) * stride + 1..][..cols];
+            for (c, open) in row.iter_mut().enumerate() {
+                *open = grid.passable(r * cols + c);
+            }
         }
+        grid.passable_bordered = bordered;
+        grid
     }
 
     pub fn len(&self) -> usize {
@@ -325,6 +340,12 @@ impl ClearanceGrid {
         let c = (p.x / self.cell) as usize;
         let r = (p.y / self.cell) as usize;
         (c < self.cols && r < self.rows).then_some(r * self.cols + c)
+    }
+
+    /// Whether each cell is passable, in a table with a closed border one cell wide: row `r`,
+    /// column `c` at `(r + 1) × (cols + 2) + c + 1`.
+    pub fn passable_bordered(&self) -> &[bool] {
+        &self.passable_bordered
     }
 
     /// True when `p` is inside the grid and an agent's disc fits at its cell's centre.
