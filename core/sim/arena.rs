@@ -353,6 +353,12 @@ impl ClearanceGrid {
         self.cell_of(p).is_some_and(|c| self.agent_fits[c])
     }
 
+    /// True when an agent's disc fits at the centre of cell `idx` (`clearance >=
+    /// AGENT_RADIUS`).
+    pub fn agent_fits(&self, idx: usize) -> bool {
+        self.agent_fits[idx]
+    }
+
     pub fn centre(&self, idx: usize) -> Point2<f32> {
         let (r, c) = (idx / self.cols, idx % self.cols);
         Point2::new((c as f32 + 0.5) * self.cell, (r as f32 + 0.5) * self.cell)

@@ -34,6 +34,7 @@
 pub mod estimate;
 pub mod gospa;
 mod merge;
+mod motion;
 mod observe;
 mod resample;
 mod role;
@@ -237,14 +238,7 @@ impl Tracker {
                     *v = dir * (max_step * (MIN_SPEED_FRACTION + (1.0 - MIN_SPEED_FRACTION) * u));
                 }
             }
-            for (p, v) in role.particles.iter_mut().zip(role.steps.iter_mut()) {
-                let q = *p + *v;
-                if g.fits_agent(q) {
-                    *p = q;
-                } else {
-                    *v = Vector2::zeros(); // blocked: choose again next tick
-                }
-            }
+            motion::step_or_stop(g, &mut role.particles, &mut role.steps);
         }
     }
 

@@ -187,11 +187,22 @@ unsafe fn down_weight_seen_avx2(
     let (quarter, halfturn) = (_mm256_set1_ps(FRAC_PI_2), _mm256_set1_ps(PI));
     let vlast = _mm256_set1_epi32(last as i32);
     let half_step = _mm256_set1_ps(0.5);
+    // A point is two floats, x then y (nalgebra's points are `repr(C)` arrays).
+    const _: () = assert!(std::mem::size_of::<Point2<f32>>() == 8);
     for (group, w) in particles.chunks_exact(8).zip(weights.chunks_exact_mut(8)) {
-        let xs: [f32; 8] = std::array::from_fn(|i| group[i].x);
-        let ys: [f32; 8] = std::array::from_fn(|i| group[i].y);
-        // SAFETY: unaligned loads of eight floats from local arrays.
-        let (x, y) = unsafe { (_mm256_loadu_ps(xs.as_ptr()), _mm256_loadu_ps(ys.as_ptr())) };
+        // SAFETY: the group's eight points are sixteen contiguous floats (x0 y0 x1 y1 …),
+        // read unaligned as two vectors.
+        let (lo, hi) = unsafe {
+            let at = group.as_ptr().cast::<f32>();
+            (_mm256_loadu_ps(at), _mm256_loadu_ps(at.add(8)))
+        };
+        // Even floats to x, odd to y: the shuffle leaves x0 x1 x4 x5 x2 x3 x6 x7, and the
+        // permutation puts the pairs in order.
+        let unzip = |v: __m256| {
+            _mm256_castpd_ps(_mm256_permute4x64_pd::<0b11_01_10_00>(_mm256_castps_pd(v)))
+        };
+        let x = unzip(_mm256_shuffle_ps::<0b10_00_10_00>(lo, hi));
+        let y = unzip(_mm256_shuffle_ps::<0b11_01_11_01>(lo, hi));
         let dx = _mm256_sub_ps(x, ox);
         let dy = _mm256_sub_ps(y, oy);
         let d2 = _mm256_add_ps(_mm256_mul_ps(dx, dx), _mm256_mul_ps(dy, dy));
