@@ -58,9 +58,9 @@ pub mod defaults {
 
     /// Tick milliseconds all matches together may be priced at: 1.6 times every core's
     /// 50 ms at 20 Hz. A match is priced at its p99 tick, and the heavy ticks of different
-    /// matches seldom fall in the same 50 ms: 2 cores ran 100 load-test matches (1.8 ms
-    /// each, 180 ms in all) and their 2,000 spectators at 18.6–20 Hz (docs/performance.md),
-    /// so the budget admits about 89 of them, what the box runs at a full 20 Hz.
+    /// matches seldom fall in the same 50 ms: 2 cores ran 100 load-test matches (priced at
+    /// 1.66 ms each, 166 ms in all) and their 2,000 spectators at 19.8–20 Hz
+    /// (docs/performance.md), so the budget admits about 96 of them.
     pub fn tick_budget_ms() -> f64 {
         let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
         TICKS_OVERLAP * 50.0 * cores as f64

@@ -81,15 +81,21 @@ const BYTES_PER_MERGE_CELL: f64 = 16.0;
 // docs/results/admission_calibration.csv); `tests/admission_calibration.rs` holds every
 // price there within 1.5× of its measured p99.
 /// Milliseconds per tick whatever the settings.
-const TICK_BASE_MS: f64 = 0.025;
-/// Per clearance cell: the distance field of the planner's turn.
-const TICK_MS_PER_CELL: f64 = 1e-5;
-/// Per robot: its scan, localiser and share of planning.
-const TICK_MS_PER_ROBOT: f64 = 0.475;
-/// Per tracker particle and tracker copy.
-const TICK_MS_PER_PARTICLE: f64 = 7e-5;
+const TICK_BASE_MS: f64 = 0.25;
+/// Per clearance cell: the distance fields of the planner's turn and the bots' choices.
+const TICK_MS_PER_CELL: f64 = 1.5e-5;
+/// Per robot: its scan and its share of the tracker.
+const TICK_MS_PER_ROBOT: f64 = 0.01;
+/// Per robot the `coordinated` planner drives: its turns (a distance field, every candidate
+/// pose scored).
+const TICK_MS_PER_COORDINATED_ROBOT: f64 = 0.2;
+/// Per tracker particle and tracker copy, plus as much again per robot whose sightings it
+/// weighs (negative information tests each particle against each robot's scan; a
+/// teammate's late scan, behind an imperfect radio, takes the slower one-particle test).
+const TICK_MS_PER_PARTICLE: f64 = 1e-5;
+const TICK_MS_PER_PARTICLE_ROBOT: f64 = 1e-5;
 /// Per landmark and localising robot.
-const TICK_MS_PER_LANDMARK: f64 = 4e-4;
+const TICK_MS_PER_LANDMARK: f64 = 2.2e-4;
 
 /// The price of keeping and building an arena for `def` (the planner's view table and the
 /// likelihood field it will derive included: a stored map keeps them once a match has been
@@ -172,6 +178,11 @@ pub fn match_on(def: &MapDef, config: &MatchConfig) -> Price {
         + copies * per_copy
         + recorded_orders(config);
     let localising = if config.localisation { robots } else { 0.0 };
+    let coordinated = if config.planner == lasertag_core::planner::PlannerKind::Coordinated {
+        robots
+    } else {
+        0.0
+    };
     Price {
         memory: memory as u64,
         // The world's own setup (particles drawn, trackers copied); the map's grids are in
@@ -180,7 +191,8 @@ pub fn match_on(def: &MapDef, config: &MatchConfig) -> Price {
         tick_ms: TICK_BASE_MS
             + cells * TICK_MS_PER_CELL
             + robots * TICK_MS_PER_ROBOT
-            + copies * particles * TICK_MS_PER_PARTICLE
+            + coordinated * TICK_MS_PER_COORDINATED_ROBOT
+            + copies * particles * (TICK_MS_PER_PARTICLE + robots * TICK_MS_PER_PARTICLE_ROBOT)
             + localising * landmarks * TICK_MS_PER_LANDMARK,
     }
 }
