@@ -1,7 +1,7 @@
 //! One tick of a match on `office` — `baseline` and `coordinated` with 2 robots and 2
 //! wandering opponents, and `coordinated` at the planning size (4 robots, 8
 //! opponents) — averaged over ticks with and without negotiation rounds, with the robots
-//! localising and with true poses; and one robot's laser scan alone, so the share of ray
+//! localising and with odometry alone; and one robot's laser scan alone, so the share of ray
 //! casting in a tick can be read off.
 //!
 //! `cargo bench --bench tick`
@@ -60,23 +60,24 @@ fn mid_game(
 }
 
 fn tick(c: &mut Criterion) {
-    // Every robot localising (the default), then the same matches with the robots knowing
-    // their poses: the difference, divided by the robots, is what a robot's localiser costs
-    // a tick on average (it updates every 0.2 m or π/6 of motion, not every tick).
+    // Every robot localising (the default), then the same matches without the localiser
+    // (each robot's estimate its odometry): the difference, divided by the robots, is what a
+    // robot's localiser costs a tick on average (it updates every 0.2 m or π/6 of motion,
+    // not every tick).
     use PlannerKind::{Baseline, Coordinated};
     for (name, planner, robots, opponents, localisation) in [
         ("tick/baseline_office_2r_2o", Baseline, 2, 2, true),
         ("tick/coordinated_office_2r_2o", Coordinated, 2, 2, true),
         ("tick/coordinated_office_4r_8o", Coordinated, 4, 8, true),
         (
-            "tick/coordinated_office_2r_2o_true_poses",
+            "tick/coordinated_office_2r_2o_odometry",
             Coordinated,
             2,
             2,
             false,
         ),
         (
-            "tick/coordinated_office_4r_8o_true_poses",
+            "tick/coordinated_office_4r_8o_odometry",
             Coordinated,
             4,
             8,
