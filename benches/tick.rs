@@ -1,8 +1,9 @@
 //! One tick of a match on `office` — `baseline` and `coordinated` with 2 robots and 2
 //! wandering opponents, and `coordinated` at the planning size (4 robots, 8
 //! opponents) — averaged over ticks with and without negotiation rounds, with the robots
-//! localising and with odometry alone; and one robot's laser scan alone, so the share of ray
-//! casting in a tick can be read off.
+//! localising and with odometry alone; one robot's laser scan alone, so the share of ray
+//! casting in a tick can be read off; and one step of the research environment's episode
+//! (the in-process engine's unit of work), with the default and the light settings.
 //!
 //! `cargo bench --bench tick`
 
@@ -124,5 +125,61 @@ fn tick(c: &mut Criterion) {
     });
 }
 
-criterion_group!(benches, tick);
+/// One step of the research environment's episode (`core::env`, what `lasertag_env`'s
+/// in-process engine runs): office, 2 robots driven by actions against a `wander` bot, the
+/// team tracker at its minimum (no observation reads it), observations packed. `default`
+/// has every robot localising; `light` turns the localiser off (each robot's estimate its
+/// odometry), the settings of docs/research.md's "light" rows.
+fn env_step(c: &mut Criterion) {
+    use lasertag_core::env::{EnvSpec, Episode, Layout, Rewards};
+    let store = MapStore::load_dir(&Path::new(env!("CARGO_MANIFEST_DIR")).join("maps")).unwrap();
+    let arena = store.get("office").unwrap().arena.clone();
+    for (name, localisation) in [
+        ("env/step_office_2r_1o", true),
+        ("env/step_office_2r_1o_light", false),
+    ] {
+        let mut config = MatchConfig {
+            planner: PlannerKind::Api,
+            localisation,
+            ..MatchConfig::default()
+        };
+        config.tracker.particles_per_role = 10;
+        let p = &config.physics;
+        let layout = Layout::new(
+            2,
+            3,
+            arena.def.width as f64,
+            arena.def.height as f64,
+            p.laser_beams,
+            p.laser_range as f64,
+            (p.laser_fov as f64).to_degrees(),
+        );
+        let spec = EnvSpec {
+            config,
+            layout,
+            rewards: Rewards::default(),
+            max_steps: None,
+            ticks_per_step: 1,
+        };
+        let size = spec.layout.size();
+        let mut obs = vec![0.0f32; 2 * size];
+        let mut rewards = vec![0.0f64; 2];
+        // Forward and a slow turn, tag held: the robots roam and fire as a policy's would.
+        let actions = [0.8f32, 0.3, 1.0, 0.6, -0.2, 0.0];
+        let mut seed = 0;
+        let mut episode = Episode::new(arena.clone(), &spec, seed).unwrap();
+        c.bench_function(name, |b| {
+            b.iter(|| {
+                let out = episode.step(&spec, &actions, &mut obs, &mut rewards);
+                if out.terminated || out.truncated {
+                    seed += 1;
+                    episode = Episode::new(arena.clone(), &spec, seed).unwrap();
+                }
+                black_box(obs[0])
+            })
+        });
+    }
+}
+
+criterion_group!(benches, tick, env_step);
 criterion_main!(benches);
