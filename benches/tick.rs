@@ -65,7 +65,7 @@ fn tick(c: &mut Criterion) {
     // (each robot's estimate its odometry): the difference, divided by the robots, is what a
     // robot's localiser costs a tick on average (it updates every 0.2 m or π/6 of motion,
     // not every tick).
-    use PlannerKind::{Baseline, Coordinated};
+    use PlannerKind::{Baseline, Coordinated, Search};
     for (name, planner, robots, opponents, localisation) in [
         ("tick/baseline_office_2r_2o", Baseline, 2, 2, true),
         ("tick/coordinated_office_2r_2o", Coordinated, 2, 2, true),
@@ -84,6 +84,7 @@ fn tick(c: &mut Criterion) {
             8,
             false,
         ),
+        ("tick/search_office_2r_2o_odometry", Search, 2, 2, false),
     ] {
         let (_, start) = mid_game(planner, robots, opponents, localisation);
         let mut world = start.clone();

@@ -1,8 +1,9 @@
 //! The experiment of the paper's Fig. 5: how soon two robots tag one opponent, with the
-//! tracker-driven `coordinated` planner against the random `baseline`, from random starts.
+//! tracker-driven `coordinated` planner and its look-ahead variant `search`
+//! (docs/search-planner.md) against the random `baseline`, from random starts.
 //!
 //! For each map and opponent bot, runs `runs` seeded matches per planner (run `i` uses the
-//! same seed, so the same starts, for both planners), and writes every capture time to a CSV,
+//! same seed, so the same starts, for every planner), and writes every capture time to a CSV,
 //! a summary with median, mean and its 95% confidence interval, a Mann–Whitney U test of
 //! the difference, and one SVG per setting: the fraction of runs that have tagged the
 //! opponent by each time.
@@ -193,7 +194,11 @@ fn normal_cdf(z: f64) -> f64 {
 }
 
 const BOTS: [BotKind; 2] = [BotKind::Wander, BotKind::Evade];
-const PLANNERS: [PlannerKind; 2] = [PlannerKind::Coordinated, PlannerKind::Baseline];
+const PLANNERS: [PlannerKind; 3] = [
+    PlannerKind::Coordinated,
+    PlannerKind::Search,
+    PlannerKind::Baseline,
+];
 
 /// The study: the configuration and the maps it runs on, in order. Run `j` is setting
 /// `j / runs` (map, then bot, then planner) with seed `seed + j % runs`.

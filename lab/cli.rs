@@ -56,7 +56,7 @@ pub enum Experiment {
         #[command(flatten)]
         shard: ShardArgs,
     },
-    /// Fig. 5: capture time of `coordinated` vs `baseline` on `office` and `warehouse`.
+    /// Fig. 5: capture time of `coordinated` and `search` vs `baseline` on `office` and `warehouse`.
     Capture {
         /// Runs per map, opponent bot and planner.
         #[arg(long, default_value_t = 100)]

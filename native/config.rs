@@ -198,10 +198,13 @@ pub fn match_config(settings: &Bound<'_, PyDict>) -> PyResult<MatchConfig> {
                     .map(|name| match name.as_str() {
                         "api" => Ok(PlannerKind::Api),
                         "coordinated" => Ok(PlannerKind::Coordinated),
+                        "search" => Ok(PlannerKind::Search),
                         "baseline" => Ok(PlannerKind::Baseline),
                         _ => Err(refuse(
                             &key,
-                            format!("{name:?}: the planners are api, coordinated, baseline"),
+                            format!(
+                                "{name:?}: the planners are api, coordinated, search, baseline"
+                            ),
                         )),
                     })
                     .collect::<PyResult<Vec<_>>>()?;

@@ -243,7 +243,7 @@ impl Metrics {
             clients.with_label_values(&[role]).set(0);
             snapshot_bytes.with_label_values(&[role]).inc_by(0);
         }
-        for kind in ["coordinated", "baseline", "idle"] {
+        for kind in ["coordinated", "search", "baseline", "idle"] {
             for clock in ["realtime", "manual"] {
                 tick_seconds.with_label_values(&[kind, clock]);
             }

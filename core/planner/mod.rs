@@ -35,6 +35,9 @@ pub enum PlannerKind {
     Idle,
     Baseline,
     Coordinated,
+    /// The coordinated planner's negotiation with each choice a look-ahead over several view
+    /// poses ([`coordinated::search`]).
+    Search,
     /// Robots driven from outside (a researcher's own brain): the team plans nothing and
     /// each robot follows the orders it is given (see `World::order_robot`).
     Api,
@@ -47,6 +50,7 @@ impl PlannerKind {
             PlannerKind::Idle => "idle",
             PlannerKind::Baseline => "baseline",
             PlannerKind::Coordinated => "coordinated",
+            PlannerKind::Search => "search",
             PlannerKind::Api => "api",
         }
     }
@@ -126,6 +130,9 @@ impl Team {
             PlannerKind::Coordinated => Brain::Coordinated(Box::new(
                 coordinated::Coordinated::new(arena, physics, coordination, robots),
             )),
+            PlannerKind::Search => Brain::Coordinated(Box::new(
+                coordinated::Coordinated::searching(arena, physics, coordination, robots),
+            )),
         };
         Team {
             trackers: vec![tracker],
@@ -160,6 +167,7 @@ impl Team {
             Brain::Idle => PlannerKind::Idle,
             Brain::Api => PlannerKind::Api,
             Brain::Baseline(_) => PlannerKind::Baseline,
+            Brain::Coordinated(ref c) if c.is_searching() => PlannerKind::Search,
             Brain::Coordinated(_) => PlannerKind::Coordinated,
         }
     }

@@ -178,7 +178,12 @@ pub fn match_on(def: &MapDef, config: &MatchConfig) -> Price {
         + copies * per_copy
         + recorded_orders(config);
     let localising = if config.localisation { robots } else { 0.0 };
-    let coordinated = if config.planner == lasertag_core::planner::PlannerKind::Coordinated {
+    // The search planner negotiates as the coordinated one does, and looks ahead on top.
+    let coordinated = if matches!(
+        config.planner,
+        lasertag_core::planner::PlannerKind::Coordinated
+            | lasertag_core::planner::PlannerKind::Search
+    ) {
         robots
     } else {
         0.0

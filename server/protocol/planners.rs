@@ -13,6 +13,9 @@ use lasertag_core::settings::FieldError;
 #[serde(rename_all = "lowercase")]
 pub enum Planner {
     Coordinated,
+    /// The coordinated planner's negotiation, each choice a look-ahead over several view
+    /// poses (docs/search-planner.md).
+    Search,
     Baseline,
     Idle,
     /// Robots driven from outside (`POST /api/matches/{id}/robots/{rid}/command`, `/act`).
@@ -30,8 +33,7 @@ impl<'de> Deserialize<'de> for PlannerChoice {
     fn deserialize<D: Deserializer<'de>>(d: D) -> Result<PlannerChoice, D::Error> {
         // By hand rather than `untagged`, whose error names no variant: say what is wanted.
         let value = serde_json::Value::deserialize(d)?;
-        let wanted =
-            "a planner (coordinated, baseline, idle, api) or an array of them, one per robot";
+        let wanted = "a planner (coordinated, search, baseline, idle, api) or an array of them, one per robot";
         match value {
             serde_json::Value::String(_) => Planner::deserialize(value)
                 .map(PlannerChoice::Team)
@@ -138,6 +140,7 @@ pub fn resolve(
 pub(crate) fn planner_kind(p: Planner) -> PlannerKind {
     match p {
         Planner::Coordinated => PlannerKind::Coordinated,
+        Planner::Search => PlannerKind::Search,
         Planner::Baseline => PlannerKind::Baseline,
         Planner::Idle => PlannerKind::Idle,
         Planner::Api => PlannerKind::Api,
@@ -152,6 +155,7 @@ pub fn planner_name(p: PlannerKind) -> &'static str {
 pub(crate) fn planner_dto(p: PlannerKind) -> Planner {
     match p {
         PlannerKind::Coordinated => Planner::Coordinated,
+        PlannerKind::Search => Planner::Search,
         PlannerKind::Baseline => Planner::Baseline,
         PlannerKind::Idle => Planner::Idle,
         PlannerKind::Api => Planner::Api,
@@ -164,6 +168,7 @@ pub(crate) fn planner_dto(p: PlannerKind) -> Planner {
 #[serde(rename_all = "lowercase")]
 pub enum Controller {
     Coordinated,
+    Search,
     Baseline,
     Idle,
     Api,
@@ -184,6 +189,7 @@ pub fn per_robot(config: &lasertag_core::world::MatchConfig) -> Vec<Controller> 
             } else {
                 match config.planner {
                     PlannerKind::Coordinated => Controller::Coordinated,
+                    PlannerKind::Search => Controller::Search,
                     PlannerKind::Baseline => Controller::Baseline,
                     PlannerKind::Idle => Controller::Idle,
                     PlannerKind::Api => Controller::Api,

@@ -101,7 +101,7 @@ pub struct NodeRef {
 pub fn notes(c: &MatchConfig) -> Vec<String> {
     let mut notes = Vec::new();
     if !c.localisation
-        && c.planner == PlannerKind::Coordinated
+        && matches!(c.planner, PlannerKind::Coordinated | PlannerKind::Search)
         && c.coordination.landmark_weight > 0.0
     {
         notes.push(

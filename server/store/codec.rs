@@ -3,10 +3,9 @@
 //! its inputs ([`encode_inputs`]: JSON lines, one input a line, deflated in chunks).
 //!
 //! The core has no serde on purpose, so these shapes live here, beside the one place that
-//! reads them back. Settings groups go through their declared fields (`settings::Group`),
-//! the same as requests do, and the fields a request cannot set are derived the way a
-//! request derives them (`localise::Settings::for_odometry`): a stored match rebuilds the
-//! very config it ran with, which the tests check field for field.
+//! reads them back. Settings groups go through their declared fields (`settings::Group`), as
+//! requests do; fields a request cannot set are derived as a request derives them
+//! (`localise::Settings::for_odometry`): a stored match rebuilds its config, field for field.
 
 use std::io::{Read, Write};
 
@@ -135,6 +134,7 @@ impl StoredDifficulty {
 #[serde(rename_all = "lowercase")]
 enum StoredPlanner {
     Coordinated,
+    Search,
     Baseline,
     Idle,
     Api,
@@ -180,6 +180,7 @@ impl StoredPlanner {
     fn of(kind: PlannerKind) -> StoredPlanner {
         match kind {
             PlannerKind::Coordinated => StoredPlanner::Coordinated,
+            PlannerKind::Search => StoredPlanner::Search,
             PlannerKind::Baseline => StoredPlanner::Baseline,
             PlannerKind::Idle => StoredPlanner::Idle,
             PlannerKind::Api => StoredPlanner::Api,
@@ -189,6 +190,7 @@ impl StoredPlanner {
     fn kind(self) -> PlannerKind {
         match self {
             StoredPlanner::Coordinated => PlannerKind::Coordinated,
+            StoredPlanner::Search => PlannerKind::Search,
             StoredPlanner::Baseline => PlannerKind::Baseline,
             StoredPlanner::Idle => PlannerKind::Idle,
             StoredPlanner::Api => PlannerKind::Api,

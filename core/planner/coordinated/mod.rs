@@ -26,15 +26,18 @@
 //!
 //! What a robot reads of its teammates (their poses, goals, claims, routes, whether they
 //! pursue or make way) goes through [`Knowledge`]: read directly with a perfect radio, as
-//! last heard otherwise ([`Mate`]). With an imperfect radio a robot also scores with its own
+//! last heard otherwise (`mates`). With an imperfect radio a robot also scores with its own
 //! tracker, and nobody moves a teammate: a robot stuck behind one with a higher index asks
 //! it over the radio to step aside, and that robot does so itself when it hears.
 //!
 //! The scoring stages live in `scoring`; robots getting past each other in doorways and
 //! narrow corridors in `passages`.
 
+mod mates;
 mod passages;
 mod scoring;
+pub mod search;
+mod travel;
 
 use std::sync::Arc;
 
@@ -99,6 +102,13 @@ crate::settings! {
         /// lies ahead of it, so that the planned robots search elsewhere; off, they plan as
         /// if it were not there (`lasertag experiment teammate` measures the difference).
         pub outside_claims: bool = true;
+        /// The `search` planner only: view poses a robot's plan looks ahead (1: the next
+        /// pose alone, valued as soon as seen rather than as much as seen).
+        pub search_depth: u64 = 3, range(1, 6);
+        /// The `search` planner only: continuations followed at each level of the plan.
+        pub search_branching: u64 = 4, range(1, 12);
+        /// The `search` planner only: seconds after which what a pose sees counts half.
+        pub search_half_life: f32 = 8.0, above(0.0, 600.0);
     }
     internal {
         /// Spacing of candidate positions (metres) and headings per position.
@@ -199,20 +209,6 @@ struct RobotState {
     outside: bool,
 }
 
-/// What a robot knows of a teammate when it plans (see [`Knowledge`]).
-#[derive(Debug, Clone, Copy)]
-struct Mate {
-    index: usize,
-    pos: Point2<f32>,
-    frozen: bool,
-    pursuing: bool,
-    /// Where it is going.
-    goal: Option<Point2<f32>>,
-    /// It still follows a path.
-    moving: bool,
-    making_way: bool,
-}
-
 #[derive(Debug, Clone)]
 pub struct Coordinated {
     settings: Settings,
@@ -222,10 +218,17 @@ pub struct Coordinated {
     /// Scratch: expected opponents per scoring cell, and per-pose worth.
     mass: Vec<f32>,
     seen: Vec<f32>,
+    /// What `seen` was divided by when last scored: `(1 + centring_weight) × total mass`.
+    norm: f32,
     /// Per candidate position of `views`: whether a landmark is recognisable from there.
     sees_landmark: Vec<bool>,
     /// Per clearance-grid cell: whether it lies in a narrow passage.
     narrow: Vec<bool>,
+    /// The `search` planner: each choice looks ahead over several poses (see `search`).
+    searching: bool,
+    /// Travel between the view table's positions, for the look-ahead (`None`: not
+    /// searching, or a map with too many positions).
+    travel: Option<Arc<travel::PositionTravel>>,
 }
 
 impl Coordinated {
@@ -251,8 +254,11 @@ impl Coordinated {
             next_round: 0,
             mass: vec![0.0; cells],
             seen: vec![0.0; poses],
+            norm: 1.0,
             sees_landmark,
             narrow,
+            searching: false,
+            travel: None,
         }
     }
 
@@ -297,43 +303,6 @@ impl Coordinated {
         };
         self.robots[i].yield_request = None;
         status
-    }
-
-    /// Teammates as robot `i` knows them, in index order: read directly with shared memory,
-    /// as last heard otherwise (a teammate never heard from is unknown and left out).
-    fn mates(&self, know: &Knowledge, view: &TeamView, i: usize) -> Vec<Mate> {
-        (0..view.robots.len())
-            .filter(|&j| j != i)
-            .filter_map(|j| {
-                if know.shared_memory() {
-                    let r = &self.robots[j];
-                    let outside = view.robots[j].outside && self.settings.outside_claims;
-                    Some(Mate {
-                        index: j,
-                        pos: view.robots[j].pose.pos,
-                        frozen: view.robots[j].frozen,
-                        pursuing: r.seeing || outside,
-                        goal: if outside {
-                            Some(ahead(view.robots[j].pose).pos)
-                        } else {
-                            self.goal_pose(j).map(|g| g.pos)
-                        },
-                        moving: !r.path.finished(),
-                        making_way: r.making_way.is_some(),
-                    })
-                } else {
-                    know.heard(i, j).map(|m| Mate {
-                        index: j,
-                        pos: m.pose.pos,
-                        frozen: m.frozen,
-                        pursuing: m.status.pursuing,
-                        goal: m.status.goal.map(|g| g.pos),
-                        moving: !m.status.route.is_empty(),
-                        making_way: m.status.making_way,
-                    })
-                }
-            })
-            .collect()
     }
 
     /// The centralised team's decisions, from the shared `tracker` (a perfect radio).

@@ -4,6 +4,7 @@
 
 use nalgebra::Point2;
 
+use super::search::{self, Ranked};
 use super::{Coordinated, Goal};
 use crate::nav::{DistanceField, PathFollower};
 use crate::planner::view::{Knowledge, TeamView};
@@ -198,6 +199,7 @@ impl Coordinated {
         const LANES: usize = 4;
         let cw = self.settings.centring_weight;
         let norm = (1.0 + cw) * total;
+        self.norm = norm;
         let (views, mass) = (&*self.views, &self.mass[..]);
         let term = |c: u32, f: f32| mass[c as usize] * (1.0 + cw * f);
         let n = views.len();
@@ -249,6 +251,9 @@ impl Coordinated {
         uncertainty: f32,
     ) -> Option<Choice> {
         let s = &self.settings;
+        // The `search` planner ranks every pose by the same score, then looks ahead from the
+        // best few (see `search`).
+        let mut ranked: Vec<Ranked> = Vec::new();
         let h = s.headings;
         let current = self.robots[i].goal.map(|g| g.pose);
         // Only for an uncertain robot: a certain one skips the pass (and the terms vanish
@@ -285,6 +290,14 @@ impl Coordinated {
                     0.0
                 };
                 let value = self.seen[k] - cost + keep;
+                if self.searching {
+                    ranked.push(Ranked {
+                        pose: k,
+                        score: value,
+                        arrival_s: travel_s,
+                    });
+                    continue;
+                }
                 if best.is_none_or(|b| value > b.value) {
                     best = Some(Choice {
                         pose: k,
@@ -293,6 +306,16 @@ impl Coordinated {
                     });
                 }
             }
+        }
+        if self.searching {
+            let firsts = search::firsts(ranked, s.search_branching as usize, current);
+            let n = self.search_best(physics, &firsts)?;
+            let k = firsts[n].pose;
+            return Some(Choice {
+                pose: k,
+                value: firsts[n].score,
+                worth: self.seen[k],
+            });
         }
         best
     }
