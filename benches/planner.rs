@@ -103,6 +103,28 @@ fn planner(c: &mut Criterion) {
             black_box(team.decide(&arena, &physics, &tracker, &view))
         })
     });
+    // The same turn by the `search` planner: the coordinated turn plus the look-ahead.
+    let mut search = Coordinated::searching(&arena, &physics, Settings::default(), 4);
+    c.bench_function("search_turn/4r_8x1000_office", |b| {
+        b.iter(|| {
+            search.renegotiate();
+            black_box(search.decide(&arena, &physics, &tracker, &view))
+        })
+    });
+    c.bench_function("search_travel_table_build/office", |b| {
+        b.iter(|| {
+            let views = lasertag_core::sim::views::ViewTable::build(
+                &arena,
+                Settings::default().view_spec(&arena, &physics),
+            );
+            black_box(
+                lasertag_core::planner::coordinated::travel::PositionTravel::build(
+                    &arena,
+                    &views.positions,
+                ),
+            )
+        })
+    });
     c.bench_function("distance_field/office", |b| {
         b.iter(|| {
             black_box(lasertag_core::nav::DistanceField::from_point(

@@ -290,7 +290,7 @@ fn write(study: &Capture, runs: Vec<Run>, out: &Path) -> Result<String, LabError
     let limit = cfg.time_limit_s as f64;
     let mut csv = String::from("map,bot,planner,seed,captured,time_s\n");
     let mut summary = format!(
-        "map,bot,planner,runs,captured,median_s,mean_s,mean_ci95_low_s,mean_ci95_high_s,median_ratio_vs_baseline,mann_whitney_p,{},mean_gospa_ci95_m\n",
+        "map,bot,planner,runs,captured,median_s,mean_s,mean_ci95_low_s,mean_ci95_high_s,median_ratio_vs_baseline,mann_whitney_p,{},mean_gospa_ci95_m,median_ratio_vs_coordinated,mann_whitney_p_vs_coordinated\n",
         tracking::csv_header("mean_")
     );
     let mut table = format!(
@@ -353,6 +353,9 @@ fn write(study: &Capture, runs: Vec<Run>, out: &Path) -> Result<String, LabError
             };
             let base = times_of(PlannerKind::Baseline);
             let (base_median, ..) = stats(&base, limit);
+            // The look-ahead is measured against the greedy choice it refines.
+            let greedy = times_of(PlannerKind::Coordinated);
+            let (greedy_median, ..) = stats(&greedy, limit);
             let as_values =
                 |t: &[Option<f64>]| t.iter().map(|v| v.unwrap_or(limit)).collect::<Vec<_>>();
             let mut series = Vec::new();
@@ -366,8 +369,10 @@ fn write(study: &Capture, runs: Vec<Run>, out: &Path) -> Result<String, LabError
                 let captured = times.iter().filter(|t| t.is_some()).count();
                 let ratio = median / base_median;
                 let pv = mann_whitney_p(&as_values(&times), &as_values(&base));
+                let greedy_ratio = median / greedy_median;
+                let greedy_pv = mann_whitney_p(&as_values(&times), &as_values(&greedy));
                 summary.push_str(&format!(
-                    "{},{},{},{},{captured},{median:.2},{mean:.2},{lo:.2},{hi:.2},{ratio:.3},{pv:.3e},{},{gospa_ci:.4}\n",
+                    "{},{},{},{},{captured},{median:.2},{mean:.2},{lo:.2},{hi:.2},{ratio:.3},{pv:.3e},{},{gospa_ci:.4},{greedy_ratio:.3},{greedy_pv:.3e}\n",
                     map_name,
                     bot_name(bot),
                     planner_name(p),

@@ -157,6 +157,26 @@ fn recorded_orders(config: &MatchConfig) -> f64 {
     }
 }
 
+/// Seconds a distance field takes per grid cell it visits (`office`: 38,400 cells in about
+/// 0.49 ms, rounded up).
+const S_PER_FIELD_CELL: f64 = 15e-9;
+
+/// The `search` planner's travel table on `def` (bytes, grid cells its distance fields
+/// visit): built once per map and shared, but priced with every match that may be the
+/// first to need it. Its positions are at most one per candidate cell of the map, and
+/// the table is built only within its bounds, so this is its most.
+fn search_table(def: &MapDef, config: &MatchConfig, cells: f64) -> (f64, f64) {
+    use lasertag_core::planner::coordinated::travel::{MAX_TABLE_POSITIONS, MAX_TABLE_WORK};
+    if config.planner != lasertag_core::planner::PlannerKind::Search {
+        return (0.0, 0.0);
+    }
+    let spacing = config.coordination.candidate_spacing as f64;
+    let positions = ((def.width as f64 / spacing).ceil() * (def.height as f64 / spacing).ceil())
+        .min(MAX_TABLE_POSITIONS as f64);
+    let visits = (positions * cells).min(MAX_TABLE_WORK as f64);
+    (positions * positions * 4.0, visits)
+}
+
 /// The price of a match with `config` on a map of `def`'s size (the map's own price is
 /// separate: charged once for a stored map, with the match for an inline one).
 pub fn match_on(def: &MapDef, config: &MatchConfig) -> Price {
@@ -188,11 +208,14 @@ pub fn match_on(def: &MapDef, config: &MatchConfig) -> Price {
     } else {
         0.0
     };
+    let (table_bytes, table_visits) = search_table(def, config, cells);
     Price {
-        memory: memory as u64,
+        memory: (memory + table_bytes) as u64,
         // The world's own setup (particles drawn, trackers copied); the map's grids are in
         // the map's price.
-        build_s: 0.01 + copies * (merge_cells + particles) * 20e-9,
+        build_s: 0.01
+            + copies * (merge_cells + particles) * 20e-9
+            + table_visits * S_PER_FIELD_CELL,
         tick_ms: TICK_BASE_MS
             + cells * TICK_MS_PER_CELL
             + robots * TICK_MS_PER_ROBOT
@@ -396,6 +419,37 @@ mod tests {
         let slivers = map(&def).build_s;
         // Measured: about 2.4 s to build the arena and 2 s more for the match's field.
         assert!(plain < 0.2 && slivers > 2.0, "{plain} {slivers}");
+    }
+
+    #[test]
+    fn the_search_planners_travel_table_is_priced_within_its_bound() {
+        let config = |planner| MatchConfig {
+            planner,
+            ..MatchConfig::default()
+        };
+        let office = empty(24.0);
+        let (greedy, search) = (
+            match_on(
+                &office,
+                &config(lasertag_core::planner::PlannerKind::Coordinated),
+            ),
+            match_on(
+                &office,
+                &config(lasertag_core::planner::PlannerKind::Search),
+            ),
+        );
+        // Measured on `office` (24 m × 16 m): 0.29 s and 0.4 MB for its table.
+        assert!(search.build_s - greedy.build_s > 0.3, "{search:?}");
+        assert!(search.memory - greedy.memory > 1_000_000, "{search:?}");
+        // A huge map's table is bounded: at most 0.6 s and 2.6 MB more, or none at all.
+        let huge = empty(500.0);
+        let extra = match_on(&huge, &config(lasertag_core::planner::PlannerKind::Search)).build_s
+            - match_on(
+                &huge,
+                &config(lasertag_core::planner::PlannerKind::Coordinated),
+            )
+            .build_s;
+        assert!(extra <= 0.61, "{extra}");
     }
 
     #[test]

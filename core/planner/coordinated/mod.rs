@@ -37,7 +37,7 @@ mod mates;
 mod passages;
 mod scoring;
 pub mod search;
-mod travel;
+pub mod travel;
 
 use std::sync::Arc;
 
@@ -103,12 +103,16 @@ crate::settings! {
         /// if it were not there (`lasertag experiment teammate` measures the difference).
         pub outside_claims: bool = true;
         /// The `search` planner only: view poses a robot's plan looks ahead (1: the next
-        /// pose alone, valued as soon as seen rather than as much as seen).
+        /// pose alone, the coordinated planner's choice).
         pub search_depth: u64 = 3, range(1, 6);
         /// The `search` planner only: continuations followed at each level of the plan.
         pub search_branching: u64 = 4, range(1, 12);
-        /// The `search` planner only: seconds after which what a pose sees counts half.
-        pub search_half_life: f32 = 8.0, above(0.0, 600.0);
+        /// The `search` planner only: how much the best continuation after a pose counts
+        /// beside the pose's own worth (0: not at all, the coordinated planner's choice).
+        pub search_weight: f32 = 0.3, range(0.0, 10.0);
+        /// The `search` planner only: seconds after the arrival at the plan's first pose
+        /// after which what a later pose sees counts half.
+        pub search_half_life: f32 = 10.0, above(0.0, 600.0);
     }
     internal {
         /// Spacing of candidate positions (metres) and headings per position.

@@ -294,7 +294,6 @@ impl Coordinated {
                     ranked.push(Ranked {
                         pose: k,
                         score: value,
-                        arrival_s: travel_s,
                     });
                     continue;
                 }

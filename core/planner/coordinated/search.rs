@@ -2,12 +2,14 @@
 //! with each robot choosing its next view pose by looking several poses ahead rather than
 //! one (docs/search-planner.md).
 //!
-//! A plan is a sequence of view poses. Its value is the share of the team's (claimed)
-//! hypotheses each pose would see for the first time, each discounted by when the robot gets
-//! there (`0.5^(t / search_half_life)`): a pose that sees much is worth less the later it is
-//! seen, and what an earlier pose of the plan already saw counts nothing again (negative
-//! information along the simulated views). The first pose of the best plan is the robot's
-//! goal; the rest is only the reason for it, and the robot chooses again on its next turn.
+//! A plan is a sequence of view poses. Its value is the coordinated planner's score of its
+//! first pose (the share of the team's claimed hypotheses it sees, less the travel and the
+//! other costs) plus `search_weight` times the value of the rest: the share each later pose
+//! would see for the first time, discounted by how long after the arrival at the first pose
+//! the robot gets there (`0.5^(t / search_half_life)`). What an earlier pose of the plan
+//! already saw counts nothing again (negative information along the simulated views). The
+//! first pose of the best plan is the robot's goal; the rest is only the reason for it, and
+//! the robot chooses again on its next turn.
 //!
 //! The search is a depth-first look-ahead, `search_depth` poses deep, that follows at each
 //! level the `search_branching` continuations worth the most on their own (a beam search over
@@ -75,15 +77,13 @@ impl Plan<'_> {
     }
 }
 
-/// One first step of a plan, with what it is worth alone and with the best plan after it.
+/// A candidate first pose of a plan and the coordinated planner's score of it.
 #[derive(Debug, Clone, Copy)]
 pub(super) struct Ranked {
     pub pose: usize,
-    /// Its worth alone, less the costs of the coordinated planner's choice (crowding, the
-    /// uncertainty terms), plus the keep bonus: the score the plan's value is added to.
+    /// Its worth less travel, crowding and the uncertainty terms, plus the keep bonus: the
+    /// coordinated planner's score, to which the plan's rest is added.
     pub score: f32,
-    /// The discount at its arrival, seconds after now.
-    pub arrival_s: f32,
 }
 
 impl Coordinated {
@@ -100,9 +100,9 @@ impl Coordinated {
         self.searching
     }
 
-    /// The plan's value after first steps `firsts`: for each, its discounted fresh worth plus
-    /// the best continuation. Returns the index into `firsts` of the best, or `None` when
-    /// there is no first step. Ties go to the earlier entry of `firsts`.
+    /// The plan's value after first steps `firsts`: for each, its score plus `search_weight`
+    /// times the best continuation. Returns the index into `firsts` of the best, or `None`
+    /// when there is no first step. Ties go to the earlier entry of `firsts`.
     pub(super) fn search_best(&self, physics: &Physics, firsts: &[Ranked]) -> Option<usize> {
         let s = &self.settings;
         let h = s.headings;
@@ -122,7 +122,6 @@ impl Coordinated {
         let discount = |t: f32| 0.5f32.powf(t / s.search_half_life);
         let mut best: Option<(usize, f32)> = None;
         for (n, first) in firsts.iter().enumerate() {
-            let gain = self.seen[first.pose] * discount(first.arrival_s);
             plan.look(first.pose, 1);
             let rest = continuation(
                 &mut plan,
@@ -136,12 +135,12 @@ impl Coordinated {
                     discount: &discount,
                 },
                 first.pose,
-                first.arrival_s,
+                0.0,
                 2,
                 s.search_depth as u8,
             );
             plan.unlook(first.pose, 1);
-            let value = first.score - self.seen[first.pose] + gain + rest;
+            let value = first.score + s.search_weight * rest;
             if best.is_none_or(|(_, v)| value > v) {
                 best = Some((n, value));
             }
@@ -263,7 +262,7 @@ mod tests {
         }))
     }
 
-    fn world(planner: PlannerKind, depth: u64, half_life: f32, seed: u64) -> World {
+    fn world(planner: PlannerKind, depth: u64, weight: f32, seed: u64) -> World {
         let mut config = MatchConfig {
             robots: 2,
             opponents: 1,
@@ -273,7 +272,7 @@ mod tests {
         };
         config.tracker.particles_per_role = 300;
         config.coordination.search_depth = depth;
-        config.coordination.search_half_life = half_life;
+        config.coordination.search_weight = weight;
         World::new(rooms(), config).unwrap()
     }
 
@@ -300,12 +299,12 @@ mod tests {
     }
 
     #[test]
-    fn looking_one_pose_ahead_with_no_hurry_is_the_coordinated_planner() {
-        // One pose deep and a half-life far past the match, the plan's value is the pose's
-        // worth (times a discount within a few thousandths of 1): the same choices.
-        for seed in 0..3 {
-            let mut greedy = world(PlannerKind::Coordinated, 1, 600.0, seed);
-            let mut search = world(PlannerKind::Search, 1, 1e6, seed);
+    fn a_plan_valued_by_its_first_pose_alone_is_the_coordinated_choice() {
+        // One pose deep, or the rest of the plan weighing nothing: the plan's value is the
+        // first pose's score, and ties go to the lower pose as the greedy choice's do.
+        for (seed, depth, weight) in [(0, 1, 0.3), (1, 3, 0.0), (2, 1, 0.0)] {
+            let mut greedy = world(PlannerKind::Coordinated, 3, 0.3, seed);
+            let mut search = world(PlannerKind::Search, depth, weight, seed);
             for _ in 0..400 {
                 greedy.step();
                 search.step();
@@ -321,7 +320,7 @@ mod tests {
     #[test]
     fn a_search_team_is_deterministic_and_finds_the_opponent() {
         let run = |seed| {
-            let mut w = world(PlannerKind::Search, 3, 8.0, seed);
+            let mut w = world(PlannerKind::Search, 3, 0.3, seed);
             while w.status == MatchStatus::Running && w.tick < 2400 {
                 w.step();
             }

@@ -8,8 +8,10 @@ use crate::sim::views::ViewTable;
 use nalgebra::Point2;
 
 /// Most candidate positions a map may have for its travel table (its size grows with the
-/// square): beyond, later steps travel in straight lines.
-const MAX_TABLE_POSITIONS: usize = 800;
+/// square), and most cells its distance fields may visit together (positions × grid cells,
+/// about half a second): beyond either, later steps travel in straight lines.
+pub const MAX_TABLE_POSITIONS: usize = 800;
+pub const MAX_TABLE_WORK: usize = 40_000_000;
 
 /// Shortest-path metres between every two candidate positions of a map's view table
 /// (`INFINITY` where one cannot reach the other), built once per map and shared.
@@ -27,7 +29,9 @@ impl PositionTravel {
     /// The table for `views` on `arena`, or `None` when the map has too many positions.
     pub fn of(arena: &Arena, views: &ViewTable) -> Option<Arc<PositionTravel>> {
         let positions = &views.positions;
-        if positions.len() > MAX_TABLE_POSITIONS {
+        if positions.len() > MAX_TABLE_POSITIONS
+            || positions.len() * arena.grid.len() > MAX_TABLE_WORK
+        {
             return None;
         }
         let key = TravelKey(
@@ -39,7 +43,8 @@ impl PositionTravel {
         Some(arena.derived(key, |arena| PositionTravel::build(arena, positions)))
     }
 
-    fn build(arena: &Arena, positions: &[Point2<f32>]) -> PositionTravel {
+    /// The table built afresh (what [`PositionTravel::of`] does once per map).
+    pub fn build(arena: &Arena, positions: &[Point2<f32>]) -> PositionTravel {
         let grid = &arena.grid;
         let n = positions.len();
         let cells: Vec<Option<usize>> = positions.iter().map(|p| grid.cell_of(*p)).collect();
