@@ -115,30 +115,23 @@ impl Coordinated {
         };
         // The shortlist for later levels: the poses that see the most, alone.
         let mut shortlist: Vec<usize> = (0..self.seen.len()).collect();
-        shortlist.sort_by(|&a, &b| self.seen[b].total_cmp(&self.seen[a]).then(a.cmp(&b)));
-        shortlist.truncate(SHORTLIST);
-        let travel = self.travel.as_deref();
-        let speed = physics.robot_speed.max(1e-3);
+        best_first(&mut shortlist, SHORTLIST, |&a, &b| {
+            self.seen[b].total_cmp(&self.seen[a]).then(a.cmp(&b))
+        });
         let discount = |t: f32| 0.5f32.powf(t / s.search_half_life);
+        let levels = Continue {
+            shortlist: &shortlist,
+            travel: self.travel.as_deref(),
+            positions: &self.views.positions,
+            headings: h,
+            speed: physics.robot_speed.max(1e-3),
+            branching: s.search_branching as usize,
+            discount: &discount,
+        };
         let mut best: Option<(usize, f32)> = None;
         for (n, first) in firsts.iter().enumerate() {
             plan.look(first.pose, 1);
-            let rest = continuation(
-                &mut plan,
-                &Continue {
-                    shortlist: &shortlist,
-                    travel,
-                    positions: &self.views.positions,
-                    headings: h,
-                    speed,
-                    branching: s.search_branching as usize,
-                    discount: &discount,
-                },
-                first.pose,
-                0.0,
-                2,
-                s.search_depth as u8,
-            );
+            let rest = continuation(&mut plan, &levels, first.pose, 0.0, 2, s.search_depth as u8);
             plan.unlook(first.pose, 1);
             let value = first.score + s.search_weight * rest;
             if best.is_none_or(|(_, v)| value > v) {
@@ -194,8 +187,9 @@ fn continuation(
             (gain > 0.0).then_some((k, gain, arrive))
         })
         .collect();
-    ranked.sort_by(|a, b| b.1.total_cmp(&a.1).then(a.0.cmp(&b.0)));
-    ranked.truncate(c.branching);
+    best_first(&mut ranked, c.branching, |a, b| {
+        b.1.total_cmp(&a.1).then(a.0.cmp(&b.0))
+    });
     let mut best = 0.0f32;
     for (k, gain, arrive) in ranked {
         plan.look(k, level);
@@ -213,15 +207,31 @@ pub(super) fn firsts(
     branching: usize,
     current: Option<usize>,
 ) -> Vec<Ranked> {
-    all.sort_by(|a, b| b.score.total_cmp(&a.score).then(a.pose.cmp(&b.pose)));
-    let kept = current.and_then(|g| all.iter().position(|r| r.pose == g));
-    let mut out: Vec<Ranked> = all.iter().take(branching).copied().collect();
+    let kept = current.and_then(|g| all.iter().find(|r| r.pose == g).copied());
+    best_first(&mut all, branching, |a, b| {
+        b.score.total_cmp(&a.score).then(a.pose.cmp(&b.pose))
+    });
     if let Some(g) = kept
-        && g >= branching
+        && !all.iter().any(|r| r.pose == g.pose)
     {
-        out.push(all[g]);
+        all.push(g);
     }
-    out
+    all
+}
+
+/// Keeps the `n` first of `items` in the order `order` (a total order: ties broken), sorted.
+/// Selecting them first and sorting only those: each choice ranks a few thousand poses to
+/// keep a handful, and a whole sort did most of the look-ahead's work.
+fn best_first<T>(items: &mut Vec<T>, n: usize, order: impl Fn(&T, &T) -> std::cmp::Ordering) {
+    if items.len() > n {
+        if n == 0 {
+            items.clear();
+            return;
+        }
+        items.select_nth_unstable_by(n - 1, &order);
+        items.truncate(n);
+    }
+    items.sort_by(order);
 }
 
 #[cfg(test)]
