@@ -26,7 +26,14 @@ fn bench(c: &mut Criterion) {
     let physics = Physics::default();
     let mut rng = ChaCha8Rng::seed_from_u64(0);
     let truth = Pose::new(2.0, 8.0, 0.0);
-    let scan = sensors::scan(&arena, &physics, truth, &[], &mut rng);
+    let scan = sensors::scan(
+        &arena,
+        &physics,
+        &sensors::Laser::new(&physics),
+        truth,
+        &[],
+        &mut rng,
+    );
     let marks = sensors::sight_landmarks(&arena, &physics, truth, &mut rng);
     let mut group = c.benchmark_group("localise_update");
     for particles in [500usize, 2000] {

@@ -38,7 +38,16 @@ fn planner(c: &mut Criterion) {
     let mut rng = ChaCha8Rng::seed_from_u64(0);
     let scans: Vec<Scan> = poses
         .iter()
-        .map(|p| sensors::scan(&arena, &physics, *p, &[], &mut rng))
+        .map(|p| {
+            sensors::scan(
+                &arena,
+                &physics,
+                &sensors::Laser::new(&physics),
+                *p,
+                &[],
+                &mut rng,
+            )
+        })
         .collect();
     // A belief shaped by a second of looking: 8 roles, the corridors' hypotheses gone.
     let mut tracker = Tracker::with_roles(

@@ -112,12 +112,14 @@ fn tick(c: &mut Criterion) {
             initial.robots[1].pose.pos,
         )))
         .collect();
+    let laser = sensors::Laser::new(&physics);
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(0);
     c.bench_function("scan/one_robot_181_beams", |b| {
         b.iter(|| {
             black_box(sensors::scan(
                 &initial.arena,
                 &physics,
+                &laser,
                 robot,
                 &others,
                 &mut rng,

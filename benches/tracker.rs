@@ -42,7 +42,14 @@ fn scans(arena: &Arena, robots: usize) -> Vec<(Pose, Scan)> {
         .map(|p| {
             (
                 *p,
-                sensors::scan(arena, &Physics::default(), *p, &[], &mut rng),
+                sensors::scan(
+                    arena,
+                    &Physics::default(),
+                    &sensors::Laser::new(&Physics::default()),
+                    *p,
+                    &[],
+                    &mut rng,
+                ),
             )
         })
         .collect()

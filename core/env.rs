@@ -123,10 +123,12 @@ impl Layout {
         let (scan, tail) = out.split_at_mut(self.beams);
         if o.scan.len() == self.beams {
             for (v, r) in scan.iter_mut().zip(o.scan) {
-                // The packed scan's millimetres (saturating as a u16 does) over the reach in
-                // millimetres, in f32: what the HTTP backend's numpy division gives.
-                let millimetres = ((*r as f64) * 1000.0).round().clamp(0.0, u16::MAX as f64);
-                *v = millimetres as u16 as f32 / self.mm_range;
+                // The packed scan's millimetres (rounded half away from zero, saturating as
+                // a u16 does) over the reach in millimetres, in f32: what the HTTP backend's
+                // numpy division gives. An f32 times 1000 is exact in f64, so adding a half
+                // and truncating is that rounding, without a call to `round`.
+                let millimetres = ((*r as f64) * 1000.0 + 0.5) as u16;
+                *v = millimetres as f32 / self.mm_range;
             }
         } else {
             // A frozen robot senses nothing.

@@ -57,7 +57,14 @@ fn drive(arena: &Arena, laser: bool, ticks: usize, seed: u64) -> (f32, f32) {
         truth = next;
         loc.predict(odom);
         if laser {
-            let scan = sensors::scan(arena, &physics, truth, &[], &mut rng);
+            let scan = sensors::scan(
+                arena,
+                &physics,
+                &sensors::Laser::new(&physics),
+                truth,
+                &[],
+                &mut rng,
+            );
             let marks = sensors::sight_landmarks(arena, &physics, truth, &mut rng);
             let obs = Observation {
                 ranges: &scan.ranges,
@@ -108,7 +115,14 @@ fn a_stationary_robot_stays_put_and_converges() {
     let mut loc = localiser(&a, Pose::new(3.1, 3.9, 0.75), &mut rng);
     for _ in 0..200 {
         loc.predict(truth);
-        let scan = sensors::scan(&a, &physics, truth, &[], &mut rng);
+        let scan = sensors::scan(
+            &a,
+            &physics,
+            &sensors::Laser::new(&physics),
+            truth,
+            &[],
+            &mut rng,
+        );
         let obs = Observation {
             ranges: &scan.ranges,
             laser_fov: physics.laser_fov,

@@ -124,7 +124,7 @@ pub fn keeps_in_view(
     let mut next = pose;
     for _ in 0..ticks {
         next = propose(next, motion, physics.robot_speed, physics.robot_turn_rate);
-        if arena.clearance(next.pos) < AGENT_RADIUS {
+        if !arena.disc_is_free(next.pos, AGENT_RADIUS) {
             return 0.0;
         }
     }
@@ -134,7 +134,7 @@ pub fn keeps_in_view(
         let a = k as f32 * std::f32::consts::FRAC_PI_4;
         let d = Vector2::new(a.cos(), a.sin()) * reach;
         let q = target + d;
-        if arena.clearance(q) >= AGENT_RADIUS && arena.line_of_sight(target, q) {
+        if arena.disc_is_free(q, AGENT_RADIUS) && arena.line_of_sight(target, q) {
             moves.push(d);
         }
     }
@@ -153,7 +153,7 @@ pub fn keeps_in_view(
     let mut p = 0.0;
     for &(o, w) in offsets {
         let at = next.pos + o;
-        if arena.clearance(at) < AGENT_RADIUS {
+        if !arena.disc_is_free(at, AGENT_RADIUS) {
             continue; // it would be in a wall: stopped, and lost
         }
         let seen = moves

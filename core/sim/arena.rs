@@ -15,7 +15,7 @@ use std::any::Any;
 use std::sync::{Arc, Mutex};
 
 use crate::sim::AGENT_RADIUS;
-use crate::sim::segments::{SegmentBins, SegmentGrid};
+use crate::sim::segments::{FanBins, SegmentBins, SegmentGrid};
 
 /// A map after validation: plain data, no serialisation concerns (see `maps.rs` for the file format).
 #[derive(Debug, Clone, PartialEq)]
@@ -127,20 +127,21 @@ impl Arena {
         self.buckets.cast(origin, dir, max)
     }
 
-    /// [`Arena::cast_ray`] for every ray of a laser's fan from `origin`, into `out`: `dirs`
-    /// are unit vectors in counter-clockwise order, each less than a half turn from the unit
-    /// vector `heading`. The same distances as one `cast_ray` a ray, bit for bit, in a
-    /// fraction of the time: each wall near the origin is tested only against the rays
-    /// within the angle it subtends.
+    /// [`Arena::cast_ray`] for every ray of a laser's fan from `origin`, into `out`: ray `i`
+    /// is the unit vector `(xs[i], ys[i])`, beam `i` of `fan` turned to the unit vector
+    /// `heading`. The same distances as one `cast_ray` a ray, bit for bit, in a fraction of
+    /// the time: each wall near the origin is tested only against the rays within the angle
+    /// it subtends.
     pub fn cast_fan(
         &self,
         origin: Point2<f32>,
         heading: Vector2<f32>,
-        dirs: &[Vector2<f32>],
+        fan: &FanBins,
+        rays: (&[f32], &[f32]),
         max: f32,
         out: &mut [f32],
     ) {
-        self.bins.cast_fan(origin, heading, dirs, max, out)
+        self.bins.cast_fan(origin, heading, fan, rays, max, out)
     }
 
     /// [`Arena::cast_ray`] through parry's BVH: the reference the fast path is tested against.
@@ -199,9 +200,22 @@ impl Arena {
             + self.grid.clearance.len() * std::mem::size_of::<f32>()
     }
 
+    /// True when the clearance grid alone shows that no wall lies within `radius` of `p`: the
+    /// distance from `p`'s cell centre to the nearest wall, less the way from `p` to that
+    /// centre, bounds `p`'s own from below (distance to a set changes no faster than the
+    /// point moves). False means "not shown", not "blocked": the cheap test that spares
+    /// most discs the exact query through the wall hierarchy.
+    pub fn surely_clear(&self, p: Point2<f32>, radius: f32) -> bool {
+        /// Slack for the rounding of the grid's distances and of the exact query's.
+        const SLACK: f32 = 1e-3;
+        self.grid.cell_of(p).is_some_and(|c| {
+            self.grid.clearance[c] - (p - self.grid.centre(c)).norm() >= radius + SLACK
+        })
+    }
+
     /// True when a disc of `radius` at `p` overlaps no wall or obstacle.
     pub fn disc_is_free(&self, p: Point2<f32>, radius: f32) -> bool {
-        self.clearance(p) >= radius
+        self.surely_clear(p, radius) || self.clearance(p) >= radius
     }
 }
 
@@ -593,6 +607,26 @@ mod tests {
     }
 
     #[test]
+    fn surely_clear_never_says_so_of_a_disc_that_touches_a_wall() {
+        use rand::{RngExt, SeedableRng};
+        let a = square_room();
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(17);
+        let (mut shown, mut free) = (0, 0);
+        for _ in 0..20_000 {
+            let p = Point2::new(rng.random_range(-0.5..10.5), rng.random_range(-0.5..6.5));
+            let radius = rng.random_range(0.05..1.0f32);
+            let exact = a.clearance(p) >= radius;
+            if a.surely_clear(p, radius) {
+                assert!(exact, "{p:?} at {radius} m: clearance {}", a.clearance(p));
+                shown += 1;
+            }
+            free += exact as usize;
+        }
+        // It spares the exact query for most discs that are free.
+        assert!(shown * 10 > free * 8, "{shown} of {free}");
+    }
+
+    #[test]
     fn grid_marks_obstacles_impassable() {
         let a = square_room();
         let inside = a.grid.cell_of(Point2::new(5.0, 3.0)).unwrap();
@@ -655,8 +689,11 @@ mod tests {
                     })
                     .collect();
                 let heading = Vector2::new(theta.cos(), theta.sin());
+                let fan_bins = FanBins::new(n, fov);
                 let mut out = vec![0.0; n];
-                a.cast_fan(o, heading, &dirs, 8.0, &mut out);
+                let xs: Vec<f32> = dirs.iter().map(|d| d.x).collect();
+                let ys: Vec<f32> = dirs.iter().map(|d| d.y).collect();
+                a.cast_fan(o, heading, &fan_bins, (&xs, &ys), 8.0, &mut out);
                 for (i, d) in dirs.iter().enumerate() {
                     let want = a.cast_ray(o, *d, 8.0);
                     assert_eq!(

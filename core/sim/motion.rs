@@ -62,14 +62,16 @@ pub fn resolve(
     let mut p = proposed;
     for _ in 0..PASSES {
         let mut moved = false;
-        let q = arena.closest_wall_point(p);
-        let d = (p - q).norm();
-        if d < AGENT_RADIUS {
-            if d < 1e-6 || arena.inside_obstacle(p) {
-                return old;
+        if !arena.surely_clear(p, AGENT_RADIUS) {
+            let q = arena.closest_wall_point(p);
+            let d = (p - q).norm();
+            if d < AGENT_RADIUS {
+                if d < 1e-6 || arena.inside_obstacle(p) {
+                    return old;
+                }
+                p = q + (p - q) / d * (AGENT_RADIUS + SKIN);
+                moved = true;
             }
-            p = q + (p - q) / d * (AGENT_RADIUS + SKIN);
-            moved = true;
         }
         for o in others {
             let v = p - o;
@@ -86,7 +88,7 @@ pub fn resolve(
             return p;
         }
     }
-    let free = arena.clearance(p) >= AGENT_RADIUS
+    let free = arena.disc_is_free(p, AGENT_RADIUS)
         && others.iter().all(|o| (p - o).norm() >= 2.0 * AGENT_RADIUS);
     if free { p } else { old }
 }

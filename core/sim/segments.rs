@@ -161,6 +161,112 @@ fn hit_before(
     (t >= 0.0 && t < best && (-1e-6..=1.0 + 1e-6).contains(&u)).then_some(t)
 }
 
+/// The pseudo-angle of `v` around a point, counted counter-clockwise from straight behind
+/// the unit vector `heading`, in `[0, 4]`: behind is 0 and 4, the heading 2. Monotone in the
+/// true angle (a diamond angle: one division, no trigonometry), so a laser's fan increases
+/// along it without a wrap.
+fn pseudo_angle(heading: Vector2<f32>, v: Vector2<f32>) -> f32 {
+    let (x, y) = (-v.dot(&heading), heading.x * v.y - heading.y * v.x);
+    // Diamond angle of (x, y) in [0, 4), monotone in the true angle, from +x.
+    let p = y / (x.abs() + y.abs()).max(f32::MIN_POSITIVE);
+    let from_x = if x >= 0.0 {
+        if y >= 0.0 { p } else { 4.0 + p }
+    } else {
+        2.0 - p
+    };
+    // Flip so that counter-clockwise increases.
+    4.0 - from_x
+}
+
+/// How many of a laser fan's beams lie before each bin of [`pseudo_angle`]: what the fan
+/// cast looks up for each wall's ends to find the beams between them, in place of two
+/// bisections a wall (they were most of its time once the hit tests ran several beams at
+/// once). Counted once for a fan's shape (beams and field of view) on the ideal beam
+/// directions; the cast widens what it looks up by a beam each way for the rounding of a
+/// scan's own directions.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FanBins {
+    beams: usize,
+    /// `below[k]` beams lie before bin `k`'s start; `below[BINS]` is every beam.
+    below: Vec<u32>,
+}
+
+impl FanBins {
+    /// Bins a unit of pseudo-angle: a power of two, so that a pseudo-angle's bin is exact.
+    const PER_UNIT: f32 = 64.0;
+    const BINS: usize = 4 * Self::PER_UNIT as usize;
+
+    /// The bins of `beams` spread evenly over `fov` (less than a full turn) around a heading.
+    pub fn new(beams: usize, fov: f32) -> FanBins {
+        let step = if beams <= 1 {
+            0.0
+        } else {
+            fov / (beams - 1) as f32
+        };
+        let heading = Vector2::new(1.0, 0.0);
+        let angles: Vec<f32> = (0..beams)
+            .map(|i| {
+                let (y, x) = (-fov / 2.0 + step * i as f32).sin_cos();
+                pseudo_angle(heading, Vector2::new(x, y))
+            })
+            .collect();
+        let mut below = vec![0u32; Self::BINS + 1];
+        let mut j = 0;
+        for (k, b) in below.iter_mut().enumerate().take(Self::BINS) {
+            let start = k as f32 / Self::PER_UNIT;
+            while j < beams && angles[j] < start {
+                j += 1;
+            }
+            *b = j as u32;
+        }
+        below[Self::BINS] = beams as u32;
+        FanBins { beams, below }
+    }
+
+    pub fn beams(&self) -> usize {
+        self.beams
+    }
+
+    fn bin(a: f32) -> usize {
+        ((a * Self::PER_UNIT) as usize).min(Self::BINS - 1)
+    }
+
+    /// At most the number of beams before pseudo-angle `a`.
+    fn before(&self, a: f32) -> usize {
+        self.below[Self::bin(a)] as usize
+    }
+
+    /// At least the number of beams before pseudo-angle `a` or at it.
+    fn through(&self, a: f32) -> usize {
+        self.below[Self::bin(a) + 1] as usize
+    }
+}
+
+/// [`hit_before`] for a run of beams `(xs[i], ys[i])` against one segment, each beam's
+/// distance in `best` replaced where the segment is hit nearer: the same arithmetic a beam
+/// at a time, written without branches so that the compiler tests several beams in one
+/// instruction (most of a fan cast's time is this loop).
+#[inline]
+fn hits_before(
+    o: Point2<f32>,
+    a: Point2<f32>,
+    b: Point2<f32>,
+    (xs, ys): (&[f32], &[f32]),
+    best: &mut [f32],
+) {
+    let e = b - a;
+    let ao = a - o;
+    let along = ao.x * e.y - ao.y * e.x;
+    for ((x, y), best) in xs.iter().zip(ys).zip(best) {
+        let denom = x * e.y - y * e.x;
+        let t = along / denom;
+        let u = (ao.x * y - ao.y * x) / denom;
+        let hit =
+            (denom.abs() >= 1e-12) & (t >= 0.0) & (t < *best) & (-1e-6..=1.0 + 1e-6).contains(&u);
+        *best = if hit { t } else { *best };
+    }
+}
+
 /// Per-cell lists as one vector of items and the offsets where each cell's list starts
 /// (cell `c` is `items[starts[c]..starts[c + 1]]`).
 fn pack<T>(per_cell: Vec<Vec<T>>) -> (Vec<u32>, Vec<T>) {
@@ -278,37 +384,29 @@ impl SegmentBins {
             + self.first_cell.len() * std::mem::size_of::<[u32; 2]>()
     }
 
-    /// Distance along each of `dirs` from `o` to the first wall, capped at `max`, into
-    /// `out`. `dirs` are unit vectors in counter-clockwise order, each less than a half
-    /// turn from the unit vector `heading` (a laser's fan around its heading).
+    /// Distance along each beam from `o` to the first wall, capped at `max`, into `out`.
+    /// Beam `i` is the unit vector `(xs[i], ys[i])`: the beams of `fan` turned to the unit
+    /// vector `heading` (each within rounding of its bearing's direction).
     pub(crate) fn cast_fan(
         &self,
         o: Point2<f32>,
         heading: Vector2<f32>,
-        dirs: &[Vector2<f32>],
+        fan: &FanBins,
+        (xs, ys): (&[f32], &[f32]),
         max: f32,
         out: &mut [f32],
     ) {
-        let n = dirs.len().min(out.len());
+        let n = xs.len().min(ys.len()).min(out.len()).min(fan.beams());
         out[..n].fill(max);
         if n == 0 {
             return;
         }
-        // Each beam's pseudo-angle around the point, counted counter-clockwise from straight
-        // behind the heading: increasing along the fan, no wrap inside it.
-        let pseudo = |v: Vector2<f32>| {
-            let (x, y) = (-v.dot(&heading), heading.x * v.y - heading.y * v.x);
-            // Diamond angle of (x, y) in [0, 4), monotone in the true angle, from +x.
-            let p = y / (x.abs() + y.abs()).max(f32::MIN_POSITIVE);
-            if x >= 0.0 {
-                if y >= 0.0 { p } else { 4.0 + p }
-            } else {
-                2.0 - p
-            }
-        };
-        // Behind is 0 and 4, the heading 2; flip so that counter-clockwise increases.
-        let angles: Vec<f32> = dirs[..n].iter().map(|d| 4.0 - pseudo(*d)).collect();
-        let rank = |a: f32| angles.partition_point(|b| *b < a);
+        let pseudo = |v: Vector2<f32>| pseudo_angle(heading, v);
+        // The beams between a wall's ends `a` and `b`, two beams wider each way than the bins
+        // give: one for the rounding of the ends' angles against the hit test, one for that
+        // of this scan's directions against the ideal fan the bins were counted on.
+        let first_after = |a: f32| fan.before(a).saturating_sub(2);
+        let last_before = |b: f32| (fan.through(b) + 2).min(n);
         let cross = |a: Vector2<f32>, b: Vector2<f32>| a.x * b.y - a.y * b.x;
         let clamp = |v: f32, k: usize| ((v / self.cell).floor().max(0.0) as usize).min(k - 1);
         let (q0, q1) = (clamp(o.x - max, self.cols), clamp(o.x + max, self.cols));
@@ -333,28 +431,25 @@ impl SegmentBins {
                     if closest > max {
                         continue;
                     }
-                    // The beams between the two ends, counter-clockwise from `pa` to `pb`, a
-                    // beam wider on each side; across the back of the fan, those after `pa`
-                    // and those before `pb`.
+                    // The beams between the two ends, counter-clockwise from `pa` to `pb`;
+                    // across the back of the fan, those after `pa` and those before `pb`.
                     let ranges = if closest < 1e-3 {
                         // On (or nearly on) the segment's line: every beam.
                         [(0, n), (0, 0)]
                     } else {
-                        let (mut pa, mut pb) = (4.0 - pseudo(va), 4.0 - pseudo(vb));
+                        let (mut pa, mut pb) = (pseudo(va), pseudo(vb));
                         if cross(va, vb) < 0.0 {
                             std::mem::swap(&mut pa, &mut pb);
                         }
-                        let (from, to) = (rank(pa).saturating_sub(1), (rank(pb) + 1).min(n));
+                        let (from, to) = (first_after(pa), last_before(pb));
                         if pa <= pb {
                             [(from, to), (0, 0)]
                         } else {
                             [(from, n), (0, to)]
                         }
                     };
-                    for i in ranges.into_iter().flat_map(|(lo, hi)| lo..hi) {
-                        if let Some(t) = hit_before(o, dirs[i], a, b, out[i]) {
-                            out[i] = t;
-                        }
+                    for (lo, hi) in ranges {
+                        hits_before(o, a, b, (&xs[lo..hi], &ys[lo..hi]), &mut out[lo..hi]);
                     }
                 }
             }

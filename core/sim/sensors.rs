@@ -11,6 +11,7 @@ use nalgebra::{Point2, Vector2};
 use rand::RngExt;
 
 use crate::sim::arena::Arena;
+use crate::sim::segments::FanBins;
 use crate::sim::{AGENT_RADIUS, AgentId, Physics, Pose, gaussian, wrap_angle};
 
 /// A landmark seen by identity: its index in the map's `landmarks`, range and bearing.
@@ -46,28 +47,31 @@ pub fn beam_bearing(i: usize, n: usize, fov: f32) -> f32 {
     -fov / 2.0 + fov * i as f32 / (n - 1) as f32
 }
 
-/// The unit vectors of a fan of `n` beams over `fov` around `heading`, in beam order: one
-/// `sin_cos` per block of [`BLOCK`] beams, the beams between turned from the block's first by
-/// the fan's step (a complex product). Each vector is within a few `f32` rounding steps of
-/// `(heading + beam_bearing(i)).sin_cos()`, at an eighth of the transcendental calls (they
-/// were most of a scan's own time).
-pub fn beam_directions(heading: f32, n: usize, fov: f32) -> Vec<Vector2<f32>> {
+/// The unit vectors of a fan of `n` beams over `fov` around `heading`, in beam order, their
+/// x and y components apart (the layout the wall and disc tests run over several beams at a
+/// time): one `sin_cos` per block of [`BLOCK`](beam_fan) beams, the beams between turned
+/// from the block's first by the fan's step (a complex product). Each vector is within a
+/// few `f32` rounding steps of `(heading + beam_bearing(i)).sin_cos()`, at an eighth of the
+/// transcendental calls (they were most of a scan's own time).
+pub fn beam_fan(heading: f32, n: usize, fov: f32) -> (Vec<f32>, Vec<f32>) {
     /// Beams turned from one exact direction: the error grows by about one rounding a turn.
     const BLOCK: usize = 8;
     let step = if n <= 1 { 0.0 } else { fov / (n - 1) as f32 };
     let (s, c) = step.sin_cos();
-    let mut dirs = Vec::with_capacity(n);
-    for i in 0..n {
-        let d = if i % BLOCK == 0 {
-            let (y, x) = (heading + beam_bearing(i, n, fov)).sin_cos();
-            Vector2::new(x, y)
-        } else {
-            let p: Vector2<f32> = dirs[i - 1];
-            Vector2::new(p.x * c - p.y * s, p.x * s + p.y * c)
-        };
-        dirs.push(d);
+    let (mut xs, mut ys) = (vec![0.0f32; n], vec![0.0f32; n]);
+    for i in (0..n).step_by(BLOCK) {
+        let (y, x) = (heading + beam_bearing(i, n, fov)).sin_cos();
+        (xs[i], ys[i]) = (x, y);
     }
-    dirs
+    // Turn every block's next beam, then the one after: the blocks' products are
+    // independent, so the processor overlaps them (a block alone is one long chain).
+    for j in 1..BLOCK {
+        for i in (j..n).step_by(BLOCK) {
+            let (px, py) = (xs[i - 1], ys[i - 1]);
+            (xs[i], ys[i]) = (px * c - py * s, px * s + py * c);
+        }
+    }
+    (xs, ys)
 }
 
 /// Distance along unit `dir` from `origin` to the disc at `centre`, if the ray hits it.
@@ -88,59 +92,94 @@ pub fn ray_disc(
     (t >= 0.0).then_some(t)
 }
 
-/// Scans from `pose`. `others` are the centres of every other agent present in the arena.
+/// A laser's fan as the physics shapes it, with what every scan of it looks up (which beams
+/// lie in which direction): made once a match rather than once a scan.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Laser {
+    fov: f32,
+    bins: FanBins,
+}
+
+impl Laser {
+    pub fn new(physics: &Physics) -> Laser {
+        Laser {
+            fov: physics.laser_fov,
+            bins: FanBins::new(physics.laser_beams, physics.laser_fov),
+        }
+    }
+
+    fn shapes(&self, physics: &Physics) -> bool {
+        self.bins.beams() == physics.laser_beams && self.fov == physics.laser_fov
+    }
+}
+
+/// Scans from `pose` with `laser` (made from `physics`). `others` are the centres of every
+/// other agent present in the arena.
 pub fn scan(
     arena: &Arena,
     physics: &Physics,
+    laser: &Laser,
     pose: Pose,
     others: &[(AgentId, Point2<f32>)],
     rng: &mut impl RngExt,
 ) -> Scan {
     let n = physics.laser_beams;
     let max = physics.laser_range;
-    // Only agents within laser range can stop a beam; skip the rest up front.
-    let near: Vec<(AgentId, Point2<f32>)> = others
-        .iter()
-        .filter(|(_, c)| (c - pose.pos).norm() <= max + AGENT_RADIUS)
-        .copied()
-        .collect();
-    let dirs = beam_directions(pose.theta, n, physics.laser_fov);
+    let (xs, ys) = beam_fan(pose.theta, n, physics.laser_fov);
     // The walls for the whole fan at once (the same distances as a cast a beam); a fan that
     // closes the circle has no "behind" to order its beams from, so it casts beam by beam.
-    let mut walls = vec![max; n];
+    let mut best = vec![max; n];
     if physics.laser_fov < std::f32::consts::TAU - 1e-3 {
         let heading = Vector2::new(pose.theta.cos(), pose.theta.sin());
-        arena.cast_fan(pose.pos, heading, &dirs, max, &mut walls);
+        // A laser made for other physics would bound the wrong beams: make the right one.
+        let own;
+        let laser = if laser.shapes(physics) {
+            laser
+        } else {
+            own = Laser::new(physics);
+            &own
+        };
+        arena.cast_fan(pose.pos, heading, &laser.bins, (&xs, &ys), max, &mut best);
     } else {
-        for (w, dir) in walls.iter_mut().zip(&dirs) {
-            *w = arena.cast_ray(pose.pos, *dir, max);
+        for ((w, x), y) in best.iter_mut().zip(&xs).zip(&ys) {
+            *w = arena.cast_ray(pose.pos, Vector2::new(*x, *y), max);
         }
     }
-    let mut ranges = Vec::with_capacity(n);
-    let mut seen: Vec<usize> = Vec::new();
-    for (&dir, &wall) in dirs.iter().zip(&walls) {
-        let mut best = wall;
-        let mut hit = None;
-        for (id, c) in &near {
-            if let Some(t) = ray_disc(pose.pos, dir, *c, AGENT_RADIUS)
-                && t < best
-            {
-                best = t;
-                hit = Some(*id);
-            }
+    // Then each agent within reach, for every beam at once: `hit[i]` is the agent (an index
+    // into `others`, plus one) that stops beam `i` nearer than any wall and any agent before
+    // it in `others`, or 0.
+    let mut hit = vec![0u32; n];
+    for (k, (_, c)) in others.iter().enumerate() {
+        if (c - pose.pos).norm() <= max + AGENT_RADIUS {
+            discs_before(
+                pose.pos,
+                *c,
+                AGENT_RADIUS,
+                k as u32 + 1,
+                (&xs, &ys),
+                &mut best,
+                &mut hit,
+            );
         }
-        if let Some(AgentId::Opponent(k)) = hit
+    }
+    let mut seen: Vec<usize> = Vec::new();
+    for &h in &hit {
+        if let Some((AgentId::Opponent(k), _)) = h.checked_sub(1).map(|i| others[i as usize])
             && !seen.contains(&k)
         {
             seen.push(k);
         }
-        let measured = if best >= max {
-            max
-        } else {
-            (best + gaussian(rng, physics.laser_noise)).clamp(0.0, max)
-        };
-        ranges.push(measured);
     }
+    let ranges = best
+        .iter()
+        .map(|&b| {
+            if b >= max {
+                max
+            } else {
+                (b + gaussian(rng, physics.laser_noise)).clamp(0.0, max)
+            }
+        })
+        .collect();
     // A fixed order (by opponent index) keeps noise draws, and so the match, deterministic.
     seen.sort_unstable();
     let detections = seen
@@ -157,6 +196,33 @@ pub fn scan(
         ranges,
         detections,
         seen,
+    }
+}
+
+/// [`ray_disc`] for every beam `(xs[i], ys[i])` from `origin` against the disc at `centre`:
+/// where the disc is nearer than `best[i]`, `best[i]` becomes its distance and `hit[i]`
+/// becomes `mark`. The same arithmetic a beam at a time, without branches, so that the
+/// compiler tests several beams in one instruction.
+fn discs_before(
+    origin: Point2<f32>,
+    centre: Point2<f32>,
+    radius: f32,
+    mark: u32,
+    (xs, ys): (&[f32], &[f32]),
+    best: &mut [f32],
+    hit: &mut [u32],
+) {
+    let v = centre - origin;
+    let v2 = v.norm_squared();
+    let r2 = radius * radius;
+    for (((x, y), best), hit) in xs.iter().zip(ys).zip(best).zip(hit) {
+        let tc = v.dot(&Vector2::new(*x, *y));
+        let d2 = v2 - tc * tc;
+        // Where the beam misses (d2 > r2) the root is NaN and `t` fails every comparison.
+        let t = tc - (r2 - d2).sqrt();
+        let nearer = (d2 <= r2) & (t >= 0.0) & (t < *best);
+        *best = if nearer { t } else { *best };
+        *hit = if nearer { mark } else { *hit };
     }
 }
 
@@ -303,13 +369,18 @@ mod tests {
     }
 
     #[test]
-    fn beam_directions_are_the_bearings_unit_vectors() {
+    fn beam_fans_are_the_bearings_unit_vectors() {
         for (n, fov) in [(181, std::f32::consts::PI), (1, 1.0), (7, 2.0), (360, 6.2)] {
             for k in 0..50 {
                 let heading = -7.0 + 0.29 * k as f32;
-                let dirs = beam_directions(heading, n, fov);
-                assert_eq!(dirs.len(), n);
-                for (i, d) in dirs.iter().enumerate() {
+                let (xs, ys) = beam_fan(heading, n, fov);
+                assert_eq!((xs.len(), ys.len()), (n, n));
+                for (i, d) in xs
+                    .iter()
+                    .zip(&ys)
+                    .map(|(x, y)| Vector2::new(*x, *y))
+                    .enumerate()
+                {
                     let a = heading + beam_bearing(i, n, fov);
                     let exact = Vector2::new(a.cos(), a.sin());
                     assert!(
@@ -331,7 +402,7 @@ mod tests {
             (AgentId::Opponent(0), Point2::new(4.0, 2.0)),
             (AgentId::Robot(1), Point2::new(1.0, 3.0)),
         ];
-        let s = scan(&a, &physics, pose, &others, &mut rng);
+        let s = scan(&a, &physics, &Laser::new(&physics), pose, &others, &mut rng);
         assert_eq!(s.ranges.len(), 181);
         // Straight ahead: the opponent's near edge at 2.75 m.
         assert!((s.ranges[90] - 2.75).abs() < 0.1, "{}", s.ranges[90]);
@@ -353,14 +424,14 @@ mod tests {
         let pose = Pose::new(1.0, 2.0, 0.0);
         let far = [(AgentId::Opponent(0), Point2::new(12.0, 2.0))];
         assert!(
-            scan(&a, &physics, pose, &far, &mut rng)
+            scan(&a, &physics, &Laser::new(&physics), pose, &far, &mut rng)
                 .detections
                 .is_empty()
         );
         let behind = [(AgentId::Opponent(0), Point2::new(0.5, 2.0))];
         let back = Pose::new(1.0, 2.0, 0.0);
         assert!(
-            scan(&a, &physics, back, &behind, &mut rng)
+            scan(&a, &physics, &Laser::new(&physics), back, &behind, &mut rng)
                 .detections
                 .is_empty()
         );

@@ -80,6 +80,8 @@ pub struct World {
     /// Every agent's position at the end of each of the last ticks (oldest first), to judge
     /// a person's shot where their screen showed the other side (lag compensation).
     trail: std::collections::VecDeque<Trail>,
+    /// The robots' laser fan, shaped once from `config.physics` for every scan.
+    laser: sensors::Laser,
     rng_sense: ChaCha8Rng,
     rng_bots: ChaCha8Rng,
     rng_odometry: ChaCha8Rng,
@@ -207,6 +209,7 @@ impl World {
             winner: None,
             events: Vec::new(),
             trail: Default::default(),
+            laser: sensors::Laser::new(&config.physics),
             rng_sense: stream(config.seed, STREAM_SENSE),
             rng_bots: stream(config.seed, STREAM_BOTS),
             rng_odometry: stream(config.seed, STREAM_ODOMETRY),
@@ -431,6 +434,7 @@ impl World {
             self.robots[i].scan = sensors::scan(
                 &self.arena,
                 &self.config.physics,
+                &self.laser,
                 self.robots[i].pose,
                 &others,
                 &mut self.rng_sense,
