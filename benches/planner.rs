@@ -35,19 +35,11 @@ fn planner(c: &mut Criterion) {
         Pose::new(20.0, 8.0, 3.0),
         Pose::new(14.0, 12.0, -1.57),
     ];
+    let laser = sensors::Laser::new(&physics);
     let mut rng = ChaCha8Rng::seed_from_u64(0);
     let scans: Vec<Scan> = poses
         .iter()
-        .map(|p| {
-            sensors::scan(
-                &arena,
-                &physics,
-                &sensors::Laser::new(&physics),
-                *p,
-                &[],
-                &mut rng,
-            )
-        })
+        .map(|p| sensors::scan(&arena, &physics, &laser, *p, &[], &mut rng))
         .collect();
     // A belief shaped by a second of looking: 8 roles, the corridors' hypotheses gone.
     let mut tracker = Tracker::with_roles(

@@ -34,6 +34,8 @@ fn scans(arena: &Arena, robots: usize) -> Vec<(Pose, Scan)> {
         Pose::new(14.0, 14.0, -1.57),
         Pose::new(5.0, 8.0, 0.0),
     ];
+    let physics = Physics::default();
+    let laser = sensors::Laser::new(&physics);
     let mut rng = ChaCha8Rng::seed_from_u64(0);
     poses
         .iter()
@@ -42,14 +44,7 @@ fn scans(arena: &Arena, robots: usize) -> Vec<(Pose, Scan)> {
         .map(|p| {
             (
                 *p,
-                sensors::scan(
-                    arena,
-                    &Physics::default(),
-                    &sensors::Laser::new(&Physics::default()),
-                    *p,
-                    &[],
-                    &mut rng,
-                ),
+                sensors::scan(arena, &physics, &laser, *p, &[], &mut rng),
             )
         })
         .collect()

@@ -35,6 +35,7 @@ fn localiser(arena: &Arena, start: Pose, rng: &mut ChaCha8Rng) -> Localiser {
 /// localiser and of raw odometry. `laser` false skips measurement updates.
 fn drive(arena: &Arena, laser: bool, ticks: usize, seed: u64) -> (f32, f32) {
     let physics = Physics::default();
+    let shape = sensors::Laser::new(&physics);
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let mut truth = Pose::new(2.0, 3.0, 0.0);
     let mut odom = truth;
@@ -57,14 +58,7 @@ fn drive(arena: &Arena, laser: bool, ticks: usize, seed: u64) -> (f32, f32) {
         truth = next;
         loc.predict(odom);
         if laser {
-            let scan = sensors::scan(
-                arena,
-                &physics,
-                &sensors::Laser::new(&physics),
-                truth,
-                &[],
-                &mut rng,
-            );
+            let scan = sensors::scan(arena, &physics, &shape, truth, &[], &mut rng);
             let marks = sensors::sight_landmarks(arena, &physics, truth, &mut rng);
             let obs = Observation {
                 ranges: &scan.ranges,
@@ -109,20 +103,14 @@ fn kld_bound_grows_with_bins() {
 fn a_stationary_robot_stays_put_and_converges() {
     let a = room(vec![]);
     let physics = Physics::default();
+    let laser = sensors::Laser::new(&physics);
     let mut rng = ChaCha8Rng::seed_from_u64(4);
     let truth = Pose::new(3.0, 4.0, 0.7);
     // Start a little wrong: the filter must pull the cloud onto the truth.
     let mut loc = localiser(&a, Pose::new(3.1, 3.9, 0.75), &mut rng);
     for _ in 0..200 {
         loc.predict(truth);
-        let scan = sensors::scan(
-            &a,
-            &physics,
-            &sensors::Laser::new(&physics),
-            truth,
-            &[],
-            &mut rng,
-        );
+        let scan = sensors::scan(&a, &physics, &laser, truth, &[], &mut rng);
         let obs = Observation {
             ranges: &scan.ranges,
             laser_fov: physics.laser_fov,

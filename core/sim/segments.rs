@@ -138,9 +138,8 @@ impl SegmentGrid {
 }
 
 /// Where the ray from `o` along `d` meets the segment from `a` to `b`, if it does so before
-/// `best` (a millionth of the segment's length of slack at its ends). The one ray–segment
-/// test of every cast: the grid walk and the fan give the same distances because they
-/// both use it.
+/// `best`: [`hits_before`] for one beam, so that the grid walk and the fan, which share that
+/// one ray–segment test, give the same distances.
 #[inline]
 fn hit_before(
     o: Point2<f32>,
@@ -149,16 +148,10 @@ fn hit_before(
     b: Point2<f32>,
     best: f32,
 ) -> Option<f32> {
-    let cross = |a: Vector2<f32>, b: Vector2<f32>| a.x * b.y - a.y * b.x;
-    let e = b - a;
-    let denom = cross(d, e);
-    if denom.abs() < 1e-12 {
-        return None;
-    }
-    let ao = a - o;
-    let t = cross(ao, e) / denom;
-    let u = cross(ao, d) / denom;
-    (t >= 0.0 && t < best && (-1e-6..=1.0 + 1e-6).contains(&u)).then_some(t)
+    let mut t = [best];
+    hits_before(o, a, b, (&[d.x], &[d.y]), &mut t);
+    // Replaced only by a strictly nearer hit.
+    (t[0] < best).then_some(t[0])
 }
 
 /// The pseudo-angle of `v` around a point, counted counter-clockwise from straight behind
@@ -242,10 +235,10 @@ impl FanBins {
     }
 }
 
-/// [`hit_before`] for a run of beams `(xs[i], ys[i])` against one segment, each beam's
-/// distance in `best` replaced where the segment is hit nearer: the same arithmetic a beam
-/// at a time, written without branches so that the compiler tests several beams in one
-/// instruction (most of a fan cast's time is this loop).
+/// Where each beam `(xs[i], ys[i])` from `o` meets the segment from `a` to `b` (a millionth
+/// of the segment's length of slack at its ends), replacing `best[i]` where that is nearer:
+/// written without branches so that the compiler tests several beams in one instruction
+/// (most of a fan cast's time is this loop).
 #[inline]
 fn hits_before(
     o: Point2<f32>,

@@ -74,24 +74,6 @@ pub fn beam_fan(heading: f32, n: usize, fov: f32) -> (Vec<f32>, Vec<f32>) {
     (xs, ys)
 }
 
-/// Distance along unit `dir` from `origin` to the disc at `centre`, if the ray hits it.
-pub fn ray_disc(
-    origin: Point2<f32>,
-    dir: Vector2<f32>,
-    centre: Point2<f32>,
-    radius: f32,
-) -> Option<f32> {
-    let v = centre - origin;
-    let tc = v.dot(&dir);
-    let d2 = v.norm_squared() - tc * tc;
-    let r2 = radius * radius;
-    if d2 > r2 {
-        return None;
-    }
-    let t = tc - (r2 - d2).sqrt();
-    (t >= 0.0).then_some(t)
-}
-
 /// A laser's fan as the physics shapes it, with what every scan of it looks up (which beams
 /// lie in which direction): made once a match rather than once a scan.
 #[derive(Debug, Clone, PartialEq)]
@@ -199,10 +181,10 @@ pub fn scan(
     }
 }
 
-/// [`ray_disc`] for every beam `(xs[i], ys[i])` from `origin` against the disc at `centre`:
-/// where the disc is nearer than `best[i]`, `best[i]` becomes its distance and `hit[i]`
-/// becomes `mark`. The same arithmetic a beam at a time, without branches, so that the
-/// compiler tests several beams in one instruction.
+/// The distance along every beam `(xs[i], ys[i])` from `origin` to the disc at `centre`,
+/// where the beam hits it: where that is nearer than `best[i]`, `best[i]` becomes it and
+/// `hit[i]` becomes `mark`. Without branches, so that the compiler tests several beams in
+/// one instruction.
 fn discs_before(
     origin: Point2<f32>,
     centre: Point2<f32>,
