@@ -19,6 +19,7 @@ use std::sync::Arc;
 
 use crate::part::Params;
 use crate::plot::{self, Series};
+use crate::record::{Fields, Line, Record};
 use crate::study::{MapStamp, Study, group_from_params, group_to_params};
 use crate::tracking::{self, Parts, Track};
 use lasertag_core::bots::BotKind;
@@ -63,14 +64,31 @@ fn planner_name(p: PlannerKind) -> &'static str {
     p.name()
 }
 
-/// Seconds until the opponents were tagged (`None` if not within the time limit), and
-/// the belief's GOSPA at every tick while the match ran.
-fn one_run(
-    arena: Arc<Arena>,
-    s: Setting,
-    seed: u64,
-    cfg: &CaptureConfig,
-) -> Result<(Option<f64>, Track), LabError> {
+/// When, in seconds from the start, a run's robots first saw an opponent and when they had
+/// tagged every opponent (`None`: not within the time limit). Capture time is finding plus
+/// chasing: the first sighting splits them, and says how much of it a planner that
+/// searches better can shorten at all.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Outcome {
+    pub tagged: Option<f64>,
+    pub first_seen: Option<f64>,
+}
+
+impl Record for Outcome {
+    fn write(&self, out: &mut Line) {
+        self.tagged.write(out);
+        self.first_seen.write(out);
+    }
+    fn read(input: &mut Fields) -> Result<Outcome, String> {
+        Ok(Outcome {
+            tagged: Record::read(input)?,
+            first_seen: Record::read(input)?,
+        })
+    }
+}
+
+/// The run's [`Outcome`] and the belief's GOSPA at every tick while the match ran.
+fn one_run(arena: Arc<Arena>, s: Setting, seed: u64, cfg: &CaptureConfig) -> Result<Run, LabError> {
     let limit_s = cfg.time_limit_s;
     let config = MatchConfig {
         robots: 2,
@@ -87,16 +105,45 @@ fn one_run(
     };
     let mut world = World::new(arena, config)?;
     let mut track = Track::default();
+    let mut first_seen = None;
     while world.status == MatchStatus::Running {
         world.step();
+        // A detection by any robot's own laser (anonymous: which opponent does not matter).
+        if first_seen.is_none() && world.robots.iter().any(|r| !r.scan.seen.is_empty()) {
+            first_seen = Some(world.time_s());
+        }
         // Not the tick that ends the match: with the opponent tagged there is nothing to
         // track, and its zero would flatter every run by a tick.
         if world.status == MatchStatus::Running {
             track.push(&world);
         }
     }
-    let time = (world.winner == Some(Side::Robots)).then(|| world.time_s());
-    Ok((time, track.finish()))
+    let tagged = (world.winner == Some(Side::Robots)).then(|| world.time_s());
+    Ok((Outcome { tagged, first_seen }, track.finish()))
+}
+
+/// The median time to the first sighting (a run that saw nothing counts as the `limit`) and
+/// the median time from it to the tag, over the runs that tagged (`NaN` when none did).
+fn find_and_chase(outcomes: &[Outcome], limit: f64) -> (f64, f64) {
+    let mut found: Vec<f64> = outcomes
+        .iter()
+        .map(|o| o.first_seen.unwrap_or(limit))
+        .collect();
+    let mut chases: Vec<f64> = outcomes
+        .iter()
+        .filter_map(|o| Some(o.tagged? - o.first_seen?))
+        .collect();
+    (median(&mut found), median(&mut chases))
+}
+
+/// The median of `xs` (sorted in place); `NaN` for none.
+pub(crate) fn median(xs: &mut [f64]) -> f64 {
+    xs.sort_by(f64::total_cmp);
+    match xs.len() {
+        0 => f64::NAN,
+        n if n % 2 == 1 => xs[n / 2],
+        n => (xs[n / 2 - 1] + xs[n / 2]) / 2.0,
+    }
 }
 
 /// Runs still going at a second below which a curve of their mean stops: a mean over a
@@ -118,14 +165,7 @@ fn gospa_curve(tracks: &[Track]) -> Vec<(Parts, usize)> {
 /// runs that timed out counted at the time limit (so the mean is a lower bound for them).
 pub(crate) fn stats(times: &[Option<f64>], limit: f64) -> (f64, f64, f64, f64) {
     let mut xs: Vec<f64> = times.iter().map(|t| t.unwrap_or(limit)).collect();
-    xs.sort_by(f64::total_cmp);
-    let median = if xs.is_empty() {
-        f64::NAN
-    } else if xs.len() % 2 == 1 {
-        xs[xs.len() / 2]
-    } else {
-        (xs[xs.len() / 2 - 1] + xs[xs.len() / 2]) / 2.0
-    };
+    let median = median(&mut xs);
     let (mean, half) = mean_ci(&xs);
     (median, mean, mean - half, mean + half)
 }
@@ -208,9 +248,9 @@ pub struct Capture {
     pub maps: Vec<MapStamp>,
 }
 
-/// What one run measured: the capture time (`None`: not within the limit) and the GOSPA
-/// track until then.
-pub type Run = (Option<f64>, Track);
+/// What one run measured: when it saw and tagged the opponents, and the GOSPA track until
+/// then.
+pub type Run = (Outcome, Track);
 
 impl Capture {
     fn settings(&self) -> Vec<Setting> {
@@ -286,11 +326,12 @@ fn write(study: &Capture, runs: Vec<Run>, out: &Path) -> Result<String, LabError
     let cfg = &study.cfg;
     let settings = study.settings();
     let (bots, planners) = (BOTS, PLANNERS);
-    let (results, tracks): (Vec<Option<f64>>, Vec<Track>) = runs.into_iter().unzip();
+    let (outcomes, tracks): (Vec<Outcome>, Vec<Track>) = runs.into_iter().unzip();
+    let results: Vec<Option<f64>> = outcomes.iter().map(|o| o.tagged).collect();
     let limit = cfg.time_limit_s as f64;
-    let mut csv = String::from("map,bot,planner,seed,captured,time_s\n");
+    let mut csv = String::from("map,bot,planner,seed,captured,time_s,first_seen_s\n");
     let mut summary = format!(
-        "map,bot,planner,runs,captured,median_s,mean_s,mean_ci95_low_s,mean_ci95_high_s,median_ratio_vs_baseline,mann_whitney_p,{},mean_gospa_ci95_m,median_ratio_vs_coordinated,mann_whitney_p_vs_coordinated\n",
+        "map,bot,planner,runs,captured,median_s,mean_s,mean_ci95_low_s,mean_ci95_high_s,median_ratio_vs_baseline,mann_whitney_p,{},mean_gospa_ci95_m,median_ratio_vs_coordinated,mann_whitney_p_vs_coordinated,median_first_seen_s,median_chase_s\n",
         tracking::csv_header("mean_")
     );
     let mut table = format!(
@@ -312,16 +353,20 @@ fn write(study: &Capture, runs: Vec<Run>, out: &Path) -> Result<String, LabError
         tracking::csv_header("mean_")
     );
     for (k, s) in settings.iter().enumerate() {
-        let times = &results[k * cfg.runs..(k + 1) * cfg.runs];
-        for (i, t) in times.iter().enumerate() {
+        let seconds = |v: Option<f64>| v.map_or(String::new(), |v| format!("{v:.2}"));
+        for (i, o) in outcomes[k * cfg.runs..(k + 1) * cfg.runs]
+            .iter()
+            .enumerate()
+        {
             csv.push_str(&format!(
-                "{},{},{},{},{},{}\n",
+                "{},{},{},{},{},{},{}\n",
                 study.maps[s.map].name,
                 bot_name(s.bot),
                 planner_name(s.planner),
                 cfg.seed + i as u64,
-                t.is_some(),
-                t.map_or(String::new(), |v| format!("{v:.2}"))
+                o.tagged.is_some(),
+                seconds(o.tagged),
+                seconds(o.first_seen)
             ));
         }
         for (i, t) in tracks[k * cfg.runs..(k + 1) * cfg.runs].iter().enumerate() {
@@ -347,6 +392,10 @@ fn write(study: &Capture, runs: Vec<Run>, out: &Path) -> Result<String, LabError
                 let k = idx(p);
                 results[k * cfg.runs..(k + 1) * cfg.runs].to_vec()
             };
+            let outcomes_of = |p: PlannerKind| {
+                let k = idx(p);
+                outcomes[k * cfg.runs..(k + 1) * cfg.runs].to_vec()
+            };
             let tracks_of = |p: PlannerKind| {
                 let k = idx(p);
                 &tracks[k * cfg.runs..(k + 1) * cfg.runs]
@@ -371,8 +420,9 @@ fn write(study: &Capture, runs: Vec<Run>, out: &Path) -> Result<String, LabError
                 let pv = mann_whitney_p(&as_values(&times), &as_values(&base));
                 let greedy_ratio = median / greedy_median;
                 let greedy_pv = mann_whitney_p(&as_values(&times), &as_values(&greedy));
+                let (first_seen, chase) = find_and_chase(&outcomes_of(p), limit);
                 summary.push_str(&format!(
-                    "{},{},{},{},{captured},{median:.2},{mean:.2},{lo:.2},{hi:.2},{ratio:.3},{pv:.3e},{},{gospa_ci:.4},{greedy_ratio:.3},{greedy_pv:.3e}\n",
+                    "{},{},{},{},{captured},{median:.2},{mean:.2},{lo:.2},{hi:.2},{ratio:.3},{pv:.3e},{},{gospa_ci:.4},{greedy_ratio:.3},{greedy_pv:.3e},{first_seen:.2},{chase:.2}\n",
                     map_name,
                     bot_name(bot),
                     planner_name(p),
@@ -491,5 +541,36 @@ mod tests {
         assert_eq!(median, 20.0);
         assert!((mean - 110.0).abs() < 1e-9);
         assert!(lo < mean && mean < hi);
+    }
+
+    #[test]
+    fn finding_counts_unseen_runs_at_the_limit_and_chasing_only_tagged_ones() {
+        let o = |tagged, first_seen| Outcome { tagged, first_seen };
+        let runs = [
+            o(Some(12.0), Some(2.0)),
+            o(Some(9.0), Some(8.0)),
+            o(None, Some(4.0)), // seen, never tagged: finding counts, chasing does not
+            o(None, None),      // never seen: found at the limit
+        ];
+        let (first_seen, chase) = find_and_chase(&runs, 300.0);
+        assert_eq!(first_seen, 6.0, "median of 2, 4, 8, 300");
+        assert_eq!(chase, 5.5, "median of 10 and 1");
+        assert!(find_and_chase(&runs[3..], 300.0).1.is_nan());
+    }
+
+    #[test]
+    fn an_outcome_reads_back_as_written() {
+        for o in [
+            Outcome {
+                tagged: Some(7.25),
+                first_seen: Some(1.5),
+            },
+            Outcome {
+                tagged: None,
+                first_seen: None,
+            },
+        ] {
+            assert_eq!(crate::record::from_line(&crate::record::to_line(&o)), Ok(o));
+        }
     }
 }

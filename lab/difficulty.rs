@@ -10,7 +10,7 @@
 use std::path::Path;
 use std::sync::Arc;
 
-use crate::capture::bot_name;
+use crate::capture::{bot_name, median};
 use crate::error::LabError;
 use crate::part::Params;
 use crate::plot::{self, Series};
@@ -92,15 +92,6 @@ pub fn win_rate(wins: usize, runs: usize) -> (f64, f64, f64) {
     let centre = (p + z * z / (2.0 * n)) / (1.0 + z * z / n);
     let half = z / (1.0 + z * z / n) * (p * (1.0 - p) / n + z * z / (4.0 * n * n)).sqrt();
     (p, (centre - half).max(0.0), (centre + half).min(1.0))
-}
-
-fn median(xs: &mut [f64]) -> f64 {
-    xs.sort_by(f64::total_cmp);
-    match xs.len() {
-        0 => f64::NAN,
-        n if n % 2 == 1 => xs[n / 2],
-        n => (xs[n / 2 - 1] + xs[n / 2]) / 2.0,
-    }
 }
 
 impl Study for DifficultyStudy {

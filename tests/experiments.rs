@@ -98,7 +98,7 @@ fn capture_writes_every_run_and_a_summary() {
     ]);
     assert!(o.status.success(), "{o:?}");
     let (header, rows) = csv(&out.join("capture.csv"));
-    assert_eq!(header, "map,bot,planner,seed,captured,time_s");
+    assert_eq!(header, "map,bot,planner,seed,captured,time_s,first_seen_s");
     assert_eq!(rows, 2 * 3 * 2, "2 bots × 3 planners × 2 runs");
     assert_eq!(csv(&out.join("capture_summary.csv")).1, 2 * 3);
     svg(&out.join("capture_office_wander.svg"));
