@@ -96,6 +96,11 @@ pub enum Experiment {
         /// Probability that a robot misses one teammate message (0..=1).
         #[arg(long, default_value_t = 0.0)]
         radio_loss: f32,
+        /// Hand the team's tracker the truth every tick (every cloud on its opponent): what
+        /// the planners achieve with a perfect belief, the floor of what better searching
+        /// can reach.
+        #[arg(long, default_value_t = false, action = clap::ArgAction::Set)]
+        oracle_belief: bool,
     },
     /// How hard each difficulty preset is: its robots' win rate and median time to the tag
     /// against the `wander` and `evade` bots, from the spawns, for the preset's match length.
@@ -285,6 +290,7 @@ pub fn run(e: Experiment, load: LoadMaps) -> Result<(), LabError> {
             localisation,
             radio_latency,
             radio_loss,
+            oracle_belief,
             shard: ShardArgs { shard },
         } => {
             if runs == 0 || time_limit == 0 {
@@ -327,6 +333,7 @@ pub fn run(e: Experiment, load: LoadMaps) -> Result<(), LabError> {
                     coordination,
                     localisation,
                     radio,
+                    oracle_belief,
                 },
                 maps: MapStamp::all(&arenas),
             };

@@ -11,11 +11,17 @@
 //! Every tick until the tag it also measures how close the team's belief is to the truth
 //! (GOSPA, [`crate::tracking`]): `capture_gospa.csv` per run, the means in the summary, and
 //! the mean over the runs still going at each second (`capture_gospa_time.csv`, one SVG per
-//! map and bot).
+//! map and bot). It notes when a robot first saw an opponent, which splits a capture into
+//! finding and chasing; with `oracle_belief` every tracker is handed the truth each tick,
+//! which bounds what a better search of the belief could gain.
+
+mod statistics;
 
 use crate::error::LabError;
 use std::path::Path;
 use std::sync::Arc;
+
+use nalgebra::Point2;
 
 use crate::part::Params;
 use crate::plot::{self, Series};
@@ -28,6 +34,8 @@ use lasertag_core::sim::TICK_HZ;
 use lasertag_core::sim::arena::Arena;
 use lasertag_core::world::{MatchConfig, Placement};
 use lasertag_core::world::{MatchStatus, Side, World};
+pub use statistics::mann_whitney_p;
+pub(crate) use statistics::{mean_ci, median, stats};
 
 #[derive(Debug, Clone)]
 pub struct CaptureConfig {
@@ -42,6 +50,8 @@ pub struct CaptureConfig {
     pub localisation: bool,
     /// The team radio (perfect unless asked: `--radio-latency`, `--radio-loss`).
     pub radio: lasertag_core::radio::Settings,
+    /// Every tick, each tracker's clouds are put on the true opponents (`--oracle-belief`).
+    pub oracle_belief: bool,
 }
 
 /// One setting of the experiment.
@@ -107,6 +117,9 @@ fn one_run(arena: Arc<Arena>, s: Setting, seed: u64, cfg: &CaptureConfig) -> Res
     let mut track = Track::default();
     let mut first_seen = None;
     while world.status == MatchStatus::Running {
+        if cfg.oracle_belief {
+            reveal_opponents(&mut world);
+        }
         world.step();
         // A detection by any robot's own laser (anonymous: which opponent does not matter).
         if first_seen.is_none() && world.robots.iter().any(|r| !r.scan.seen.is_empty()) {
@@ -120,6 +133,32 @@ fn one_run(arena: Arc<Arena>, s: Setting, seed: u64, cfg: &CaptureConfig) -> Res
     }
     let tagged = (world.winner == Some(Side::Robots)).then(|| world.time_s());
     Ok((Outcome { tagged, first_seen }, track.finish()))
+}
+
+/// Puts every untagged role's cloud of every tracker on the nearest untagged opponent, at
+/// full confidence: the planners then choose from a belief that is the truth.
+fn reveal_opponents(world: &mut World) {
+    let truth: Vec<Point2<f32>> = world
+        .opponents
+        .iter()
+        .filter(|o| !o.tagged)
+        .map(|o| o.pose.pos)
+        .collect();
+    for tracker in &mut world.team.trackers {
+        for role in tracker.roles.iter_mut().filter(|r| !r.tagged) {
+            let centre = role.particles().first().copied().unwrap_or_default();
+            let Some(&at) = truth.iter().min_by(|a, b| {
+                (**a - centre)
+                    .norm_squared()
+                    .total_cmp(&(**b - centre).norm_squared())
+            }) else {
+                return;
+            };
+            let n = role.particles().len().max(1);
+            role.reset(vec![at; n]);
+            role.confidence = 1.0;
+        }
+    }
 }
 
 /// The median time to the first sighting (a run that saw nothing counts as the `limit`) and
@@ -136,16 +175,6 @@ fn find_and_chase(outcomes: &[Outcome], limit: f64) -> (f64, f64) {
     (median(&mut found), median(&mut chases))
 }
 
-/// The median of `xs` (sorted in place); `NaN` for none.
-pub(crate) fn median(xs: &mut [f64]) -> f64 {
-    xs.sort_by(f64::total_cmp);
-    match xs.len() {
-        0 => f64::NAN,
-        n if n % 2 == 1 => xs[n / 2],
-        n => (xs[n / 2 - 1] + xs[n / 2]) / 2.0,
-    }
-}
-
 /// Runs still going at a second below which a curve of their mean stops: a mean over a
 /// handful of long runs says more about those runs than about the planner.
 const CURVE_MIN_RUNS: f64 = 0.1;
@@ -159,78 +188,6 @@ fn gospa_curve(tracks: &[Track]) -> Vec<(Parts, usize)> {
         .into_iter()
         .take_while(|(_, n)| *n >= least)
         .collect()
-}
-
-/// Median, mean and the 95% confidence interval of the mean (normal approximation), with
-/// runs that timed out counted at the time limit (so the mean is a lower bound for them).
-pub(crate) fn stats(times: &[Option<f64>], limit: f64) -> (f64, f64, f64, f64) {
-    let mut xs: Vec<f64> = times.iter().map(|t| t.unwrap_or(limit)).collect();
-    let median = median(&mut xs);
-    let (mean, half) = mean_ci(&xs);
-    (median, mean, mean - half, mean + half)
-}
-
-/// Mean and the half-width of its 95% confidence interval (normal approximation).
-pub(crate) fn mean_ci(xs: &[f64]) -> (f64, f64) {
-    let n = xs.len().max(1) as f64;
-    let mean = xs.iter().sum::<f64>() / n;
-    let var = xs.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0).max(1.0);
-    (mean, 1.96 * (var / n).sqrt())
-}
-
-/// Two-sided p-value of the Mann–Whitney U test (normal approximation with tie correction).
-pub fn mann_whitney_p(a: &[f64], b: &[f64]) -> f64 {
-    let (n1, n2) = (a.len() as f64, b.len() as f64);
-    if a.is_empty() || b.is_empty() {
-        return f64::NAN;
-    }
-    let mut all: Vec<(f64, usize)> = a
-        .iter()
-        .map(|x| (*x, 0))
-        .chain(b.iter().map(|x| (*x, 1)))
-        .collect();
-    all.sort_by(|x, y| x.0.total_cmp(&y.0));
-    let mut ranks = vec![0.0; all.len()];
-    let mut tie_term = 0.0;
-    let mut i = 0;
-    while i < all.len() {
-        let mut j = i;
-        while j + 1 < all.len() && all[j + 1].0 == all[i].0 {
-            j += 1;
-        }
-        let rank = (i + j) as f64 / 2.0 + 1.0;
-        ranks[i..=j].iter_mut().for_each(|r| *r = rank);
-        let t = (j - i + 1) as f64;
-        tie_term += t * t * t - t;
-        i = j + 1;
-    }
-    let r1: f64 = all
-        .iter()
-        .zip(&ranks)
-        .filter(|(x, _)| x.1 == 0)
-        .map(|(_, r)| r)
-        .sum();
-    let u1 = r1 - n1 * (n1 + 1.0) / 2.0;
-    let mu = n1 * n2 / 2.0;
-    let n = n1 + n2;
-    let sigma = (n1 * n2 / 12.0 * ((n + 1.0) - tie_term / (n * (n - 1.0)))).sqrt();
-    if sigma == 0.0 {
-        return 1.0;
-    }
-    let z = (u1 - mu).abs() / sigma;
-    (2.0 * (1.0 - normal_cdf(z))).clamp(0.0, 1.0)
-}
-
-/// Φ(z) by the Abramowitz–Stegun approximation of erf (error below 1.5e-7).
-fn normal_cdf(z: f64) -> f64 {
-    let x = z / std::f64::consts::SQRT_2;
-    let t = 1.0 / (1.0 + 0.327_591_1 * x.abs());
-    let poly = t
-        * (0.254_829_592
-            + t * (-0.284_496_736
-                + t * (1.421_413_741 + t * (-1.453_152_027 + t * 1.061_405_429))));
-    let erf = 1.0 - poly * (-x * x).exp();
-    0.5 * (1.0 + if x >= 0.0 { erf } else { -erf })
 }
 
 const BOTS: [BotKind; 2] = [BotKind::Wander, BotKind::Evade];
@@ -291,6 +248,7 @@ impl Study for Capture {
         p.set("seed", c.seed);
         p.set("time_limit_s", c.time_limit_s);
         p.set("localisation", c.localisation);
+        p.set("oracle_belief", c.oracle_belief);
         group_to_params(&c.coordination, "coordination", &mut p);
         group_to_params(&c.radio, "radio", &mut p);
         MapStamp::to_params(&self.maps, &mut p);
@@ -305,6 +263,7 @@ impl Study for Capture {
                 seed: p.parse("seed")?,
                 time_limit_s: p.parse("time_limit_s")?,
                 localisation: p.parse("localisation")?,
+                oracle_belief: p.parse("oracle_belief")?,
                 coordination: group_from_params(p, "coordination")?,
                 radio: group_from_params(p, "radio")?,
             },
@@ -527,23 +486,6 @@ mod tests {
     use super::*;
 
     #[test]
-    fn mann_whitney_separates_shifted_samples_and_not_equal_ones() {
-        let a: Vec<f64> = (0..50).map(|i| i as f64).collect();
-        let b: Vec<f64> = (0..50).map(|i| i as f64 + 30.0).collect();
-        assert!(mann_whitney_p(&a, &b) < 1e-6);
-        assert!(mann_whitney_p(&a, &a) > 0.99);
-        assert!((normal_cdf(1.959_964) - 0.975).abs() < 1e-6);
-    }
-
-    #[test]
-    fn stats_count_timeouts_at_the_limit() {
-        let (median, mean, lo, hi) = stats(&[Some(10.0), Some(20.0), None], 300.0);
-        assert_eq!(median, 20.0);
-        assert!((mean - 110.0).abs() < 1e-9);
-        assert!(lo < mean && mean < hi);
-    }
-
-    #[test]
     fn finding_counts_unseen_runs_at_the_limit_and_chasing_only_tagged_ones() {
         let o = |tagged, first_seen| Outcome { tagged, first_seen };
         let runs = [
@@ -556,6 +498,38 @@ mod tests {
         assert_eq!(first_seen, 6.0, "median of 2, 4, 8, 300");
         assert_eq!(chase, 5.5, "median of 10 and 1");
         assert!(find_and_chase(&runs[3..], 300.0).1.is_nan());
+    }
+
+    #[test]
+    fn an_oracle_belief_puts_every_cloud_on_the_opponent() {
+        use lasertag_core::sim::arena::MapDef;
+        let arena = Arc::new(Arena::new(MapDef {
+            name: "room".into(),
+            width: 10.0,
+            height: 6.0,
+            obstacles: vec![],
+            robot_spawns: vec![[1.0, 1.0, 0.0], [1.0, 2.0, 0.0]],
+            opponent_spawns: vec![Point2::new(8.0, 4.0)],
+            landmarks: vec![],
+        }));
+        let config = MatchConfig {
+            robots: 2,
+            opponents: 1,
+            ..MatchConfig::default()
+        };
+        let mut world = World::new(arena, config).unwrap();
+        world.step();
+        let truth = world.opponents[0].pose.pos;
+        let on_truth = |w: &World| {
+            w.team.trackers.iter().all(|t| {
+                t.roles
+                    .iter()
+                    .all(|r| !r.particles().is_empty() && r.particles().iter().all(|p| *p == truth))
+            })
+        };
+        assert!(!on_truth(&world), "a fresh tracker guesses over the room");
+        reveal_opponents(&mut world);
+        assert!(on_truth(&world));
     }
 
     #[test]
