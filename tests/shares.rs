@@ -427,3 +427,30 @@ async fn a_spectator_that_does_not_read_makes_way_for_a_newcomer() {
     // The cap still holds: a fourth has no place.
     assert!(spectator(&s, 4, &id).await.is_err());
 }
+
+/// The showcase computes its head start (its spectators' delay of play) after it is listed:
+/// a spectator who comes while that runs (seconds on a loaded machine or a debug build) is
+/// told the view starts at once, as it does when the computing ends, not to wait for the
+/// ticks still being computed.
+#[tokio::test]
+async fn a_spectator_who_comes_during_the_head_start_is_not_told_to_wait() {
+    let s = TestServer::start().await;
+    tokio::spawn(lasertag::game::showcase::keep_running(s.registry.clone()));
+    let mut id = None;
+    for _ in 0..2000 {
+        let all = s.get("/api/matches").await.body;
+        id = all.as_array().unwrap().iter().find_map(|m| {
+            let id = m["id"].as_str()?;
+            id.starts_with("showcase-").then(|| id.to_string())
+        });
+        if id.is_some() {
+            break;
+        }
+        tokio::time::sleep(Duration::from_millis(5)).await;
+    }
+    let id = id.expect("a showcase starts");
+    let mut ws = s.ws(&id, None).await.unwrap();
+    let welcome = ws.next_of("welcome").await;
+    assert_eq!(welcome["role"], "spectator", "{welcome}");
+    assert_eq!(welcome["view_starts_in_s"], 0.0, "{welcome}");
+}

@@ -205,8 +205,15 @@ impl Connection {
             spectator_delay_s: self.handle.hub.delay_ticks as f64
                 / lasertag_core::sim::TICK_HZ as f64,
             view_starts_in_s: if self.watching {
-                // The match's age says nothing of where anyone is.
-                let live = hub.frames.borrow().tick;
+                // The match's age says nothing of where anyone is. A head start still being
+                // computed counts as done: it runs back to back, and its last tick is a
+                // moment away however far the computing has got (on a loaded machine a
+                // visitor may join half-way, and should not be told to wait seconds).
+                let live = hub
+                    .frames
+                    .borrow()
+                    .tick
+                    .max(hub.summary.borrow().meta.head_start_ticks);
                 hub.delay_ticks.saturating_sub(live) as f64 / lasertag_core::sim::TICK_HZ as f64
             } else {
                 0.0
