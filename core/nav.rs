@@ -11,10 +11,12 @@
 use nalgebra::Point2;
 
 use crate::sim::arena::ClearanceGrid;
-use crate::sim::{Motion, Pose, wrap_angle};
 use dial::{Exhausted, OpenCells, STRAIGHT, dial};
+pub use dial::{Unwatched, Watch};
+pub use follow::{PathFollower, steer, turn_to};
 
 mod dial;
+mod follow;
 
 /// The passable cell a search from `from` starts at: the nearest within a metre and two cells
 /// (an agent pressed against a wall stands on a cell where it does not fit).
@@ -94,7 +96,45 @@ impl DistanceField {
     /// The field over `open` of every cell up to `limit` travel units away (`u32::MAX`: all).
     fn search(grid: &ClearanceGrid, start: usize, open: &OpenCells, limit: u32) -> DistanceField {
         // With no goal and no bound on the work, the search settles every cell within reach.
-        let (units, prev) = match dial(grid, start, open, None, limit, &mut u64::MAX.clone()) {
+        DistanceField::search_watched(grid, start, open, limit, &mut Unwatched)
+    }
+
+    /// [`DistanceField::from_point_avoiding`] that grows only as long as `watch` lets it: the
+    /// cells it settled have their distances and paths exactly as the whole field gives
+    /// them; the cells beyond read as unreachable or farther than they are. `watch` sees
+    /// travel in the search's own units: [`DistanceField::metres_of`] turns them into metres
+    /// as the field does.
+    pub fn from_point_watched(
+        grid: &ClearanceGrid,
+        from: Point2<f32>,
+        avoid: &[(Point2<f32>, f32)],
+        watch: &mut impl Watch,
+    ) -> Option<DistanceField> {
+        let start = start_cell(grid, from)?;
+        let open = OpenCells::new(grid, avoid);
+        Some(DistanceField::search_watched(
+            grid,
+            start,
+            &open,
+            u32::MAX,
+            watch,
+        ))
+    }
+
+    /// Metres of `units` of travel on `grid`, as a field's `dist` holds them.
+    pub fn metres_of(grid: &ClearanceGrid, units: u32) -> f32 {
+        units as f32 * (grid.cell / STRAIGHT as f32)
+    }
+
+    fn search_watched(
+        grid: &ClearanceGrid,
+        start: usize,
+        open: &OpenCells,
+        limit: u32,
+        watch: &mut impl Watch,
+    ) -> DistanceField {
+        let (units, prev) = match dial(grid, start, open, None, limit, &mut u64::MAX.clone(), watch)
+        {
             Ok(search) | Err(Exhausted(search)) => search,
         };
         let scale = grid.cell / STRAIGHT as f32;
@@ -213,8 +253,16 @@ pub fn path_within(
     };
     charge(work, search_setup_work(grid.len()))?;
     let open = OpenCells::new(grid, &[]);
-    let (units, prev) =
-        dial(grid, start, &open, Some(goal), u32::MAX, work).map_err(|_| OverBudget)?;
+    let (units, prev) = dial(
+        grid,
+        start,
+        &open,
+        Some(goal),
+        u32::MAX,
+        work,
+        &mut Unwatched,
+    )
+    .map_err(|_| OverBudget)?;
     if units.get(goal).is_none_or(|&u| u == u32::MAX) {
         return Ok(None);
     }
@@ -324,73 +372,10 @@ fn segment_passable_within(
     Ok(true)
 }
 
-/// Walks a path of waypoints.
-#[derive(Debug, Clone, Default, PartialEq)]
-pub struct PathFollower {
-    pub waypoints: Vec<Point2<f32>>,
-    pub next: usize,
-}
-
-impl PathFollower {
-    pub fn new(waypoints: Vec<Point2<f32>>) -> PathFollower {
-        // waypoints[0] is where the agent stood when planning.
-        PathFollower { waypoints, next: 1 }
-    }
-
-    pub fn finished(&self) -> bool {
-        self.next >= self.waypoints.len()
-    }
-
-    /// The waypoint to head for now, advancing past those already reached.
-    pub fn target(&mut self, pos: Point2<f32>) -> Option<Point2<f32>> {
-        while self.next < self.waypoints.len() {
-            let last = self.next + 1 == self.waypoints.len();
-            let reach = if last { 0.1 } else { 0.3 };
-            if (self.waypoints[self.next] - pos).norm() <= reach {
-                self.next += 1;
-            } else {
-                break;
-            }
-        }
-        self.waypoints.get(self.next).copied()
-    }
-}
-
-/// Differential-drive steering towards `target`: turn first when the error is large, then drive
-/// with speed falling off as the heading error grows. `turn_rate` is the top turn rate.
-pub fn steer(pose: Pose, target: Point2<f32>, turn_rate: f32) -> Motion {
-    let d = target - pose.pos;
-    let dist = d.norm();
-    if dist < 1e-3 {
-        return Motion::Stop;
-    }
-    let err = wrap_angle(d.y.atan2(d.x) - pose.theta);
-    // A proportional turn that saturates at the top rate; gain chosen to settle in ~3 ticks.
-    let turn = (err * 6.0 / turn_rate).clamp(-1.0, 1.0);
-    let forward = if err.abs() > 0.8 {
-        0.0
-    } else {
-        err.cos().max(0.0) * (dist / 0.4).min(1.0)
-    };
-    Motion::Drive { forward, turn }
-}
-
-/// Turn in place to `theta`; `Stop` once within a small tolerance.
-pub fn turn_to(pose: Pose, theta: f32, turn_rate: f32) -> Motion {
-    let err = wrap_angle(theta - pose.theta);
-    if err.abs() < 0.02 {
-        Motion::Stop
-    } else {
-        Motion::Drive {
-            forward: 0.0,
-            turn: (err * 6.0 / turn_rate).clamp(-1.0, 1.0),
-        }
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::sim::Pose;
     use crate::sim::arena::{Arena, MapDef};
 
     /// Two rooms joined by a door in a wall at x = 5.
@@ -519,6 +504,55 @@ mod tests {
         }
     }
 
+    /// Stops where told, and tells every settled cell once, in order of distance.
+    struct StopAt {
+        metres: f32,
+        grid_cell: f32,
+        settled: Vec<(usize, u32)>,
+    }
+
+    impl Watch for StopAt {
+        fn settled(&mut self, cell: usize, units: u32) {
+            self.settled.push((cell, units));
+        }
+        fn go_on(&mut self, units: u32) -> bool {
+            units as f32 * (self.grid_cell / STRAIGHT as f32) <= self.metres
+        }
+    }
+
+    #[test]
+    fn a_watched_field_is_the_whole_fields_as_far_as_it_grew() {
+        let arena = two_rooms();
+        let grid = &arena.grid;
+        let from = Point2::new(1.0, 1.0);
+        let whole = DistanceField::from_point(grid, from).unwrap();
+        let all = DistanceField::from_point_watched(grid, from, &[], &mut Unwatched).unwrap();
+        assert_eq!(all.dist, whole.dist);
+        for metres in [0.0, 2.0, 6.5] {
+            let mut watch = StopAt {
+                metres,
+                grid_cell: grid.cell,
+                settled: Vec::new(),
+            };
+            let grown = DistanceField::from_point_watched(grid, from, &[], &mut watch).unwrap();
+            let mut told = 0;
+            for cell in 0..grid.len() {
+                if whole.reachable(cell) && whole.dist[cell] <= metres {
+                    assert_eq!(grown.dist[cell], whole.dist[cell], "cell {cell}");
+                    assert_eq!(grown.cells_to(cell), whole.cells_to(cell));
+                    told += 1;
+                } else {
+                    assert!(!grown.reachable(cell) || grown.dist[cell] >= whole.dist[cell]);
+                }
+            }
+            assert_eq!(watch.settled.len(), told, "{metres} m");
+            assert!(watch.settled.windows(2).all(|w| w[0].1 <= w[1].1));
+            for &(cell, units) in &watch.settled {
+                assert_eq!(DistanceField::metres_of(grid, units), whole.dist[cell]);
+            }
+        }
+    }
+
     #[test]
     fn a_walled_off_room_is_unreachable() {
         let mut def = two_rooms().def.clone();
@@ -556,16 +590,5 @@ mod tests {
             path_within(g, Point2::new(1.0, 1.0), goal, &mut work),
             Err(OverBudget)
         );
-    }
-
-    #[test]
-    fn steering_reaches_a_point() {
-        let mut pose = Pose::new(1.0, 1.0, 3.0);
-        let target = Point2::new(3.0, 2.0);
-        for _ in 0..200 {
-            let m = steer(pose, target, 2.0);
-            pose = crate::sim::motion::propose(pose, m, 1.0, 2.0);
-        }
-        assert!((pose.pos - target).norm() < 0.05, "{pose:?}");
     }
 }

@@ -68,12 +68,35 @@ impl OpenCells {
     }
 }
 
+/// What a caller follows of a search as it grows: the cells it settles, and whether it should
+/// go on to the next distance. The search asks before settling the cells `units` away, so a
+/// caller that says no leaves every cell nearer settled (final units and predecessors) and
+/// every other one unreached or with more units than it will finally have.
+pub trait Watch {
+    /// `cell` has its final `units`.
+    fn settled(&mut self, cell: usize, units: u32);
+    /// Whether to settle the cells `units` away.
+    fn go_on(&mut self, units: u32) -> bool;
+}
+
+/// Watches nothing and lets the search run to its end: the whole field.
+pub struct Unwatched;
+
+impl Watch for Unwatched {
+    #[inline(always)]
+    fn settled(&mut self, _: usize, _: u32) {}
+    #[inline(always)]
+    fn go_on(&mut self, _: u32) -> bool {
+        true
+    }
+}
+
 /// Dial's algorithm from `start` over the `open` cells. With a `goal` it stops once the goal
 /// is settled: every cell on the goal's shortest path was settled before it, and a cell's
 /// predecessor changes only on a strictly shorter way, so the path is the one a full search
 /// finds. Each settled cell takes one unit of `work`; none left, it gives up. It also stops
 /// once every cell within `limit` units is settled: those have their final units, and every
-/// other cell holds `u32::MAX` or more than `limit`.
+/// other cell holds `u32::MAX` or more than `limit`; and where `watch` says so.
 pub(super) fn dial(
     grid: &ClearanceGrid,
     start: usize,
@@ -81,6 +104,7 @@ pub(super) fn dial(
     goal: Option<usize>,
     limit: u32,
     work: &mut u64,
+    watch: &mut impl Watch,
 ) -> Result<Search, Exhausted> {
     const RING: usize = DIAGONAL as usize + 1;
     let n = grid.len();
@@ -96,7 +120,7 @@ pub(super) fn dial(
     buckets[0].push((start as u32, bordered(start) as u32));
     let mut pending = 1usize;
     let mut d: u32 = 0;
-    while pending > 0 && d <= limit {
+    while pending > 0 && d <= limit && watch.go_on(d) {
         let slot = d as usize % RING;
         let cells = std::mem::take(&mut buckets[slot]);
         pending -= cells.len();
@@ -105,6 +129,7 @@ pub(super) fn dial(
             if units[idx] != d {
                 continue; // a stale entry: reached sooner by another way
             }
+            watch.settled(idx, d);
             if goal == Some(idx) {
                 return Ok((units, prev));
             }

@@ -30,11 +30,13 @@
 //! tracker, and nobody moves a teammate: a robot stuck behind one with a higher index asks
 //! it over the radio to step aside, and that robot does so itself when it hears.
 //!
-//! The scoring stages live in `scoring`; robots getting past each other in doorways and
-//! narrow corridors in `passages`.
+//! The scoring stages live in `scoring` (with how far a choosing robot's travel field need
+//! grow in `reach`); robots getting past each other in doorways and narrow corridors in
+//! `passages`.
 
 mod mates;
 mod passages;
+mod reach;
 mod scoring;
 pub mod search;
 pub mod travel;
@@ -228,6 +230,9 @@ pub struct Coordinated {
     sees_landmark: Vec<bool>,
     /// Per clearance-grid cell: whether it lies in a narrow passage.
     narrow: Vec<bool>,
+    /// Per clearance-grid cell: the candidate position of `views` on it, or
+    /// `reach::NO_POSITION` (shared: copies of a match's world keep one).
+    cell_positions: Arc<[u32]>,
     /// The `search` planner: each choice looks ahead over several poses (see `search`).
     searching: bool,
     /// Travel between the view table's positions, for the look-ahead (`None`: not
@@ -251,6 +256,7 @@ impl Coordinated {
                 })
                 .collect();
         let narrow = nav::narrow_cells(&arena.grid, NARROW_HALF_WIDTH, NARROW_REACH);
+        let cell_positions = reach::cell_positions(&arena.grid, &views.positions);
         Coordinated {
             settings,
             views,
@@ -261,6 +267,7 @@ impl Coordinated {
             norm: 1.0,
             sees_landmark,
             narrow,
+            cell_positions,
             searching: false,
             travel: None,
         }

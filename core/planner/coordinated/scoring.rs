@@ -4,9 +4,10 @@
 
 use nalgebra::Point2;
 
+use super::reach::ChoiceWatch;
 use super::search::{self, Ranked};
 use super::{Coordinated, Goal};
-use crate::nav::{DistanceField, PathFollower};
+use crate::nav::{DistanceField, PathFollower, Unwatched, Watch};
 use crate::planner::view::{Knowledge, TeamView};
 use crate::sim::arena::Arena;
 use crate::sim::{AGENT_RADIUS, Physics, Pose, wrap_angle};
@@ -133,8 +134,15 @@ impl Coordinated {
             .filter_map(|m| m.goal)
             .collect();
         self.score_poses(total);
-        let field = self.field_for(arena, view, know, i);
         let uncertainty = self.uncertainty(view.robots[i].spread);
+        // The look-ahead ranks every pose (and follows the robot's current goal, however
+        // far): it needs the whole field.
+        let field = if self.searching {
+            self.field_for(arena, view, know, i, &mut Unwatched)
+        } else {
+            let mut watch = self.choice_watch(arena, physics, i, &taken, uncertainty);
+            self.field_for(arena, view, know, i, &mut watch)
+        };
         let best = field.as_ref().and_then(|f| {
             self.best_for(arena, physics, i, f, &taken, uncertainty)
                 .map(|c| (c, f))
@@ -165,12 +173,64 @@ impl Coordinated {
         state.progress = None;
     }
 
+    /// What stops robot `i`'s field growing once no farther pose can be its choice: each
+    /// position's most worth before travel, with the same terms [`Coordinated::best_for`]
+    /// adds, less the narrow passages' (at least 0, at most the whole way).
+    fn choice_watch<'a>(
+        &'a self,
+        arena: &'a Arena,
+        physics: &Physics,
+        i: usize,
+        chosen: &[Point2<f32>],
+        uncertainty: f32,
+    ) -> ChoiceWatch<'a> {
+        let s = &self.settings;
+        let h = s.headings;
+        let current = self.robots[i].goal.map(|g| g.pose);
+        let tops: Vec<f32> = self
+            .views
+            .positions
+            .iter()
+            .enumerate()
+            .map(|(p_idx, p)| {
+                let crowding: f32 = chosen
+                    .iter()
+                    .map(|q| (1.0 - (q - p).norm() / s.crowding_radius).max(0.0))
+                    .sum();
+                let landmark = if uncertainty > 0.0 && self.sees_landmark[p_idx] {
+                    uncertainty * s.landmark_weight
+                } else {
+                    0.0
+                };
+                let most = (p_idx * h..(p_idx + 1) * h)
+                    .map(|k| {
+                        self.seen[k]
+                            + if current == Some(k) {
+                                s.keep_bonus
+                            } else {
+                                0.0
+                            }
+                    })
+                    .fold(f32::NEG_INFINITY, f32::max);
+                most - s.crowding_weight * crowding + landmark
+            })
+            .collect();
+        let per_metre = s.travel_weight / physics.robot_speed;
+        let narrow = if uncertainty > 0.0 && s.narrow_weight > 0.0 {
+            uncertainty * s.narrow_weight
+        } else {
+            0.0
+        };
+        ChoiceWatch::new(&arena.grid, &self.cell_positions, tops, per_metre, narrow)
+    }
+
     fn field_for(
         &self,
         arena: &Arena,
         view: &TeamView,
         know: &Knowledge,
         i: usize,
+        watch: &mut impl Watch,
     ) -> Option<DistanceField> {
         let from = view.robots[i].pose.pos;
         if self.robots[i].avoid_team {
@@ -184,11 +244,11 @@ impl Coordinated {
                     (m.pos, (3.0 * AGENT_RADIUS).min(gap.max(0.0)))
                 })
                 .collect();
-            if let Some(f) = DistanceField::from_point_avoiding(&arena.grid, from, &others) {
+            if let Some(f) = DistanceField::from_point_watched(&arena.grid, from, &others, watch) {
                 return Some(f);
             }
         }
-        DistanceField::from_point(&arena.grid, from)
+        DistanceField::from_point_watched(&arena.grid, from, &[], watch)
     }
 
     /// Per-pose worth under the current (claimed) mass: [`Coordinated::worth_of`] for every
@@ -453,5 +513,74 @@ mod tests {
                 "pose {k}"
             );
         }
+    }
+
+    /// The field that stops growing once no farther pose can win gives every choice the
+    /// whole field gives, pose, value and worth, over random beliefs, starts, teammates'
+    /// goals, current goals and localisation spreads (the narrow passages' and landmarks'
+    /// terms on and off); and it does stop early.
+    #[test]
+    fn a_field_grown_only_as_far_as_a_choice_needs_makes_the_same_choice() {
+        use rand::{RngExt, SeedableRng};
+        let physics = Physics::default();
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
+        let mut stopped_early = 0;
+        for trial in 0..300 {
+            let arena = if trial % 2 == 0 {
+                corridor()
+            } else {
+                std::sync::Arc::new(room_with_landmark())
+            };
+            let settings = Settings {
+                keep_bonus: if trial % 3 == 0 { 0.05 } else { 0.0 },
+                ..Settings::default()
+            };
+            let mut c = Coordinated::new(&arena, &physics, settings, 1);
+            let (w, h) = (arena.def.width, arena.def.height);
+            let point = |rng: &mut rand_chacha::ChaCha8Rng| {
+                Point2::new(rng.random::<f32>() * w, rng.random::<f32>() * h)
+            };
+            let mut total = 0.0;
+            for _ in 0..rng.random_range(1..6) {
+                let p = point(&mut rng);
+                if let Some(cell) = c.views.cell_of(p) {
+                    let m = rng.random::<f32>();
+                    c.mass[cell] += m;
+                    total += m;
+                }
+            }
+            if total == 0.0 {
+                continue;
+            }
+            c.score_poses(total);
+            let from = point(&mut rng);
+            let taken: Vec<Point2<f32>> = (0..rng.random_range(0..3))
+                .map(|_| point(&mut rng))
+                .collect();
+            if rng.random::<f32>() < 0.5 {
+                let pose = rng.random_range(0..c.views.len());
+                c.robots[0].goal = Some(Goal { pose, worth: 0.5 });
+            }
+            let spread = [0.0, 0.2, 0.3][rng.random_range(0..3)];
+            let u = c.uncertainty(spread);
+            let Some(whole) = DistanceField::from_point(&arena.grid, from) else {
+                continue;
+            };
+            let mut watch = c.choice_watch(&arena, &physics, 0, &taken, u);
+            let grown =
+                DistanceField::from_point_watched(&arena.grid, from, &[], &mut watch).unwrap();
+            let full = c.best_for(&arena, &physics, 0, &whole, &taken, u);
+            let part = c.best_for(&arena, &physics, 0, &grown, &taken, u);
+            assert_eq!(
+                full.map(|b| (b.pose, b.value.to_bits(), b.worth.to_bits())),
+                part.map(|b| (b.pose, b.value.to_bits(), b.worth.to_bits())),
+                "trial {trial}"
+            );
+            let settled = |f: &DistanceField| f.dist.iter().filter(|d| d.is_finite()).count();
+            if settled(&grown) < settled(&whole) {
+                stopped_early += 1;
+            }
+        }
+        assert!(stopped_early > 50, "{stopped_early}");
     }
 }
