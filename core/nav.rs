@@ -512,7 +512,10 @@ mod tests {
     }
 
     impl Watch for StopAt {
-        fn settled(&mut self, cell: usize, units: u32) {
+        fn settled(&mut self, cell: usize, units: u32, from: Option<(usize, u32)>) {
+            if let Some((_, before)) = from {
+                assert!(before < units);
+            }
             self.settled.push((cell, units));
         }
         fn go_on(&mut self, units: u32) -> bool {

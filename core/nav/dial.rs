@@ -73,8 +73,12 @@ impl OpenCells {
 /// caller that says no leaves every cell nearer settled (final units and predecessors) and
 /// every other one unreached or with more units than it will finally have.
 pub trait Watch {
-    /// `cell` has its final `units`.
-    fn settled(&mut self, cell: usize, units: u32);
+    /// Whether [`Watch::settled`] reads where a cell was reached from (looking it up costs
+    /// the search a little on every cell: a watch that ignores it says no).
+    const READS_FROM: bool = true;
+    /// `cell` has its final `units`, reached from `from` (a cell and its units; `None` for
+    /// the start), its final predecessor.
+    fn settled(&mut self, cell: usize, units: u32, from: Option<(usize, u32)>);
     /// Whether to settle the cells `units` away.
     fn go_on(&mut self, units: u32) -> bool;
 }
@@ -83,8 +87,9 @@ pub trait Watch {
 pub struct Unwatched;
 
 impl Watch for Unwatched {
+    const READS_FROM: bool = false;
     #[inline(always)]
-    fn settled(&mut self, _: usize, _: u32) {}
+    fn settled(&mut self, _: usize, _: u32, _: Option<(usize, u32)>) {}
     #[inline(always)]
     fn go_on(&mut self, _: u32) -> bool {
         true
@@ -97,14 +102,14 @@ impl Watch for Unwatched {
 /// finds. Each settled cell takes one unit of `work`; none left, it gives up. It also stops
 /// once every cell within `limit` units is settled: those have their final units, and every
 /// other cell holds `u32::MAX` or more than `limit`; and where `watch` says so.
-pub(super) fn dial(
+pub(super) fn dial<W: Watch>(
     grid: &ClearanceGrid,
     start: usize,
     open: &OpenCells,
     goal: Option<usize>,
     limit: u32,
     work: &mut u64,
-    watch: &mut impl Watch,
+    watch: &mut W,
 ) -> Result<Search, Exhausted> {
     const RING: usize = DIAGONAL as usize + 1;
     let n = grid.len();
@@ -129,7 +134,13 @@ pub(super) fn dial(
             if units[idx] != d {
                 continue; // a stale entry: reached sooner by another way
             }
-            watch.settled(idx, d);
+            let from = if W::READS_FROM && prev[idx] != NONE {
+                let from = prev[idx] as usize;
+                Some((from, units[from]))
+            } else {
+                None
+            };
+            watch.settled(idx, d, from);
             if goal == Some(idx) {
                 return Ok((units, prev));
             }

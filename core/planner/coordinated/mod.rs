@@ -231,7 +231,7 @@ pub struct Coordinated {
     /// Per clearance-grid cell: whether it lies in a narrow passage.
     narrow: Vec<bool>,
     /// Per clearance-grid cell: the candidate position of `views` on it, or
-    /// `reach::NO_POSITION` (shared: copies of a match's world keep one).
+    /// none (shared: copies of a match's world keep one).
     cell_positions: Arc<[u32]>,
     /// The `search` planner: each choice looks ahead over several poses (see `search`).
     searching: bool,
@@ -256,7 +256,7 @@ impl Coordinated {
                 })
                 .collect();
         let narrow = nav::narrow_cells(&arena.grid, NARROW_HALF_WIDTH, NARROW_REACH);
-        let cell_positions = reach::cell_positions(&arena.grid, &views.positions);
+        let cell_positions = Coordinated::cell_positions(&arena.grid, &views.positions);
         Coordinated {
             settings,
             views,

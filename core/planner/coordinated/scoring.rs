@@ -4,7 +4,6 @@
 
 use nalgebra::Point2;
 
-use super::reach::ChoiceWatch;
 use super::search::{self, Ranked};
 use super::{Coordinated, Goal};
 use crate::nav::{DistanceField, PathFollower, Unwatched, Watch};
@@ -137,14 +136,19 @@ impl Coordinated {
         let uncertainty = self.uncertainty(view.robots[i].spread);
         // The look-ahead ranks every pose (and follows the robot's current goal, however
         // far): it needs the whole field.
-        let field = if self.searching {
-            self.field_for(arena, view, know, i, &mut Unwatched)
+        let (field, narrow) = if self.searching {
+            let field = self.field_for(arena, view, know, i, &mut Unwatched);
+            let narrow = field
+                .as_ref()
+                .and_then(|f| self.narrow_metres(f, uncertainty));
+            (field, narrow)
         } else {
             let mut watch = self.choice_watch(arena, physics, i, &taken, uncertainty);
-            self.field_for(arena, view, know, i, &mut watch)
+            let field = self.field_for(arena, view, know, i, &mut watch);
+            (field, watch.into_narrow_metres())
         };
         let best = field.as_ref().and_then(|f| {
-            self.best_for(arena, physics, i, f, &taken, uncertainty)
+            self.best_for(arena, physics, i, f, narrow.as_deref(), &taken, uncertainty)
                 .map(|c| (c, f))
         });
         let from = view.robots[i].pose.pos;
@@ -171,57 +175,6 @@ impl Coordinated {
         });
         state.path = PathFollower::new(path);
         state.progress = None;
-    }
-
-    /// What stops robot `i`'s field growing once no farther pose can be its choice: each
-    /// position's most worth before travel, with the same terms [`Coordinated::best_for`]
-    /// adds, less the narrow passages' (at least 0, at most the whole way).
-    fn choice_watch<'a>(
-        &'a self,
-        arena: &'a Arena,
-        physics: &Physics,
-        i: usize,
-        chosen: &[Point2<f32>],
-        uncertainty: f32,
-    ) -> ChoiceWatch<'a> {
-        let s = &self.settings;
-        let h = s.headings;
-        let current = self.robots[i].goal.map(|g| g.pose);
-        let tops: Vec<f32> = self
-            .views
-            .positions
-            .iter()
-            .enumerate()
-            .map(|(p_idx, p)| {
-                let crowding: f32 = chosen
-                    .iter()
-                    .map(|q| (1.0 - (q - p).norm() / s.crowding_radius).max(0.0))
-                    .sum();
-                let landmark = if uncertainty > 0.0 && self.sees_landmark[p_idx] {
-                    uncertainty * s.landmark_weight
-                } else {
-                    0.0
-                };
-                let most = (p_idx * h..(p_idx + 1) * h)
-                    .map(|k| {
-                        self.seen[k]
-                            + if current == Some(k) {
-                                s.keep_bonus
-                            } else {
-                                0.0
-                            }
-                    })
-                    .fold(f32::NEG_INFINITY, f32::max);
-                most - s.crowding_weight * crowding + landmark
-            })
-            .collect();
-        let per_metre = s.travel_weight / physics.robot_speed;
-        let narrow = if uncertainty > 0.0 && s.narrow_weight > 0.0 {
-            uncertainty * s.narrow_weight
-        } else {
-            0.0
-        };
-        ChoiceWatch::new(&arena.grid, &self.cell_positions, tops, per_metre, narrow)
     }
 
     fn field_for(
@@ -300,13 +253,16 @@ impl Coordinated {
 
     /// Robot `i`'s best pose given the scored worths. An `uncertainty` above 0 adds
     /// Fabiani & Latombe's trade: destinations that see a landmark gain, paths through
-    /// narrow passages lose.
+    /// narrow passages (`narrow`: their metres on each cell's path, for a robot that weighs
+    /// them) lose.
+    #[allow(clippy::too_many_arguments)] // the choice's inputs, each read once
     fn best_for(
         &self,
         arena: &Arena,
         physics: &Physics,
         i: usize,
         field: &DistanceField,
+        narrow: Option<&[f32]>,
         chosen: &[Point2<f32>],
         uncertainty: f32,
     ) -> Option<Choice> {
@@ -316,10 +272,6 @@ impl Coordinated {
         let mut ranked: Vec<Ranked> = Vec::new();
         let h = s.headings;
         let current = self.robots[i].goal.map(|g| g.pose);
-        // Only for an uncertain robot: a certain one skips the pass (and the terms vanish
-        // exactly, so its choices are the plain planner's).
-        let narrow =
-            (uncertainty > 0.0 && s.narrow_weight > 0.0).then(|| field.narrow_metres(&self.narrow));
         let mut best: Option<Choice> = None;
         for (p_idx, p) in self.views.positions.iter().enumerate() {
             let Some(cell) = arena.grid.cell_of(*p) else {
@@ -340,7 +292,7 @@ impl Coordinated {
                 } else {
                     0.0
                 };
-                let narrow_m = narrow.as_ref().map_or(0.0, |n| n[cell]);
+                let narrow_m = narrow.map_or(0.0, |n| n[cell]);
                 cost += uncertainty * (s.narrow_weight * narrow_m - landmark);
             }
             for k in p_idx * h..(p_idx + 1) * h {
@@ -406,7 +358,10 @@ mod tests {
         c.score_poses(total);
         let field = DistanceField::from_point(&arena.grid, from).unwrap();
         let u = c.uncertainty(spread);
-        let best = c.best_for(arena, &physics, 0, &field, &[], u).unwrap();
+        let narrow = c.narrow_metres(&field, u);
+        let best = c
+            .best_for(arena, &physics, 0, &field, narrow.as_deref(), &[], u)
+            .unwrap();
         (c.views.pose(best.pose).0, best)
     }
 
@@ -569,8 +524,40 @@ mod tests {
             let mut watch = c.choice_watch(&arena, &physics, 0, &taken, u);
             let grown =
                 DistanceField::from_point_watched(&arena.grid, from, &[], &mut watch).unwrap();
-            let full = c.best_for(&arena, &physics, 0, &whole, &taken, u);
-            let part = c.best_for(&arena, &physics, 0, &grown, &taken, u);
+            let whole_narrow = c.narrow_metres(&whole, u);
+            let grown_narrow = watch.into_narrow_metres();
+            assert_eq!(whole_narrow.is_some(), grown_narrow.is_some());
+            let full = c.best_for(
+                &arena,
+                &physics,
+                0,
+                &whole,
+                whole_narrow.as_deref(),
+                &taken,
+                u,
+            );
+            let part = c.best_for(
+                &arena,
+                &physics,
+                0,
+                &grown,
+                grown_narrow.as_deref(),
+                &taken,
+                u,
+            );
+            // The narrow metres summed as the field grew are the whole field's, cell by
+            // cell, wherever the field settled.
+            if let (Some(w), Some(g)) = (&whole_narrow, &grown_narrow) {
+                for cell in 0..g.len() {
+                    if g[cell].is_finite() {
+                        assert_eq!(
+                            g[cell].to_bits(),
+                            w[cell].to_bits(),
+                            "trial {trial}, cell {cell}"
+                        );
+                    }
+                }
+            }
             assert_eq!(
                 full.map(|b| (b.pose, b.value.to_bits(), b.worth.to_bits())),
                 part.map(|b| (b.pose, b.value.to_bits(), b.worth.to_bits())),
