@@ -375,7 +375,6 @@ fn segment_passable_within(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::sim::Pose;
     use crate::sim::arena::{Arena, MapDef};
 
     /// Two rooms joined by a door in a wall at x = 5.
