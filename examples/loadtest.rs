@@ -31,7 +31,7 @@ use tokio_tungstenite::tungstenite::Message;
 #[derive(Debug, Parser)]
 #[command(about = "Load test: real-time matches and WebSocket spectators on loopback")]
 struct Args {
-    /// Real-time matches to run (1..=200).
+    /// Real-time matches to run (1..=500).
     #[arg(long, default_value_t = 20)]
     matches: usize,
     /// WebSocket spectators, spread over the matches (0..=5000).
@@ -167,11 +167,11 @@ fn pct(sorted: &[f64], q: f64) -> f64 {
 }
 
 async fn run(args: Args) -> Result<(), String> {
-    if !(1..=200).contains(&args.matches)
+    if !(1..=500).contains(&args.matches)
         || args.spectators > 5000
         || !(1..=600).contains(&args.seconds)
     {
-        return Err("--matches 1..=200, --spectators 0..=5000, --seconds 1..=600".into());
+        return Err("--matches 1..=500, --spectators 0..=5000, --seconds 1..=600".into());
     }
     let addr = match args.addr {
         Some(a) if a.ip().is_loopback() => a,

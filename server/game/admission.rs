@@ -81,19 +81,19 @@ const BYTES_PER_MERGE_CELL: f64 = 16.0;
 // docs/results/admission_calibration.csv); `tests/admission_calibration.rs` holds every
 // price there within 1.5× of its measured p99.
 /// Milliseconds per tick whatever the settings.
-const TICK_BASE_MS: f64 = 0.25;
+const TICK_BASE_MS: f64 = 0.15;
 /// Per clearance cell: the distance fields of the planner's turn and the bots' choices.
-const TICK_MS_PER_CELL: f64 = 1.5e-5;
+const TICK_MS_PER_CELL: f64 = 0.8e-5;
 /// Per robot: its scan and its share of the tracker.
 const TICK_MS_PER_ROBOT: f64 = 0.01;
 /// Per robot the `coordinated` planner drives: its turns (a distance field, every candidate
 /// pose scored).
-const TICK_MS_PER_COORDINATED_ROBOT: f64 = 0.2;
+const TICK_MS_PER_COORDINATED_ROBOT: f64 = 0.1;
 /// Per tracker particle and tracker copy, plus as much again per robot whose sightings it
 /// weighs (negative information tests each particle against each robot's scan; a
 /// teammate's late scan, behind an imperfect radio, takes the slower one-particle test).
 const TICK_MS_PER_PARTICLE: f64 = 1e-5;
-const TICK_MS_PER_PARTICLE_ROBOT: f64 = 1e-5;
+const TICK_MS_PER_PARTICLE_ROBOT: f64 = 0.5e-5;
 /// Per landmark and localising robot.
 const TICK_MS_PER_LANDMARK: f64 = 2.2e-4;
 
