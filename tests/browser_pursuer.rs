@@ -1,6 +1,7 @@
 //! A person on the robot team in headless Chromium against a real server: they take a robot
-//! from the lobby (co-op), and in a staged match, over a network with a 150 ms round trip,
-//! they turn their robot round with the keyboard, see the team's belief, split a role with
+//! from the lobby (co-op, beside a robot with the look-ahead `search` planner), and in a
+//! staged match, over a network with a 150 ms round trip, they turn their robot round with
+//! the keyboard, see the team's belief, split a role with
 //! their own sighting and tag the opponent they found.
 //!
 //! Needs Chromium (`bash tests/run.sh` installs Debian's package when it is missing). With
@@ -33,7 +34,7 @@ async fn a_person_hunts_with_the_robots_in_headless_chromium() {
          const f = document.getElementById('create');
          f.elements.difficulty.value = 'custom'; f.elements.difficulty.dispatchEvent(new Event('change'));
          f.elements.mode.value = 'coop'; f.elements.mode.dispatchEvent(new Event('change'));
-         f.elements.robots.value = 1; f.elements.planner.value = 'coordinated';
+         f.elements.robots.value = 1; f.elements.planner.value = 'search';
          f.requestSubmit();",
     )
     .await;
@@ -47,7 +48,7 @@ async fn a_person_hunts_with_the_robots_in_headless_chromium() {
     let listed = s.get("/api/matches").await.body;
     let m = &listed[0];
     assert_eq!(m["pursuer_slots"], 1, "{m}");
-    assert_eq!(m["robot_planners"], json!(["coordinated", "person"]), "{m}");
+    assert_eq!(m["robot_planners"], json!(["search", "person"]), "{m}");
     assert_eq!(m["opponent_control"], "bot", "{m}");
 
     // 2. A staged hunt, over a network with a 150 ms round trip: r1 (the person's) at (1, 2)

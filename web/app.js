@@ -189,6 +189,14 @@ async function loadDifficulties() {
   showDifficulty();
 }
 
+/** What each planner does, in a player's words (docs/planner.md, docs/search-planner.md). */
+const TEAM_PLANS = {
+  coordinated: "tracking you and coordinating",
+  search: "tracking you and planning several looks ahead",
+  baseline: "searching at random",
+  idle: "standing still",
+};
+
 /** The chosen preset's settings fill the form (a preset decides them) and its measured
  * figures show beside it; "custom" frees the fields. */
 function showDifficulty() {
@@ -206,7 +214,7 @@ function showDifficulty() {
   const by = Object.fromEntries(d.measured.map((m) => [m.bot, m]));
   const pct = (m) => `${Math.round(100 * m.robots_win_rate)}%`;
   const team = `${d.robots} robot${d.robots > 1 ? "s" : ""} at ${d.robot_speed} m/s, ` +
-    `${d.planner === "coordinated" ? "tracking you and coordinating" : "searching at random"}, ` +
+    `${TEAM_PLANS[d.planner] || d.planner}, ` +
     `${d.tag_cooldown_s} s between tags, ${d.time_limit_s / 60} minutes`;
   const measured = by.evade && by.wander
     ? ` Measured on ${by.evade.map}: the robots win ${pct(by.evade)} of matches against a bot that runs from them ` +
