@@ -34,7 +34,7 @@ use lasertag_core::sim::TICK_HZ;
 use lasertag_core::sim::arena::Arena;
 use lasertag_core::world::{MatchConfig, Placement};
 use lasertag_core::world::{MatchStatus, Side, World};
-pub use statistics::mann_whitney_p;
+pub use statistics::{mann_whitney_p, wilcoxon_signed_rank_p};
 pub(crate) use statistics::{mean_ci, median, stats};
 
 #[derive(Debug, Clone)]
@@ -290,7 +290,7 @@ fn write(study: &Capture, runs: Vec<Run>, out: &Path) -> Result<String, LabError
     let limit = cfg.time_limit_s as f64;
     let mut csv = String::from("map,bot,planner,seed,captured,time_s,first_seen_s\n");
     let mut summary = format!(
-        "map,bot,planner,runs,captured,median_s,mean_s,mean_ci95_low_s,mean_ci95_high_s,median_ratio_vs_baseline,mann_whitney_p,{},mean_gospa_ci95_m,median_ratio_vs_coordinated,mann_whitney_p_vs_coordinated,median_first_seen_s,median_chase_s\n",
+        "map,bot,planner,runs,captured,median_s,mean_s,mean_ci95_low_s,mean_ci95_high_s,median_ratio_vs_baseline,mann_whitney_p,{},mean_gospa_ci95_m,median_ratio_vs_coordinated,mann_whitney_p_vs_coordinated,median_first_seen_s,median_chase_s,wilcoxon_p_vs_coordinated\n",
         tracking::csv_header("mean_")
     );
     let mut table = format!(
@@ -379,9 +379,11 @@ fn write(study: &Capture, runs: Vec<Run>, out: &Path) -> Result<String, LabError
                 let pv = mann_whitney_p(&as_values(&times), &as_values(&base));
                 let greedy_ratio = median / greedy_median;
                 let greedy_pv = mann_whitney_p(&as_values(&times), &as_values(&greedy));
+                // Run i of every planner has the same seed and starts: paired.
+                let paired_pv = wilcoxon_signed_rank_p(&as_values(&times), &as_values(&greedy));
                 let (first_seen, chase) = find_and_chase(&outcomes_of(p), limit);
                 summary.push_str(&format!(
-                    "{},{},{},{},{captured},{median:.2},{mean:.2},{lo:.2},{hi:.2},{ratio:.3},{pv:.3e},{},{gospa_ci:.4},{greedy_ratio:.3},{greedy_pv:.3e},{first_seen:.2},{chase:.2}\n",
+                    "{},{},{},{},{captured},{median:.2},{mean:.2},{lo:.2},{hi:.2},{ratio:.3},{pv:.3e},{},{gospa_ci:.4},{greedy_ratio:.3},{greedy_pv:.3e},{first_seen:.2},{chase:.2},{paired_pv:.3e}\n",
                     map_name,
                     bot_name(bot),
                     planner_name(p),
