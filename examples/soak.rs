@@ -45,7 +45,7 @@ struct Args {
     /// Minutes to run (1..=600).
     #[arg(long, default_value_t = 30)]
     minutes: u64,
-    /// Real-time matches kept running (2..=100).
+    /// Real-time matches kept running (2..=300).
     #[arg(long, default_value_t = 20)]
     matches: usize,
     /// WebSocket clients (1..=2000).
@@ -429,12 +429,12 @@ fn median(mut v: Vec<f64>) -> f64 {
 
 async fn run(args: Args) -> Result<bool, String> {
     if !(1..=600).contains(&args.minutes)
-        || !(2..=100).contains(&args.matches)
+        || !(2..=300).contains(&args.matches)
         || !(1..=2000).contains(&args.clients)
         || !(2..=300).contains(&args.sample_s)
     {
         return Err(
-            "--minutes 1..=600, --matches 2..=100, --clients 1..=2000, --sample-s 2..=300".into(),
+            "--minutes 1..=600, --matches 2..=300, --clients 1..=2000, --sample-s 2..=300".into(),
         );
     }
     let maps =
