@@ -60,7 +60,7 @@ fn play(
     mut input_at: impl FnMut(u64) -> Option<WorldInput>,
 ) -> Played {
     let mut world = World::new(arena, config).expect("world");
-    let mut recording = Recording::default();
+    let mut recording = Recording::new(false);
     let (mut step, mut record) = (Duration::ZERO, Duration::ZERO);
     let mut handed = Vec::new();
     for t in 0..ticks {
@@ -85,7 +85,7 @@ fn play(
     }
     Played {
         world,
-        inputs: recording.inputs().to_vec(),
+        inputs: recording.inputs().unwrap_or_default().to_vec(),
         step_us: step.as_secs_f64() * 1e6 / ticks as f64,
         record_us: record.as_secs_f64() * 1e6 / ticks as f64,
     }
@@ -268,12 +268,14 @@ fn main() {
                 id: id.clone(),
                 arena: arena.clone(),
                 settings: Box::new(settings),
+                live: Box::default(),
                 started_at: SystemTime::now(),
             },
             Write::Append {
                 id: id.clone(),
                 inputs: chunk.clone(),
                 names: Some(vec![format!("p{}", i % 50)]),
+                live: None,
                 tick: 1200,
             },
             Write::Finish {

@@ -88,6 +88,15 @@ impl Bucket {
     }
 }
 
+impl ClientKey {
+    /// The key its [`Display`](std::fmt::Display) wrote (a stored match's client); `None`
+    /// for anything else.
+    pub fn parse(text: &str) -> Option<ClientKey> {
+        let ip: IpAddr = text.strip_suffix("/64").unwrap_or(text).parse().ok()?;
+        Some(ClientKey::of(ip))
+    }
+}
+
 impl std::fmt::Display for ClientKey {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self.0 {
@@ -97,12 +106,60 @@ impl std::fmt::Display for ClientKey {
     }
 }
 
+/// A secret as the server keeps it: its SHA-256, so that what is stored (a match's owner
+/// and seat tokens in the history, to resume it after a restart) lets nobody in who copies
+/// the database. Tokens are 96 to 192 random bits, so an unsalted hash is enough: nothing
+/// guessable is behind it.
+#[derive(Clone, Copy, PartialEq, Eq)]
+pub struct SecretHash([u8; 32]);
+
+impl SecretHash {
+    pub fn of(secret: &str) -> SecretHash {
+        use sha2::Digest;
+        SecretHash(sha2::Sha256::digest(secret.as_bytes()).into())
+    }
+
+    /// Whether `presented` is the secret this is the hash of (in time independent of where
+    /// the hashes differ).
+    pub fn matches(&self, presented: &str) -> bool {
+        let other = SecretHash::of(presented);
+        self.0
+            .iter()
+            .zip(other.0.iter())
+            .fold(0u8, |acc, (x, y)| acc | (x ^ y))
+            == 0
+    }
+
+    /// Lower-case hex, as stored.
+    pub fn to_hex(&self) -> String {
+        self.0.iter().map(|b| format!("{b:02x}")).collect()
+    }
+
+    /// The hash written by [`SecretHash::to_hex`]; `None` for anything else.
+    pub fn from_hex(hex: &str) -> Option<SecretHash> {
+        if hex.len() != 64 || !hex.is_ascii() {
+            return None;
+        }
+        let mut out = [0u8; 32];
+        for (i, b) in out.iter_mut().enumerate() {
+            *b = u8::from_str_radix(&hex[2 * i..2 * i + 2], 16).ok()?;
+        }
+        Some(SecretHash(out))
+    }
+}
+
+impl std::fmt::Debug for SecretHash {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("SecretHash(..)")
+    }
+}
+
 /// Who may change a match or a map, and who made it.
 #[derive(Debug, Clone, Default)]
 pub struct Owner {
-    /// The secret that was handed out when it was made; `None` for what the server made
-    /// itself (the showcase, shipped maps), which only the operator may change.
-    pub token: Option<String>,
+    /// The hash of the secret that was handed out when it was made; `None` for what the
+    /// server made itself (the showcase, shipped maps), which only the operator may change.
+    pub token: Option<SecretHash>,
     /// The client that made it; `None` for the server's own.
     pub client: Option<ClientKey>,
     /// Whether the token also reads the match live and sees its secret seed. Not for a
@@ -112,20 +169,21 @@ pub struct Owner {
 
 impl Owner {
     /// A fresh owner for something `client` makes now (`None`: the operator, whose matches
-    /// count against no client's quota); the token is in `owner.token`.
-    pub fn new(client: Option<ClientKey>) -> Owner {
-        Owner {
-            token: Some(random_id(16)),
+    /// count against no client's quota), and its token: the only time the server holds it
+    /// in clear.
+    pub fn new(client: Option<ClientKey>) -> (Owner, String) {
+        let token = random_id(16);
+        let owner = Owner {
+            token: Some(SecretHash::of(&token)),
             client,
             reads_live: true,
-        }
+        };
+        (owner, token)
     }
 
     /// Whether `presented` is this owner's token.
     pub fn is(&self, presented: &str) -> bool {
-        self.token
-            .as_deref()
-            .is_some_and(|t| same_secret(t, presented))
+        self.token.is_some_and(|t| t.matches(presented))
     }
 }
 
@@ -180,6 +238,10 @@ mod tests {
             ClientKey::of("192.0.2.7".parse().unwrap()),
             ClientKey::of("192.0.2.8".parse().unwrap())
         );
+        for key in [ClientKey::of(a), ClientKey::of(mapped)] {
+            assert_eq!(ClientKey::parse(&key.to_string()), Some(key));
+        }
+        assert_eq!(ClientKey::parse("nowhere"), None);
     }
 
     #[test]
@@ -187,9 +249,12 @@ mod tests {
         assert!(same_secret("abcd", "abcd"));
         assert!(!same_secret("abcd", "abce"));
         assert!(!same_secret("abcd", "abc"));
-        let owner = Owner::new(Some(ClientKey::of("192.0.2.7".parse().unwrap())));
-        let token = owner.token.clone().unwrap();
+        let (owner, token) = Owner::new(Some(ClientKey::of("192.0.2.7".parse().unwrap())));
         assert_eq!(token.len(), 32);
         assert!(owner.is(&token) && !owner.is("") && !Owner::default().is(""));
+        let hash = owner.token.unwrap();
+        assert_eq!(SecretHash::from_hex(&hash.to_hex()), Some(hash));
+        assert_eq!(SecretHash::from_hex("zz"), None);
+        assert!(!format!("{owner:?}").contains(&hash.to_hex()));
     }
 }

@@ -36,6 +36,7 @@ pub mod defaults {
     pub const MAX_BUILD_S: f64 = 2.0;
     pub const MAX_TICK_MS: f64 = 20.0;
     pub const MEMORY_BUDGET_MB: u64 = 4096;
+    pub const DISK_BUDGET_MB: u64 = 2048;
     pub const TICK_OVERRUN_MS: f64 = 50.0;
     pub const JOIN_HOLD: &str = "10";
     pub const MAX_HOLDS_PER_ADDRESS: usize = 1;
@@ -223,6 +224,12 @@ pub struct Config {
     #[arg(long, env = "LASERTAG_MEMORY_BUDGET_MB", default_value_t = defaults::MEMORY_BUDGET_MB,
           value_parser = clap::value_parser!(u64).range(1..))]
     pub memory_budget_mb: u64,
+    /// Megabytes of the store the running matches' records may be priced at together (a
+    /// match driven over the API may record 64 MB of orders); past it new ones are refused
+    /// with 503 until some go. Ended matches are bounded by the history's retention.
+    #[arg(long, env = "LASERTAG_DISK_BUDGET_MB", default_value_t = defaults::DISK_BUDGET_MB,
+          value_parser = clap::value_parser!(u64).range(1..))]
+    pub disk_budget_mb: u64,
     /// Tick milliseconds all running matches together may be priced at (default: 2 × 50 ms
     /// on every core: a match is priced at its p99 tick, and those seldom coincide); past it
     /// new matches are refused with 503.
@@ -351,6 +358,7 @@ impl Default for Config {
             max_build_s: defaults::MAX_BUILD_S,
             max_tick_ms: defaults::MAX_TICK_MS,
             memory_budget_mb: defaults::MEMORY_BUDGET_MB,
+            disk_budget_mb: defaults::DISK_BUDGET_MB,
             tick_budget_ms: defaults::tick_budget_ms(),
             client_budget_share: defaults::CLIENT_BUDGET_SHARE,
             max_command_work: defaults::MAX_COMMAND_WORK,

@@ -202,8 +202,19 @@ async fn serve(args: ServeArgs) -> Result<(), String> {
     tracing::info!(at = %lasertag::store::Store::describe(&args.history), "history opened");
     let history = lasertag::game::replay::History::with_store(store);
     let registry = Registry::with_history(maps, args.config, history);
-    if !args.no_showcase {
-        tokio::spawn(lasertag::game::showcase::keep_running(registry.clone()));
+    // The matches the last process left running come back first (requests for them get
+    // 503 meanwhile; everything else is served at once), then the showcase, which carries
+    // on with a resumed one.
+    {
+        let left = lasertag::game::resume::left_running(&registry);
+        let registry = registry.clone();
+        let showcase = !args.no_showcase;
+        tokio::spawn(async move {
+            lasertag::game::resume::resume_all(registry.clone(), left).await;
+            if showcase {
+                lasertag::game::showcase::keep_running(registry).await;
+            }
+        });
     }
     let listener = tokio::net::TcpListener::bind(args.addr)
         .await
@@ -216,6 +227,11 @@ async fn serve(args: ServeArgs) -> Result<(), String> {
         .settings(local)
         .map_err(|e| e.to_string())?
         .map(|(settings, client)| Fleet::start(settings, client, registry.clone()));
+    if fleet.is_some() {
+        // A node's matches are not resumed by another node yet: a node that stops ends
+        // them, as it always has (docs/operations.md, "Fleet").
+        registry.end_matches_on_stop();
+    }
     tracing::info!("serving http://{local}");
     let app = match &fleet {
         Some(fleet) => lasertag::http::app_in_fleet(registry.clone(), args.web, fleet.clone()),

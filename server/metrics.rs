@@ -101,6 +101,9 @@ pub struct Metrics {
     pub matches: IntGaugeVec,
     /// Matches removed, by `reason` (`deleted`, `finished`, `abandoned`, `idle`).
     pub matches_removed: IntCounterVec,
+    /// Matches a starting server found left running in its store, by `outcome`
+    /// (`resumed`, `lost`: its record could not be rebuilt).
+    pub matches_resumed: IntCounterVec,
     /// WebSocket clients connected now, by `role` (`player`, `spectator`).
     pub clients: IntGaugeVec,
     /// Compute time of one tick (world step and frame), by planner `kind` and `clock`.
@@ -145,6 +148,14 @@ impl Metrics {
                 "Matches removed: deleted through the API, cleaned up after finishing, or abandoned",
             ),
             &["reason"],
+        )
+        .expect("valid metric");
+        let matches_resumed = IntCounterVec::new(
+            Opts::new(
+                "lasertag_matches_resumed_total",
+                "Matches a starting server found left running in its store: resumed, or lost when their record could not be rebuilt",
+            ),
+            &["outcome"],
         )
         .expect("valid metric");
         let clients = IntGaugeVec::new(
@@ -221,6 +232,7 @@ impl Metrics {
         for c in [
             Box::new(matches.clone()) as Box<dyn prometheus::core::Collector>,
             Box::new(matches_removed.clone()),
+            Box::new(matches_resumed.clone()),
             Box::new(clients.clone()),
             Box::new(tick_seconds.clone()),
             Box::new(tracker_seconds.clone()),
@@ -256,10 +268,14 @@ impl Metrics {
         for reason in ["deleted", "finished", "abandoned", "idle"] {
             matches_removed.with_label_values(&[reason]).inc_by(0);
         }
+        for outcome in ["resumed", "lost"] {
+            matches_resumed.with_label_values(&[outcome]).inc_by(0);
+        }
         Metrics {
             registry,
             matches,
             matches_removed,
+            matches_resumed,
             clients,
             tick_seconds,
             tracker_seconds,

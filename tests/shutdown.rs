@@ -1,6 +1,7 @@
-//! Graceful shutdown of the real binary: on SIGTERM it stops accepting,
-//! tells every client of a running match `finished` with reason `server_shutdown`, closes
-//! every socket with a close frame, and exits within 5 s of the signal.
+//! Graceful shutdown of the real binary: on SIGTERM it stops accepting, suspends every
+//! running match into its store (the next server on the same store resumes it), closes
+//! every socket with a close frame (1012, "restarting", for a running match: come back),
+//! and exits within 5 s of the signal; the next server seats the player again.
 
 #![cfg(unix)]
 
@@ -67,7 +68,8 @@ async fn until_close(ws: &mut Ws) -> (Option<Value>, Got) {
 // EOF (`ResetWithoutClosingHandshake`) instead of `finished` and its close frame.
 #[tokio::test]
 async fn sigterm_tells_every_client_closes_cleanly_and_exits_within_5_s() {
-    let mut server = start();
+    let data = common::temp_dir("shutdown");
+    let mut server = Server::start(&["--no-showcase", "--data-dir", &data.display().to_string()]);
     let addr = server.addr;
     let client = reqwest::Client::new();
     // A running real-time match with a player and a spectator; a finished manual match with
@@ -130,11 +132,10 @@ async fn sigterm_tells_every_client_closes_cleanly_and_exits_within_5_s() {
         until_close(&mut late)
     );
     for (who, (finished, closed)) in [("player", p), ("spectator", s)] {
-        let finished = finished.unwrap_or_else(|| panic!("{who}: no finished before the close"));
-        assert_eq!(finished["reason"], "server_shutdown", "{who}: {finished}");
-        assert_eq!(finished["winner"], Value::Null, "{who}: nobody won");
+        // The match goes on in the next server: no `finished`, a close that says come back.
+        assert!(finished.is_none(), "{who}: {finished:?}");
         assert!(
-            matches!(&closed, Got::Closed { code: 1001, reason } if reason.contains("shutting down")),
+            matches!(&closed, Got::Closed { code: 1012, reason } if reason.contains("restarting")),
             "{who}: {closed:?}"
         );
     }
@@ -168,6 +169,34 @@ async fn sigterm_tells_every_client_closes_cleanly_and_exits_within_5_s() {
     assert!(
         tokio::net::TcpStream::connect(addr).await.is_err(),
         "still accepting after shutdown"
+    );
+
+    // The next server on the same store has the match running, the player's seat kept.
+    let next = Server::start(&["--no-showcase", "--data-dir", &data.display().to_string()]);
+    let state = loop {
+        let r = client
+            .get(format!("http://{}/api/matches/{live}", next.addr))
+            .send()
+            .await
+            .unwrap();
+        if r.status() == 503 {
+            assert!(
+                r.headers().contains_key("retry-after"),
+                "503 without Retry-After"
+            );
+            tokio::time::sleep(Duration::from_millis(100)).await;
+            continue;
+        }
+        assert_eq!(r.status(), 200);
+        break r.json::<Value>().await.unwrap();
+    };
+    assert_eq!(state["status"], "running", "{state}");
+    let mut back = ws(next.addr, &format!("/ws/matches/{live}?token={token}")).await;
+    let welcome = back.next_of("welcome").await;
+    assert_eq!(
+        (welcome["name"].as_str(), welcome["you"].as_str()),
+        (Some("alice"), Some("o0")),
+        "{welcome}"
     );
 }
 

@@ -67,12 +67,14 @@ fn started(id: &str, n: u64, name: &str) -> Vec<Write> {
                 None,
                 false,
             )),
+            live: Box::default(),
             started_at: std::time::SystemTime::now(),
         },
         Write::Append {
             id: id.into(),
             inputs: (0..n).map(keys).collect(),
             names: Some(vec![name.into()]),
+            live: None,
             tick: n,
         },
     ]
@@ -437,6 +439,7 @@ fn only_a_silent_writers_matches_are_closed_and_speaking_again_reopens_them() {
         id: "live".into(),
         inputs: vec![keys(8)],
         names: None,
+        live: None,
         tick: 9,
     }])
     .expect("write");
@@ -684,6 +687,7 @@ fn throughput() {
                     id: id.clone(),
                     inputs: (second * 20..second * 20 + 20).map(keys).collect(),
                     names: None,
+                    live: None,
                     tick: second * 20,
                 })
                 .collect();

@@ -78,8 +78,6 @@ export class Game {
     this.socket = new PageSocket(this, {
       url: () => socketUrl(base, `/ws/matches/${encodeURIComponent(matchId)}${q}`),
       types: { welcome: "welcome", snapshot: "snapshot", event: "event", finished: "finished", pong: "pong" },
-      // Players keep their opponent for a while: try to come back.
-      retries: 20,
     });
     this.socket.connect();
     this.pingTimer = setInterval(() => this.send({ type: "ping", t: performance.now() }), 1000);

@@ -62,7 +62,6 @@ export class Replay {
         return socketUrl(this.base, `/ws/replays/${encodeURIComponent(this.id)}?${q}`);
       },
       types: { replay: "welcome", snapshot: "snapshot", event: "event", replay_status: "status" },
-      retries: 5,
     });
     Object.assign(debug, {
       page: "replay", replayId: id, view: this.fogged ? this.as : "full", connected: false,

@@ -1,12 +1,16 @@
 // A page's WebSocket (game.js: a live match, replay.js: a replay): the URL on the node that
 // serves it, compact binary snapshots decoded and JSON text parsed, each message handed to
 // the page's handler for its `type`, the server's `error`s kept for the tests, and a
-// connection lost tried again a second later, a few times in a row.
+// connection lost tried again with a growing wait, for up to 30 s (a restarting server
+// resumes its matches within seconds: docs/operations.md).
 
 import { CompactDecoder } from "./compact.js";
 
-/** The wait before a lost connection is tried again. */
-const RETRY_MS = 1000;
+/** The first wait before a lost connection is tried again; each next wait doubles, up to
+ * `RETRY_MAX_MS`, until `GIVE_UP_MS` have passed since the connection was lost. */
+const RETRY_FIRST_MS = 250;
+const RETRY_MAX_MS = 4000;
+const GIVE_UP_MS = 30000;
 
 /** The page's status line. */
 const status = (text) => { document.getElementById("hud-status").textContent = text; };
@@ -26,11 +30,12 @@ export class PageSocket {
   /** The socket of `page`: `url()` is where to connect, asked on every try; `types` names
    * the page's method for each message type it reads (the others are dropped, an `error`
    * kept for the tests); `page.lost(e)` hears of a close the page did not ask for, and is
-   * true when the page has dealt with it; otherwise the socket is tried again, `retries`
-   * times in a row at the most. */
-  constructor(page, { url, types, retries }) {
-    Object.assign(this, { page, url, types, retries });
+   * true when the page has dealt with it; otherwise the socket is tried again with a
+   * growing wait, for `giveUpMs` at the most. */
+  constructor(page, { url, types, giveUpMs = GIVE_UP_MS }) {
+    Object.assign(this, { page, url, types, giveUpMs });
     this.tries = 0;
+    this.lostAt = null;
     this.ws = null;
   }
 
@@ -39,7 +44,12 @@ export class PageSocket {
     ws.binaryType = "arraybuffer";
     const decoder = new CompactDecoder();
     this.ws = ws;
-    ws.onopen = () => { debug.connected = true; this.tries = 0; };
+    ws.onopen = () => {
+      debug.connected = true;
+      if (this.lostAt !== null) debug.reconnects = (debug.reconnects || 0) + 1;
+      this.tries = 0;
+      this.lostAt = null;
+    };
     ws.onmessage = (m) => {
       const binary = typeof m.data !== "string";
       // What the page receives, for measurements of the bandwidth a client needs.
@@ -54,9 +64,13 @@ export class PageSocket {
     ws.onclose = (e) => {
       debug.connected = false;
       if (this.page.lost(e)) return;
-      if (this.tries++ < this.retries) {
-        status("connection lost — reconnecting…");
-        setTimeout(() => { if (this.ws === ws) this.connect(); }, RETRY_MS);
+      const now = performance.now();
+      if (this.lostAt === null) this.lostAt = now;
+      if (now - this.lostAt < this.giveUpMs) {
+        // 1012: the server is restarting and resumes the match (docs/api.md).
+        status(e.code === 1012 ? "server restarting — reconnecting…" : "connection lost — reconnecting…");
+        const wait = Math.min(RETRY_FIRST_MS * 2 ** this.tries++, RETRY_MAX_MS);
+        setTimeout(() => { if (this.ws === ws) this.connect(); }, wait);
       } else {
         status("connection lost");
       }

@@ -29,17 +29,21 @@ pub enum FinishReason {
     /// Its ticks took longer than the server could give them, again and again (the
     /// server's protection of its other matches): nobody won.
     Overloaded,
+    /// The server that ran it stopped, and the next could not rebuild it from its record
+    /// (a damaged or foreign store): nobody won.
+    Lost,
 }
 
 impl FinishReason {
     /// Every reason, in declaration order.
-    pub const ALL: [FinishReason; 6] = [
+    pub const ALL: [FinishReason; 7] = [
         FinishReason::AllTagged,
         FinishReason::TimeLimit,
         FinishReason::Stopped,
         FinishReason::ServerShutdown,
         FinishReason::Abandoned,
         FinishReason::Overloaded,
+        FinishReason::Lost,
     ];
 
     /// Its name, as the API, the history and the logs spell it.
@@ -51,6 +55,7 @@ impl FinishReason {
             FinishReason::ServerShutdown => "server_shutdown",
             FinishReason::Abandoned => "abandoned",
             FinishReason::Overloaded => "overloaded",
+            FinishReason::Lost => "lost",
         }
     }
 
@@ -61,9 +66,10 @@ impl FinishReason {
         match self {
             FinishReason::AllTagged => Some(Side::Robots),
             FinishReason::TimeLimit | FinishReason::Stopped => Some(Side::Opponents),
-            FinishReason::ServerShutdown | FinishReason::Abandoned | FinishReason::Overloaded => {
-                None
-            }
+            FinishReason::ServerShutdown
+            | FinishReason::Abandoned
+            | FinishReason::Overloaded
+            | FinishReason::Lost => None,
         }
     }
 }

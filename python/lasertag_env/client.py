@@ -39,6 +39,18 @@ __all__ = ["Client", "ServerError", "ConnectionDropped", "loads"]
 # (10 s by default). Reconnecting before sending after a shorter pause means a request is
 # almost never written to a socket the server is about to close.
 _IDLE_RECONNECT_S = 5.0
+# How long a request waits for a restarting server to be back (it resumes its matches within
+# seconds; docs/operations.md).
+_RESTART_WAIT_S = 30.0
+
+
+def _wait_out(retry_after: str) -> None:
+    """Sleeps for what a ``Retry-After`` of seconds says (0.05 to 5 s)."""
+    try:
+        wait = float(retry_after)
+    except ValueError:
+        wait = 1.0
+    time.sleep(min(max(wait, 0.05), 5.0))
 _MAX_HEAD = 65536
 _RECV = 65536
 
@@ -93,6 +105,8 @@ class Client:
         self._buf = bytearray()  # what was received and not yet read
         self._last = 0.0
         self._pid = _pid[0]
+        # Whether a server answered here once (a refused connection then means a restart).
+        self._was_up = False
 
     def _connect(self) -> None:
         now = time.monotonic()
@@ -111,6 +125,7 @@ class Client:
             self._sock = sock
             self._buf = bytearray()
             self._pid = _pid[0]
+            self._was_up = True
 
     def close(self) -> None:
         if self._sock is not None:
@@ -124,8 +139,10 @@ class Client:
 
         A request is sent again only when the connection closed before any byte of the
         answer (the server closes idle keep-alive connections, and a request caught in that
-        race is never read), or when the server answered 429 (refused, so not applied): an
-        ``act`` is never applied twice.
+        race is never read), when the server answered 429 (refused, so not applied), or
+        when a restarting server is not there yet or answers 503 with ``Retry-After`` while
+        it resumes the match (docs/api.md): an ``act`` is never applied twice. A restart is
+        waited for up to ``_RESTART_WAIT_S``.
         """
         token = token or self.token
         head = self._heads.get((method, path, token))
@@ -144,8 +161,21 @@ class Client:
         else:
             request = head + b"\r\n"
         dropped = refused = 0
+        restart_deadline = None
         while True:
-            self._connect()
+            try:
+                self._connect()
+            except ConnectionRefusedError:
+                # Nobody listens where a server did: one restarting (it resumes its
+                # matches). Try again for a while; nothing was sent.
+                if not self._was_up:
+                    raise
+                now = time.monotonic()
+                restart_deadline = restart_deadline or now + _RESTART_WAIT_S
+                if now >= restart_deadline:
+                    raise
+                time.sleep(0.25)
+                continue
             try:
                 try:
                     self._sock.sendall(request)
@@ -171,12 +201,15 @@ class Client:
                 # token; a quota refusal has no Retry-After and is the caller's): the
                 # request was refused, not applied, so waiting and sending it again is safe.
                 refused += 1
-                try:
-                    wait = float(retry_after)
-                except ValueError:
-                    wait = 1.0
-                time.sleep(min(max(wait, 0.05), 5.0))
+                _wait_out(retry_after)
                 continue
+            if resp.status == 503 and retry_after is not None:
+                # A match being resumed after a restart: refused, not applied.
+                now = time.monotonic()
+                restart_deadline = restart_deadline or now + _RESTART_WAIT_S
+                if now < restart_deadline:
+                    _wait_out(retry_after)
+                    continue
             return resp
 
     def _more(self) -> int:

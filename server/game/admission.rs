@@ -13,11 +13,14 @@ use lasertag_core::sim::arena::{ClearanceGrid, MapDef, bounding_box};
 use lasertag_core::world::MatchConfig;
 use nalgebra::Point2;
 
-/// Bytes, build seconds and tick milliseconds of one admitted thing.
+/// Bytes, build seconds, tick milliseconds and stored bytes of one admitted thing.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct Price {
     /// Bytes kept while it lives.
     pub memory: u64,
+    /// Bytes of the store its record may take while it runs (`game::record`): orders from
+    /// outside are bounded by this, not by memory.
+    pub disk: u64,
     /// Seconds of one core to validate and build it.
     pub build_s: f64,
     /// Milliseconds of one core per tick (matches only).
@@ -30,6 +33,7 @@ impl std::ops::Add for Price {
     fn add(self, o: Price) -> Price {
         Price {
             memory: self.memory + o.memory,
+            disk: self.disk + o.disk,
             build_s: self.build_s + o.build_s,
             tick_ms: self.tick_ms + o.tick_ms,
         }
@@ -135,6 +139,7 @@ pub fn map(def: &MapDef) -> Price {
         + views;
     Price {
         memory: memory as u64,
+        disk: 0,
         // Both the clearance grid and the likelihood field query every cell.
         build_s: MAP_BASE_S
             + 2.0 * box_cells * S_PER_BOX_CELL
@@ -144,14 +149,19 @@ pub fn map(def: &MapDef) -> Price {
     }
 }
 
-/// Bytes of the orders from outside a match with `config` may record (bounded, kept for its
-/// replay): none when it takes none.
-fn recorded_orders(config: &MatchConfig) -> f64 {
-    let takes_orders = config.planner == lasertag_core::planner::PlannerKind::Api
+/// Whether a match with `config` takes orders from outside (robots or opponents driven over
+/// the API), whose record is bounded by [`record::MAX_RECORD_BYTES`](crate::game::record).
+fn takes_orders(config: &MatchConfig) -> bool {
+    config.planner == lasertag_core::planner::PlannerKind::Api
         || config.outside_robots.contains(&true)
-        || config.opponent_control == lasertag_core::world::ControlKind::Api;
-    if takes_orders {
-        crate::game::record::MAX_ORDER_BYTES as f64
+        || config.opponent_control == lasertag_core::world::ControlKind::Api
+}
+
+/// Bytes of the orders from outside a match with `config` keeps in memory (the newest, for
+/// its replay; the store has the rest): none when it takes none.
+fn recorded_orders(config: &MatchConfig) -> f64 {
+    if takes_orders(config) {
+        crate::game::record::MEMORY_ORDER_BYTES as f64
     } else {
         0.0
     }
@@ -211,6 +221,11 @@ pub fn match_on(def: &MapDef, config: &MatchConfig) -> Price {
     let (table_bytes, table_visits) = search_table(def, config, cells);
     Price {
         memory: (memory + table_bytes) as u64,
+        disk: if takes_orders(config) {
+            crate::game::record::MAX_RECORD_BYTES as u64
+        } else {
+            0
+        },
         // The world's own setup (particles drawn, trackers copied); the map's grids are in
         // the map's price.
         build_s: 0.01
@@ -312,8 +327,7 @@ pub fn held_back(config: &MatchConfig, delay_ticks: u64) -> Price {
     let beliefs = (delay_ticks / BELIEF_HOLD_EVERY + 2) as f64;
     Price {
         memory: ((delay_ticks + 1) as f64 * frame + beliefs * belief) as u64,
-        build_s: 0.0,
-        tick_ms: 0.0,
+        ..Price::default()
     }
 }
 
@@ -378,6 +392,14 @@ pub enum NoRoom {
         asked_ms: f64,
         budget_ms: f64,
     },
+    /// The running matches' records and this one's would be priced past the store's budget.
+    #[error(
+        "the server's budget of {} for running matches' records is taken ({} admitted; this match may record {}); try again when matches have ended",
+        mb(*.budget),
+        mb(*.held),
+        mb(*.asked)
+    )]
+    Disk { held: u64, asked: u64, budget: u64 },
     /// The server is draining before it shuts down.
     #[error(
         "the server is shutting down and takes no new matches; its running matches go on until they end"

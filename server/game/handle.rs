@@ -141,4 +141,11 @@ impl MatchHandle {
         let _ = self.tx.send(Request::Stop(reason)).await;
         self.tx.closed().await;
     }
+
+    /// Ends the match's task but not the match, its record whole in the store, and waits
+    /// for the task to end.
+    pub async fn suspend(&self) {
+        let _ = self.tx.send(Request::Suspend).await;
+        self.tx.closed().await;
+    }
 }

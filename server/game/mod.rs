@@ -13,6 +13,7 @@ mod handle;
 pub mod hub;
 pub mod record;
 pub mod replay;
+pub mod resume;
 pub mod showcase;
 mod task;
 pub mod view;
@@ -38,7 +39,9 @@ pub use crate::access::{random_id, random_seed};
 pub use error::MatchError;
 pub use handle::MatchHandle;
 pub use hub::{Hub, Seat, SeatLedger, SpectatorSeat};
-pub use task::{Answer, Reading, Request, TaskSettings, spawn_match};
+pub use task::{
+    Answer, Reading, Request, Resumed, ResumedSeat, TaskSettings, spawn_match, spawn_resumed,
+};
 pub use view::Sight;
 
 type Matches = RwLock<BTreeMap<String, MatchHandle>>;
@@ -65,6 +68,12 @@ pub struct Registry {
     pub work: work::WorkBudget,
     /// The seats each client holds over every match.
     pub seats: Arc<SeatLedger>,
+    /// Matches a restarted server is still rebuilding from the store (`resume`): requests
+    /// for them are answered 503 with `Retry-After` rather than 404.
+    resuming: RwLock<std::collections::BTreeSet<String>>,
+    /// Whether a stop ends the running matches even though the store could resume them: a
+    /// fleet node's own store is not where its matches would be resumed (`fleet`).
+    ends_matches_on_stop: std::sync::atomic::AtomicBool,
 }
 
 /// Counts an open WebSocket connection until dropped.
@@ -101,12 +110,13 @@ impl Registry {
     /// may change it.
     pub fn start(&self, world: World, meta: MatchMeta) -> MatchHandle {
         let mut matches = self.matches.write().unwrap_or_else(|e| e.into_inner());
-        self.start_locked(
+        self.start_with(
             &mut matches,
             world,
             meta,
             Owner::default(),
             Price::default(),
+            None,
         )
     }
 
@@ -126,7 +136,7 @@ impl Registry {
         if self.draining.is_cancelled() {
             return Err(NoRoom::Draining);
         }
-        Ok(self.start_locked(&mut matches, world, meta, owner, price))
+        Ok(self.start_with(&mut matches, world, meta, owner, price, None))
     }
 
     /// Whether `price` fits in what the server has left of its budgets, and in `client`'s
@@ -156,6 +166,15 @@ impl Registry {
                 held: admitted.memory + maps,
                 asked: price.memory,
                 budget: cfg.memory_budget_mb * 1_000_000,
+            });
+        }
+        let disk = cfg.disk_budget_mb.saturating_mul(1_000_000);
+        if price.disk > 0 && admitted.disk + price.disk > disk {
+            self.metrics.refuse(crate::metrics::Refusal::Budget);
+            return Err(NoRoom::Disk {
+                held: admitted.disk,
+                asked: price.disk,
+                budget: disk,
             });
         }
         if price.tick_ms > 0.0 && admitted.tick_ms + price.tick_ms > cfg.tick_budget_ms {
@@ -235,16 +254,84 @@ impl Registry {
         Ok(())
     }
 
-    fn start_locked(
+    /// Starts a match rebuilt from its record under its old id, owner and seats
+    /// (`resume`): it was admitted before the restart, so no budget refuses it now.
+    pub fn start_resumed(
+        &self,
+        world: World,
+        meta: MatchMeta,
+        owner: Owner,
+        price: Price,
+        resumed: Resumed,
+    ) -> MatchHandle {
+        let id = meta.id.clone();
+        let mut matches = self.matches.write().unwrap_or_else(|e| e.into_inner());
+        let handle = self.start_with(&mut matches, world, meta, owner, price, Some(resumed));
+        drop(matches);
+        self.done_resuming(&id);
+        handle
+    }
+
+    /// Notes that the matches `ids` are being rebuilt (see [`Registry::is_resuming`]).
+    pub fn resuming(&self, ids: &[String]) {
+        let mut r = self.resuming.write().unwrap_or_else(|e| e.into_inner());
+        r.extend(ids.iter().cloned());
+    }
+
+    /// `id` is back, or lost: no longer being rebuilt.
+    pub fn done_resuming(&self, id: &str) {
+        self.resuming
+            .write()
+            .unwrap_or_else(|e| e.into_inner())
+            .remove(id);
+    }
+
+    /// Whether match `id` is being rebuilt from the store after a restart.
+    pub fn is_resuming(&self, id: &str) -> bool {
+        self.resuming
+            .read()
+            .unwrap_or_else(|e| e.into_inner())
+            .contains(id)
+    }
+
+    /// How many matches are still being rebuilt.
+    pub fn resuming_count(&self) -> usize {
+        self.resuming
+            .read()
+            .unwrap_or_else(|e| e.into_inner())
+            .len()
+    }
+
+    /// Whether matches left running in the store come back when a server starts on it.
+    pub fn resumes_matches(&self) -> bool {
+        self.history.store().is_some_and(|s| s.resumes())
+    }
+
+    /// Whether a stop suspends the running matches (the next server on the same store
+    /// resumes them) rather than ending them.
+    pub fn suspends_on_stop(&self) -> bool {
+        self.resumes_matches() && !self.ends_matches_on_stop.load(Ordering::Relaxed)
+    }
+
+    /// From now on a stop ends the running matches (`server_shutdown`) rather than
+    /// suspending them: for a fleet node, whose own store is not where they would be
+    /// resumed.
+    pub fn end_matches_on_stop(&self) {
+        self.ends_matches_on_stop.store(true, Ordering::Relaxed);
+    }
+
+    fn start_with(
         &self,
         matches: &mut BTreeMap<String, MatchHandle>,
         world: World,
         meta: MatchMeta,
         owner: Owner,
         price: Price,
+        resumed: Option<Resumed>,
     ) -> MatchHandle {
         let id = meta.id.clone();
         let clock = meta.clock;
+        let owner = Arc::new(owner);
         let on_exit = {
             let matches: Weak<Matches> = Arc::downgrade(&self.matches);
             let id = id.clone();
@@ -254,30 +341,31 @@ impl Registry {
                 }
             }
         };
-        let (tx, hub) = spawn_match(
-            world,
-            meta,
-            TaskSettings {
-                reconnect_grace: self.config.reconnect_grace,
-                finished_grace: self.config.finished_grace,
-                abandoned_after: self.config.abandoned_after,
-                idle_manual_after: self.config.idle_manual_after,
-                max_players: self.config.max_players_per_match,
-                join_hold: self.config.join_hold,
-                max_holds: self.config.max_holds_per_address,
-                seats: self.seats.clone(),
-                max_seats: self.config.max_seats_per_address,
-                both_sides: self.config.both_sides_per_address,
-                tick_overrun: Duration::from_secs_f64(self.config.tick_overrun_ms / 1e3),
-                max_command_work: self.config.max_command_work,
-                metrics: self.metrics.clone(),
-                history: self.history.clone(),
-                on_exit: Box::new(on_exit),
-            },
-        );
+        let settings = TaskSettings {
+            reconnect_grace: self.config.reconnect_grace,
+            finished_grace: self.config.finished_grace,
+            abandoned_after: self.config.abandoned_after,
+            idle_manual_after: self.config.idle_manual_after,
+            max_players: self.config.max_players_per_match,
+            join_hold: self.config.join_hold,
+            max_holds: self.config.max_holds_per_address,
+            seats: self.seats.clone(),
+            max_seats: self.config.max_seats_per_address,
+            both_sides: self.config.both_sides_per_address,
+            tick_overrun: Duration::from_secs_f64(self.config.tick_overrun_ms / 1e3),
+            max_command_work: self.config.max_command_work,
+            metrics: self.metrics.clone(),
+            history: self.history.clone(),
+            owner: owner.clone(),
+            on_exit: Box::new(on_exit),
+        };
+        let (tx, hub) = match resumed {
+            Some(resumed) => spawn_resumed(world, meta, settings, resumed),
+            None => spawn_match(world, meta, settings),
+        };
         let handle = MatchHandle {
             id: id.clone(),
-            owner: Arc::new(owner),
+            owner,
             price,
             order: self.next_order.fetch_add(1, Ordering::Relaxed),
             clock,
@@ -325,11 +413,18 @@ impl Registry {
     /// Starts shutting down: cancels [`Registry::shutdown`] (and [`Registry::draining`]) and
     /// ends every match with reason `server_shutdown` (their connections send `finished`
     /// and close).
+    /// Stops every match: suspended, to be resumed by the next server on the same store
+    /// ([`Registry::resumes_matches`]), or else ended with reason `server_shutdown`.
     pub async fn begin_shutdown(&self) {
         self.draining.cancel();
         self.shutdown.cancel();
+        let suspend = self.suspends_on_stop();
         for h in self.all() {
-            h.stop(FinishReason::ServerShutdown).await;
+            if suspend {
+                h.suspend().await;
+            } else {
+                h.stop(FinishReason::ServerShutdown).await;
+            }
         }
     }
 

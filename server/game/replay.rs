@@ -21,7 +21,7 @@ use lasertag_core::sim::arena::Arena;
 use lasertag_core::world::{MatchConfig, MatchStatus, SetupError, Side, World, WorldInput};
 
 use crate::game::admission::{self, world_copy};
-use crate::game::view::{Clock, MatchMeta};
+use crate::game::view::MatchMeta;
 use crate::store::codec::StoredSettings;
 use crate::store::{Listed, Store, StoreError, Write};
 
@@ -150,20 +150,7 @@ impl Replay {
         let at =
             |ms: i64| SystemTime::UNIX_EPOCH + std::time::Duration::from_millis(ms.max(0) as u64);
         Ok(Replay {
-            meta: MatchMeta {
-                id: l.id,
-                map: l.map,
-                clock: Clock::of_stored(settings.clock),
-                players: 0,
-                spectators: 0,
-                free_slots: 0,
-                free_pursuer_slots: 0,
-                bots_joinable: settings.bots_joinable,
-                spectator_delay_ticks: settings.spectator_delay_ticks,
-                head_start_ticks: 0,
-                difficulty: settings.difficulty(),
-                rated: settings.rated,
-            },
+            meta: MatchMeta::stored(l.id, l.map, &settings),
             last_tick: l.ticks,
             winner: match l.winner.as_deref() {
                 Some("robots") => Some(Side::Robots),

@@ -90,7 +90,7 @@ async fn start(registry: &Registry) -> Option<String> {
     .ok()??;
     let meta = MatchMeta {
         // As long as any match's id: the history (shared by a fleet) keeps every showcase.
-        id: format!("showcase-{}", random_id(8)),
+        id: format!("{SHOWCASE_PREFIX}{}", random_id(8)),
         map,
         clock: Clock::Realtime,
         players: 0,
@@ -115,6 +115,9 @@ async fn start(registry: &Registry) -> Option<String> {
 /// lock a visitor out unless they fill them all.
 pub const MAX_SHOWCASES: usize = 6;
 
+/// How a showcase's id begins.
+const SHOWCASE_PREFIX: &str = "showcase-";
+
 /// One showcase the keeper started, and when spectators saw it end.
 struct Round {
     id: String,
@@ -124,14 +127,26 @@ struct Round {
 /// Keeps one showcase match running for as long as the server runs, and another beside it
 /// while every running one is full (people hold all its slots), up to [`MAX_SHOWCASES`].
 pub async fn keep_running(registry: Arc<Registry>) {
-    let Some(first) = start(&registry).await else {
-        tracing::warn!("no map to run a showcase match on");
-        return;
-    };
-    let mut rounds = vec![Round {
-        id: first,
-        finished_at: None,
-    }];
+    // The showcases a restart resumed carry on; a new one starts only when none did.
+    let mut rounds: Vec<Round> = registry
+        .all()
+        .into_iter()
+        .filter(|h| h.id.starts_with(SHOWCASE_PREFIX) && h.owner.token.is_none())
+        .map(|h| Round {
+            id: h.id,
+            finished_at: None,
+        })
+        .collect();
+    if rounds.is_empty() {
+        let Some(first) = start(&registry).await else {
+            tracing::warn!("no map to run a showcase match on");
+            return;
+        };
+        rounds.push(Round {
+            id: first,
+            finished_at: None,
+        });
+    }
     loop {
         tokio::time::sleep(Duration::from_secs(2)).await;
         if registry.draining.is_cancelled() {

@@ -626,6 +626,31 @@ pub struct MatchMeta {
     pub rated: bool,
 }
 
+impl MatchMeta {
+    /// The meta of the stored match `id` on `map` (a replay, a resumed match), as its
+    /// settings say; nobody is at it yet.
+    pub fn stored(
+        id: String,
+        map: String,
+        settings: &crate::store::codec::StoredSettings,
+    ) -> MatchMeta {
+        MatchMeta {
+            id,
+            map,
+            clock: Clock::of_stored(settings.clock),
+            players: 0,
+            spectators: 0,
+            free_slots: 0,
+            free_pursuer_slots: 0,
+            bots_joinable: settings.bots_joinable,
+            spectator_delay_ticks: settings.spectator_delay_ticks,
+            head_start_ticks: 0,
+            difficulty: settings.difficulty(),
+            rated: settings.rated,
+        }
+    }
+}
+
 /// Whether people may play a match: human opponent slots, bot opponents people may take
 /// over (`bots_joinable`, the showcase), or seats on the robot team (`pursuer_slots`). Such a match shows its truth `spectator_delay_s`
 /// late and keeps its seed secret while it runs: a match is a pure function of its

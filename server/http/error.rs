@@ -20,6 +20,8 @@ use lasertag_core::world::{InputError, OrderError, RobotOrderError};
 pub struct ApiError {
     pub status: StatusCode,
     pub message: String,
+    /// Seconds after which the same request may succeed (`Retry-After`).
+    pub retry_after: Option<u32>,
 }
 
 impl ApiError {
@@ -27,6 +29,29 @@ impl ApiError {
         ApiError {
             status,
             message: message.into(),
+            retry_after: None,
+        }
+    }
+
+    /// The match `id` is there, but a server that restarted is still rebuilding it from its
+    /// record (`game::resume`): 503, and when to ask again.
+    pub fn resuming(id: &str) -> ApiError {
+        ApiError {
+            retry_after: Some(1),
+            ..ApiError::new(
+                StatusCode::SERVICE_UNAVAILABLE,
+                format!("match {id} is being resumed after a restart; try again in a second"),
+            )
+        }
+    }
+
+    /// The match `id` as the registry has it: 503 while it is being resumed, 404 when it
+    /// has none.
+    pub fn no_match(registry: &crate::game::Registry, id: &str) -> ApiError {
+        if registry.is_resuming(id) {
+            ApiError::resuming(id)
+        } else {
+            ApiError::not_found(format!("no match {id}"))
         }
     }
 
@@ -92,6 +117,11 @@ impl IntoResponse for ApiError {
             }),
         )
             .into_response();
+        if let Some(s) = self.retry_after {
+            response
+                .headers_mut()
+                .insert(axum::http::header::RETRY_AFTER, s.into());
+        }
         // RFC 9110: a 401 names the scheme that would be accepted.
         if self.status == StatusCode::UNAUTHORIZED {
             response.headers_mut().insert(
@@ -116,9 +146,11 @@ impl From<NoRoom> for ApiError {
     fn from(e: NoRoom) -> ApiError {
         let status = match e {
             NoRoom::Client { .. } | NoRoom::ClientBudget { .. } => StatusCode::TOO_MANY_REQUESTS,
-            NoRoom::Server(_) | NoRoom::Memory { .. } | NoRoom::Cpu { .. } | NoRoom::Draining => {
-                StatusCode::SERVICE_UNAVAILABLE
-            }
+            NoRoom::Server(_)
+            | NoRoom::Memory { .. }
+            | NoRoom::Disk { .. }
+            | NoRoom::Cpu { .. }
+            | NoRoom::Draining => StatusCode::SERVICE_UNAVAILABLE,
         };
         ApiError::new(status, e.to_string())
     }

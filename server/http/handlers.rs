@@ -50,7 +50,7 @@ fn find(state: &AppState, id: &str) -> Result<MatchHandle, ApiError> {
     state
         .registry
         .get(id)
-        .ok_or_else(|| ApiError::not_found(format!("no match {id}")))
+        .ok_or_else(|| ApiError::no_match(&state.registry, id))
 }
 
 #[utoipa::path(get, path = "/api/health", responses((status = 200, body = Health)))]

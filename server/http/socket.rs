@@ -43,13 +43,14 @@ const SHUTDOWN_DRAIN: Duration = Duration::from_secs(1);
 /// Close reasons are cut to this many bytes: they must fit a control frame (123 bytes).
 const REASON_BYTES: usize = 120;
 
-/// Close codes (RFC 6455): normal, going away, policy violation, message too big, internal
-/// error.
+/// Close codes (RFC 6455 and IANA's registry): normal, going away, policy violation, message
+/// too big, internal error, service restart.
 const NORMAL: u16 = 1000;
 const GOING_AWAY: u16 = 1001;
 const POLICY: u16 = 1008;
 const TOO_BIG: u16 = 1009;
 const INTERNAL: u16 = 1011;
+const RESTART: u16 = 1012;
 
 /// Why a connection ends.
 #[derive(Debug)]
@@ -74,6 +75,14 @@ impl End {
     /// The server is shutting down (1001).
     pub fn going_away() -> End {
         End::Close(GOING_AWAY, "the server is shutting down".into())
+    }
+
+    /// The server is stopping, and the next one resumes the match: come back (1012).
+    pub fn restarting() -> End {
+        End::Close(
+            RESTART,
+            "the server is restarting; the match goes on: reconnect".into(),
+        )
     }
 
     /// The server failed at what the socket needed (1011).
@@ -231,6 +240,8 @@ pub struct Socket {
     manner: Manner,
     metrics: Metrics,
     shutdown: CancellationToken,
+    /// Whether a stop suspends the matches (`Registry::suspends_on_stop`).
+    resumes: bool,
     max_message_bytes: usize,
     hard_message_bytes: usize,
     /// How the rate limit is said: sustained messages per second, and bursts.
@@ -252,6 +263,7 @@ impl Socket {
             socket,
             metrics: registry.metrics.clone(),
             shutdown: registry.shutdown.clone(),
+            resumes: registry.suspends_on_stop(),
             max_message_bytes: cfg.max_message_bytes,
             hard_message_bytes: cfg.hard_message_bytes(),
             rate: (cfg.messages_per_s, cfg.message_burst),
@@ -269,6 +281,12 @@ impl Socket {
     /// The server's shutdown token.
     pub fn shutdown(&self) -> &CancellationToken {
         &self.shutdown
+    }
+
+    /// Whether the server is stopping and the match goes on in the next one (its store
+    /// resumes matches): then a socket closes with [`End::restarting`], not `finished`.
+    pub fn restarting(&self) -> bool {
+        self.resumes && self.shutdown.is_cancelled()
     }
 
     /// Counts `bytes` of snapshots sent, under the connection's role.

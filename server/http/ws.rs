@@ -54,7 +54,7 @@ pub async fn upgrade(
     socket::refuse_while_stopping(registry)?;
     let handle = registry
         .get(&id)
-        .ok_or_else(|| ApiError::not_found(format!("no match {id}")))?;
+        .ok_or_else(|| ApiError::no_match(registry, &id))?;
     socket::only_params(&query, &["token", "format"])?;
     let compact = socket::compact_format(&query)?;
     let admitted = socket::admit(&state, ip, ws)?;
@@ -262,6 +262,9 @@ impl Connection {
                         // The match's task has ended (deleted, cleaned up, or the server is
                         // stopping).
                         let last = frames.borrow().clone();
+                        if self.sock.restarting() && last.status != MatchStatus::Finished {
+                            return Err(End::restarting());
+                        }
                         if !self.finished_sent {
                             self.finished_sent = true;
                             self.sock.text(wire::finished(&last)).await?;
@@ -306,6 +309,9 @@ impl Connection {
                     }
                 }
                 _ = shutdown.cancelled(), if !self.finished_sent => {
+                    if self.sock.restarting() {
+                        return Err(End::restarting());
+                    }
                     // The match task is being stopped too and will publish its end; this
                     // tells the client even if the task's last frame is not seen first.
                     self.finished_sent = true;

@@ -94,8 +94,7 @@ pub async fn add(
         .await?;
     // Checked again: others may have uploaded while this one was built.
     room(service, &name, client)?;
-    let owner = Owner::new(Some(client));
-    let owner_token = owner.token.clone().unwrap_or_default();
+    let (owner, owner_token) = Owner::new(Some(client));
     let mut store = registry.maps.write().unwrap_or_else(|e| e.into_inner());
     if !store.insert_owned(arena, owner, price.memory) {
         return Err(MapsError::Taken(name));

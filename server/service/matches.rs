@@ -164,11 +164,11 @@ pub async fn create<R>(
         rated: req.rated,
     };
     let rated = req.rated;
+    let (owner, owner_token) = Owner::new(client);
     let owner = Owner {
         reads_live: !rated,
-        ..Owner::new(client)
+        ..owner
     };
-    let owner_token = owner.token.clone().unwrap_or_default();
     let handle = registry.try_start(world, meta, owner, price)?;
     // Asked of the task so that fields it owns (free slots) are filled in.
     let mut summary = handle

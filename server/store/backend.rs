@@ -9,7 +9,7 @@ use lasertag_core::difficulty::Difficulty;
 use lasertag_core::sim::arena::Arena;
 use lasertag_core::world::WorldInput;
 
-use crate::store::codec::{self, StoredSettings};
+use crate::store::codec::{self, StoredLive, StoredSettings};
 use crate::store::results::PlayerResult;
 
 /// How often the writer thread calls [`Backend::heartbeat`], busy or idle.
@@ -59,6 +59,8 @@ pub enum Write {
         id: String,
         arena: Arc<Arena>,
         settings: Box<StoredSettings>,
+        /// Its owner and seats, to resume it.
+        live: Box<StoredLive>,
         started_at: SystemTime,
     },
     /// Inputs applied since the last append, and the tick the match has reached.
@@ -67,12 +69,41 @@ pub enum Write {
         inputs: Vec<(u64, WorldInput)>,
         /// Everyone who has played it so far, when that changed.
         names: Option<Vec<String>>,
+        /// Its owner and seats now, when the seats changed.
+        live: Option<Box<StoredLive>>,
         tick: u64,
     },
     /// The match ended (after its last append).
     Finish { id: String, ended: Ended },
+    /// A running match that could not be resumed ends where its record stops, with reason
+    /// `lost` (an incomplete replay).
+    Lost { id: String },
     /// Answers once everything before it is committed.
     Flush(std::sync::mpsc::Sender<()>),
+    /// Takes at most `room` running matches whose holder's lease ran out, or that were
+    /// handed to this writer and are not among `running` (`Backend::adopt`); answers their
+    /// ids, after everything before it is committed.
+    Adopt {
+        room: usize,
+        running: Vec<String>,
+        reply: std::sync::mpsc::Sender<Vec<String>>,
+    },
+    /// Hands every match this writer holds to writer `to` (`Backend::hand_over`), after
+    /// everything before it is committed; answers their ids.
+    HandOver {
+        to: String,
+        reply: std::sync::mpsc::Sender<Vec<String>>,
+    },
+}
+
+impl Write {
+    /// Whether it asks the writer for something rather than storing a change.
+    pub fn is_control(&self) -> bool {
+        matches!(
+            self,
+            Write::Flush(_) | Write::Adopt { .. } | Write::HandOver { .. }
+        )
+    }
 }
 
 /// How a match ended.
@@ -114,6 +145,15 @@ pub struct Stored {
     pub map_document: String,
     /// Deflated chunks of inputs ([`codec::decode_inputs`]), in order.
     pub chunks: Vec<Vec<u8>>,
+}
+
+/// A match a server left running: its record, whole, and what resumes it.
+#[derive(Debug, Clone)]
+pub struct Unfinished {
+    /// Its listing says how far the record goes (`ticks`) and `complete: false`.
+    pub stored: Stored,
+    /// JSON of [`StoredLive`]; none for a record written before the store kept it.
+    pub live: Option<String>,
 }
 
 /// A player name's totals over the stored matches.
@@ -159,6 +199,28 @@ pub enum LeaderOrder {
 
 /// The operations a database must offer the store.
 pub trait Backend: Send {
+    /// How often the writer thread calls [`Backend::heartbeat`].
+    fn beat_every(&self) -> Duration {
+        HEARTBEAT
+    }
+    /// How long this writer may go on running its matches after the start of a heartbeat
+    /// (or a write) the database took: `None` when nobody else could take them (a database
+    /// of one server's own).
+    fn lease(&self) -> Option<Duration> {
+        None
+    }
+    /// See [`Write::Adopt`]; a database of one server's own has nothing to adopt.
+    fn adopt(&mut self, _room: usize, _running: &[String]) -> Result<Vec<String>, StoreError> {
+        Ok(Vec::new())
+    }
+    /// See [`Write::HandOver`].
+    fn hand_over(&mut self, _to: &str) -> Result<Vec<String>, StoreError> {
+        Ok(Vec::new())
+    }
+    /// This writer's id, when the database knows writers apart.
+    fn writer_id(&self) -> Option<String> {
+        None
+    }
     /// Called by the writer thread every [`HEARTBEAT`]: a shared database hears that this
     /// writer is alive, and closes the matches of writers it has not heard from.
     fn heartbeat(&mut self) -> Result<(), StoreError> {
@@ -172,6 +234,15 @@ pub trait Backend: Send {
     fn write(&mut self, batch: &[Write]) -> Result<(), StoreError>;
     fn list(&mut self, limit: usize, before: Option<&str>) -> Result<Vec<Listed>, StoreError>;
     fn load(&mut self, id: &str) -> Result<Option<Stored>, StoreError>;
+    /// The ids of the matches this server may resume: left running by a process that has
+    /// stopped, oldest first.
+    fn unfinished(&mut self) -> Result<Vec<String>, StoreError> {
+        Ok(Vec::new())
+    }
+    /// The record of the unfinished match `id`.
+    fn load_unfinished(&mut self, _id: &str) -> Result<Option<Unfinished>, StoreError> {
+        Ok(None)
+    }
     fn player(&mut self, name: &str) -> Result<Option<PlayerStats>, StoreError>;
     fn played(&mut self, name: &str, limit: usize) -> Result<Vec<Played>, StoreError>;
     fn leaders(&mut self, order: LeaderOrder, limit: usize)

@@ -12,19 +12,22 @@ use std::io::{Read, Write};
 use flate2::Compression;
 use flate2::read::DeflateDecoder;
 use flate2::write::DeflateEncoder;
-use lasertag_core::bots::BotKind;
 use lasertag_core::difficulty::Difficulty;
-use lasertag_core::planner::PlannerKind;
 use lasertag_core::settings::{Group, Value};
 use lasertag_core::sim::Odometry;
 use lasertag_core::world::{
-    ControlKind, FinishReason, HumanInput, MatchConfig, OpponentOrder, Placement, RobotOrder,
-    WorldInput,
+    FinishReason, HumanInput, MatchConfig, OpponentOrder, Placement, RobotOrder, WorldInput,
 };
 use lasertag_core::{localise, planner, radio, tracker};
 use nalgebra::Point2;
 use serde::{Deserialize, Serialize};
 use serde_json::{Map, Value as Json};
+
+mod live;
+mod names;
+pub use live::{StoredLive, StoredSeat};
+pub use names::StoredClock;
+use names::{StoredBot, StoredControl, StoredDifficulty, StoredPlanner};
 
 /// A stored match that cannot be read back.
 #[derive(Debug, thiserror::Error)]
@@ -75,127 +78,6 @@ pub struct StoredSettings {
     /// Whether it counted for ratings (docs/ratings.md).
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub rated: bool,
-}
-
-// The stored form's names for the core's kinds. They are the API's names too, but fixed
-// here on their own: a database outlives a change of the API.
-
-/// How a stored match's clock ran.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum StoredClock {
-    Realtime,
-    Manual,
-}
-
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "lowercase")]
-enum StoredControl {
-    Bot,
-    Api,
-    Human,
-}
-
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "lowercase")]
-enum StoredBot {
-    Wander,
-    Evade,
-    Idle,
-}
-
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "lowercase")]
-enum StoredDifficulty {
-    Recruit,
-    Veteran,
-    Elite,
-}
-
-impl StoredDifficulty {
-    fn of(d: Difficulty) -> StoredDifficulty {
-        match d {
-            Difficulty::Recruit => StoredDifficulty::Recruit,
-            Difficulty::Veteran => StoredDifficulty::Veteran,
-            Difficulty::Elite => StoredDifficulty::Elite,
-        }
-    }
-
-    fn kind(self) -> Difficulty {
-        match self {
-            StoredDifficulty::Recruit => Difficulty::Recruit,
-            StoredDifficulty::Veteran => Difficulty::Veteran,
-            StoredDifficulty::Elite => Difficulty::Elite,
-        }
-    }
-}
-
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "lowercase")]
-enum StoredPlanner {
-    Coordinated,
-    Search,
-    Baseline,
-    Idle,
-    Api,
-}
-
-impl StoredControl {
-    fn of(kind: ControlKind) -> StoredControl {
-        match kind {
-            ControlKind::Bot => StoredControl::Bot,
-            ControlKind::Api => StoredControl::Api,
-            ControlKind::Human => StoredControl::Human,
-        }
-    }
-
-    fn kind(self) -> ControlKind {
-        match self {
-            StoredControl::Bot => ControlKind::Bot,
-            StoredControl::Api => ControlKind::Api,
-            StoredControl::Human => ControlKind::Human,
-        }
-    }
-}
-
-impl StoredBot {
-    fn of(kind: BotKind) -> StoredBot {
-        match kind {
-            BotKind::Wander => StoredBot::Wander,
-            BotKind::Evade => StoredBot::Evade,
-            BotKind::Idle => StoredBot::Idle,
-        }
-    }
-
-    fn kind(self) -> BotKind {
-        match self {
-            StoredBot::Wander => BotKind::Wander,
-            StoredBot::Evade => BotKind::Evade,
-            StoredBot::Idle => BotKind::Idle,
-        }
-    }
-}
-
-impl StoredPlanner {
-    fn of(kind: PlannerKind) -> StoredPlanner {
-        match kind {
-            PlannerKind::Coordinated => StoredPlanner::Coordinated,
-            PlannerKind::Search => StoredPlanner::Search,
-            PlannerKind::Baseline => StoredPlanner::Baseline,
-            PlannerKind::Idle => StoredPlanner::Idle,
-            PlannerKind::Api => StoredPlanner::Api,
-        }
-    }
-
-    fn kind(self) -> PlannerKind {
-        match self {
-            StoredPlanner::Coordinated => PlannerKind::Coordinated,
-            StoredPlanner::Search => PlannerKind::Search,
-            StoredPlanner::Baseline => PlannerKind::Baseline,
-            StoredPlanner::Idle => PlannerKind::Idle,
-            StoredPlanner::Api => PlannerKind::Api,
-        }
-    }
 }
 
 #[derive(Debug, Clone, Serialize, Deserialize)]

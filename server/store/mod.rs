@@ -20,14 +20,14 @@ pub mod sqlite;
 
 pub use backend::{
     Backend, Ended, HEARTBEAT, LeaderOrder, Listed, Played, PlayerStats, Rated, Retention,
-    StoreError, Stored, Write, unix_ms,
+    StoreError, Stored, Unfinished, Write, unix_ms,
 };
 pub use results::PlayerResult;
 
 use std::path::{Path, PathBuf};
-use std::sync::Mutex;
 use std::sync::mpsc::{Receiver, RecvTimeoutError, SyncSender, TrySendError};
-use std::time::Duration;
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
 
 /// Writes the channel holds before [`Store::send`] refuses (a second of a thousand busy
 /// matches).
@@ -75,6 +75,15 @@ pub struct Store {
     reader: Mutex<Box<dyn Backend>>,
     /// SQLite's directory (for [`Store::file_bytes`]); none for a server database.
     dir: Option<PathBuf>,
+    /// See [`Store::resumes`]: SQLite's one server resumes its own; a fleet's shared
+    /// database is another matter (`fleet`).
+    resumes: bool,
+    /// How long this server may run its matches (a shared database's lease).
+    lease: Arc<Lease>,
+    /// Whether other servers' matches may be taken from this store ([`Store::adopt`]).
+    adopts: bool,
+    /// This server's writer id in a shared database.
+    writer_id: Option<String>,
 }
 
 impl std::fmt::Debug for Store {
@@ -133,16 +142,9 @@ impl Store {
     }
 
     /// Opens the SQLite history in `dir` (created if missing). Matches a previous process
-    /// left running are marked incomplete.
+    /// left running stay as they are: the server resumes them (`game::resume`).
     pub fn open(dir: &Path, retention: Retention) -> Result<Store, StoreError> {
         let writer = sqlite::Sqlite::open(dir, retention)?;
-        let interrupted = sqlite::close_interrupted(writer.connection())?;
-        if interrupted > 0 {
-            tracing::warn!(
-                interrupted,
-                "matches the last run left unfinished are kept as incomplete"
-            );
-        }
         let reader = sqlite::Sqlite::reader(dir, retention)?;
         Ok(Store::with(
             Box::new(writer),
@@ -155,9 +157,13 @@ impl Store {
     /// is where the database's files are, if it has files of its own.
     pub fn with(writer: Box<dyn Backend>, reader: Box<dyn Backend>, dir: Option<PathBuf>) -> Store {
         let (tx, rx) = std::sync::mpsc::sync_channel(WRITE_QUEUE);
+        let lease = Arc::new(Lease::default());
+        let adopts = writer.lease().is_some();
+        let writer_id = writer.writer_id();
+        let held = lease.clone();
         let spawned = std::thread::Builder::new()
             .name("store".into())
-            .spawn(move || write_loop(writer, rx));
+            .spawn(move || write_loop(writer, rx, held));
         if let Err(e) = spawned {
             // The channel's receiver is gone with the closure: every send says Closed.
             tracing::error!("no store writer thread: {e}");
@@ -165,8 +171,67 @@ impl Store {
         Store {
             writes: tx,
             reader: Mutex::new(reader),
+            resumes: dir.is_some(),
             dir,
+            lease,
+            adopts,
+            writer_id,
         }
+    }
+
+    /// Whether matches left running in this store are resumed by the next server that opens
+    /// it (`game::resume`).
+    pub fn resumes(&self) -> bool {
+        self.resumes
+    }
+
+    /// How long this server may run its matches (see [`Lease`]).
+    pub fn lease(&self) -> &Arc<Lease> {
+        &self.lease
+    }
+
+    /// Whether servers share this store, taking each other's matches when one stops
+    /// ([`Store::adopt`], [`Store::hand_over`]).
+    pub fn adopts(&self) -> bool {
+        self.adopts
+    }
+
+    /// This server's writer id in a shared store.
+    pub fn writer_id(&self) -> Option<&str> {
+        self.writer_id.as_deref()
+    }
+
+    /// Takes at most `room` matches other servers can no longer run (their lease ran out)
+    /// or that were handed to this one, and are not among `running`: answers their ids,
+    /// which this server holds now (blocking, at most `timeout`).
+    pub fn adopt(
+        &self,
+        room: usize,
+        running: Vec<String>,
+        timeout: Duration,
+    ) -> Result<Vec<String>, StoreError> {
+        let (reply, rx) = std::sync::mpsc::channel();
+        self.writes
+            .send(Write::Adopt {
+                room,
+                running,
+                reply,
+            })
+            .map_err(|_| StoreError::Closed)?;
+        rx.recv_timeout(timeout).map_err(|_| StoreError::Closed)
+    }
+
+    /// Hands every match this server holds to the server whose writer is `to`, after every
+    /// write before (blocking, at most `timeout`): answers their ids.
+    pub fn hand_over(&self, to: &str, timeout: Duration) -> Result<Vec<String>, StoreError> {
+        let (reply, rx) = std::sync::mpsc::channel();
+        self.writes
+            .send(Write::HandOver {
+                to: to.to_string(),
+                reply,
+            })
+            .map_err(|_| StoreError::Closed)?;
+        rx.recv_timeout(timeout).map_err(|_| StoreError::Closed)
     }
 
     /// Queues `w` for the writer; refuses (giving it back) when the queue is full.
@@ -183,6 +248,16 @@ impl Store {
             .send(Write::Flush(tx))
             .map_err(|_| StoreError::Closed)?;
         rx.recv_timeout(timeout).map_err(|_| StoreError::Closed)
+    }
+
+    /// The ids of the matches left running in the store, to resume (blocking).
+    pub fn unfinished(&self) -> Result<Vec<String>, StoreError> {
+        self.read(|b| b.unfinished())
+    }
+
+    /// The record of the unfinished match `id` (blocking).
+    pub fn load_unfinished(&self, id: &str) -> Result<Option<Unfinished>, StoreError> {
+        self.read(|b| b.load_unfinished(id))
     }
 
     /// Runs `f` on the read connection (blocking).
@@ -212,11 +287,23 @@ impl Store {
     }
 }
 
-fn write_loop(mut backend: Box<dyn Backend>, rx: Receiver<Write>) {
-    let mut beat = std::time::Instant::now();
+fn write_loop(mut backend: Box<dyn Backend>, rx: Receiver<Write>, lease: Arc<Lease>) {
+    let every = backend.beat_every();
+    let hold = backend.lease();
+    // The start of the last heartbeat due; a write the database took counts as one too (it
+    // beats in the same transaction, `postgres`).
+    let mut beat = Instant::now() - every;
     loop {
+        if beat.elapsed() >= every {
+            let started = Instant::now();
+            beat = started;
+            match backend.heartbeat() {
+                Ok(()) => lease.renew(started, hold),
+                Err(e) => tracing::warn!("history heartbeat: {e}"),
+            }
+        }
         // A busy writer beats too: the heartbeat is due by the clock, not by idleness.
-        match rx.recv_timeout(HEARTBEAT.saturating_sub(beat.elapsed())) {
+        match rx.recv_timeout(every.saturating_sub(beat.elapsed())) {
             Ok(first) => {
                 let mut batch = vec![first];
                 while batch.len() < BATCH {
@@ -225,23 +312,114 @@ fn write_loop(mut backend: Box<dyn Backend>, rx: Receiver<Write>) {
                         Err(_) => break,
                     }
                 }
-                if let Err(e) = backend.write(&batch) {
-                    tracing::error!("the history could not store {} writes: {e}", batch.len());
-                }
+                // Changes in order; a request for the writer waits for the changes before it.
+                let mut changes = Vec::new();
                 for w in batch {
-                    if let Write::Flush(done) = w {
-                        let _ = done.send(());
+                    if !w.is_control() {
+                        changes.push(w);
+                        continue;
                     }
+                    commit(backend.as_mut(), &mut changes, &lease, hold);
+                    answer(backend.as_mut(), w);
                 }
+                commit(backend.as_mut(), &mut changes, &lease, hold);
             }
             Err(RecvTimeoutError::Timeout) => {}
             Err(RecvTimeoutError::Disconnected) => break,
         }
-        if beat.elapsed() >= HEARTBEAT {
-            beat = std::time::Instant::now();
-            if let Err(e) = backend.heartbeat() {
-                tracing::warn!("history heartbeat: {e}");
-            }
+    }
+}
+
+/// Commits `changes` (and empties it); the database took them as a sign of life.
+fn commit(
+    backend: &mut dyn Backend,
+    changes: &mut Vec<Write>,
+    lease: &Lease,
+    hold: Option<Duration>,
+) {
+    if changes.is_empty() {
+        return;
+    }
+    let started = Instant::now();
+    match backend.write(changes) {
+        Ok(()) => lease.renew(started, hold),
+        Err(e) => tracing::error!("the history could not store {} writes: {e}", changes.len()),
+    }
+    changes.clear();
+}
+
+/// Answers a request for the writer.
+fn answer(backend: &mut dyn Backend, w: Write) {
+    match w {
+        Write::Flush(done) => {
+            let _ = done.send(());
         }
+        Write::Adopt {
+            room,
+            running,
+            reply,
+        } => {
+            let ids = backend.adopt(room, &running).unwrap_or_else(|e| {
+                tracing::warn!("history: adopting matches: {e}");
+                Vec::new()
+            });
+            let _ = reply.send(ids);
+        }
+        Write::HandOver { to, reply } => {
+            let ids = backend.hand_over(&to).unwrap_or_else(|e| {
+                tracing::warn!("history: handing matches over: {e}");
+                Vec::new()
+            });
+            let _ = reply.send(ids);
+        }
+        _ => {}
+    }
+}
+
+/// How long this server may go on running its matches: until a while after the start of its
+/// last heartbeat the database took, when other servers could take them
+/// (`Backend::lease`); for ever with a database of its own. Match tasks ask before each
+/// tick ([`Lease::holds`]): a server that was paused (`SIGSTOP`, a stalled VM) past its lease
+/// stops its matches rather than run them beside the server that took them.
+#[derive(Debug)]
+pub struct Lease {
+    /// Whether the lease can run out at all.
+    applies: std::sync::atomic::AtomicBool,
+    /// Milliseconds after `epoch` until which it holds.
+    until_ms: std::sync::atomic::AtomicU64,
+    epoch: Instant,
+}
+
+impl Default for Lease {
+    fn default() -> Self {
+        Lease {
+            applies: std::sync::atomic::AtomicBool::new(false),
+            until_ms: std::sync::atomic::AtomicU64::new(0),
+            epoch: Instant::now(),
+        }
+    }
+}
+
+impl Lease {
+    /// A heartbeat or write that started at `started` was taken: the lease holds `hold`
+    /// after it (`None`: a lease that never runs out).
+    fn renew(&self, started: Instant, hold: Option<Duration>) {
+        use std::sync::atomic::Ordering;
+        let Some(hold) = hold else { return };
+        let until = (started + hold)
+            .saturating_duration_since(self.epoch)
+            .as_millis() as u64;
+        self.until_ms.fetch_max(until, Ordering::Release);
+        self.applies.store(true, Ordering::Release);
+    }
+
+    /// Whether this server may run its matches now.
+    pub fn holds(&self) -> bool {
+        use std::sync::atomic::Ordering;
+        if !self.applies.load(Ordering::Acquire) {
+            return true;
+        }
+        let now = self.epoch.elapsed().as_millis() as u64;
+        now < self.until_ms.load(Ordering::Acquire)
     }
 }

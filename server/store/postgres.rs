@@ -29,6 +29,7 @@ use ::postgres::{Client, Config, NoTls, Row};
 
 use crate::store::backend::{
     self, Backend, LeaderOrder, Listed, Played, PlayerStats, Rated, Retention, StoreError, Stored,
+    Unfinished,
 };
 
 mod convert;
@@ -43,6 +44,14 @@ use write::{Change, apply, evict};
 /// How long a writer may be silent before its running matches are closed: six heartbeats,
 /// so a slow commit or a short network cut never closes a live match.
 pub const STALE_AFTER: Duration = Duration::from_secs(60);
+
+/// A writer's hold on its running matches lasts this long after its last heartbeat, then
+/// another server may take them (`adopt`); the holder stops them [`LEASE_MARGIN`] sooner
+/// (`store::Lease`), so at most one server runs a match at any moment. It beats every
+/// [`BEAT_EVERY`], a few times within its lease.
+pub const LEASE: Duration = Duration::from_secs(10);
+pub const LEASE_MARGIN: Duration = Duration::from_secs(3);
+pub const BEAT_EVERY: Duration = Duration::from_secs(2);
 
 /// The longest pause between the writer's tries to reach a database that went away.
 const RETRY_AT_MOST: Duration = Duration::from_secs(5);
@@ -142,6 +151,9 @@ pub struct Postgres {
     retention: Retention,
     /// This process's writer id; none on a connection for reads.
     writer: Option<String>,
+    /// The fence this writer holds each match it took from another at (`adopt`); one it
+    /// began is held at 0. A write with a fence the match no longer has is refused.
+    fences: std::collections::HashMap<String, i64>,
 }
 
 /// Why a batch was not committed.
@@ -214,6 +226,7 @@ impl Postgres {
             conn: None,
             retention,
             writer,
+            fences: Default::default(),
         };
         db.conn()?;
         Ok(db)
@@ -320,7 +333,10 @@ impl Postgres {
             )));
         };
         let retention = self.retention;
-        let Conn { client, st } = self.conn().map_err(Failure::Undone)?;
+        self.conn().map_err(Failure::Undone)?;
+        let Some(Conn { client, st }) = self.conn.as_mut() else {
+            return Err(Failure::Undone(StoreError::Closed));
+        };
         let mut tx = client.transaction().map_err(|e| Failure::Undone(db(e)))?;
         // Writing is a sign of life too: another server's sweep that forgot this writer (it
         // was silent, with nothing running) must not close the match it is starting now.
@@ -329,7 +345,7 @@ impl Postgres {
         let mut finished = false;
         for change in changes {
             // A refused change costs only itself; a failed statement ends the transaction.
-            match apply(&mut tx, st, &writer, change, now) {
+            match apply(&mut tx, st, &writer, &self.fences, change, now) {
                 Ok(Ok(())) => {}
                 Ok(Err(refused)) => tracing::warn!("history: {refused}"),
                 Err(e) => return Err(Failure::Undone(db(e))),
@@ -339,7 +355,59 @@ impl Postgres {
         if finished && let Err(e) = evict(&mut tx, st, retention) {
             tracing::warn!("history: eviction put off: {}", describe(&e));
         }
-        tx.commit().map_err(|e| Failure::Unknown(db(e)))
+        tx.commit().map_err(|e| Failure::Unknown(db(e)))?;
+        for change in changes {
+            match change {
+                Change::Finish { id, .. } | Change::Lost { id } => {
+                    self.fences.remove(*id);
+                }
+                _ => {}
+            }
+        }
+        Ok(())
+    }
+
+    /// Takes the running matches whose holder's lease ran out ([`LEASE`]) or that were
+    /// handed to this writer and are not among `running`, at most `room` of them, and
+    /// answers their ids: this writer holds them now, at their new fences.
+    pub fn adopt(&mut self, room: usize, running: &[String]) -> Result<Vec<String>, StoreError> {
+        let Some(me) = self.writer.clone() else {
+            return Ok(Vec::new());
+        };
+        if room == 0 {
+            return Ok(Vec::new());
+        }
+        let lease = LEASE.as_secs_f64();
+        let room = big(room as u64);
+        let taken = self.read(|c, st| {
+            c.query(&st.adopt, &[&me, &lease, &room, &running])?
+                .iter()
+                .map(|r| Ok((r.try_get::<_, String>(0)?, r.try_get::<_, i64>(1)?)))
+                .collect::<Result<Vec<_>, ::postgres::Error>>()
+        })?;
+        let mut ids = Vec::with_capacity(taken.len());
+        for (id, fence) in taken {
+            self.fences.insert(id.clone(), fence);
+            ids.push(id);
+        }
+        Ok(ids)
+    }
+
+    /// Hands every match this writer holds to writer `to`: answers their ids.
+    pub fn hand_over(&mut self, to: &str) -> Result<Vec<String>, StoreError> {
+        let Some(me) = self.writer.clone() else {
+            return Ok(Vec::new());
+        };
+        let ids = self.read(|c, st| {
+            c.query(&st.hand_over, &[&me, &to])?
+                .iter()
+                .map(|r| r.try_get::<_, String>(0))
+                .collect::<Result<Vec<_>, ::postgres::Error>>()
+        })?;
+        for id in &ids {
+            self.fences.remove(id);
+        }
+        Ok(ids)
     }
 }
 
@@ -357,6 +425,26 @@ impl Drop for Postgres {
 }
 
 impl Backend for Postgres {
+    fn beat_every(&self) -> Duration {
+        BEAT_EVERY
+    }
+
+    fn lease(&self) -> Option<Duration> {
+        self.writer.as_ref().map(|_| LEASE - LEASE_MARGIN)
+    }
+
+    fn adopt(&mut self, room: usize, running: &[String]) -> Result<Vec<String>, StoreError> {
+        Postgres::adopt(self, room, running)
+    }
+
+    fn hand_over(&mut self, to: &str) -> Result<Vec<String>, StoreError> {
+        Postgres::hand_over(self, to)
+    }
+
+    fn writer_id(&self) -> Option<String> {
+        self.writer.clone()
+    }
+
     fn write(&mut self, batch: &[backend::Write]) -> Result<(), StoreError> {
         let now = backend::unix_ms(std::time::SystemTime::now());
         let mut changes = Vec::with_capacity(batch.len());
@@ -420,6 +508,23 @@ impl Backend for Postgres {
                 .iter()
                 .map(listed)
                 .collect()
+        })
+    }
+
+    fn load_unfinished(&mut self, id: &str) -> Result<Option<Unfinished>, StoreError> {
+        self.read(|c, st| {
+            let Some(r) = c.query_opt(&st.load_running, &[&id])? else {
+                return Ok(None);
+            };
+            Ok(Some(Unfinished {
+                stored: Stored {
+                    listed: listed(&r)?,
+                    settings: r.try_get(9)?,
+                    map_document: r.try_get(10)?,
+                    chunks: r.try_get(11)?,
+                },
+                live: r.try_get(12)?,
+            }))
         })
     }
 

@@ -12,6 +12,7 @@ use rusqlite::{Connection, OptionalExtension, params};
 
 use crate::store::backend::{
     self, Ended, LeaderOrder, Listed, Played, PlayerStats, Retention, StoreError, Stored,
+    Unfinished,
 };
 
 /// The schema, one migration a step: step i takes `user_version` i to i + 1.
@@ -64,6 +65,8 @@ const MIGRATIONS: &[&str] = &[
     CREATE INDEX ratings_by_age ON ratings(updated_at);
     ALTER TABLE players ADD COLUMN rating_before REAL;
     ALTER TABLE players ADD COLUMN rating_after REAL;",
+    // 3: what resumes a running match (`codec::StoredLive`: owner, seats, token hashes).
+    "ALTER TABLE matches ADD COLUMN live TEXT;",
 ];
 
 /// The schema version this build writes.
@@ -120,40 +123,57 @@ fn migrate(conn: &mut Connection) -> Result<(), StoreError> {
     Ok(())
 }
 
-/// Matches a previous process left running are over: each becomes incomplete, ending at its
-/// last stored tick. Answers how many.
-pub fn close_interrupted(conn: &Connection) -> Result<usize, StoreError> {
+/// A running match that could not be resumed: over at its last stored tick, reason `lost`.
+pub fn lose(conn: &Connection, id: &str) -> Result<(), StoreError> {
     conn.execute(
-        "UPDATE matches SET ended_at = updated_at, complete = 0 WHERE ended_at IS NULL",
-        [],
+        "UPDATE matches SET ended_at = updated_at, complete = 0, reason = 'lost'
+         WHERE id = ?1 AND ended_at IS NULL",
+        [id],
     )
-    .map_err(db)
+    .map_err(db)?;
+    Ok(())
 }
 
-pub fn begin(
-    conn: &Connection,
-    id: &str,
-    map: &str,
-    map_hash: &str,
-    map_document: &str,
-    settings: &str,
-    started_at: i64,
-) -> Result<(), StoreError> {
+/// The matches left running, oldest first.
+pub fn unfinished(conn: &Connection) -> Result<Vec<String>, StoreError> {
+    let mut stmt = conn
+        .prepare_cached("SELECT id FROM matches WHERE ended_at IS NULL ORDER BY seq")
+        .map_err(db)?;
+    let rows = stmt.query_map([], |r| r.get::<_, String>(0)).map_err(db)?;
+    rows.collect::<Result<_, _>>().map_err(db)
+}
+
+/// A match's start as the database stores it.
+pub struct Begun<'a> {
+    pub id: &'a str,
+    pub map: &'a str,
+    pub map_hash: &'a str,
+    pub map_document: &'a str,
+    /// JSON of `codec::StoredSettings`.
+    pub settings: &'a str,
+    /// JSON of `codec::StoredLive`.
+    pub live: &'a str,
+    /// Unix milliseconds.
+    pub started_at: i64,
+}
+
+pub fn begin(conn: &Connection, b: &Begun<'_>) -> Result<(), StoreError> {
     conn.execute(
         "INSERT OR IGNORE INTO maps (hash, name, document) VALUES (?1, ?2, ?3)",
-        params![map_hash, map, map_document],
+        params![b.map_hash, b.map, b.map_document],
     )
     .map_err(db)?;
     conn.execute(
-        "INSERT INTO matches (id, map, map_hash, settings, started_at, updated_at, bytes)
-         VALUES (?1, ?2, ?3, ?4, ?5, ?5, ?6)",
+        "INSERT INTO matches (id, map, map_hash, settings, started_at, updated_at, bytes, live)
+         VALUES (?1, ?2, ?3, ?4, ?5, ?5, ?6, ?7)",
         params![
-            id,
-            map,
-            map_hash,
-            settings,
-            started_at,
-            settings.len() as i64
+            b.id,
+            b.map,
+            b.map_hash,
+            b.settings,
+            b.started_at,
+            b.settings.len() as i64,
+            b.live
         ],
     )
     .map_err(db)?;
@@ -166,6 +186,7 @@ pub fn append(
     id: &str,
     chunk: Option<&[u8]>,
     names: Option<&str>,
+    live: Option<&str>,
     tick: u64,
     now: i64,
 ) -> Result<(), StoreError> {
@@ -186,8 +207,8 @@ pub fn append(
     }
     conn.execute(
         "UPDATE matches SET ticks = ?2, updated_at = ?3, bytes = bytes + ?4,
-                names = COALESCE(?5, names) WHERE seq = ?1",
-        params![seq, tick as i64, now, bytes, names],
+                names = COALESCE(?5, names), live = COALESCE(?6, live) WHERE seq = ?1",
+        params![seq, tick as i64, now, bytes, names, live],
     )
     .map_err(db)?;
     Ok(())
@@ -253,24 +274,39 @@ pub fn list(
 
 /// One ended match, whole.
 pub fn load(conn: &Connection, id: &str) -> Result<Option<Stored>, StoreError> {
+    Ok(load_where(conn, id, true)?.map(|(stored, _)| stored))
+}
+
+/// One match left running, whole, with what resumes it.
+pub fn load_unfinished(conn: &Connection, id: &str) -> Result<Option<Unfinished>, StoreError> {
+    Ok(load_where(conn, id, false)?.map(|(stored, live)| Unfinished { stored, live }))
+}
+
+/// The match `id`, ended or running as `ended` says, and its live record.
+fn load_where(
+    conn: &Connection,
+    id: &str,
+    ended: bool,
+) -> Result<Option<(Stored, Option<String>)>, StoreError> {
     let row = conn
         .query_row(
             "SELECT id, map, started_at, ended_at, ticks, winner, reason, complete, names,
-                    settings, (SELECT document FROM maps WHERE hash = map_hash), seq
-             FROM matches WHERE id = ?1 AND ended_at IS NOT NULL",
-            [id],
+                    settings, (SELECT document FROM maps WHERE hash = map_hash), seq, live
+             FROM matches WHERE id = ?1 AND (ended_at IS NOT NULL) = ?2",
+            params![id, ended],
             |r| {
                 Ok((
                     listed(r)?,
                     r.get::<_, String>(9)?,
                     r.get::<_, String>(10)?,
                     r.get::<_, i64>(11)?,
+                    r.get::<_, Option<String>>(12)?,
                 ))
             },
         )
         .optional()
         .map_err(db)?;
-    let Some((listed, settings, map_document, seq)) = row else {
+    let Some((listed, settings, map_document, seq, live)) = row else {
         return Ok(None);
     };
     let mut stmt = conn
@@ -281,12 +317,15 @@ pub fn load(conn: &Connection, id: &str) -> Result<Option<Stored>, StoreError> {
         .map_err(db)?
         .collect::<Result<Vec<_>, _>>()
         .map_err(db)?;
-    Ok(Some(Stored {
-        listed,
-        settings,
-        map_document,
-        chunks,
-    }))
+    Ok(Some((
+        Stored {
+            listed,
+            settings,
+            map_document,
+            chunks,
+        },
+        live,
+    )))
 }
 
 /// What the store holds: ended matches and their bytes (settings and inputs).
@@ -422,6 +461,7 @@ impl backend::Backend for Sqlite {
                     id,
                     arena,
                     settings,
+                    live,
                     started_at,
                 } => {
                     begun = true;
@@ -431,12 +471,15 @@ impl backend::Backend for Sqlite {
                         .and_then(|settings| {
                             begin(
                                 &tx,
-                                id,
-                                &arena.def.name,
-                                &backend::map_key(&document),
-                                &document,
-                                &settings,
-                                backend::unix_ms(*started_at),
+                                &Begun {
+                                    id,
+                                    map: &arena.def.name,
+                                    map_hash: &backend::map_key(&document),
+                                    map_document: &document,
+                                    settings: &settings,
+                                    live: &live.to_json(),
+                                    started_at: backend::unix_ms(*started_at),
+                                },
                             )
                         })
                 }
@@ -444,6 +487,7 @@ impl backend::Backend for Sqlite {
                     id,
                     inputs,
                     names,
+                    live,
                     tick,
                 } => {
                     let chunk =
@@ -451,13 +495,26 @@ impl backend::Backend for Sqlite {
                     let names = names
                         .as_ref()
                         .map(|n| serde_json::to_string(n).unwrap_or_else(|_| "[]".into()));
-                    append(&tx, id, chunk.as_deref(), names.as_deref(), *tick, now)
+                    let live = live.as_ref().map(|l| l.to_json());
+                    append(
+                        &tx,
+                        id,
+                        chunk.as_deref(),
+                        names.as_deref(),
+                        live.as_deref(),
+                        *tick,
+                        now,
+                    )
+                }
+                Write::Lost { id } => {
+                    finished = true;
+                    lose(&tx, id)
                 }
                 Write::Finish { id, ended } => {
                     finished = true;
                     finish(&tx, id, ended)
                 }
-                Write::Flush(_) => Ok(()),
+                Write::Flush(_) | Write::Adopt { .. } | Write::HandOver { .. } => Ok(()),
             };
             if let Err(e) = done {
                 tracing::warn!("history: {e}");
@@ -491,6 +548,14 @@ impl backend::Backend for Sqlite {
 
     fn load(&mut self, id: &str) -> Result<Option<Stored>, StoreError> {
         load(&self.conn, id)
+    }
+
+    fn unfinished(&mut self) -> Result<Vec<String>, StoreError> {
+        unfinished(&self.conn)
+    }
+
+    fn load_unfinished(&mut self, id: &str) -> Result<Option<Unfinished>, StoreError> {
+        load_unfinished(&self.conn, id)
     }
 
     fn player(&mut self, name: &str) -> Result<Option<PlayerStats>, StoreError> {

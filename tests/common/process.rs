@@ -31,10 +31,16 @@ impl Server {
 
     /// [`Server::start`] with `env` added to the child's environment.
     pub fn start_with_env(args: &[&str], env: &[(&str, &str)]) -> Server {
+        Server::start_at("127.0.0.1:0", args, env)
+    }
+
+    /// `lasertag serve --addr <addr>` with `args` after it and `env` added (a fixed address:
+    /// a server started again where the last one was, for clients that reconnect).
+    pub fn start_at(addr: &str, args: &[&str], env: &[(&str, &str)]) -> Server {
         let root = env!("CARGO_MANIFEST_DIR");
         let mut child = Command::new(env!("CARGO_BIN_EXE_lasertag"))
             .current_dir(root)
-            .args(["serve", "--addr", "127.0.0.1:0"])
+            .args(["serve", "--addr", addr])
             .args(args)
             .envs(env.iter().copied())
             .env("RUST_LOG", "info")

@@ -1,6 +1,7 @@
 //! The replay's keyframes and the history's byte budget.
 
 use super::*;
+use crate::game::view::Clock;
 use crate::maps::MapStore;
 use lasertag_core::world::{ControlKind, HumanInput};
 

@@ -1,4 +1,5 @@
-//! How a match task feeds the history: the match's start, its inputs about once a second,
+//! How a match task feeds the history: the match's start (with what resumes it: owner and
+//! seats, tokens hashed), its inputs about once a second (and its seats when they change),
 //! and its end, handed to the store's writer without ever waiting on it (a full queue
 //! means trying again at the next flush), and the finished match kept for replay.
 
@@ -6,7 +7,7 @@ use std::time::{Duration, Instant, SystemTime};
 
 use super::MatchTask;
 use crate::game::replay::Replay;
-use crate::store::codec::StoredSettings;
+use crate::store::codec::{StoredLive, StoredSettings};
 use crate::store::{Ended, Write, results, unix_ms};
 use lasertag_core::world::{FinishReason, MatchStatus};
 
@@ -14,6 +15,18 @@ use lasertag_core::world::{FinishReason, MatchStatus};
 pub(super) const FLUSH_EVERY: Duration = Duration::from_secs(1);
 
 impl MatchTask {
+    /// What resumes the match besides its settings and inputs: owner and seats.
+    fn live_record(&self) -> StoredLive {
+        let owner = &self.settings.owner;
+        StoredLive {
+            owner: owner.token.map(|t| t.to_hex()),
+            client: owner.client.map(|c| c.to_string()),
+            reads_live: owner.reads_live,
+            seats: self.stored_seats(),
+            head_start_ticks: self.meta.head_start_ticks,
+        }
+    }
+
     /// Sends the match's start, unless the store has it.
     fn store_begin(&mut self) -> bool {
         if self.store.begun {
@@ -31,6 +44,7 @@ impl MatchTask {
             id: self.meta.id.clone(),
             arena: self.world.arena.clone(),
             settings: Box::new(settings),
+            live: Box::new(self.live_record()),
             started_at: self.started_at,
         };
         self.store.begun = self.settings.history.record(begin).is_ok();
@@ -48,15 +62,15 @@ impl MatchTask {
             return;
         }
         let inputs = self.recording.unstored().to_vec();
-        let names = self
-            .recording
-            .seats_unstored()
-            .then(|| self.recording.names());
+        let seats_changed = self.recording.seats_unstored();
+        let names = seats_changed.then(|| self.recording.names());
+        let live = seats_changed.then(|| Box::new(self.live_record()));
         let n = inputs.len();
         let append = Write::Append {
             id: self.meta.id.clone(),
             inputs,
             names,
+            live,
             tick: self.world.tick,
         };
         if self.settings.history.record(append).is_ok() {
@@ -74,12 +88,14 @@ impl MatchTask {
         }
         self.archived = true;
         self.store_flush(true);
+        // A recording that let go of its oldest orders is replayed from the store.
+        let inputs = self.recording.inputs().unwrap_or_default().to_vec();
         let replay = Replay::of(
             &self.world,
             self.meta.clone(),
             self.world.arena.clone(),
             self.world.config.clone(),
-            self.recording.inputs().to_vec(),
+            inputs,
             self.started_at,
         );
         let listed = replay.listed();
@@ -115,6 +131,8 @@ impl MatchTask {
         {
             tracing::warn!("the history's queue is full: the match stays incomplete there");
         }
-        self.settings.history.keep(replay);
+        if self.recording.inputs().is_some() {
+            self.settings.history.keep(replay);
+        }
     }
 }

@@ -30,7 +30,7 @@ use seats::Player;
 use tokio::time::MissedTickBehavior;
 use tracing::Instrument;
 
-use crate::access::{ClientKey, same_secret};
+use crate::access::{ClientKey, Owner, SecretHash};
 use std::borrow::Cow;
 
 use crate::access::random_id;
@@ -118,6 +118,9 @@ pub enum Request {
     },
     /// End the match for this reason (deleted, or the server is shutting down) and its task.
     Stop(FinishReason),
+    /// End the task, not the match: its record goes to the store, whole, and the next
+    /// server to start on that store resumes it (`game::resume`).
+    Suspend,
 }
 
 impl Request {
@@ -156,6 +159,7 @@ impl std::fmt::Debug for Request {
                 .field("seq", seq)
                 .finish(),
             Request::Stop(reason) => f.debug_tuple("Stop").field(reason).finish(),
+            Request::Suspend => f.write_str("Suspend"),
         }
     }
 }
@@ -308,8 +312,35 @@ pub struct TaskSettings {
     pub metrics: Metrics,
     /// Where the match goes for replay once it has finished.
     pub history: Arc<crate::game::replay::History>,
+    /// Who owns the match (stored, hashed, to resume it).
+    pub owner: Arc<Owner>,
     /// Called once when the task ends by itself (cleaned up, abandoned): unregisters it.
     pub on_exit: Box<dyn FnOnce() + Send>,
+}
+
+/// A person's seat in a resumed match, as the store kept it.
+#[derive(Debug, Clone)]
+pub struct ResumedSeat {
+    pub seat: usize,
+    pub player_id: String,
+    pub name: String,
+    pub token: SecretHash,
+    pub client: Option<ClientKey>,
+}
+
+/// What a match rebuilt from its record (`game::resume`) brings to its task besides its
+/// world.
+#[derive(Debug)]
+pub struct Resumed {
+    /// Its record, all of it in the store already.
+    pub recording: Recording,
+    /// The recorded inputs from the world's tick on, and the tick the match had reached:
+    /// the task runs these ticks at once, publishing each, so that a delayed view has its
+    /// delay's worth of frames to show (and nobody sees the truth live).
+    pub catch_up: Vec<(u64, WorldInput)>,
+    pub until: u64,
+    pub seats: Vec<ResumedSeat>,
+    pub started_at: std::time::SystemTime,
 }
 
 impl std::fmt::Debug for TaskSettings {
@@ -330,6 +361,26 @@ pub fn spawn_match(
     world: World,
     meta: MatchMeta,
     settings: TaskSettings,
+) -> (mpsc::Sender<Request>, Hub) {
+    spawn(world, meta, settings, None)
+}
+
+/// Spawns the task of a match rebuilt from its record: it catches up to where the match had
+/// got (see [`Resumed`]) before it answers anything.
+pub fn spawn_resumed(
+    world: World,
+    meta: MatchMeta,
+    settings: TaskSettings,
+    resumed: Resumed,
+) -> (mpsc::Sender<Request>, Hub) {
+    spawn(world, meta, settings, Some(resumed))
+}
+
+fn spawn(
+    world: World,
+    meta: MatchMeta,
+    settings: TaskSettings,
+    resumed: Option<Resumed>,
 ) -> (mpsc::Sender<Request>, Hub) {
     let (tx, rx) = mpsc::channel(256);
     let first = Arc::new(Frame::build(&world, &Default::default(), 0, 0, true));
@@ -370,11 +421,31 @@ pub fn spawn_match(
     };
     let histograms = settings.metrics.tick_histograms(kind, clock);
     let now = Instant::now();
+    let spills = settings.history.store().is_some();
+    let (recording, started_at, catch_up, seats) = match resumed {
+        Some(r) => (
+            r.recording,
+            r.started_at,
+            Some((r.catch_up, r.until)),
+            r.seats,
+        ),
+        None => (
+            Recording::new(spills),
+            std::time::SystemTime::now(),
+            None,
+            Vec::new(),
+        ),
+    };
     let mut task = MatchTask {
-        recording: Recording::default(),
+        recording,
         archived: false,
-        store: StoreProgress::default(),
-        started_at: std::time::SystemTime::now(),
+        store: StoreProgress {
+            // A resumed match's start is in the store already.
+            begun: catch_up.is_some(),
+            last_flush: now,
+        },
+        catch_up,
+        started_at,
         players: MatchTask::bodies(&world).iter().map(|_| None).collect(),
         bodies: MatchTask::bodies(&world),
         finished_at: None,
@@ -400,6 +471,7 @@ pub fn spawn_match(
         overruns: std::collections::VecDeque::with_capacity(OVERRUN_WINDOW),
         overrun_count: 0,
     };
+    task.reseat(seats);
     task.publish_summary();
     // The store hears of the match at once: a crash in its first second still leaves it.
     task.store_flush(true);
@@ -452,6 +524,8 @@ struct MatchTask {
     archived: bool,
     /// What the store has of the match.
     store: StoreProgress,
+    /// A resumed match's ticks to run at once before anything else (see [`Resumed`]).
+    catch_up: Option<(Vec<(u64, WorldInput)>, u64)>,
     started_at: std::time::SystemTime,
     /// When the world was first seen finished (for the clean-up grace).
     finished_at: Option<Instant>,
@@ -500,7 +574,9 @@ impl MatchTask {
         housekeeping.set_missed_tick_behavior(MissedTickBehavior::Skip);
         let mut pending: Option<PendingStep> = None;
         let mut last_tick: Option<Instant> = None;
-        if realtime {
+        if let Some((inputs, until)) = self.catch_up.take() {
+            self.catch_up(&inputs, until);
+        } else if realtime {
             self.head_start();
         }
         loop {
@@ -511,6 +587,11 @@ impl MatchTask {
                 biased;
                 req = rx.recv() => {
                     let Some(req) = req else { break };
+                    if let Request::Suspend = req {
+                        self.store_flush(true);
+                        tracing::info!(tick = self.world.tick, "match suspended: the store has it to resume");
+                        break;
+                    }
                     if let Request::Stop(reason) = req {
                         let _ = self.apply(WorldInput::End(reason));
                         self.publish();
@@ -627,6 +708,33 @@ impl MatchTask {
         });
     }
 
+    /// Runs a resumed match from the world's tick to `until` at once, re-applying the
+    /// recorded `inputs` (the store has them: nothing is recorded again), publishing each
+    /// tick as the clock would, so that a held-back view shows what it showed before the
+    /// restart. Off the workers, untimed, as the head start.
+    fn catch_up(&mut self, inputs: &[(u64, WorldInput)], until: u64) {
+        off_the_workers(true, || {
+            let mut next = 0;
+            loop {
+                while let Some((t, input)) = inputs.get(next)
+                    && *t <= self.world.tick
+                {
+                    if *t == self.world.tick {
+                        let _ = self.world.apply(input);
+                    }
+                    next += 1;
+                }
+                if self.world.tick >= until || self.world.status != MatchStatus::Running {
+                    break;
+                }
+                self.world.step();
+                self.publish();
+            }
+            self.publish();
+        });
+        tracing::info!(tick = self.world.tick, "match resumed");
+    }
+
     /// Applies a change from outside to the world and records it (see `game::record`).
     fn apply(&mut self, input: WorldInput) -> Result<(), InputError> {
         self.world.apply(&input)?;
@@ -669,7 +777,7 @@ impl MatchTask {
 
     fn answer(&mut self, req: Request, realtime: bool, pending: &mut Option<PendingStep>) {
         match req {
-            Request::Stop(_) => {}
+            Request::Stop(_) | Request::Suspend => {}
             Request::Read { sight, answer } => {
                 // A read sees the counts as they are now (the frame catches up when read).
                 self.refresh_meta();

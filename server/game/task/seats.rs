@@ -17,7 +17,8 @@ const MAX_QUEUED_INPUTS: usize = 8;
 pub(super) struct Player {
     pub(super) id: String,
     pub(super) name: Arc<str>,
-    pub(super) token: String,
+    /// The hash of the seat's token (the token itself went to the person who joined).
+    pub(super) token: SecretHash,
     /// Bumped at every connection with this token; inputs from older ones are ignored.
     pub(super) generation: u64,
     /// Held while a connection plays this slot: its receiver is dropped when the
@@ -50,6 +51,55 @@ impl Player {
 }
 
 impl MatchTask {
+    /// Seats the people a resumed match had (`game::resume`): each has the reconnect grace
+    /// to come back with their token, from now, so the outage counts against nobody.
+    pub(super) fn reseat(&mut self, seats: Vec<ResumedSeat>) {
+        let now = Instant::now();
+        for s in seats {
+            let Some(place) = self.players.get_mut(s.seat) else {
+                tracing::warn!(seat = s.seat, "a resumed seat the match does not have");
+                continue;
+            };
+            let ledger = s
+                .client
+                .and_then(|c| self.settings.seats.take(c, usize::MAX).ok());
+            *place = Some(Player {
+                id: s.player_id,
+                name: s.name.as_str().into(),
+                token: s.token,
+                generation: 0,
+                kick: None,
+                away_since: Some(now),
+                joined_at: now,
+                played: true,
+                client: s.client,
+                _ledger: ledger,
+                inputs: Default::default(),
+                received: 0,
+                applied: 0,
+                drive: None,
+            });
+        }
+    }
+
+    /// The seats people hold now, as the store keeps them to resume the match.
+    pub(super) fn stored_seats(&self) -> Vec<crate::store::codec::StoredSeat> {
+        self.players
+            .iter()
+            .enumerate()
+            .filter_map(|(seat, p)| {
+                let p = p.as_ref()?;
+                Some(crate::store::codec::StoredSeat {
+                    seat,
+                    player_id: p.id.clone(),
+                    name: p.name.to_string(),
+                    token: p.token.to_hex(),
+                    client: p.client.map(|c| c.to_string()),
+                })
+            })
+            .collect()
+    }
+
     /// Hands each player's next numbered input to the world: one per tick, in order. With
     /// none queued, the last one holds (keys still down).
     pub(super) fn feed_inputs(&mut self) {
@@ -264,10 +314,11 @@ impl MatchTask {
             },
             None => None,
         };
+        let token = random_id(24);
         let player = Player {
             id: random_id(8),
             name: name.as_str().into(),
-            token: random_id(24),
+            token: SecretHash::of(&token),
             generation: 0,
             kick: None,
             away_since: Some(Instant::now()),
@@ -285,7 +336,7 @@ impl MatchTask {
         let joined = Joined {
             player_id: player.id.clone(),
             body,
-            token: player.token.clone(),
+            token,
         };
         self.players[seat] = Some(player);
         let _ = self.apply(match body {
@@ -309,7 +360,7 @@ impl MatchTask {
         let seat = self
             .players
             .iter()
-            .position(|p| p.as_ref().is_some_and(|p| same_secret(&p.token, token)))
+            .position(|p| p.as_ref().is_some_and(|p| p.token.matches(token)))
             .ok_or_else(|| {
                 MatchError::NotAPlayer(format!("token: not a player of match {}", self.meta.id))
             })?;

@@ -2,6 +2,7 @@
 //! physics from its name, inputs line for line.
 
 use super::*;
+use lasertag_core::bots::BotKind;
 use lasertag_core::world::ControlKind;
 
 fn round_trip(config: &MatchConfig) {

@@ -67,6 +67,11 @@ const MIGRATIONS: &[&str] = &[
     CREATE INDEX ratings_by_age ON ratings(updated_at);
     ALTER TABLE players ADD COLUMN rating_before DOUBLE PRECISION,
                         ADD COLUMN rating_after DOUBLE PRECISION;",
+    // 3: what resumes a running match (`codec::StoredLive`: owner, seats, token hashes).
+    "ALTER TABLE matches ADD COLUMN live TEXT;",
+    // 4: a running match's lease: its holder is `writer`; `fence` counts the times it changed
+    // hands, and a holder writes only with the fence it took it at.
+    "ALTER TABLE matches ADD COLUMN fence BIGINT NOT NULL DEFAULT 0;",
 ];
 
 /// The schema version this build writes.
@@ -122,7 +127,11 @@ pub(super) struct Statements {
     pub(super) begin_map: Statement,
     pub(super) begin_match: Statement,
     pub(super) append: Statement,
+    pub(super) lose: Statement,
     pub(super) finish: Statement,
+    pub(super) adopt: Statement,
+    pub(super) hand_over: Statement,
+    pub(super) load_running: Statement,
     pub(super) add_players: Statement,
     pub(super) evict: Statement,
     pub(super) forget_maps: Statement,
@@ -157,27 +166,62 @@ impl Statements {
             )?,
             begin_match: c.prepare(
                 "INSERT INTO matches (id, writer, map, map_hash, settings, started_at,
-                                      updated_at, bytes)
-                 VALUES ($1, $2, $3, $4, $5, $6, $6, $7) ON CONFLICT (id) DO NOTHING",
+                                      updated_at, bytes, live)
+                 VALUES ($1, $2, $3, $4, $5, $6, $6, $7, $8) ON CONFLICT (id) DO NOTHING",
             )?,
             // One round trip: appends are most of the writes. A match a silent-writer sweep
             // closed is open again once its writer speaks.
             append: c.prepare(
                 "WITH m AS (
                    UPDATE matches SET ticks = $3, updated_at = $4, bytes = bytes + $5,
-                          names = COALESCE($6, names),
+                          names = COALESCE($6, names), live = COALESCE($8, live),
                           ended_at = CASE WHEN complete THEN ended_at END
-                   WHERE id = $1 AND writer = $2 RETURNING seq
+                   WHERE id = $1 AND writer = $2 AND fence = $9 RETURNING seq
                  ), chunk AS (
                    INSERT INTO inputs (seq, chunk) SELECT seq, $7::BYTEA FROM m
                    WHERE $7::BYTEA IS NOT NULL
                  )
                  SELECT seq FROM m",
             )?,
+            lose: c.prepare(
+                "UPDATE matches SET ended_at = updated_at, complete = FALSE, reason = 'lost'
+                 WHERE id = $1 AND writer = $2 AND fence = $3 AND ended_at IS NULL",
+            )?,
             finish: c.prepare(
                 "UPDATE matches SET ended_at = $3, ticks = $4, winner = $5, reason = $6,
                         complete = TRUE
-                 WHERE id = $1 AND writer = $2 RETURNING seq",
+                 WHERE id = $1 AND writer = $2 AND fence = $7 RETURNING seq",
+            )?,
+            // Takes, in one statement, at most $3 running matches whose holder's lease has
+            // run out (its writer silent for $2 s) or that were handed to this writer ($1)
+            // and are not among those it runs ($4): each changes hands, its fence one up.
+            // Rows another server is taking at the same moment are locked: skipped.
+            adopt: c.prepare(
+                "WITH picked AS (
+                   SELECT seq FROM matches m
+                   WHERE ended_at IS NULL
+                     AND (m.writer = $1 AND NOT (m.id = ANY($4::TEXT[]))
+                          OR m.writer <> $1 AND NOT EXISTS (
+                            SELECT 1 FROM writers w WHERE w.id = m.writer
+                              AND w.seen_at > now() - make_interval(secs => $2)))
+                   ORDER BY seq LIMIT $3 FOR UPDATE SKIP LOCKED)
+                 UPDATE matches m SET writer = $1, fence = m.fence + 1
+                 FROM picked WHERE m.seq = picked.seq
+                 RETURNING m.id, m.fence",
+            )?,
+            // Hands this writer's ($1) running matches to writer $2, each with its fence one
+            // up (the handing writer's last writes are committed before it).
+            hand_over: c.prepare(
+                "UPDATE matches SET writer = $2, fence = fence + 1
+                 WHERE writer = $1 AND ended_at IS NULL RETURNING id",
+            )?,
+            load_running: c.prepare(
+                "SELECT m.id, m.map, m.started_at, m.ended_at, m.ticks, m.winner, m.reason,
+                        m.complete, m.names, m.settings, maps.document,
+                        ARRAY(SELECT chunk FROM inputs WHERE inputs.seq = m.seq ORDER BY n),
+                        m.live
+                 FROM matches m JOIN maps ON maps.hash = m.map_hash
+                 WHERE m.id = $1 AND m.ended_at IS NULL",
             )?,
             add_players: c.prepare(
                 "INSERT INTO players (seq, name, tags, survived_ticks, won, rating_before,

@@ -17,13 +17,18 @@ pub(super) enum Change<'a> {
         hash: String,
         document: String,
         settings: String,
+        live: String,
         started_at: i64,
     },
     Append {
         id: &'a str,
         chunk: Option<Vec<u8>>,
         names: Option<String>,
+        live: Option<String>,
         tick: i64,
+    },
+    Lost {
+        id: &'a str,
     },
     Finish {
         id: &'a str,
@@ -41,6 +46,7 @@ impl<'a> Change<'a> {
                 id,
                 arena,
                 settings,
+                live,
                 started_at,
             } => {
                 let document = crate::maps::import::to_json(&crate::maps::to_file(&arena.def));
@@ -52,6 +58,7 @@ impl<'a> Change<'a> {
                         hash: crate::store::backend::map_key(&document),
                         document,
                         settings,
+                        live: live.to_json(),
                         started_at: crate::store::backend::unix_ms(*started_at),
                     })
             }
@@ -59,6 +66,7 @@ impl<'a> Change<'a> {
                 id,
                 inputs,
                 names,
+                live,
                 tick,
             } => Ok(Change::Append {
                 id,
@@ -66,10 +74,12 @@ impl<'a> Change<'a> {
                 names: names
                     .as_ref()
                     .map(|n| serde_json::to_string(n).unwrap_or_else(|_| "[]".into())),
+                live: live.as_ref().map(|l| l.to_json()),
                 tick: big(*tick),
             }),
             Write::Finish { id, ended } => Ok(Change::Finish { id, ended }),
-            Write::Flush(_) => return None,
+            Write::Lost { id } => Ok(Change::Lost { id }),
+            Write::Flush(_) | Write::Adopt { .. } | Write::HandOver { .. } => return None,
         })
     }
 }
@@ -80,9 +90,13 @@ pub(super) fn apply(
     tx: &mut Transaction<'_>,
     st: &Statements,
     writer: &str,
+    fences: &std::collections::HashMap<String, i64>,
     change: &Change<'_>,
     now: i64,
 ) -> Result<Result<(), StoreError>, ::postgres::Error> {
+    // The fence this writer holds a match at (0: it began it); a match it no longer holds
+    // refuses the write.
+    let fence = |id: &str| fences.get(id).copied().unwrap_or(0);
     match change {
         Change::Begin {
             id,
@@ -90,6 +104,7 @@ pub(super) fn apply(
             hash,
             document,
             settings,
+            live,
             started_at,
         } => {
             tx.execute(&st.begin_map, &[hash, map, document])?;
@@ -99,7 +114,7 @@ pub(super) fn apply(
             let bytes = (settings.len() + document.len()) as i64;
             let added = tx.execute(
                 &st.begin_match,
-                &[id, &writer, map, hash, settings, started_at, &bytes],
+                &[id, &writer, map, hash, settings, started_at, &bytes, live],
             )?;
             Ok(if added == 0 {
                 Err(StoreError::Duplicate(id.to_string()))
@@ -111,15 +126,32 @@ pub(super) fn apply(
             id,
             chunk,
             names,
+            live,
             tick,
         } => {
             let bytes = chunk.as_ref().map_or(0, |c| c.len() as i64);
-            let found =
-                tx.query_opt(&st.append, &[id, &writer, tick, &now, &bytes, names, chunk])?;
+            let found = tx.query_opt(
+                &st.append,
+                &[
+                    id,
+                    &writer,
+                    tick,
+                    &now,
+                    &bytes,
+                    names,
+                    chunk,
+                    live,
+                    &fence(id),
+                ],
+            )?;
             Ok(match found {
                 Some(_) => Ok(()),
                 None => Err(StoreError::Unknown(id.to_string())),
             })
+        }
+        Change::Lost { id } => {
+            tx.execute(&st.lose, &[id, &writer, &fence(id)])?;
+            Ok(Ok(()))
         }
         Change::Finish { id, ended } => {
             let ticks = big(ended.ticks);
@@ -132,6 +164,7 @@ pub(super) fn apply(
                     &ticks,
                     &ended.winner,
                     &ended.reason,
+                    &fence(id),
                 ],
             )?
             else {

@@ -37,12 +37,17 @@ fn a_match(id: &str, n: usize, name: &str, won: bool) -> Vec<Write> {
                 None,
                 false,
             )),
+            live: Box::new(crate::store::codec::StoredLive {
+                owner: Some("ab".repeat(32)),
+                ..Default::default()
+            }),
             started_at: std::time::SystemTime::now(),
         },
         Write::Append {
             id: id.into(),
             inputs: (0..n as u64).map(|t| (t, keys.clone())).collect(),
             names: Some(vec![name.into()]),
+            live: None,
             tick: n as u64,
         },
         Write::Finish {
@@ -125,7 +130,7 @@ fn retention_keeps_the_newest_and_statistics_add_up() {
 }
 
 #[test]
-fn a_newer_schema_is_refused_and_an_unfinished_match_becomes_incomplete() {
+fn a_newer_schema_is_refused_and_an_unfinished_match_is_kept_for_resuming_or_lost() {
     let d = dir("schema");
     let retention = Retention {
         max_matches: 10,
@@ -136,9 +141,21 @@ fn a_newer_schema_is_refused_and_an_unfinished_match_becomes_incomplete() {
     writes.pop();
     db.write(&writes).expect("write");
     assert!(db.list(10, None).expect("list").is_empty(), "still running");
-    assert_eq!(close_interrupted(db.connection()).expect("close"), 1);
+    assert_eq!(db.unfinished().expect("unfinished"), ["cut"]);
+    let left = db
+        .load_unfinished("cut")
+        .expect("load")
+        .expect("the running match");
+    assert_eq!(left.stored.listed.ticks, 7);
+    assert_eq!(left.stored.chunks.len(), 1);
+    let live = crate::store::codec::StoredLive::from_json(&left.live.expect("live record"));
+    assert_eq!(live.expect("parses").owner, Some("ab".repeat(32)));
+    assert!(db.load("cut").expect("load").is_none(), "not ended");
+    db.write(&[Write::Lost { id: "cut".into() }]).expect("lost");
+    assert!(db.unfinished().expect("unfinished").is_empty());
     let cut = db.list(10, None).expect("list");
     assert_eq!((cut[0].complete, cut[0].ticks), (false, 7));
+    assert_eq!(cut[0].reason.as_deref(), Some("lost"));
     assert_eq!(cut[0].players, ["ada"]);
     db.connection()
         .pragma_update(None, "user_version", SCHEMA_VERSION + 1)
