@@ -361,7 +361,7 @@ async fn main() {
         tasks.push(tokio::spawn(async move {
             let mut tick = 0;
             while !stop.load(Ordering::Relaxed) {
-                let (status, r) = patient(
+                let act = call(
                     &http,
                     reqwest::Method::POST,
                     format!("{base}/api/matches/{id}/act"),
@@ -369,8 +369,24 @@ async fn main() {
                     Some(&commands_at(tick)),
                 )
                 .await;
-                assert_eq!(status, 200, "act on {id}: {r}");
-                tick = r["tick"].as_u64().expect("a tick");
+                match act {
+                    Some((200, r)) => tick = r["tick"].as_u64().expect("a tick"),
+                    Some((503, _)) | None => {
+                        // A restart: the match goes on from its last stored tick, which the
+                        // next commands must follow (they are a function of the tick).
+                        let (status, r) = patient(
+                            &http,
+                            reqwest::Method::GET,
+                            format!("{base}/api/matches/{id}"),
+                            Some(&token),
+                            None,
+                        )
+                        .await;
+                        assert_eq!(status, 200, "{id}: {r}");
+                        tick = r["tick"].as_u64().expect("a tick");
+                    }
+                    Some((status, r)) => panic!("act on {id}: {status} {r}"),
+                }
             }
         }));
     }

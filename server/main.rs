@@ -228,10 +228,12 @@ async fn serve(args: ServeArgs) -> Result<(), String> {
         .map_err(|e| e.to_string())?
         .map(|(settings, client)| Fleet::start(settings, client, registry.clone()));
     if fleet.is_some() {
-        // A node's matches are not resumed by another node yet: a node that stops ends
-        // them, as it always has (docs/operations.md, "Fleet").
+        // A fleet node's own store is not where another node would resume its matches: a
+        // node that stops hands them over through a shared store, or else ends them.
         registry.end_matches_on_stop();
     }
+    // On a shared store, the matches other servers can no longer run are taken over here.
+    tokio::spawn(lasertag::game::resume::adopt_forever(registry.clone()));
     tracing::info!("serving http://{local}");
     let app = match &fleet {
         Some(fleet) => lasertag::http::app_in_fleet(registry.clone(), args.web, fleet.clone()),
@@ -245,7 +247,12 @@ async fn serve(args: ServeArgs) -> Result<(), String> {
     if let Some(sidecar) = &sidecar {
         tokio::spawn(lasertag::agones::run(registry.clone(), sidecar.clone()));
     }
-    let server = lasertag::http::serve(listener, app, limits, shutdown_signal(registry.clone()));
+    let server = lasertag::http::serve(
+        listener,
+        app,
+        limits,
+        shutdown_signal(registry.clone(), fleet.clone()),
+    );
     tokio::pin!(server);
     // Before a signal only an accept loop that failed ends the server. After one, the server
     // future may well be the branch that finishes first (it has no HTTP request left to wait
@@ -315,7 +322,7 @@ async fn serve(args: ServeArgs) -> Result<(), String> {
 
 /// Resolves on Ctrl-C or SIGTERM, after the drain (`--drain-s`) and after telling every
 /// match and connection to stop.
-async fn shutdown_signal(registry: Arc<Registry>) {
+async fn shutdown_signal(registry: Arc<Registry>, fleet: Option<Arc<Fleet>>) {
     let mut signals = StopSignals::new();
     signals.next().await;
     let drain = registry.config.drain;
@@ -338,7 +345,33 @@ async fn shutdown_signal(registry: Arc<Registry>) {
         }
     }
     tracing::info!("shutting down");
-    registry.begin_shutdown().await;
+    // In a fleet on a shared store, the running matches go on on another node with room.
+    let target = fleet
+        .filter(|_| registry.history.store().is_some_and(|s| s.adopts()))
+        .and_then(|f| f.hand_over_to());
+    match target {
+        Some((url, writer)) => {
+            tracing::info!(to = %url, "handing the running matches over");
+            registry.begin_shutdown_moving_to(&url).await;
+            let store = registry.clone();
+            let handed = tokio::task::spawn_blocking(move || {
+                store
+                    .history
+                    .store()
+                    .map(|s| s.hand_over(&writer, Duration::from_secs(2)))
+            })
+            .await;
+            match handed {
+                Ok(Some(Ok(ids))) => {
+                    tracing::info!(matches = ids.len(), to = %url, "matches handed over")
+                }
+                _ => tracing::warn!(
+                    "the matches could not be handed over; others take them once this node's lease runs out"
+                ),
+            }
+        }
+        None => registry.begin_shutdown().await,
+    }
 }
 
 /// Ctrl-C and SIGTERM, as often as they come.

@@ -99,7 +99,8 @@ pub struct Metrics {
     registry: Registry,
     /// Matches held, by `state` (`running`, `finished`); set at each scrape.
     pub matches: IntGaugeVec,
-    /// Matches removed, by `reason` (`deleted`, `finished`, `abandoned`, `idle`).
+    /// Matches removed, by `reason` (`deleted`, `finished`, `abandoned`, `idle`, `moved`:
+    /// another server took it).
     pub matches_removed: IntCounterVec,
     /// Matches a starting server found left running in its store, by `outcome`
     /// (`resumed`, `lost`: its record could not be rebuilt).
@@ -265,7 +266,7 @@ impl Metrics {
         for r in Refusal::ALL {
             refused.with_label_values(&[r.label()]).inc_by(0);
         }
-        for reason in ["deleted", "finished", "abandoned", "idle"] {
+        for reason in ["deleted", "finished", "abandoned", "idle", "moved"] {
             matches_removed.with_label_values(&[reason]).inc_by(0);
         }
         for outcome in ["resumed", "lost"] {

@@ -374,3 +374,127 @@ async fn an_api_match_records_past_what_memory_held_and_resumes() {
     assert_eq!(status, 200, "{r}");
     assert_eq!(r["tick"].as_u64(), Some(acts as u64 + 1));
 }
+
+/// A tmpfs of a few megabytes mounted at a fresh directory (the tests run as root, as CI
+/// does), unmounted when dropped, so that a store can be given a disk that fills.
+struct SmallDisk {
+    dir: std::path::PathBuf,
+}
+
+impl SmallDisk {
+    fn mount(what: &str, mb: u64) -> SmallDisk {
+        let dir = common::temp_dir(what);
+        std::fs::create_dir_all(&dir).expect("a mount point");
+        let status = std::process::Command::new("mount")
+            .args(["-t", "tmpfs", "-o", &format!("size={mb}m"), "tmpfs"])
+            .arg(&dir)
+            .status()
+            .expect("mount runs");
+        assert!(status.success(), "mounting a tmpfs needs root");
+        SmallDisk { dir }
+    }
+
+    /// Fills the disk to the last byte with one file, which it returns.
+    fn fill(&self) -> std::path::PathBuf {
+        use std::io::Write;
+        let path = self.dir.join("filler");
+        let mut f = std::fs::File::create(&path).expect("the filler");
+        let chunk = vec![0u8; 64 * 1024];
+        while f.write_all(&chunk).is_ok() {}
+        let small = [0u8; 512];
+        while f.write_all(&small).is_ok() {}
+        let _ = f.sync_all();
+        path
+    }
+}
+
+impl Drop for SmallDisk {
+    fn drop(&mut self) {
+        let _ = std::process::Command::new("umount")
+            .arg("-l")
+            .arg(&self.dir)
+            .status();
+    }
+}
+
+#[tokio::test]
+async fn a_full_disk_stops_the_record_not_the_play_and_the_record_keeps_no_gap() {
+    let disk = SmallDisk::mount("resume-full-disk", 24);
+    let dir = disk.dir.join("data");
+    let client = reqwest::Client::new();
+    let mut a = serve_unthrottled(&dir);
+    let (id, token) = create(
+        &client,
+        &a,
+        json!({"map": "office", "clock": "manual", "seed": 9, "robots": 2, "opponents": 1,
+            "planner": "api", "localisation": false}),
+    )
+    .await;
+    let path = format!("/api/matches/{id}/act");
+    let act = |tick: u64| {
+        let turn = if (tick / 20).is_multiple_of(2) {
+            0.5
+        } else {
+            -0.5
+        };
+        json!({"commands": {"r0": {"forward": 1.0, "turn": turn}, "r1": {"forward": 0.6, "turn": -turn}},
+            "ticks": 1})
+    };
+    let drive = |n: u64| {
+        let (client, a, path, token) = (&client, &a, &path, &token);
+        async move {
+            let mut last = 0;
+            for _ in 0..n {
+                let (status, r, _) = send(
+                    client,
+                    reqwest::Method::POST,
+                    a,
+                    path,
+                    Some(token),
+                    Some(act(last)),
+                )
+                .await;
+                assert_eq!(status, 200, "{r}");
+                last = r["tick"].as_u64().unwrap();
+            }
+            last
+        }
+    };
+    let tick = drive(100).await;
+    stored().await;
+    let filler = disk.fill();
+    // Play goes on while nothing can be written, and the operator is told.
+    let played = drive(300).await;
+    assert!(played > tick, "the match plays on: {played}");
+    stored().await;
+    let told = a
+        .warnings
+        .lock()
+        .unwrap()
+        .iter()
+        .any(|l| l.contains("could not store") && l.contains("cannot be written"));
+    assert!(
+        told,
+        "the log says the history cannot be written: {:?}",
+        a.warnings.lock().unwrap()
+    );
+    // Room again: the writer stores what waited, and the record has no gap.
+    std::fs::remove_file(filler).expect("the filler goes");
+    drive(20).await;
+    stored().await;
+    stored().await;
+    let before = reading(&client, &a, &id, &token).await;
+    kill(&mut a);
+    let b = serve_unthrottled(&dir);
+    when_back(&client, &b, &format!("/api/matches/{id}"), None).await;
+    assert_eq!(
+        reading(&client, &b, &id, &token).await,
+        before,
+        "resumed whole"
+    );
+    let db = rusqlite::Connection::open(dir.join("lasertag.db")).expect("the database");
+    let check: String = db
+        .query_row("PRAGMA integrity_check", [], |r| r.get(0))
+        .expect("integrity_check");
+    assert_eq!(check, "ok");
+}

@@ -118,8 +118,9 @@ async fn a_player_never_sees_a_robot_out_of_its_line_of_sight() {
             ws.send_json(&json!({"type": "input", "forward": 1.0, "turn": turn, "tag": false}))
                 .await
                 .unwrap();
-            // Let the connection hand the input to the match task.
-            tokio::time::sleep(Duration::from_millis(30)).await;
+            // Let the connection hand the input to the match task (on a loaded machine
+            // 30 ms was not always enough, and the player then walked another way).
+            tokio::time::sleep(Duration::from_millis(100)).await;
         }
         let truth = s.step(&id, 1).await;
         let tick = truth["tick"].as_u64().unwrap();

@@ -39,8 +39,28 @@ export class PageSocket {
     this.ws = null;
   }
 
+  /** Where to connect now: `url()`, on the node the match moved to when it did. */
+  target() {
+    const url = new URL(this.url());
+    if (!this.movedTo) return url.href;
+    const to = new URL(this.movedTo);
+    return `${to.protocol === "https:" ? "wss" : "ws"}://${to.host}${url.pathname}${url.search}`;
+  }
+
+  /** The match goes on on another node (`moved`, docs/api.md): its URL, or else the node
+   * that `GET /api/matches/{id}` ends up at (a fleet redirects to the host). */
+  async moved(msg) {
+    debug.moved = (debug.moved || 0) + 1;
+    if (msg.url) { this.movedTo = msg.url; return; }
+    try {
+      const path = new URL(this.target()).pathname.replace(/^\/ws\//, "/api/");
+      const r = await fetch(path);
+      if (r.ok) this.movedTo = new URL(r.url).origin;
+    } catch { /* the next try asks again */ }
+  }
+
   connect() {
-    const ws = new WebSocket(this.url());
+    const ws = new WebSocket(this.target());
     ws.binaryType = "arraybuffer";
     const decoder = new CompactDecoder();
     this.ws = ws;
@@ -67,7 +87,8 @@ export class PageSocket {
       const now = performance.now();
       if (this.lostAt === null) this.lostAt = now;
       if (now - this.lostAt < this.giveUpMs) {
-        // 1012: the server is restarting and resumes the match (docs/api.md).
+        // 1012: the server is restarting and resumes the match, or the match moved to
+        // another node (docs/api.md).
         status(e.code === 1012 ? "server restarting — reconnecting…" : "connection lost — reconnecting…");
         const wait = Math.min(RETRY_FIRST_MS * 2 ** this.tries++, RETRY_MAX_MS);
         setTimeout(() => { if (this.ws === ws) this.connect(); }, wait);
@@ -78,6 +99,7 @@ export class PageSocket {
   }
 
   dispatch(msg) {
+    if (msg.type === "moved") return this.moved(msg);
     const method = this.types[msg.type];
     if (method) return this.page[method](msg);
     if (msg.type === "error") {

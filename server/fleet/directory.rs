@@ -209,6 +209,7 @@ impl Directory {
                     held: r.held,
                     players: r.players,
                     spectators: r.spectators,
+                    writer: r.writer,
                     matches: r.matches,
                 }),
                 _ => {
@@ -241,6 +242,11 @@ impl Directory {
             players: summaries.iter().map(|s| s.players).sum(),
             spectators: summaries.iter().map(|s| s.spectators).sum(),
             draining: registry.draining.is_cancelled(),
+            writer: registry
+                .history
+                .store()
+                .filter(|s| s.adopts())
+                .and_then(|s| s.writer_id().map(str::to_string)),
             matches: summaries.iter().collect(),
         };
         record.encode()

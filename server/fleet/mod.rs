@@ -390,6 +390,20 @@ impl Fleet {
         placement
     }
 
+    /// Where this node's running matches go when it stops: the least loaded other node that
+    /// is not draining, has room for them and takes matches over (its URL and its writer in
+    /// the shared store); none when no node does (then they end here, as a lone node's do).
+    pub fn hand_over_to(&self) -> Option<(String, String)> {
+        let want = self.registry.len();
+        let view = self.view();
+        view.nodes
+            .iter()
+            .filter(|n| !n.node.draining && n.capacity.saturating_sub(n.held) >= want)
+            .filter_map(|n| Some((n.held, n.node.url.clone(), n.writer.clone()?)))
+            .min_by_key(|(held, _, _)| *held)
+            .map(|(_, url, writer)| (url, writer))
+    }
+
     /// Leaves the directory (this node's key is deleted at once, so the others drop it on
     /// their next read) and ends the directory task; gives up after `within`.
     pub async fn leave(&self, within: Duration) {
@@ -462,6 +476,7 @@ mod tests {
             held,
             players: 0,
             spectators: 0,
+            writer: None,
             matches: Vec::new(),
         };
         let t0 = Instant::now();

@@ -24,6 +24,8 @@ pub struct RemoteNode {
     pub held: usize,
     pub players: usize,
     pub spectators: usize,
+    /// Its writer in the shared store, when it adopts matches (`NodeRecord::writer`).
+    pub writer: Option<String>,
     pub matches: Vec<RemoteSummary>,
 }
 

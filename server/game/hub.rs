@@ -57,6 +57,9 @@ pub struct Hub {
     pub spectators: Arc<AtomicUsize>,
     /// The spectators counted in `spectators`, to find those that do not read.
     pub watchers: Arc<Mutex<Vec<Weak<Watcher>>>>,
+    /// Set when the match goes on on another server: its URL when known (a node that
+    /// hands its matches over), none when the lobby must say (a lease that ran out).
+    pub moved: Arc<std::sync::OnceLock<Option<String>>>,
 }
 
 impl Hub {

@@ -413,6 +413,22 @@ impl Registry {
     /// Starts shutting down: cancels [`Registry::shutdown`] (and [`Registry::draining`]) and
     /// ends every match with reason `server_shutdown` (their connections send `finished`
     /// and close).
+    /// Stops every match by handing it to the server at `url`: each running match's viewers
+    /// are told to go there (`moved`) and its task suspended, its record whole in the
+    /// shared store; the caller then hands the matches' leases over (`Store::hand_over`).
+    pub async fn begin_shutdown_moving_to(&self, url: &str) {
+        for h in self.all() {
+            if h.hub.frames.borrow().status != lasertag_core::world::MatchStatus::Finished {
+                let _ = h.hub.moved.set(Some(url.to_string()));
+            }
+        }
+        self.draining.cancel();
+        self.shutdown.cancel();
+        for h in self.all() {
+            h.suspend().await;
+        }
+    }
+
     /// Stops every match: suspended, to be resumed by the next server on the same store
     /// ([`Registry::resumes_matches`]), or else ended with reason `server_shutdown`.
     pub async fn begin_shutdown(&self) {

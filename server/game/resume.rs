@@ -264,6 +264,64 @@ pub async fn resume_all(registry: Arc<Registry>, ids: Vec<String>) -> Report {
     report
 }
 
+/// How often a server on a shared store looks for matches other servers can no longer run.
+pub const ADOPT_EVERY: Duration = Duration::from_secs(2);
+/// Matches one server takes at one look, so that the servers with room share a dead one's.
+const ADOPT_AT_ONCE: usize = 8;
+
+/// On a store servers share (a fleet's PostgreSQL): every [`ADOPT_EVERY`], takes the running
+/// matches whose server's lease ran out (it died, or was cut off or paused past it) or that
+/// a draining server handed to this one, as many as this server has room for, and resumes
+/// them as a restart does. The store takes each atomically, its fence one up, so no two
+/// servers run a match at once and the one that lost it can write nothing more to it.
+pub async fn adopt_forever(registry: Arc<Registry>) {
+    if !registry.history.store().is_some_and(Store::adopts) {
+        return;
+    }
+    let mut every = tokio::time::interval(ADOPT_EVERY);
+    every.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+    loop {
+        every.tick().await;
+        if registry.draining.is_cancelled() {
+            return;
+        }
+        let room = registry
+            .config
+            .max_matches
+            .saturating_sub(registry.len())
+            .min(ADOPT_AT_ONCE);
+        if room == 0 {
+            continue;
+        }
+        let running: Vec<String> = registry.all().into_iter().map(|h| h.id).collect();
+        let asker = registry.clone();
+        let taken = tokio::task::spawn_blocking(move || {
+            asker
+                .history
+                .store()
+                .map(|s| s.adopt(room, running, Duration::from_secs(10)))
+        })
+        .await;
+        let ids = match taken {
+            Ok(Some(Ok(ids))) => ids,
+            Ok(Some(Err(e))) => {
+                tracing::warn!("cannot look for matches to adopt: {e}");
+                continue;
+            }
+            _ => continue,
+        };
+        if ids.is_empty() {
+            continue;
+        }
+        tracing::info!(
+            matches = ids.len(),
+            "adopting matches another server can no longer run"
+        );
+        registry.resuming(&ids);
+        resume_all(registry.clone(), ids).await;
+    }
+}
+
 /// Reads and rebuilds the match `id` (blocking).
 fn rebuild_one(registry: &Registry, id: &str) -> Result<Rebuilt, ResumeError> {
     let fail = |why: String| ResumeError {

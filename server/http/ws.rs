@@ -262,6 +262,10 @@ impl Connection {
                         // The match's task has ended (deleted, cleaned up, or the server is
                         // stopping).
                         let last = frames.borrow().clone();
+                        if let Some(to) = self.handle.hub.moved.get() {
+                            self.sock.text(wire::moved(to.as_deref())).await?;
+                            return Err(End::restarting());
+                        }
                         if self.sock.restarting() && last.status != MatchStatus::Finished {
                             return Err(End::restarting());
                         }
@@ -309,6 +313,10 @@ impl Connection {
                     }
                 }
                 _ = shutdown.cancelled(), if !self.finished_sent => {
+                    if let Some(to) = self.handle.hub.moved.get() {
+                        self.sock.text(wire::moved(to.as_deref())).await?;
+                        return Err(End::restarting());
+                    }
                     if self.sock.restarting() {
                         return Err(End::restarting());
                     }

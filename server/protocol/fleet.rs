@@ -33,6 +33,10 @@ pub struct NodeRecord<M> {
     pub players: usize,
     pub spectators: usize,
     pub draining: bool,
+    /// Its writer's id in the fleet's shared store, when it takes matches over from other
+    /// nodes (a draining node hands its matches to such a node).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub writer: Option<String>,
     pub matches: Vec<M>,
 }
 

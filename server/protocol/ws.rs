@@ -470,6 +470,19 @@ pub fn event(e: &Event) -> Utf8Bytes {
     }))
 }
 
+/// The `moved` message: the match goes on on another server, at `url` when known (else the
+/// lobby, `GET /api/matches/{id}` on any node, says where); the socket closes after it.
+#[derive(Serialize)]
+struct Moved<'a> {
+    #[serde(rename = "type")]
+    kind: &'static str,
+    url: Option<&'a str>,
+}
+
+pub fn moved(url: Option<&str>) -> Utf8Bytes {
+    Utf8Bytes::from(to_json(&Moved { kind: "moved", url }))
+}
+
 /// The `finished` message, from the match's `finished` event.
 pub fn finished(frame: &Frame) -> Utf8Bytes {
     let e = frame.finished.as_ref().map(crate::protocol::event);

@@ -22,6 +22,10 @@ pub enum StoreError {
     Io { path: String, message: String },
     #[error("database: {0}")]
     Database(String),
+    /// The database cannot be written now (a full disk, an I/O error): the same writes may
+    /// go through later.
+    #[error("the database cannot be written now: {0}")]
+    Unwritable(String),
     #[error("--database: {0}")]
     DatabaseUrl(String),
     #[error("cannot connect to PostgreSQL at {target}: {message}")]

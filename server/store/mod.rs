@@ -330,7 +330,15 @@ fn write_loop(mut backend: Box<dyn Backend>, rx: Receiver<Write>, lease: Arc<Lea
     }
 }
 
-/// Commits `changes` (and empties it); the database took them as a sign of life.
+/// How long the writer waits before it tries again a batch the database could not take
+/// for want of room.
+const UNWRITABLE_RETRY: Duration = Duration::from_secs(1);
+
+/// Commits `changes` (and empties it); the database took them as a sign of life. A batch
+/// the disk could not take (full, failing) is tried again until it goes in: meanwhile the
+/// queue fills, [`Store::send`] refuses, and every match keeps the inputs it could not hand
+/// over, so that the record never has a gap (a resumed match would not be the same match).
+/// Live play goes on all the while; the log says so once a minute.
 fn commit(
     backend: &mut dyn Backend,
     changes: &mut Vec<Write>,
@@ -340,10 +348,32 @@ fn commit(
     if changes.is_empty() {
         return;
     }
-    let started = Instant::now();
-    match backend.write(changes) {
-        Ok(()) => lease.renew(started, hold),
-        Err(e) => tracing::error!("the history could not store {} writes: {e}", changes.len()),
+    let mut told: Option<Instant> = None;
+    loop {
+        let started = Instant::now();
+        match backend.write(changes) {
+            Ok(()) => {
+                lease.renew(started, hold);
+                if told.is_some() {
+                    tracing::info!("the history is stored again");
+                }
+                break;
+            }
+            Err(e @ StoreError::Unwritable(_)) => {
+                if told.is_none_or(|t| t.elapsed() >= Duration::from_secs(60)) {
+                    tracing::error!(
+                        "the history could not store {} writes: {e}; matches play on and keep their inputs until it can",
+                        changes.len()
+                    );
+                    told = Some(Instant::now());
+                }
+                std::thread::sleep(UNWRITABLE_RETRY);
+            }
+            Err(e) => {
+                tracing::error!("the history could not store {} writes: {e}", changes.len());
+                break;
+            }
+        }
     }
     changes.clear();
 }
@@ -380,13 +410,17 @@ fn answer(backend: &mut dyn Backend, w: Write) {
 /// last heartbeat the database took, when other servers could take them
 /// (`Backend::lease`); for ever with a database of its own. Match tasks ask before each
 /// tick ([`Lease::holds`]): a server that was paused (`SIGSTOP`, a stalled VM) past its lease
-/// stops its matches rather than run them beside the server that took them.
+/// stops its matches rather than run them beside the server that took them. A lease that
+/// ran out stays out for the matches that held it: a heartbeat after it starts a new *term*,
+/// which only matches started (or adopted) from then on hold.
 #[derive(Debug)]
 pub struct Lease {
     /// Whether the lease can run out at all.
     applies: std::sync::atomic::AtomicBool,
     /// Milliseconds after `epoch` until which it holds.
     until_ms: std::sync::atomic::AtomicU64,
+    /// Bumped by a renewal after the lease ran out.
+    term: std::sync::atomic::AtomicU64,
     epoch: Instant,
 }
 
@@ -395,12 +429,17 @@ impl Default for Lease {
         Lease {
             applies: std::sync::atomic::AtomicBool::new(false),
             until_ms: std::sync::atomic::AtomicU64::new(0),
+            term: std::sync::atomic::AtomicU64::new(0),
             epoch: Instant::now(),
         }
     }
 }
 
 impl Lease {
+    fn now_ms(&self) -> u64 {
+        self.epoch.elapsed().as_millis() as u64
+    }
+
     /// A heartbeat or write that started at `started` was taken: the lease holds `hold`
     /// after it (`None`: a lease that never runs out).
     fn renew(&self, started: Instant, hold: Option<Duration>) {
@@ -409,17 +448,52 @@ impl Lease {
         let until = (started + hold)
             .saturating_duration_since(self.epoch)
             .as_millis() as u64;
+        if self.applies.load(Ordering::Acquire)
+            && self.now_ms() >= self.until_ms.load(Ordering::Acquire)
+        {
+            // It ran out meanwhile: whatever held it then holds nothing now.
+            self.term.fetch_add(1, Ordering::AcqRel);
+        }
         self.until_ms.fetch_max(until, Ordering::Release);
         self.applies.store(true, Ordering::Release);
     }
 
-    /// Whether this server may run its matches now.
-    pub fn holds(&self) -> bool {
+    /// The term a match started now holds the lease in.
+    pub fn term(&self) -> u64 {
+        self.term.load(std::sync::atomic::Ordering::Acquire)
+    }
+
+    /// Whether a match that holds the lease in `term` may run now.
+    pub fn holds(&self, term: u64) -> bool {
         use std::sync::atomic::Ordering;
         if !self.applies.load(Ordering::Acquire) {
             return true;
         }
-        let now = self.epoch.elapsed().as_millis() as u64;
-        now < self.until_ms.load(Ordering::Acquire)
+        term == self.term() && self.now_ms() < self.until_ms.load(Ordering::Acquire)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_lease_that_ran_out_stays_out_for_what_held_it() {
+        let lease = Lease::default();
+        assert!(lease.holds(0), "a store of one's own: always");
+        let hold = Some(Duration::from_millis(50));
+        lease.renew(Instant::now(), hold);
+        let term = lease.term();
+        assert!(lease.holds(term));
+        std::thread::sleep(Duration::from_millis(80));
+        assert!(!lease.holds(term), "past its hold");
+        lease.renew(Instant::now(), hold);
+        assert!(
+            !lease.holds(term),
+            "a renewal after it ran out starts a new term"
+        );
+        assert!(lease.holds(lease.term()));
+        lease.renew(Instant::now(), None);
+        assert!(lease.holds(lease.term()));
     }
 }

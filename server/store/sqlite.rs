@@ -134,10 +134,14 @@ pub fn lose(conn: &Connection, id: &str) -> Result<(), StoreError> {
     Ok(())
 }
 
-/// The matches left running, oldest first.
+/// The matches left running: those people were playing first (they are waiting), then the
+/// rest, oldest first.
 pub fn unfinished(conn: &Connection) -> Result<Vec<String>, StoreError> {
     let mut stmt = conn
-        .prepare_cached("SELECT id FROM matches WHERE ended_at IS NULL ORDER BY seq")
+        .prepare_cached(
+            "SELECT id FROM matches WHERE ended_at IS NULL
+             ORDER BY COALESCE(live LIKE '%\"seats\"%', 0) DESC, seq",
+        )
         .map_err(db)?;
     let rows = stmt.query_map([], |r| r.get::<_, String>(0)).map_err(db)?;
     rows.collect::<Result<_, _>>().map_err(db)
@@ -516,8 +520,11 @@ impl backend::Backend for Sqlite {
                 }
                 Write::Flush(_) | Write::Adopt { .. } | Write::HandOver { .. } => Ok(()),
             };
-            if let Err(e) = done {
-                tracing::warn!("history: {e}");
+            match done {
+                // The disk, not this write: the whole batch is undone, to be tried again.
+                Err(e @ StoreError::Unwritable(_)) => return Err(e),
+                Err(e) => tracing::warn!("history: {e}"),
+                Ok(()) => {}
             }
         }
         // A match's start stores its map, its end may leave the history past its bounds.

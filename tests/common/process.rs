@@ -13,6 +13,8 @@ use serde_json::{Value, json};
 pub struct Server {
     pub child: Child,
     pub addr: SocketAddr,
+    /// The log lines that name a warning or an error, as they come.
+    pub warnings: std::sync::Arc<std::sync::Mutex<Vec<String>>>,
 }
 
 impl Drop for Server {
@@ -51,9 +53,17 @@ impl Server {
             .expect("the lasertag binary starts");
         let stdout = child.stdout.take().expect("piped stdout");
         let (tx, rx) = std::sync::mpsc::channel();
+        let warnings = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
+        let kept = warnings.clone();
         // Keep reading the log (so the pipe never fills) and pass the address on.
         std::thread::spawn(move || {
             for line in BufReader::new(stdout).lines().map_while(Result::ok) {
+                if line.contains(" WARN ") || line.contains(" ERROR ") {
+                    let mut kept = kept.lock().unwrap_or_else(|e| e.into_inner());
+                    if kept.len() < 10_000 {
+                        kept.push(line.clone());
+                    }
+                }
                 if let Some(rest) = line.split("serving http://").nth(1) {
                     let addr: String = rest
                         .chars()
@@ -68,7 +78,11 @@ impl Server {
             .expect("the server logs its address")
             .parse()
             .expect("a socket address");
-        Server { child, addr }
+        Server {
+            child,
+            addr,
+            warnings,
+        }
     }
 
     pub fn url(&self, path: &str) -> String {

@@ -403,6 +403,7 @@ fn spawn(
         arena: world.arena.clone(),
         spectators: Arc::new(AtomicUsize::new(0)),
         watchers: Default::default(),
+        moved: Default::default(),
     };
     let span = tracing::info_span!("match", id = %meta.id);
     // A manual-clock match computes only when asked, so it runs on the runtime of the
@@ -422,6 +423,11 @@ fn spawn(
     let histograms = settings.metrics.tick_histograms(kind, clock);
     let now = Instant::now();
     let spills = settings.history.store().is_some();
+    let lease = settings
+        .history
+        .store()
+        .map(|s| (s.lease().clone(), s.lease().term()));
+    let moved = hub.moved.clone();
     let (recording, started_at, catch_up, seats) = match resumed {
         Some(r) => (
             r.recording,
@@ -445,6 +451,8 @@ fn spawn(
             last_flush: now,
         },
         catch_up,
+        lease,
+        moved,
         started_at,
         players: MatchTask::bodies(&world).iter().map(|_| None).collect(),
         bodies: MatchTask::bodies(&world),
@@ -526,6 +534,11 @@ struct MatchTask {
     store: StoreProgress,
     /// A resumed match's ticks to run at once before anything else (see [`Resumed`]).
     catch_up: Option<(Vec<(u64, WorldInput)>, u64)>,
+    /// How long this server may run its matches, when its store is shared (`store::Lease`),
+    /// and the term this match holds it in.
+    lease: Option<(Arc<crate::store::Lease>, u64)>,
+    /// Where the match went, when it leaves this server (`Hub::moved`).
+    moved: Arc<std::sync::OnceLock<Option<String>>>,
     started_at: std::time::SystemTime,
     /// When the world was first seen finished (for the clean-up grace).
     finished_at: Option<Instant>,
@@ -592,6 +605,9 @@ impl MatchTask {
                         tracing::info!(tick = self.world.tick, "match suspended: the store has it to resume");
                         break;
                     }
+                    if self.lease_lapsed() {
+                        break;
+                    }
                     if let Request::Stop(reason) = req {
                         let _ = self.apply(WorldInput::End(reason));
                         self.publish();
@@ -616,6 +632,9 @@ impl MatchTask {
                     }
                 }
                 _ = interval.tick(), if realtime && (running || draining) => {
+                    if self.lease_lapsed() {
+                        break;
+                    }
                     if !running {
                         // Finished, but spectators are still that far behind: the last
                         // frames come out at the pace they were made.
@@ -638,6 +657,9 @@ impl MatchTask {
                     }
                 }
                 _ = std::future::ready(()), if pending.is_some() => {
+                    if self.lease_lapsed() {
+                        break;
+                    }
                     if let Some(mut step) = pending.take() {
                         let n = step.remaining.min(STEP_CHUNK - step.unpublished);
                         let slice = Instant::now();
@@ -706,6 +728,29 @@ impl MatchTask {
                 self.publish();
             }
         });
+    }
+
+    /// Whether this server's hold on its matches ran out (`store::Lease`: it could not
+    /// reach its shared store for a while, or it was paused): another server may run the
+    /// match now, so this one stops it at once, unfinished, and lets its viewers know it
+    /// moved; the store keeps refusing its writes (the match's fence moved on).
+    fn lease_lapsed(&mut self) -> bool {
+        if self.lease.as_ref().is_none_or(|(l, term)| l.holds(*term)) {
+            return false;
+        }
+        tracing::warn!(
+            tick = self.world.tick,
+            "this server's lease on its matches ran out: the match stops here, another server takes it"
+        );
+        let _ = self.moved.set(None);
+        self.settings
+            .metrics
+            .matches_removed
+            .with_label_values(&["moved"])
+            .inc();
+        let on_exit = std::mem::replace(&mut self.settings.on_exit, Box::new(|| {}));
+        on_exit();
+        true
     }
 
     /// Runs a resumed match from the world's tick to `until` at once, re-applying the

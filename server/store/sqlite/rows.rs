@@ -4,7 +4,14 @@
 use crate::store::backend::{Listed, StoreError};
 
 pub(super) fn db(e: rusqlite::Error) -> StoreError {
-    StoreError::Database(e.to_string())
+    use rusqlite::ffi::ErrorCode;
+    match e.sqlite_error_code() {
+        // The disk, not the data: the same writes may succeed once there is room again.
+        Some(ErrorCode::DiskFull | ErrorCode::SystemIoFailure | ErrorCode::CannotOpen) => {
+            StoreError::Unwritable(e.to_string())
+        }
+        _ => StoreError::Database(e.to_string()),
+    }
 }
 
 pub(super) const LISTED: &str =

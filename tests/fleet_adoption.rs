@@ -1,0 +1,280 @@
+//! A fleet on a shared PostgreSQL store takes over the matches of a node that cannot run
+//! them (docs/operations.md, "Matches survive their server"): real `redis-server`,
+//! PostgreSQL and `lasertag` processes on loopback.
+//!
+//! - A node killed with SIGKILL: once its lease has run out another node adopts its running
+//!   matches (same ids and tokens, from their last stored tick), and the lobby points there.
+//! - A node that stops (SIGTERM) hands its matches to a node with room: its clients get
+//!   `moved` with that node's URL before the close, and the match goes on there.
+//! - A node paused with SIGSTOP past its lease loses its match to another and, woken with
+//!   SIGCONT, stops it and writes nothing more to it (its fence is gone).
+//!
+//! Needs `redis-server` and PostgreSQL's server (`bash tests/run.sh` installs them).
+
+#![cfg(unix)]
+
+mod common;
+#[path = "common/postgres.rs"]
+mod postgres;
+#[path = "common/process.rs"]
+mod process;
+#[path = "common/redis_server.rs"]
+mod redis_server;
+
+use std::process::Command;
+use std::time::{Duration, Instant};
+
+use common::{Got, Ws};
+use process::Server;
+use redis_server::RedisServer;
+use serde_json::{Value, json};
+
+fn node(redis: &RedisServer, db: &str, id: &str) -> Server {
+    let data = common::temp_dir(&format!("adoption-{id}"));
+    let data = data.display().to_string();
+    let url = redis.url();
+    Server::start(&[
+        "--no-showcase",
+        "--data-dir",
+        &data,
+        "--database",
+        db,
+        "--fleet",
+        &url,
+        "--node-id",
+        id,
+        "--fleet-heartbeat-s",
+        "0.5",
+        "--fleet-ttl-s",
+        "1.5",
+    ])
+}
+
+fn no_redirects() -> reqwest::Client {
+    reqwest::Client::builder()
+        .redirect(reqwest::redirect::Policy::none())
+        .build()
+        .expect("a client")
+}
+
+async fn create_here(http: &reqwest::Client, s: &Server, body: Value) -> (String, String) {
+    let r = http
+        .post(s.url("/api/matches?place=local"))
+        .json(&body)
+        .send()
+        .await
+        .expect("the node answers");
+    assert_eq!(r.status(), 201);
+    let v: Value = r.json().await.expect("JSON");
+    (
+        v["id"].as_str().unwrap().to_string(),
+        v["owner_token"].as_str().unwrap().to_string(),
+    )
+}
+
+/// Waits (at most `secs`) until `s` itself runs match `id`: a 200 without a redirect.
+async fn until_hosted(
+    http: &reqwest::Client,
+    s: &Server,
+    id: &str,
+    token: Option<&str>,
+    secs: u64,
+) -> Value {
+    let start = Instant::now();
+    loop {
+        let mut r = http.get(s.url(&format!("/api/matches/{id}")));
+        if let Some(t) = token {
+            r = r.bearer_auth(t);
+        }
+        if let Ok(r) = r.send().await
+            && r.status() == 200
+        {
+            return r.json().await.expect("JSON");
+        }
+        assert!(
+            start.elapsed() < Duration::from_secs(secs),
+            "{id} not run by {} within {secs} s",
+            s.addr
+        );
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+}
+
+fn signal(s: &Server, sig: &str) {
+    let status = Command::new("kill")
+        .args([sig, &s.child.id().to_string()])
+        .status()
+        .expect("kill runs");
+    assert!(status.success());
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_dead_nodes_matches_are_adopted_and_a_stopping_node_hands_its_over() {
+    let redis = RedisServer::start();
+    let db = std::thread::spawn(|| postgres::database("adoption"))
+        .join()
+        .expect("a database");
+    let mut a = node(&redis, &db.url, "a");
+    let b = node(&redis, &db.url, "b");
+    let http = no_redirects();
+    let (live, _) = create_here(
+        &http,
+        &a,
+        json!({"map": "office", "robots": 2, "opponents": 2, "opponent_bot": "evade",
+            "seed": 4, "time_limit_s": 600}),
+    )
+    .await;
+    let (manual, token) = create_here(
+        &http,
+        &a,
+        json!({"map": "office", "clock": "manual", "seed": 8, "opponent_bot": "evade"}),
+    )
+    .await;
+    let stepped: Value = http
+        .post(a.url(&format!("/api/matches/{manual}/step")))
+        .bearer_auth(&token)
+        .json(&json!({"ticks": 200}))
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
+    tokio::time::sleep(Duration::from_millis(1600)).await; // the store has it
+    a.child.kill().expect("SIGKILL");
+    a.child.wait().expect("a dies");
+    let killed = Instant::now();
+
+    // b takes both once a's lease has run out (10 s), at its next look (every 2 s).
+    let state = until_hosted(&http, &b, &manual, Some(&token), 30).await;
+    eprintln!("adopted {:?} after the kill", killed.elapsed());
+    assert_eq!(state["tick"], 200, "{state}");
+    assert_eq!(
+        state["robots"], stepped["robots"],
+        "the same match, as it was"
+    );
+    let running = until_hosted(&http, &b, &live, None, 10).await;
+    assert_eq!(running["status"], "running", "{running}");
+    // The owner token still changes it, on b.
+    let r = http
+        .post(b.url(&format!("/api/matches/{manual}/step")))
+        .bearer_auth(&token)
+        .json(&json!({"ticks": 5}))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 200);
+    // b's lobby lists them as its own.
+    let listing: Value = http
+        .get(b.url("/api/matches"))
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
+    for id in [&live, &manual] {
+        let m = listing
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|m| m["id"] == id.as_str())
+            .unwrap_or_else(|| panic!("{id} listed: {listing}"));
+        assert_eq!(m["node"]["id"], "b", "{m}");
+    }
+
+    // b stops: its matches go to c, and b's spectator is told where.
+    let c = node(&redis, &db.url, "c");
+    tokio::time::sleep(Duration::from_secs(2)).await; // b sees c in the directory
+    let (stream, _) =
+        tokio_tungstenite::connect_async(format!("ws://{}/ws/matches/{live}", b.addr))
+            .await
+            .expect("a spectator on b");
+    let mut spectator = Ws { stream };
+    spectator.next_of("snapshot").await;
+    signal(&b, "-TERM");
+    let moved = loop {
+        match spectator.next().await {
+            Got::Json(v) if v["type"] == "moved" => break v,
+            Got::Json(_) => {}
+            other => panic!("closed without `moved`: {other:?}"),
+        }
+    };
+    assert_eq!(moved["url"], format!("http://{}", c.addr), "{moved}");
+    assert!(matches!(
+        spectator.next().await,
+        Got::Closed { code: 1012, .. }
+    ));
+    let running = until_hosted(&http, &c, &live, None, 15).await;
+    assert_eq!(running["status"], "running", "{running}");
+    until_hosted(&http, &c, &manual, Some(&token), 15).await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_node_paused_past_its_lease_loses_its_match_and_writes_nothing_more_to_it() {
+    let redis = RedisServer::start();
+    let db = std::thread::spawn(|| postgres::database("adoption_paused"))
+        .join()
+        .expect("a database");
+    let d = node(&redis, &db.url, "d");
+    let e = node(&redis, &db.url, "e");
+    let http = no_redirects();
+    let (id, _) = create_here(
+        &http,
+        &d,
+        json!({"map": "office", "robots": 2, "opponents": 2, "opponent_bot": "evade",
+            "seed": 6, "time_limit_s": 600}),
+    )
+    .await;
+    tokio::time::sleep(Duration::from_millis(1600)).await;
+    let holder = |db: &postgres::Database| {
+        let id = id.clone();
+        let q = format!("SELECT writer || ':' || fence FROM matches WHERE id = '{id}'");
+        db.query_text(&q).expect("the match's row")
+    };
+    let before = holder(&db);
+    assert!(before.ends_with(":0"), "{before}");
+
+    signal(&d, "-STOP");
+    until_hosted(&http, &e, &id, None, 30).await;
+    let taken = holder(&db);
+    assert_ne!(taken, before, "e holds it now");
+    assert!(taken.ends_with(":1"), "{taken}");
+    let ticks_on_e = || {
+        db.query_text(&format!(
+            "SELECT ticks::TEXT FROM matches WHERE id = '{id}'"
+        ))
+        .and_then(|t| t.parse::<u64>().ok())
+        .unwrap_or(0)
+    };
+    signal(&d, "-CONT");
+    // d wakes up with the match in memory and its lease long gone: it stops it.
+    tokio::time::sleep(Duration::from_secs(3)).await;
+    assert_eq!(holder(&db), taken, "d took nothing back");
+    let r = http
+        .get(d.url(&format!("/api/matches/{id}")))
+        .send()
+        .await
+        .unwrap();
+    assert_ne!(r.status(), 200, "d no longer runs it");
+    // The match goes on on e alone.
+    let t0 = ticks_on_e();
+    tokio::time::sleep(Duration::from_millis(2500)).await;
+    assert!(ticks_on_e() > t0, "e's record moves on");
+    assert_eq!(holder(&db), taken);
+    let metrics = reqwest::get(d.url("/metrics"))
+        .await
+        .unwrap()
+        .text()
+        .await
+        .unwrap();
+    assert!(
+        metrics.contains("lasertag_matches_removed_total{reason=\"moved\"} 1"),
+        "{}",
+        metrics
+            .lines()
+            .filter(|l| l.contains("removed"))
+            .collect::<Vec<_>>()
+            .join("\n")
+    );
+}
