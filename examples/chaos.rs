@@ -16,12 +16,12 @@
 //! - `--bots` real-time matches of bots against the coordinated team, each with a seed of its
 //!   own and a time limit of 1 to 3 minutes (one that ends is replaced); its twin is the same
 //!   match on the twin server, stepped by hand to its end: winner and last tick must agree.
-//! - `--api` manual matches driven over HTTP as fast as a client goes (`act`, one tick, 8
+//! - `--api` manual matches driven over HTTP at 20 steps a second (`act`, one tick, 8
 //!   robots' commands a function of the tick); the client reads the tick the match answers
 //!   and goes on from there after a restart. Its twin gets each tick's commands once; at the
 //!   end both are read at the same tick: state, belief and events must agree.
 //! - `--players` real-time matches with a person's WebSocket each (keys changing every
-//!   100 ms) and `--spectators` spectators on the bots' matches: each reconnects after a
+//!   100 ms; the robots there stand idle, so that the person is still playing at every kill) and `--spectators` spectators on the bots' matches: each reconnects after a
 //!   crash with its token, as the page does (growing waits, up to 30 s). A person's match has
 //!   no twin (its inputs follow the wall clock): it counts as lost if it does not come back.
 //!
@@ -100,6 +100,7 @@ impl Server {
             .env("LASERTAG_MAX_SEATS_PER_ADDRESS", "1000")
             .env("LASERTAG_MAX_HOLDS_PER_ADDRESS", "1000")
             .env("LASERTAG_CLIENT_BUDGET_SHARE", "1")
+            .env("LASERTAG_IDLE_MANUAL_AFTER_S", "86400")
             .env("LASERTAG_MAX_CONNECTIONS_PER_ADDRESS", "100000")
             .env("LASERTAG_MAX_TCP_PER_ADDRESS", "100000")
             .stdout(Stdio::piped())
@@ -360,7 +361,11 @@ async fn main() {
         let (http, base, stop) = (http.clone(), base.clone(), stop.clone());
         tasks.push(tokio::spawn(async move {
             let mut tick = 0;
+            // Twenty steps a second, as a match in real time: a client that steps as fast as
+            // it can runs hours of play in minutes (and reaches its record's bound).
+            let mut pace = tokio::time::interval(Duration::from_millis(50));
             while !stop.load(Ordering::Relaxed) {
+                pace.tick().await;
                 let act = call(
                     &http,
                     reqwest::Method::POST,
@@ -396,7 +401,7 @@ async fn main() {
     let player_matches = Arc::new(Mutex::new(Vec::<String>::new()));
     for k in 0..args.players {
         let body = json!({"map": "office", "opponent_control": "human", "opponents": 1, "robots": 2,
-            "time_limit_s": 3600});
+            "planner": "idle", "time_limit_s": 3600});
         let (id, _) = create(&http, &base, &body).await;
         let (status, joined) = patient(
             &http,

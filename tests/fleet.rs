@@ -22,12 +22,16 @@
 #[allow(dead_code)]
 mod cdp;
 mod common;
+#[path = "common/fleet_nodes.rs"]
+mod fleet_nodes;
 #[path = "common/postgres.rs"]
 mod postgres;
 #[path = "common/process.rs"]
 mod process;
 #[path = "common/redis_server.rs"]
 mod redis_server;
+
+use fleet_nodes::{HEARTBEAT_S, SLACK, TTL_S, create_here, no_redirects, node};
 
 use std::process::Command;
 use std::time::{Duration, Instant};
@@ -36,42 +40,6 @@ use common::{Got, Ws};
 use process::Server;
 use redis_server::RedisServer;
 use serde_json::{Value, json};
-
-/// The timing the nodes run with: a dead node leaves the listings within their sum.
-const HEARTBEAT_S: f64 = 0.5;
-const TTL_S: f64 = 1.5;
-/// What a loaded 2-core machine may add to that bound: a late timer, a slow round trip.
-const SLACK: Duration = Duration::from_millis(1500);
-
-fn node(redis: &RedisServer, id: &str, extra: &[&str]) -> Server {
-    let data = common::temp_dir(&format!("fleet-{id}"));
-    let data = data.display().to_string();
-    let url = redis.url();
-    let (heartbeat, ttl) = (HEARTBEAT_S.to_string(), TTL_S.to_string());
-    let mut args = vec![
-        "--no-showcase",
-        "--data-dir",
-        &data,
-        "--fleet",
-        &url,
-        "--node-id",
-        id,
-        "--fleet-heartbeat-s",
-        &heartbeat,
-        "--fleet-ttl-s",
-        &ttl,
-    ];
-    args.extend_from_slice(extra);
-    Server::start(&args)
-}
-
-/// A client that does not follow redirects, to see them.
-fn no_redirects() -> reqwest::Client {
-    reqwest::Client::builder()
-        .redirect(reqwest::redirect::Policy::none())
-        .build()
-        .expect("a client")
-}
 
 async fn listing(client: &reqwest::Client, server: &Server) -> Vec<Value> {
     let r = client
@@ -90,18 +58,6 @@ fn hosted_on(listing: &[Value], node: &str) -> Vec<String> {
         .filter(|m| m["node"]["id"] == node)
         .map(|m| m["id"].as_str().unwrap_or_default().to_owned())
         .collect()
-}
-
-/// `POST /api/matches?place=local` on `server`: the created match.
-async fn create_here(client: &reqwest::Client, server: &Server, body: Value) -> Value {
-    let r = client
-        .post(server.url("/api/matches?place=local"))
-        .json(&body)
-        .send()
-        .await
-        .expect("the server answers");
-    assert_eq!(r.status(), 201);
-    r.json().await.expect("JSON")
 }
 
 /// Polls `check` every 50 ms until it holds, failing after `secs`; returns when it held.

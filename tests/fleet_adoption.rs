@@ -14,6 +14,8 @@
 #![cfg(unix)]
 
 mod common;
+#[path = "common/fleet_nodes.rs"]
+mod fleet_nodes;
 #[path = "common/postgres.rs"]
 mod postgres;
 #[path = "common/process.rs"]
@@ -29,43 +31,14 @@ use process::Server;
 use redis_server::RedisServer;
 use serde_json::{Value, json};
 
-fn node(redis: &RedisServer, db: &str, id: &str) -> Server {
-    let data = common::temp_dir(&format!("adoption-{id}"));
-    let data = data.display().to_string();
-    let url = redis.url();
-    Server::start(&[
-        "--no-showcase",
-        "--data-dir",
-        &data,
-        "--database",
-        db,
-        "--fleet",
-        &url,
-        "--node-id",
-        id,
-        "--fleet-heartbeat-s",
-        "0.5",
-        "--fleet-ttl-s",
-        "1.5",
-    ])
+/// A node on the shared store `db`.
+fn on(redis: &RedisServer, db: &str, id: &str) -> Server {
+    fleet_nodes::node(redis, id, &["--database", db])
 }
 
-fn no_redirects() -> reqwest::Client {
-    reqwest::Client::builder()
-        .redirect(reqwest::redirect::Policy::none())
-        .build()
-        .expect("a client")
-}
-
-async fn create_here(http: &reqwest::Client, s: &Server, body: Value) -> (String, String) {
-    let r = http
-        .post(s.url("/api/matches?place=local"))
-        .json(&body)
-        .send()
-        .await
-        .expect("the node answers");
-    assert_eq!(r.status(), 201);
-    let v: Value = r.json().await.expect("JSON");
+/// A match made on `s` itself: (id, owner token).
+async fn made_on(http: &reqwest::Client, s: &Server, body: Value) -> (String, String) {
+    let v = fleet_nodes::create_here(http, s, body).await;
     (
         v["id"].as_str().unwrap().to_string(),
         v["owner_token"].as_str().unwrap().to_string(),
@@ -114,17 +87,17 @@ async fn a_dead_nodes_matches_are_adopted_and_a_stopping_node_hands_its_over() {
     let db = std::thread::spawn(|| postgres::database("adoption"))
         .join()
         .expect("a database");
-    let mut a = node(&redis, &db.url, "a");
-    let b = node(&redis, &db.url, "b");
-    let http = no_redirects();
-    let (live, _) = create_here(
+    let mut a = on(&redis, &db.url, "a");
+    let b = on(&redis, &db.url, "b");
+    let http = fleet_nodes::no_redirects();
+    let (live, _) = made_on(
         &http,
         &a,
         json!({"map": "office", "robots": 2, "opponents": 2, "opponent_bot": "evade",
             "seed": 4, "time_limit_s": 600}),
     )
     .await;
-    let (manual, token) = create_here(
+    let (manual, token) = made_on(
         &http,
         &a,
         json!({"map": "office", "clock": "manual", "seed": 8, "opponent_bot": "evade"}),
@@ -184,7 +157,7 @@ async fn a_dead_nodes_matches_are_adopted_and_a_stopping_node_hands_its_over() {
     }
 
     // b stops: its matches go to c, and b's spectator is told where.
-    let c = node(&redis, &db.url, "c");
+    let c = on(&redis, &db.url, "c");
     tokio::time::sleep(Duration::from_secs(2)).await; // b sees c in the directory
     let (stream, _) =
         tokio_tungstenite::connect_async(format!("ws://{}/ws/matches/{live}", b.addr))
@@ -216,10 +189,10 @@ async fn a_node_paused_past_its_lease_loses_its_match_and_writes_nothing_more_to
     let db = std::thread::spawn(|| postgres::database("adoption_paused"))
         .join()
         .expect("a database");
-    let d = node(&redis, &db.url, "d");
-    let e = node(&redis, &db.url, "e");
-    let http = no_redirects();
-    let (id, _) = create_here(
+    let d = on(&redis, &db.url, "d");
+    let e = on(&redis, &db.url, "e");
+    let http = fleet_nodes::no_redirects();
+    let (id, _) = made_on(
         &http,
         &d,
         json!({"map": "office", "robots": 2, "opponents": 2, "opponent_bot": "evade",

@@ -309,6 +309,20 @@ async fn a_player_takes_their_seat_again_after_a_sigkill_and_the_truth_stays_lat
                 > 0.1,
         "the body moved before the kill and kept its place: {moved}"
     );
+
+    // And again: a resumed match's seats survive the next crash too.
+    again
+        .send_json(&json!({"type": "input", "forward": 1.0, "turn": 0.0, "tag": false, "seq": 1}))
+        .await
+        .unwrap();
+    stored().await;
+    let mut b = b;
+    kill(&mut b);
+    let c = serve(&dir);
+    when_back(&client, &c, &format!("/api/matches/{id}"), None).await;
+    let mut third = ws(&c, &format!("/ws/matches/{id}?token={token}")).await;
+    let welcome = third.next_of("welcome").await;
+    assert_eq!(welcome["you"], "o0", "{welcome}");
 }
 
 #[tokio::test]
