@@ -162,3 +162,25 @@ fn flee_path(
     }
     best.and_then(|(_, cell)| field.path_to(grid, from, cell))
 }
+
+impl crate::checkpoint::Plain for BotKind {
+    fn save(&self, w: &mut crate::checkpoint::Writer) {
+        (*self as u8).save(w);
+    }
+    fn load(r: &mut crate::checkpoint::Reader) -> Result<Self, crate::checkpoint::CheckpointError> {
+        match u8::load(r)? {
+            0 => Ok(BotKind::Idle),
+            1 => Ok(BotKind::Wander),
+            2 => Ok(BotKind::Evade),
+            _ => Err(crate::checkpoint::CheckpointError::BadValue("a bot kind")),
+        }
+    }
+}
+crate::checkpoint::plain_struct!(Bot {
+    kind,
+    path,
+    pause_until,
+    next_flee,
+    fleeing,
+    progress,
+});

@@ -6,6 +6,7 @@
 //! `ChaCha8Rng` stream. The modules form floors, each importing only those listed before it
 //! (`tests/tidy.rs` checks the order):
 //!
+//! - [`checkpoint`]: a match's state as bytes and back (what a resumed match starts from).
 //! - [`settings`]: settings groups declared once (name, type, default, range, doc).
 //! - [`sim`]: the physical world: static [`sim::arena`], kinematics and collisions, laser and
 //!   landmark sensors, tagging rules, candidate views.
@@ -19,6 +20,8 @@
 //! - [`difficulty`]: the robot team's presets a person chooses (recruit, veteran, elite).
 //! - [`env`]: the research environment's episodes as flat arrays (observation vectors,
 //!   rewards, episode ends) for in-process engines.
+
+pub mod checkpoint;
 
 pub mod settings;
 

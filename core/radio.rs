@@ -178,6 +178,35 @@ impl Radio {
     }
 }
 
+crate::checkpoint::plain_struct!(OwnedSighting {
+    pose,
+    scan,
+    detections,
+    tagged
+});
+crate::checkpoint::plain_struct!(Status {
+    goal,
+    claim,
+    pursuing,
+    route,
+    making_way,
+    yield_request,
+});
+crate::checkpoint::plain_struct!(Message {
+    from,
+    sent,
+    pose,
+    frozen,
+    sighting,
+    hits,
+    status,
+});
+crate::checkpoint::restore_struct!(Radio {
+    plain: [rng, queue],
+    nested: [],
+    derived: [settings],
+});
+
 #[cfg(test)]
 mod tests {
     use super::*;

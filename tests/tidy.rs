@@ -14,6 +14,7 @@ use std::process::Command;
 
 /// The core's modules from the ground floor up: each may import only those before it.
 const CORE_FLOORS: &[&str] = &[
+    "checkpoint",
     "settings",
     "sim",
     "nav",

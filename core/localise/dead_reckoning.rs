@@ -76,6 +76,8 @@ impl DeadReckoning {
     }
 }
 
+crate::checkpoint::plain_struct!(DeadReckoning { cov, last });
+
 #[cfg(test)]
 mod tests {
     use super::*;

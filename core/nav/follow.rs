@@ -69,6 +69,8 @@ pub fn turn_to(pose: Pose, theta: f32, turn_rate: f32) -> Motion {
     }
 }
 
+crate::checkpoint::plain_struct!(PathFollower { waypoints, next });
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -218,3 +218,16 @@ impl Baseline {
         }
     }
 }
+
+crate::checkpoint::plain_struct!(RobotState {
+    goal,
+    path,
+    needs_goal,
+    chase,
+    progress,
+});
+crate::checkpoint::restore_struct!(Baseline {
+    plain: [robots, rng, next_round],
+    nested: [],
+    derived: [candidates],
+});

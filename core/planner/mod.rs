@@ -431,5 +431,49 @@ fn plan(
     }
 }
 
+crate::checkpoint::restore_struct!(Channel {
+    plain: [heard, hits_heard, hits, requests],
+    nested: [radio],
+    derived: [],
+});
+crate::checkpoint::restore_struct!(Team {
+    plain: [],
+    nested: [trackers, brain, channel],
+    derived: [],
+});
+
+/// The planner is the settings' choice: a checkpoint of another planner is refused.
+impl crate::checkpoint::Restore for Brain {
+    fn save(&self, w: &mut crate::checkpoint::Writer) {
+        use crate::checkpoint::Plain;
+        match self {
+            Brain::Idle => 0u8.save(w),
+            Brain::Api => 1u8.save(w),
+            Brain::Baseline(b) => {
+                2u8.save(w);
+                b.save(w);
+            }
+            Brain::Coordinated(c) => {
+                3u8.save(w);
+                c.save(w);
+            }
+        }
+    }
+    fn restore(
+        &mut self,
+        r: &mut crate::checkpoint::Reader,
+    ) -> Result<(), crate::checkpoint::CheckpointError> {
+        use crate::checkpoint::Plain;
+        match (u8::load(r)?, self) {
+            (0, Brain::Idle) | (1, Brain::Api) => Ok(()),
+            (2, Brain::Baseline(b)) => b.restore(r),
+            (3, Brain::Coordinated(c)) => c.restore(r),
+            _ => Err(crate::checkpoint::CheckpointError::Mismatch {
+                what: "the planner",
+            }),
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests;

@@ -89,3 +89,5 @@ impl<'a> Knowledge<'a> {
         self.requests.get(i).map_or(&[], |v| v.as_slice())
     }
 }
+
+crate::checkpoint::plain_struct!(RobotCommand { motion, tag, goal });

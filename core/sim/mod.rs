@@ -218,6 +218,54 @@ pub enum Motion {
     Toward(Point2<f32>),
 }
 
+crate::checkpoint::plain_struct!(Pose { pos, theta });
+
+impl crate::checkpoint::Plain for AgentId {
+    fn save(&self, w: &mut crate::checkpoint::Writer) {
+        let (tag, index) = match *self {
+            AgentId::Robot(i) => (0u8, i),
+            AgentId::Opponent(i) => (1, i),
+        };
+        tag.save(w);
+        index.save(w);
+    }
+    fn load(r: &mut crate::checkpoint::Reader) -> Result<Self, crate::checkpoint::CheckpointError> {
+        match u8::load(r)? {
+            0 => Ok(AgentId::Robot(usize::load(r)?)),
+            1 => Ok(AgentId::Opponent(usize::load(r)?)),
+            _ => Err(crate::checkpoint::CheckpointError::BadValue("an agent id")),
+        }
+    }
+}
+
+impl crate::checkpoint::Plain for Motion {
+    fn save(&self, w: &mut crate::checkpoint::Writer) {
+        match *self {
+            Motion::Stop => 0u8.save(w),
+            Motion::Drive { forward, turn } => {
+                1u8.save(w);
+                forward.save(w);
+                turn.save(w);
+            }
+            Motion::Toward(p) => {
+                2u8.save(w);
+                p.save(w);
+            }
+        }
+    }
+    fn load(r: &mut crate::checkpoint::Reader) -> Result<Self, crate::checkpoint::CheckpointError> {
+        match u8::load(r)? {
+            0 => Ok(Motion::Stop),
+            1 => Ok(Motion::Drive {
+                forward: f32::load(r)?,
+                turn: f32::load(r)?,
+            }),
+            2 => Ok(Motion::Toward(Point2::load(r)?)),
+            _ => Err(crate::checkpoint::CheckpointError::BadValue("a motion")),
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

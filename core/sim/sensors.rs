@@ -324,6 +324,14 @@ pub fn detection_point(pose: Pose, d: &Detection) -> Point2<f32> {
     pose.pos + Vector2::new(a.cos(), a.sin()) * d.range
 }
 
+crate::checkpoint::plain_struct!(LandmarkSighting { id, range, bearing });
+crate::checkpoint::plain_struct!(Detection { range, bearing });
+crate::checkpoint::plain_struct!(Scan {
+    ranges,
+    detections,
+    seen
+});
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -189,3 +189,14 @@ pub(super) const MIN_SPEED_FRACTION: f32 = 0.3;
 /// opponent is elsewhere.
 pub(super) const CONTRADICTED_TICKS: u32 = 10;
 pub(super) const CONTRADICTED_KEEP: f32 = 0.02;
+
+crate::checkpoint::plain_struct!(Role {
+    id,
+    count,
+    tagged,
+    particles,
+    weights,
+    steps,
+    unseen_run,
+    confidence,
+});

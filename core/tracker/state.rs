@@ -20,3 +20,9 @@ pub struct Tracker {
     pub(super) merger: merge::Histograms,
     pub(super) tick: u64,
 }
+
+crate::checkpoint::restore_struct!(Tracker {
+    plain: [roles, next_id, rng, tick],
+    nested: [],
+    derived: [settings, free_cells, directions, merger],
+});

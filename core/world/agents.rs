@@ -101,3 +101,64 @@ pub enum OrderError {
     #[error("{field}: [{x}, {y}] lies outside the arena")]
     OutsideArena { field: String, x: f32, y: f32 },
 }
+
+crate::checkpoint::restore_struct!(Robot {
+    plain: [
+        pose,
+        estimate,
+        spread,
+        odometry,
+        dead_reckoning,
+        landmarks,
+        frozen_until,
+        cooldown_until,
+        scan,
+        command,
+        api,
+        aim_tick,
+        seated,
+    ],
+    nested: [localiser],
+    derived: [],
+});
+crate::checkpoint::plain_struct!(ApiRoute { waypoints, fire });
+crate::checkpoint::plain_struct!(HumanInput {
+    forward,
+    turn,
+    tag,
+    seen_tick
+});
+crate::checkpoint::plain_struct!(Opponent {
+    pose,
+    tagged,
+    cooldown_until,
+    control,
+    bench,
+});
+
+impl Plain for Control {
+    fn save(&self, w: &mut crate::checkpoint::Writer) {
+        match self {
+            Control::Bot(b) => {
+                0u8.save(w);
+                b.save(w);
+            }
+            Control::Api(a) => {
+                1u8.save(w);
+                a.save(w);
+            }
+            Control::Human(h) => {
+                2u8.save(w);
+                h.save(w);
+            }
+        }
+    }
+    fn load(r: &mut crate::checkpoint::Reader) -> Result<Self, CheckpointError> {
+        match u8::load(r)? {
+            0 => Ok(Control::Bot(Bot::load(r)?)),
+            1 => Ok(Control::Api(ApiRoute::load(r)?)),
+            2 => Ok(Control::Human(HumanInput::load(r)?)),
+            _ => Err(CheckpointError::BadValue("an opponent's control")),
+        }
+    }
+}

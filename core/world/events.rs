@@ -136,3 +136,129 @@ pub struct Event {
     pub tick: u64,
     pub kind: EventKind,
 }
+
+crate::checkpoint::plain_struct!(Event { seq, tick, kind });
+
+impl Plain for Side {
+    fn save(&self, w: &mut crate::checkpoint::Writer) {
+        (*self as u8).save(w);
+    }
+    fn load(r: &mut crate::checkpoint::Reader) -> Result<Self, CheckpointError> {
+        match u8::load(r)? {
+            0 => Ok(Side::Robots),
+            1 => Ok(Side::Opponents),
+            _ => Err(CheckpointError::BadValue("a side")),
+        }
+    }
+}
+
+impl Plain for MatchStatus {
+    fn save(&self, w: &mut crate::checkpoint::Writer) {
+        (*self as u8).save(w);
+    }
+    fn load(r: &mut crate::checkpoint::Reader) -> Result<Self, CheckpointError> {
+        match u8::load(r)? {
+            0 => Ok(MatchStatus::Running),
+            1 => Ok(MatchStatus::Finished),
+            _ => Err(CheckpointError::BadValue("a match status")),
+        }
+    }
+}
+
+impl Plain for FinishReason {
+    fn save(&self, w: &mut crate::checkpoint::Writer) {
+        (*self as u8).save(w);
+    }
+    fn load(r: &mut crate::checkpoint::Reader) -> Result<Self, CheckpointError> {
+        FinishReason::ALL
+            .get(u8::load(r)? as usize)
+            .copied()
+            .ok_or(CheckpointError::BadValue("a finish reason"))
+    }
+}
+
+impl Plain for EventKind {
+    fn save(&self, w: &mut crate::checkpoint::Writer) {
+        match self {
+            EventKind::Shot { by, hit } => {
+                0u8.save(w);
+                by.save(w);
+                hit.save(w);
+            }
+            EventKind::Tag { by, target } => {
+                1u8.save(w);
+                by.save(w);
+                target.save(w);
+            }
+            EventKind::RobotTagged { by, target } => {
+                2u8.save(w);
+                by.save(w);
+                target.save(w);
+            }
+            EventKind::RoleSplit { role, from } => {
+                3u8.save(w);
+                role.save(w);
+                from.save(w);
+            }
+            EventKind::RoleMerge { role, from, count } => {
+                4u8.save(w);
+                role.save(w);
+                from.save(w);
+                count.save(w);
+            }
+            EventKind::PlayerJoined { agent, name } => {
+                5u8.save(w);
+                agent.save(w);
+                name.save(w);
+            }
+            EventKind::PlayerLeft { agent, name } => {
+                6u8.save(w);
+                agent.save(w);
+                name.save(w);
+            }
+            EventKind::Finished { winner, reason } => {
+                7u8.save(w);
+                winner.save(w);
+                reason.save(w);
+            }
+        }
+    }
+    fn load(r: &mut crate::checkpoint::Reader) -> Result<Self, CheckpointError> {
+        Ok(match u8::load(r)? {
+            0 => EventKind::Shot {
+                by: Plain::load(r)?,
+                hit: Plain::load(r)?,
+            },
+            1 => EventKind::Tag {
+                by: Plain::load(r)?,
+                target: Plain::load(r)?,
+            },
+            2 => EventKind::RobotTagged {
+                by: Plain::load(r)?,
+                target: Plain::load(r)?,
+            },
+            3 => EventKind::RoleSplit {
+                role: Plain::load(r)?,
+                from: Plain::load(r)?,
+            },
+            4 => EventKind::RoleMerge {
+                role: Plain::load(r)?,
+                from: Plain::load(r)?,
+                count: Plain::load(r)?,
+            },
+            5 => EventKind::PlayerJoined {
+                agent: Plain::load(r)?,
+                name: Plain::load(r)?,
+            },
+            6 => EventKind::PlayerLeft {
+                agent: Plain::load(r)?,
+                name: Plain::load(r)?,
+            },
+            7 => EventKind::Finished {
+                winner: Plain::load(r)?,
+                reason: Plain::load(r)?,
+            },
+            _ => return Err(CheckpointError::BadValue("an event")),
+        })
+    }
+}

@@ -26,6 +26,7 @@ use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
 use crate::bots::{Bot, BotKind};
+use crate::checkpoint::{CheckpointError, Plain, Restore};
 use crate::localise::dead_reckoning::DeadReckoning;
 use crate::localise::{LikelihoodField, Localiser, Observation};
 use crate::planner::{PlannerKind, RobotCommand, RobotView, Team, TeamView};
@@ -224,6 +225,24 @@ impl World {
         world.localise();
         world.think(&mut |_| {});
         Ok(world)
+    }
+
+    /// Its state as a checkpoint: what [`World::restored`] brings back (see
+    /// [`crate::checkpoint`]).
+    pub fn checkpoint(&self) -> Vec<u8> {
+        let mut w = crate::checkpoint::Writer::new();
+        Restore::save(self, &mut w);
+        w.into_bytes()
+    }
+
+    /// The match `checkpoint` was taken of, from `self`: a fresh [`World::new`] on the map
+    /// and settings that match had (they build what the checkpoint leaves out). On an
+    /// error the half-restored world is dropped; build a fresh one to try anything else.
+    pub fn restored(mut self, checkpoint: &[u8]) -> Result<World, CheckpointError> {
+        let mut r = crate::checkpoint::Reader::new(checkpoint)?;
+        Restore::restore(&mut self, &mut r)?;
+        r.finish()?;
+        Ok(self)
     }
 
     pub fn time_s(&self) -> f64 {
@@ -711,5 +730,31 @@ impl World {
     }
 }
 
+crate::checkpoint::plain_struct!(Trail {
+    tick,
+    robots,
+    opponents
+});
+crate::checkpoint::restore_struct!(World {
+    plain: [
+        tick,
+        status,
+        winner,
+        opponents,
+        events,
+        trail,
+        rng_sense,
+        rng_bots,
+        rng_odometry,
+        rng_localise,
+        route_budget,
+        route_work,
+    ],
+    nested: [robots, team],
+    derived: [arena, config, laser],
+});
+
+#[cfg(test)]
+mod checkpoint_tests;
 #[cfg(test)]
 mod tests;

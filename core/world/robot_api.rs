@@ -297,3 +297,10 @@ impl World {
         })
     }
 }
+
+crate::checkpoint::plain_struct!(ApiDrive {
+    motion,
+    route,
+    fire,
+    aim_tick
+});
