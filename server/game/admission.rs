@@ -18,8 +18,9 @@ use nalgebra::Point2;
 pub struct Price {
     /// Bytes kept while it lives.
     pub memory: u64,
-    /// Bytes of the store its record may take while it runs (`game::record`): orders from
-    /// outside are bounded by this, not by memory.
+    /// Bytes of the store its record may take while it runs: orders from outside
+    /// (`game::record`, bounded by this, not by memory) and its checkpoints
+    /// ([`checkpoint_bytes`]).
     pub disk: u64,
     /// Seconds of one core to validate and build it.
     pub build_s: f64,
@@ -149,6 +150,45 @@ pub fn map(def: &MapDef) -> Price {
     }
 }
 
+/// Bytes of a match's state that changes as it plays, whatever its settings: its event log,
+/// radio traffic, scans, plans and the planner's scratch (the share of `MATCH_BASE_BYTES`
+/// a checkpoint writes).
+const CHECKPOINT_BASE_BYTES: f64 = 1e6;
+/// Per event the log may hold (an agent id or two, a tick, a name of at most 32 bytes).
+const BYTES_PER_EVENT: f64 = 64.0;
+/// Checkpoints the store keeps of a running match (`task::history`).
+const CHECKPOINTS_KEPT: f64 = 2.0;
+
+/// The most bytes one checkpoint of a match with `config` on `def` takes (what
+/// `World::checkpoint` writes, before it is deflated): the parts of the match's memory
+/// that change as it plays — its tracker particles, its robots' localisers and plans, the
+/// planner's per-cell scratch — and its event log, at most a shot per agent per cooldown
+/// and a few events a second besides. The map's derived tables are not in it: a resume
+/// builds them again. The store refuses a checkpoint past this bound (the match then
+/// resumes from an older one, or from its start).
+pub fn checkpoint_bytes(def: &MapDef, config: &MatchConfig) -> u64 {
+    let (_, cols, rows) = ClearanceGrid::shape(def.width, def.height);
+    let cells = (cols * rows) as f64;
+    let robots = config.robots as f64;
+    let copies = if config.radio.perfect() { 1.0 } else { robots };
+    let particles = config.tracker.particles_per_role as f64 * config.opponents as f64;
+    let localiser = if config.localisation {
+        config.localiser.max_particles as f64 * BYTES_PER_PARTICLE
+    } else {
+        0.0
+    };
+    let agents = (config.robots + config.opponents) as f64;
+    let ticks = config.time_limit_ticks as f64;
+    let shots = agents * ticks / config.physics.tag_cooldown_ticks.max(1) as f64;
+    let others = 4.0 * ticks / lasertag_core::sim::TICK_HZ as f64;
+    let bytes = CHECKPOINT_BASE_BYTES
+        + robots * (BYTES_PER_ROBOT + localiser)
+        + copies * particles * BYTES_PER_PARTICLE
+        + cells * 8.0
+        + (shots + others) * BYTES_PER_EVENT;
+    bytes as u64
+}
+
 /// Whether a match with `config` takes orders from outside (robots or opponents driven over
 /// the API), whose record is bounded by [`record::MAX_RECORD_BYTES`](crate::game::record).
 fn takes_orders(config: &MatchConfig) -> bool {
@@ -225,7 +265,7 @@ pub fn match_on(def: &MapDef, config: &MatchConfig) -> Price {
             crate::game::record::MAX_RECORD_BYTES as u64
         } else {
             0
-        },
+        } + (CHECKPOINTS_KEPT * checkpoint_bytes(def, config) as f64) as u64,
         // The world's own setup (particles drawn, trackers copied); the map's grids are in
         // the map's price.
         build_s: 0.01

@@ -140,6 +140,11 @@ impl Recording {
         (self.dropped == 0).then_some(&self.inputs[..])
     }
 
+    /// How many inputs it holds, counting those let go of from memory.
+    pub fn recorded(&self) -> usize {
+        self.dropped + self.inputs.len()
+    }
+
     /// The inputs the store does not hold yet.
     pub fn unstored(&self) -> &[(u64, WorldInput)] {
         &self.inputs[self.stored - self.dropped..]

@@ -29,8 +29,8 @@ use crate::game::admission::{self, Price};
 use crate::game::record::Recording;
 use crate::game::view::MatchMeta;
 use crate::game::{Registry, Resumed, ResumedSeat};
-use crate::store::codec::{StoredLive, StoredSettings, decode_inputs};
-use crate::store::{Store, Unfinished, Write};
+use crate::store::codec::{StoredLive, StoredSettings, decode_checkpoint, decode_inputs};
+use crate::store::{Store, StoredCheckpoint, Unfinished, Write};
 
 /// Why a stored match could not be brought back.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -93,8 +93,16 @@ pub fn rebuild(
     let delay = settings.spectator_delay_ticks;
     // The task replays the delay's worth itself, publishing each tick (see `Resumed`).
     let from = until.saturating_sub(delay);
-    let mut world = World::new(arena.clone(), config.clone()).map_err(|e| fail(e.to_string()))?;
-    let mut next = 0;
+    let fresh = || World::new(arena.clone(), config.clone()).map_err(|e| fail(e.to_string()));
+    let (mut world, mut next, checkpoint_tick) =
+        match from_checkpoint(&left.checkpoints, from, inputs.len(), fresh()?) {
+            Ok(Some((world, applied, tick))) => (world, applied, Some(tick)),
+            Ok(None) => (fresh()?, 0, None),
+            Err(why) => {
+                tracing::warn!(%id, "rebuilt from tick 0: {why}");
+                (fresh()?, 0, None)
+            }
+        };
     while world.tick < from && world.status == MatchStatus::Running {
         while let Some((t, input)) = inputs.get(next)
             && *t == world.tick
@@ -152,8 +160,37 @@ pub fn rebuild(
             until,
             seats,
             started_at,
+            checkpoint_tick,
         },
     })
+}
+
+/// The world of the newest of `checkpoints` a rebuild to tick `from` may start from (one no
+/// later than `from`, whose inputs the record has: at most `recorded`), restored into
+/// `fresh`, with how many inputs it had applied and its tick: `None` when there is none.
+/// A checkpoint that cannot be restored (a build whose types differ) is an error: the
+/// caller rebuilds from tick 0, which only takes longer.
+fn from_checkpoint(
+    checkpoints: &[StoredCheckpoint],
+    from: u64,
+    recorded: usize,
+    fresh: World,
+) -> Result<Option<(World, usize, u64)>, String> {
+    let Some(c) = checkpoints
+        .iter()
+        .filter(|c| c.tick <= from && c.applied as usize <= recorded)
+        .max_by_key(|c| c.tick)
+    else {
+        return Ok(None);
+    };
+    let world = decode_checkpoint(fresh, &c.state).map_err(|e| e.to_string())?;
+    if world.tick != c.tick {
+        return Err(format!(
+            "the checkpoint of tick {} holds tick {}",
+            c.tick, world.tick
+        ));
+    }
+    Ok(Some((world, c.applied as usize, c.tick)))
 }
 
 /// The arena of a stored map: `ours` when it is the same map (so its derived tables are

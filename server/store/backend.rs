@@ -7,7 +7,7 @@ use std::time::{Duration, SystemTime};
 
 use lasertag_core::difficulty::Difficulty;
 use lasertag_core::sim::arena::Arena;
-use lasertag_core::world::WorldInput;
+use lasertag_core::world::{World, WorldInput};
 
 use crate::store::codec::{self, StoredLive, StoredSettings};
 use crate::store::results::PlayerResult;
@@ -36,6 +36,9 @@ pub enum StoreError {
     NewerSchema { found: usize, known: usize },
     #[error("no stored match {0}")]
     Unknown(String),
+    /// The match's checkpoint came out larger than its price: it resumes from an older one.
+    #[error("match {0}'s checkpoint is larger than priced: not stored")]
+    CheckpointTooLarge(String),
     #[error(transparent)]
     Codec(#[from] std::sync::Arc<codec::CodecError>),
     #[error("the store is closed")]
@@ -76,6 +79,18 @@ pub enum Write {
         /// Its owner and seats now, when the seats changed.
         live: Option<Box<StoredLive>>,
         tick: u64,
+    },
+    /// A copy of a running match's state (`World::checkpoint`, encoded by the writer),
+    /// taken between ticks after `applied` of its inputs, every one of which went before it
+    /// in an append: a resume starts there instead of at tick 0. The store keeps it and
+    /// those from `keep_from` on, and stores none past `max_bytes` (its price).
+    Checkpoint {
+        id: String,
+        tick: u64,
+        applied: u64,
+        keep_from: u64,
+        world: Box<World>,
+        max_bytes: u64,
     },
     /// The match ended (after its last append).
     Finish { id: String, ended: Ended },
@@ -158,6 +173,17 @@ pub struct Unfinished {
     pub stored: Stored,
     /// JSON of [`StoredLive`]; none for a record written before the store kept it.
     pub live: Option<String>,
+    /// Its checkpoints, newest first.
+    pub checkpoints: Vec<StoredCheckpoint>,
+}
+
+/// A running match's state at `tick`, after `applied` of its inputs ([`Write::Checkpoint`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct StoredCheckpoint {
+    pub tick: u64,
+    pub applied: u64,
+    /// [`codec::encode_checkpoint`](codec::encode_checkpoint)'s bytes.
+    pub state: Vec<u8>,
 }
 
 /// A player name's totals over the stored matches.

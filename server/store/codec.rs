@@ -16,7 +16,7 @@ use lasertag_core::difficulty::Difficulty;
 use lasertag_core::settings::{Group, Value};
 use lasertag_core::sim::Odometry;
 use lasertag_core::world::{
-    FinishReason, HumanInput, MatchConfig, OpponentOrder, Placement, RobotOrder, WorldInput,
+    FinishReason, HumanInput, MatchConfig, OpponentOrder, Placement, RobotOrder, World, WorldInput,
 };
 use lasertag_core::{localise, planner, radio, tracker};
 use nalgebra::Point2;
@@ -36,6 +36,8 @@ pub enum CodecError {
     Settings(String),
     #[error("stored inputs: {0}")]
     Inputs(String),
+    #[error("stored checkpoint: {0}")]
+    Checkpoint(String),
 }
 
 /// The version of [`StoredSettings`] this build writes and reads.
@@ -459,6 +461,31 @@ pub fn encode_inputs(inputs: &[(u64, WorldInput)]) -> Vec<u8> {
     let mut out = DeflateEncoder::new(Vec::with_capacity(text.len() / 4), Compression::fast());
     let _ = out.write_all(&text);
     out.finish().unwrap_or_default()
+}
+
+/// `world`'s checkpoint, deflated: `None` past `max_bytes`.
+pub fn encode_checkpoint(world: &World, max_bytes: u64) -> Option<Vec<u8>> {
+    let state = world.checkpoint();
+    let mut out = DeflateEncoder::new(Vec::with_capacity(state.len() / 2), Compression::fast());
+    let _ = out.write_all(&state);
+    let bytes = out.finish().unwrap_or_default();
+    (bytes.len() as u64 <= max_bytes).then_some(bytes)
+}
+
+/// The match a checkpoint written by [`encode_checkpoint`] was taken of, from `fresh` (a
+/// new world on that match's map and settings).
+pub fn decode_checkpoint(fresh: World, bytes: &[u8]) -> Result<World, CodecError> {
+    // A damaged store cannot make the reader inflate without end: no match's state comes
+    // near this.
+    const MOST_STATE_BYTES: u64 = 1 << 28;
+    let mut state = Vec::new();
+    DeflateDecoder::new(bytes)
+        .take(MOST_STATE_BYTES)
+        .read_to_end(&mut state)
+        .map_err(|e| CodecError::Checkpoint(format!("not deflated: {e}")))?;
+    fresh
+        .restored(&state)
+        .map_err(|e| CodecError::Checkpoint(e.to_string()))
 }
 
 /// The inputs of one chunk written by [`encode_inputs`].

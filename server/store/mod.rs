@@ -20,7 +20,7 @@ pub mod sqlite;
 
 pub use backend::{
     Backend, Ended, HEARTBEAT, LeaderOrder, Listed, Played, PlayerStats, Rated, Retention,
-    StoreError, Stored, Unfinished, Write, unix_ms,
+    StoreError, Stored, StoredCheckpoint, Unfinished, Write, unix_ms,
 };
 pub use results::PlayerResult;
 

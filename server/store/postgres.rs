@@ -25,18 +25,18 @@
 use std::time::Duration;
 
 use ::postgres::config::{Host, SslMode};
-use ::postgres::{Client, Config, NoTls, Row};
+use ::postgres::{Client, Config, NoTls};
 
 use crate::store::backend::{
-    self, Backend, LeaderOrder, Listed, Played, PlayerStats, Rated, Retention, StoreError, Stored,
-    Unfinished,
+    self, Backend, LeaderOrder, Listed, Played, PlayerStats, Retention, StoreError, Stored,
+    StoredCheckpoint, Unfinished,
 };
 
 mod convert;
 mod schema;
 mod write;
 
-use convert::{big, db, describe};
+use convert::{big, db, describe, listed, stats};
 use schema::Statements;
 pub use schema::{SCHEMA_VERSION, migrate};
 use write::{Change, apply, evict};
@@ -162,44 +162,6 @@ enum Failure {
     Undone(StoreError),
     /// The commit itself failed: it may or may not have landed.
     Unknown(StoreError),
-}
-
-fn listed(r: &Row) -> Result<Listed, ::postgres::Error> {
-    let names: String = r.try_get(8)?;
-    Ok(Listed {
-        id: r.try_get(0)?,
-        map: r.try_get(1)?,
-        started_at_ms: r.try_get(2)?,
-        ended_at_ms: r.try_get(3)?,
-        ticks: r.try_get::<_, i64>(4)?.max(0) as u64,
-        winner: r.try_get(5)?,
-        reason: r.try_get(6)?,
-        complete: r.try_get(7)?,
-        players: serde_json::from_str(&names).unwrap_or_default(),
-    })
-}
-
-fn stats(r: &Row) -> Result<PlayerStats, ::postgres::Error> {
-    let n = |i: usize| {
-        r.try_get::<_, Option<i64>>(i)
-            .map(|v| v.unwrap_or(0).max(0) as u64)
-    };
-    let rating = match r.try_get::<_, Option<f64>>(5)? {
-        Some(rating) => Some(Rated {
-            rating,
-            deviation: r.try_get(6)?,
-            matches: n(7)?,
-        }),
-        None => None,
-    };
-    Ok(PlayerStats {
-        name: r.try_get(0)?,
-        matches: n(1)?,
-        wins: n(2)?,
-        tags: n(3)?,
-        longest_survival_ticks: n(4)?,
-        rating,
-    })
 }
 
 impl Postgres {
@@ -516,6 +478,14 @@ impl Backend for Postgres {
             let Some(r) = c.query_opt(&st.load_running, &[&id])? else {
                 return Ok(None);
             };
+            let mut checkpoints = Vec::new();
+            for row in c.query(&st.load_checkpoints, &[&id])? {
+                checkpoints.push(StoredCheckpoint {
+                    tick: row.try_get::<_, i64>(0)?.max(0) as u64,
+                    applied: row.try_get::<_, i64>(1)?.max(0) as u64,
+                    state: row.try_get(2)?,
+                });
+            }
             Ok(Some(Unfinished {
                 stored: Stored {
                     listed: listed(&r)?,
@@ -524,6 +494,7 @@ impl Backend for Postgres {
                     chunks: r.try_get(11)?,
                 },
                 live: r.try_get(12)?,
+                checkpoints,
             }))
         })
     }

@@ -67,6 +67,14 @@ const MIGRATIONS: &[&str] = &[
     ALTER TABLE players ADD COLUMN rating_after REAL;",
     // 3: what resumes a running match (`codec::StoredLive`: owner, seats, token hashes).
     "ALTER TABLE matches ADD COLUMN live TEXT;",
+    // 4: running matches' checkpoints (`backend::Write::Checkpoint`), the newest few each.
+    "CREATE TABLE checkpoints (
+        seq INTEGER NOT NULL REFERENCES matches(seq) ON DELETE CASCADE,
+        tick INTEGER NOT NULL,
+        applied INTEGER NOT NULL,
+        state BLOB NOT NULL,
+        PRIMARY KEY (seq, tick)
+    );",
 ];
 
 /// The schema version this build writes.
@@ -121,30 +129,6 @@ fn migrate(conn: &mut Connection) -> Result<(), StoreError> {
         tx.commit().map_err(db)?;
     }
     Ok(())
-}
-
-/// A running match that could not be resumed: over at its last stored tick, reason `lost`.
-pub fn lose(conn: &Connection, id: &str) -> Result<(), StoreError> {
-    conn.execute(
-        "UPDATE matches SET ended_at = updated_at, complete = 0, reason = 'lost'
-         WHERE id = ?1 AND ended_at IS NULL",
-        [id],
-    )
-    .map_err(db)?;
-    Ok(())
-}
-
-/// The matches left running: those people were playing first (they are waiting), then the
-/// rest, oldest first.
-pub fn unfinished(conn: &Connection) -> Result<Vec<String>, StoreError> {
-    let mut stmt = conn
-        .prepare_cached(
-            "SELECT id FROM matches WHERE ended_at IS NULL
-             ORDER BY COALESCE(live LIKE '%\"seats\"%', 0) DESC, seq",
-        )
-        .map_err(db)?;
-    let rows = stmt.query_map([], |r| r.get::<_, String>(0)).map_err(db)?;
-    rows.collect::<Result<_, _>>().map_err(db)
 }
 
 /// A match's start as the database stores it.
@@ -222,6 +206,7 @@ pub fn finish(conn: &Connection, id: &str, ended: &Ended) -> Result<(), StoreErr
     let seq: i64 = conn
         .query_row("SELECT seq FROM matches WHERE id = ?1", [id], |r| r.get(0))
         .map_err(db)?;
+    forget_checkpoints(conn, id)?;
     conn.execute(
         "UPDATE matches SET ended_at = ?2, ticks = ?3, winner = ?4, reason = ?5, complete = 1
          WHERE seq = ?1",
@@ -279,57 +264,6 @@ pub fn list(
 /// One ended match, whole.
 pub fn load(conn: &Connection, id: &str) -> Result<Option<Stored>, StoreError> {
     Ok(load_where(conn, id, true)?.map(|(stored, _)| stored))
-}
-
-/// One match left running, whole, with what resumes it.
-pub fn load_unfinished(conn: &Connection, id: &str) -> Result<Option<Unfinished>, StoreError> {
-    Ok(load_where(conn, id, false)?.map(|(stored, live)| Unfinished { stored, live }))
-}
-
-/// The match `id`, ended or running as `ended` says, and its live record.
-fn load_where(
-    conn: &Connection,
-    id: &str,
-    ended: bool,
-) -> Result<Option<(Stored, Option<String>)>, StoreError> {
-    let row = conn
-        .query_row(
-            "SELECT id, map, started_at, ended_at, ticks, winner, reason, complete, names,
-                    settings, (SELECT document FROM maps WHERE hash = map_hash), seq, live
-             FROM matches WHERE id = ?1 AND (ended_at IS NOT NULL) = ?2",
-            params![id, ended],
-            |r| {
-                Ok((
-                    listed(r)?,
-                    r.get::<_, String>(9)?,
-                    r.get::<_, String>(10)?,
-                    r.get::<_, i64>(11)?,
-                    r.get::<_, Option<String>>(12)?,
-                ))
-            },
-        )
-        .optional()
-        .map_err(db)?;
-    let Some((listed, settings, map_document, seq, live)) = row else {
-        return Ok(None);
-    };
-    let mut stmt = conn
-        .prepare_cached("SELECT chunk FROM inputs WHERE seq = ?1 ORDER BY rowid")
-        .map_err(db)?;
-    let chunks = stmt
-        .query_map([seq], |r| r.get::<_, Vec<u8>>(0))
-        .map_err(db)?
-        .collect::<Result<Vec<_>, _>>()
-        .map_err(db)?;
-    Ok(Some((
-        Stored {
-            listed,
-            settings,
-            map_document,
-            chunks,
-        },
-        live,
-    )))
 }
 
 /// What the store holds: ended matches and their bytes (settings and inputs).
@@ -510,6 +444,17 @@ impl backend::Backend for Sqlite {
                         now,
                     )
                 }
+                Write::Checkpoint {
+                    id,
+                    tick,
+                    applied,
+                    keep_from,
+                    world,
+                    max_bytes,
+                } => match crate::store::codec::encode_checkpoint(world, *max_bytes) {
+                    Some(state) => checkpoint(&tx, id, *tick, *applied, *keep_from, &state),
+                    None => Err(StoreError::CheckpointTooLarge(id.clone())),
+                },
                 Write::Lost { id } => {
                     finished = true;
                     lose(&tx, id)
@@ -588,9 +533,12 @@ impl backend::Backend for Sqlite {
 
 mod players;
 mod rows;
+mod running;
 use players::rate;
 pub use players::{leaders, played, player};
-use rows::{LISTED, db, listed};
+use rows::{LISTED, db, listed, load_where};
+use running::forget_checkpoints;
+pub use running::{checkpoint, load_unfinished, lose, unfinished};
 
 #[cfg(test)]
 mod tests;

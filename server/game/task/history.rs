@@ -14,6 +14,11 @@ use lasertag_core::world::{FinishReason, MatchStatus};
 /// How often a running match's inputs go to the store: what a crash may lose.
 pub(super) const FLUSH_EVERY: Duration = Duration::from_secs(1);
 
+/// Ticks of play between a match's checkpoints (30 s): what a resume re-simulates at most,
+/// besides a delayed view's delay. The store keeps the newest two, so that one is always at
+/// least a delay old (a match whose delay is longer checkpoints once a delay).
+pub const CHECKPOINT_EVERY_TICKS: u64 = 600;
+
 impl MatchTask {
     /// What resumes the match besides its settings and inputs: owner and seats.
     fn live_record(&self) -> StoredLive {
@@ -75,8 +80,38 @@ impl MatchTask {
         };
         if self.settings.history.record(append).is_ok() {
             self.recording.mark_stored(n);
+            self.store_checkpoint();
         } else {
             tracing::warn!("the history's queue is full: this match's inputs wait a second");
+        }
+    }
+
+    /// Sends a copy of the world to the store when a checkpoint is due: right after an
+    /// append that took every input applied so far, so that the checkpoint's count of them
+    /// says where in the record it stands. The copy is encoded on the writer's thread.
+    fn store_checkpoint(&mut self) {
+        let every = CHECKPOINT_EVERY_TICKS.max(self.meta.spectator_delay_ticks);
+        let tick = self.world.tick;
+        let due = match self.store.last_checkpoint {
+            Some(last) => tick >= last + every,
+            None => tick >= every,
+        };
+        if !due
+            || self.world.status != MatchStatus::Running
+            || !self.recording.unstored().is_empty()
+        {
+            return;
+        }
+        let checkpoint = Write::Checkpoint {
+            id: self.meta.id.clone(),
+            tick,
+            applied: self.recording.recorded() as u64,
+            keep_from: self.store.last_checkpoint.unwrap_or(0),
+            world: Box::new(self.world.clone()),
+            max_bytes: self.store.checkpoint_bytes,
+        };
+        if self.settings.history.record(checkpoint).is_ok() {
+            self.store.last_checkpoint = Some(tick);
         }
     }
 

@@ -34,6 +34,7 @@ use crate::access::{ClientKey, Owner, SecretHash};
 use std::borrow::Cow;
 
 use crate::access::random_id;
+use crate::game::admission;
 use crate::game::delay::{HeldBack, HeldBelief};
 use crate::game::error::MatchError;
 use crate::game::hub::{Hub, Seat};
@@ -272,15 +273,10 @@ pub(super) struct StoreProgress {
     /// The store has the match's start.
     pub(super) begun: bool,
     pub(super) last_flush: Instant,
-}
-
-impl Default for StoreProgress {
-    fn default() -> Self {
-        StoreProgress {
-            begun: false,
-            last_flush: Instant::now(),
-        }
-    }
+    /// The tick of the newest checkpoint the store has (or was sent), if any.
+    pub(super) last_checkpoint: Option<u64>,
+    /// The most bytes one of its checkpoints may take (its price).
+    pub(super) checkpoint_bytes: u64,
 }
 
 /// What a match task needs from the shell besides its world.
@@ -341,6 +337,8 @@ pub struct Resumed {
     pub until: u64,
     pub seats: Vec<ResumedSeat>,
     pub started_at: std::time::SystemTime,
+    /// The tick of the checkpoint it was rebuilt from, if any.
+    pub checkpoint_tick: Option<u64>,
 }
 
 impl std::fmt::Debug for TaskSettings {
@@ -428,18 +426,20 @@ fn spawn(
         .store()
         .map(|s| (s.lease().clone(), s.lease().term()));
     let moved = hub.moved.clone();
-    let (recording, started_at, catch_up, seats) = match resumed {
+    let (recording, started_at, catch_up, seats, last_checkpoint) = match resumed {
         Some(r) => (
             r.recording,
             r.started_at,
             Some((r.catch_up, r.until)),
             r.seats,
+            r.checkpoint_tick,
         ),
         None => (
             Recording::new(spills),
             std::time::SystemTime::now(),
             None,
             Vec::new(),
+            None,
         ),
     };
     let mut task = MatchTask {
@@ -449,6 +449,8 @@ fn spawn(
             // A resumed match's start is in the store already.
             begun: catch_up.is_some(),
             last_flush: now,
+            last_checkpoint,
+            checkpoint_bytes: admission::checkpoint_bytes(&world.arena.def, &world.config),
         },
         catch_up,
         lease,

@@ -72,6 +72,14 @@ const MIGRATIONS: &[&str] = &[
     // 4: a running match's lease: its holder is `writer`; `fence` counts the times it changed
     // hands, and a holder writes only with the fence it took it at.
     "ALTER TABLE matches ADD COLUMN fence BIGINT NOT NULL DEFAULT 0;",
+    // 5: running matches' checkpoints (`backend::Write::Checkpoint`), the newest few each.
+    "CREATE TABLE checkpoints (
+        seq BIGINT NOT NULL REFERENCES matches(seq) ON DELETE CASCADE,
+        tick BIGINT NOT NULL,
+        applied BIGINT NOT NULL,
+        state BYTEA NOT NULL,
+        PRIMARY KEY (seq, tick)
+    );",
 ];
 
 /// The schema version this build writes.
@@ -128,6 +136,9 @@ pub(super) struct Statements {
     pub(super) begin_match: Statement,
     pub(super) append: Statement,
     pub(super) lose: Statement,
+    pub(super) checkpoint: Statement,
+    pub(super) forget_checkpoints: Statement,
+    pub(super) load_checkpoints: Statement,
     pub(super) finish: Statement,
     pub(super) adopt: Statement,
     pub(super) hand_over: Statement,
@@ -186,6 +197,29 @@ impl Statements {
             lose: c.prepare(
                 "UPDATE matches SET ended_at = updated_at, complete = FALSE, reason = 'lost'
                  WHERE id = $1 AND writer = $2 AND fence = $3 AND ended_at IS NULL",
+            )?,
+            // Only the match's holder stores one (the fence), and the older ones go with it.
+            checkpoint: c.prepare(
+                "WITH m AS (
+                   SELECT seq FROM matches
+                   WHERE id = $1 AND writer = $2 AND fence = $3 AND ended_at IS NULL
+                 ), kept AS (
+                   INSERT INTO checkpoints (seq, tick, applied, state)
+                   SELECT seq, $4, $5, $6 FROM m
+                   ON CONFLICT (seq, tick) DO UPDATE
+                     SET applied = EXCLUDED.applied, state = EXCLUDED.state
+                   RETURNING seq
+                 ), gone AS (
+                   DELETE FROM checkpoints c USING m WHERE c.seq = m.seq AND c.tick < $7
+                 )
+                 SELECT seq FROM kept",
+            )?,
+            forget_checkpoints: c.prepare(
+                "DELETE FROM checkpoints WHERE seq = (SELECT seq FROM matches WHERE id = $1)",
+            )?,
+            load_checkpoints: c.prepare(
+                "SELECT tick, applied, state FROM checkpoints
+                 WHERE seq = (SELECT seq FROM matches WHERE id = $1) ORDER BY tick DESC",
             )?,
             finish: c.prepare(
                 "UPDATE matches SET ended_at = $3, ticks = $4, winner = $5, reason = $6,

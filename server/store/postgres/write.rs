@@ -30,6 +30,13 @@ pub(super) enum Change<'a> {
     Lost {
         id: &'a str,
     },
+    Checkpoint {
+        id: &'a str,
+        tick: i64,
+        applied: i64,
+        keep_from: i64,
+        state: Vec<u8>,
+    },
     Finish {
         id: &'a str,
         ended: &'a Ended,
@@ -79,6 +86,23 @@ impl<'a> Change<'a> {
             }),
             Write::Finish { id, ended } => Ok(Change::Finish { id, ended }),
             Write::Lost { id } => Ok(Change::Lost { id }),
+            Write::Checkpoint {
+                id,
+                tick,
+                applied,
+                keep_from,
+                world,
+                max_bytes,
+            } => match crate::store::codec::encode_checkpoint(world, *max_bytes) {
+                Some(state) => Ok(Change::Checkpoint {
+                    id,
+                    tick: big(*tick),
+                    applied: big(*applied),
+                    keep_from: big((*keep_from).min(*tick)),
+                    state,
+                }),
+                None => Err(StoreError::CheckpointTooLarge(id.clone())),
+            },
             Write::Flush(_) | Write::Adopt { .. } | Write::HandOver { .. } => return None,
         })
     }
@@ -150,8 +174,26 @@ pub(super) fn apply(
             })
         }
         Change::Lost { id } => {
-            tx.execute(&st.lose, &[id, &writer, &fence(id)])?;
+            if tx.execute(&st.lose, &[id, &writer, &fence(id)])? > 0 {
+                tx.execute(&st.forget_checkpoints, &[id])?;
+            }
             Ok(Ok(()))
+        }
+        Change::Checkpoint {
+            id,
+            tick,
+            applied,
+            keep_from,
+            state,
+        } => {
+            let kept = tx.query_opt(
+                &st.checkpoint,
+                &[id, &writer, &fence(id), tick, applied, state, keep_from],
+            )?;
+            Ok(match kept {
+                Some(_) => Ok(()),
+                None => Err(StoreError::Unknown(id.to_string())),
+            })
         }
         Change::Finish { id, ended } => {
             let ticks = big(ended.ticks);
@@ -171,6 +213,7 @@ pub(super) fn apply(
                 return Ok(Err(StoreError::Unknown(id.to_string())));
             };
             let seq: i64 = row.try_get(0)?;
+            tx.execute(&st.forget_checkpoints, &[id])?;
             if !ended.players.is_empty() {
                 let p = &ended.players;
                 let names: Vec<&str> = p.iter().map(|p| p.name.as_str()).collect();

@@ -5,7 +5,7 @@ use super::super::codec::StoredSettings;
 use super::super::{Backend, Ended, PlayerResult, Retention, Write};
 use super::*;
 use crate::store::codec::StoredClock;
-use lasertag_core::world::{HumanInput, MatchConfig, WorldInput};
+use lasertag_core::world::{HumanInput, MatchConfig, MatchStatus, World, WorldInput};
 
 fn dir(what: &str) -> std::path::PathBuf {
     let d = std::env::temp_dir().join(format!("lasertag-sqlite-{what}-{}", std::process::id()));
@@ -162,6 +162,68 @@ fn a_newer_schema_is_refused_and_an_unfinished_match_is_kept_for_resuming_or_los
         .expect("pragma");
     drop(db);
     assert!(matches!(open(&d), Err(StoreError::NewerSchema { .. })));
+    let _ = std::fs::remove_dir_all(&d);
+}
+
+#[test]
+fn a_running_match_keeps_its_two_newest_checkpoints_and_its_end_lets_them_go() {
+    let d = dir("checkpoints");
+    let retention = Retention {
+        max_matches: 10,
+        max_bytes: 1 << 30,
+    };
+    let mut db = Sqlite::open(&d, retention).expect("open");
+    let mut writes = a_match("long", 7, "ada", false);
+    let finish = writes.pop().expect("the finish");
+    db.write(&writes).expect("write");
+    let Write::Begin { arena, .. } = &writes[0] else {
+        panic!("a begin first")
+    };
+    let mut world = World::new(arena.clone(), MatchConfig::default()).expect("world");
+    let mut last = 0;
+    for tick in [20, 40, 60] {
+        while world.tick < tick {
+            assert_ne!(world.status, MatchStatus::Finished, "the match runs on");
+            world.step();
+        }
+        let write = Write::Checkpoint {
+            id: "long".into(),
+            tick,
+            applied: 7,
+            keep_from: last,
+            world: Box::new(world.clone()),
+            max_bytes: u64::MAX,
+        };
+        db.write(&[write]).expect("checkpoint");
+        last = tick;
+    }
+    let left = db.load_unfinished("long").expect("load").expect("running");
+    let ticks: Vec<u64> = left.checkpoints.iter().map(|c| c.tick).collect();
+    assert_eq!(ticks, [60, 40], "the newest two, newest first");
+    let back = crate::store::codec::decode_checkpoint(
+        World::new(arena.clone(), MatchConfig::default()).expect("world"),
+        &left.checkpoints[0].state,
+    )
+    .expect("restores");
+    assert_eq!(back.digest(), world.digest());
+    // One past its price is not stored; the others stay.
+    let big = Write::Checkpoint {
+        id: "long".into(),
+        tick: 80,
+        applied: 7,
+        keep_from: 60,
+        world: Box::new(world.clone()),
+        max_bytes: 10,
+    };
+    db.write(&[big]).expect("the batch goes through");
+    let left = db.load_unfinished("long").expect("load").expect("running");
+    assert_eq!(left.checkpoints.len(), 2);
+    db.write(&[finish]).expect("finish");
+    let kept: i64 = db
+        .connection()
+        .query_row("SELECT COUNT(*) FROM checkpoints", [], |r| r.get(0))
+        .expect("count");
+    assert_eq!(kept, 0, "an ended match replays from its start");
     let _ = std::fs::remove_dir_all(&d);
 }
 
