@@ -3,7 +3,9 @@
 //!
 //! 1. Plays `--matches` matches `--minutes` into play in-process and writes each one's
 //!    record to a fresh SQLite store as a running match does: its start with owner and
-//!    seat, then its inputs a second at a time. None is ended: the store is what a server
+//!    seat, then its inputs a second at a time, and a checkpoint of the core's state every
+//!    `--checkpoint-every` ticks (600, the server's; 0 for none: a resume then re-simulates
+//!    every match from its first tick), the newest two kept. None is ended: the store is what a server
 //!    killed at that moment leaves. The match is one that lasts: one coordinated robot
 //!    against eight bots that run from it on `warehouse` (two robots, or five bots, tag them
 //!    all within five minutes in nearly every seed); in half of them a person has taken a
@@ -14,7 +16,7 @@
 //!    then): p50 and max, and when the last was back.
 //!
 //! `cargo build --release && cargo run --release --example resume_probe -- [--matches 100]
-//! [--minutes 5] [--seed 1]`
+//! [--minutes 5] [--seed 1] [--checkpoint-every 600]`
 
 use std::net::TcpStream;
 use std::path::{Path, PathBuf};
@@ -47,6 +49,8 @@ fn percentile(sorted: &[f64], p: f64) -> f64 {
 struct Record {
     id: String,
     writes: Vec<Write>,
+    /// The newest checkpoint's size as stored (deflated).
+    checkpoint_bytes: usize,
 }
 
 /// Plays match `i` for `ticks` ticks; `None` when it ended before (it would not be running).
@@ -54,6 +58,7 @@ fn play(
     i: u64,
     seed: u64,
     ticks: u64,
+    checkpoint_every: u64,
     arena: Arc<lasertag_core::sim::arena::Arena>,
 ) -> Option<Record> {
     let people = i.is_multiple_of(2);
@@ -105,6 +110,8 @@ fn play(
     }];
     let mut stored = inputs.len();
     let mut pending = std::mem::take(&mut inputs);
+    let mut last_checkpoint = 0;
+    let mut checkpoints = Vec::new();
     while world.tick < ticks {
         if people && world.tick.is_multiple_of(8) {
             let keys = WorldInput::Keys {
@@ -132,10 +139,36 @@ fn play(
                 live: None,
                 tick: world.tick,
             });
+            if checkpoint_every > 0 && world.tick.is_multiple_of(checkpoint_every) {
+                // The store keeps the newest two; holding only those here keeps the probe's
+                // memory to two worlds a match.
+                if checkpoints.len() == 2 {
+                    checkpoints.remove(0);
+                }
+                checkpoints.push(Write::Checkpoint {
+                    id: id.clone(),
+                    tick: world.tick,
+                    applied: stored as u64,
+                    keep_from: last_checkpoint,
+                    world: Box::new(world.clone()),
+                    max_bytes: u64::MAX,
+                });
+                last_checkpoint = world.tick;
+            }
         }
     }
-    let _ = stored;
-    Some(Record { id, writes })
+    let checkpoint_bytes = match checkpoints.last() {
+        Some(Write::Checkpoint { world, .. }) => {
+            lasertag::store::codec::encode_checkpoint(world, u64::MAX).map_or(0, |b| b.len())
+        }
+        _ => 0,
+    };
+    writes.extend(checkpoints);
+    Some(Record {
+        id,
+        writes,
+        checkpoint_bytes,
+    })
 }
 
 fn free_port() -> u16 {
@@ -171,6 +204,7 @@ fn main() {
     let matches = flag("--matches", 100);
     let minutes = flag("--minutes", 5);
     let seed = flag("--seed", 1);
+    let checkpoint_every = flag("--checkpoint-every", 600);
     let ticks = minutes * 60 * 20;
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let maps = MapStore::load_dir(&root.join("maps")).expect("the shipped maps");
@@ -198,7 +232,7 @@ fn main() {
                             "fewer than one match in 20 is still running {minutes} min into play"
                         );
                     }
-                    if let Some(r) = play(i, seed, ticks, arena.clone()) {
+                    if let Some(r) = play(i, seed, ticks, checkpoint_every, arena.clone()) {
                         let mut all = records.lock().unwrap();
                         if (all.len() as u64) < matches {
                             all.push(r);
@@ -218,6 +252,15 @@ fn main() {
     eprintln!(" ({:.1} s)", t.elapsed().as_secs_f64());
     let records = std::mem::take(&mut *records.lock().unwrap());
     let ids: Vec<String> = records.iter().map(|r| r.id.clone()).collect();
+    let mut sizes: Vec<f64> = records.iter().map(|r| r.checkpoint_bytes as f64).collect();
+    sizes.sort_by(f64::total_cmp);
+    if checkpoint_every > 0 {
+        eprintln!(
+            "checkpoints every {checkpoint_every} ticks, the newest deflated: p50 {:.0} KiB, max {:.0} KiB",
+            percentile(&sizes, 0.5) / 1024.0,
+            percentile(&sizes, 1.0) / 1024.0
+        );
+    }
     {
         let store = Store::open(
             &dir,
