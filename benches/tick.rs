@@ -3,7 +3,8 @@
 //! opponents) — averaged over ticks with and without negotiation rounds, with the robots
 //! localising and with odometry alone; one robot's laser scan alone, so the share of ray
 //! casting in a tick can be read off; and one step of the research environment's episode
-//! (the in-process engine's unit of work), with the default and the light settings.
+//! (the in-process engine's unit of work), with the default and the light settings; and
+//! what a checkpoint costs (clone on the match's task, encode, restore).
 //!
 //! `cargo bench --bench tick`
 
@@ -128,6 +129,28 @@ fn tick(c: &mut Criterion) {
     });
 }
 
+/// What a checkpoint costs a running match: its task clones the world once every 600 ticks
+/// (`checkpoint/clone_*`, on the match's task); the store's writer thread turns the clone
+/// into deflated bytes (`checkpoint/encode_*`); a resume restores them into a fresh world
+/// (`checkpoint/restore_*`). The largest calibration-like world: coordinated, 4 robots
+/// localising, 8 opponents, 10 s into play.
+fn checkpoint(c: &mut Criterion) {
+    let (initial, start) = mid_game(PlannerKind::Coordinated, 4, 8, true);
+    c.bench_function("checkpoint/clone_office_4r_8o", |b| {
+        b.iter(|| black_box(start.clone()))
+    });
+    c.bench_function("checkpoint/encode_office_4r_8o", |b| {
+        b.iter(|| black_box(lasertag::store::codec::encode_checkpoint(&start, u64::MAX)))
+    });
+    let bytes = lasertag::store::codec::encode_checkpoint(&start, u64::MAX).unwrap();
+    c.bench_function("checkpoint/restore_office_4r_8o", |b| {
+        b.iter(|| {
+            let fresh = World::new(initial.arena.clone(), initial.config.clone()).unwrap();
+            black_box(lasertag::store::codec::decode_checkpoint(fresh, &bytes).unwrap())
+        })
+    });
+}
+
 /// One step of the research environment's episode (`core::env`, what `lasertag_env`'s
 /// in-process engine runs): office, 2 robots driven by actions against a `wander` bot, the
 /// team tracker at its minimum (no observation reads it), observations packed. `default`
@@ -184,5 +207,5 @@ fn env_step(c: &mut Criterion) {
     }
 }
 
-criterion_group!(benches, tick, env_step);
+criterion_group!(benches, tick, checkpoint, env_step);
 criterion_main!(benches);
