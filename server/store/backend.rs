@@ -186,6 +186,13 @@ pub struct StoredCheckpoint {
     pub state: Vec<u8>,
 }
 
+/// What both databases store of a [`Write::Checkpoint`]: its deflated bytes, or the refusal
+/// when they came out larger than its price.
+pub fn checkpoint_state(id: &str, world: &World, max_bytes: u64) -> Result<Vec<u8>, StoreError> {
+    codec::encode_checkpoint(world, max_bytes)
+        .ok_or_else(|| StoreError::CheckpointTooLarge(id.to_owned()))
+}
+
 /// A player name's totals over the stored matches.
 #[derive(Debug, Clone, PartialEq)]
 pub struct PlayerStats {

@@ -451,10 +451,8 @@ impl backend::Backend for Sqlite {
                     keep_from,
                     world,
                     max_bytes,
-                } => match crate::store::codec::encode_checkpoint(world, *max_bytes) {
-                    Some(state) => checkpoint(&tx, id, *tick, *applied, *keep_from, &state),
-                    None => Err(StoreError::CheckpointTooLarge(id.clone())),
-                },
+                } => crate::store::backend::checkpoint_state(id, world, *max_bytes)
+                    .and_then(|state| checkpoint(&tx, id, *tick, *applied, *keep_from, &state)),
                 Write::Lost { id } => {
                     finished = true;
                     lose(&tx, id)

@@ -93,16 +93,15 @@ impl<'a> Change<'a> {
                 keep_from,
                 world,
                 max_bytes,
-            } => match crate::store::codec::encode_checkpoint(world, *max_bytes) {
-                Some(state) => Ok(Change::Checkpoint {
+            } => crate::store::backend::checkpoint_state(id, world, *max_bytes).map(|state| {
+                Change::Checkpoint {
                     id,
                     tick: big(*tick),
                     applied: big(*applied),
                     keep_from: big((*keep_from).min(*tick)),
                     state,
-                }),
-                None => Err(StoreError::CheckpointTooLarge(id.clone())),
-            },
+                }
+            }),
             Write::Flush(_) | Write::Adopt { .. } | Write::HandOver { .. } => return None,
         })
     }
