@@ -107,6 +107,10 @@ impl Difficulty {
         config.time_limit_ticks = p.time_limit_s * TICK_HZ as u64;
     }
 
+    /// The maps the presets' ratings were measured on ([`Difficulty::measured`]): a match
+    /// on another map measures nothing against them, and is not rated.
+    pub const MEASURED_ON: &'static [&'static str] = &["office"];
+
     /// How the preset's robots did against each built-in bot on `office`
     /// (`lasertag experiment difficulty --runs 200`, seeds 0..200; the committed figures are
     /// `docs/results/difficulty_summary.csv`, which a test of the server holds these to).

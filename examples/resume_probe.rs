@@ -105,6 +105,7 @@ fn play(
             reads_live: true,
             seats,
             head_start_ticks: 0,
+            people: Vec::new(),
         }),
         started_at: SystemTime::now(),
     }];

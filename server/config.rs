@@ -56,6 +56,9 @@ pub mod defaults {
     pub const EXPORT_BUDGET: &str = "300";
     pub const MAX_TCP_PER_ADDRESS: usize = 256;
     pub const MAX_SEATS_PER_ADDRESS: usize = 2;
+    pub const MAX_NAMES_PER_ADDRESS: u64 = 5;
+    pub const MAX_NAMES: u64 = 100_000;
+    pub const NAME_CLAIMS_PER_MINUTE: f64 = 60.0;
 
     /// Tick milliseconds all matches together may be priced at: twice every core's 50 ms at
     /// 20 Hz. A match is priced at its p99 tick, and the heavy ticks of different matches
@@ -326,6 +329,21 @@ pub struct Config {
     /// being hunted (people behind one address then play on one side of a match).
     #[arg(long, env = "LASERTAG_BOTH_SIDES_PER_ADDRESS")]
     pub both_sides_per_address: bool,
+    /// Names one client (an IPv4 address, or an IPv6 /64) may keep (`POST /api/names`);
+    /// more claims are refused with 429 until it gives one up.
+    #[arg(long, env = "LASERTAG_MAX_NAMES_PER_ADDRESS", default_value_t = defaults::MAX_NAMES_PER_ADDRESS,
+          value_parser = clap::value_parser!(u64).range(1..))]
+    pub max_names_per_address: u64,
+    /// Names everyone together may keep (about 200 bytes each in the history); past it
+    /// claims are refused with 503.
+    #[arg(long, env = "LASERTAG_MAX_NAMES", default_value_t = defaults::MAX_NAMES,
+          value_parser = clap::value_parser!(u64).range(1..))]
+    pub max_names: u64,
+    /// Claims of names the server takes a minute, all clients together (bursts of as
+    /// many): each is a write to the history, which live matches share.
+    #[arg(long, env = "LASERTAG_NAME_CLAIMS_PER_MINUTE", default_value_t = defaults::NAME_CLAIMS_PER_MINUTE,
+          value_parser = positive)]
+    pub name_claims_per_minute: f64,
 }
 
 impl Default for Config {
@@ -375,6 +393,9 @@ impl Default for Config {
             max_tcp_per_address: defaults::MAX_TCP_PER_ADDRESS,
             max_seats_per_address: defaults::MAX_SEATS_PER_ADDRESS,
             both_sides_per_address: false,
+            max_names_per_address: defaults::MAX_NAMES_PER_ADDRESS,
+            max_names: defaults::MAX_NAMES,
+            name_claims_per_minute: defaults::NAME_CLAIMS_PER_MINUTE,
         }
     }
 }

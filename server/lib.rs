@@ -3,7 +3,8 @@
 //! An imperative shell over a functional core (the core is its own crate, so the compiler
 //! keeps clocks, tasks, I/O and serialisation out of it). Its floors, from the ground up
 //! (each imports only those below it; `tests/tidy.rs` checks):
-//! - [`config`] (limits), [`access`] (owners, their tokens, per-client keys), [`metrics`]
+//! - [`config`] (limits), [`access`] (owners, their tokens, per-client keys), [`names`]
+//!   (what a player's name may be, and its look-alikes' key), [`metrics`]
 //!   (Prometheus), [`schema`] (hand-written OpenAPI pieces and lenient number parsing),
 //!   [`maps`] (map files);
 //! - [`store`] (the history of matches: SQLite, or PostgreSQL for a fleet);
@@ -29,6 +30,7 @@ pub mod game;
 pub mod http;
 pub mod maps;
 pub mod metrics;
+pub mod names;
 pub mod protocol;
 pub mod schema;
 pub mod service;

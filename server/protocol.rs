@@ -53,7 +53,7 @@ use lasertag_core::world::{ControlKind, FinishReason, MatchConfig, Placement};
 use lasertag_core::world::{EventKind, MatchStatus, Side, World};
 
 pub use difficulty_name::DifficultyName;
-pub use join::{JoinRequest, JoinTeam, Joined};
+pub use join::{ClaimRequest, JoinRequest, JoinTeam, Joined, NameKept};
 pub(crate) use planners::planner_dto;
 pub use planners::{Controller, Planner, PlannerChoice, planner_name};
 pub use refusal::{Invalid, invalid};
@@ -452,9 +452,10 @@ impl CreateMatch {
 
     /// Whether a match made from this request counts for ratings (docs/ratings.md): one
     /// person against a preset exactly as it was measured — a `difficulty` and nothing that
-    /// changes the robot team, its clock or where anyone starts; one opponent, a person's
-    /// seat; a real-time clock (nobody steps it); and (checked where the maps are) a map
-    /// the server ships. Its owner token then reads it as late as
+    /// changes the robot team, its clock or where anyone starts (`placement` too); one
+    /// opponent, a person's seat; a real-time clock (nobody steps it); strangers held back by
+    /// at least the default delay; and (checked where the maps are) a map the presets were
+    /// measured on, shipped by the server. Its owner token then reads it as late as
     /// everyone else, and its seed stays secret from the owner too: nobody in it can see its
     /// truth live.
     fn rated(&self) -> bool {
@@ -469,9 +470,16 @@ impl CreateMatch {
             && self.localiser.is_none()
             && self.robot_starts.is_none()
             && self.opponent_starts.is_none()
+            && self.placement.is_none()
             && self.pursuer_slots.unwrap_or(0) == 0;
+        // Strangers read a match as late as its delay: a shorter one than the default would
+        // let a second program show the player where the robots are.
+        let held_back = self
+            .spectator_delay_s
+            .is_none_or(|d| d >= bounds::SPECTATOR_DELAY_S.default.unwrap_or(0.0));
         self.difficulty.is_some()
             && team_as_measured
+            && held_back
             && self.opponents.unwrap_or(1) == 1
             && self.opponent_control == Some(OpponentControl::Human)
             && self.clock.unwrap_or(Clock::Realtime) == Clock::Realtime

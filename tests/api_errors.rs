@@ -424,8 +424,8 @@ async fn every_error_class_is_answered_and_nothing_running_is_disturbed() {
         409,
         "no free",
     );
-    // A player's name is checked as sent, as the schema's pattern does: a control character
-    // at either end is refused, not trimmed away.
+    // A player's name is checked as sent: a control character at either end is refused,
+    // not trimmed away (tests/names.rs has the rest of the rules).
     let seats = server
         .create_match(json!({"map": "office", "clock": "manual", "opponent_control": "human"}))
         .await;

@@ -156,10 +156,20 @@ async fn the_lobby_offers_difficulty_presets_with_their_measured_figures() {
     assert_eq!(m["planner"], "coordinated", "{m}");
     // One person against the preset on a shipped map: rated, and the page knows it.
     assert_eq!(m["rated"], true, "{m}");
+    assert_eq!(
+        m["map"], "office",
+        "the presets' map is offered with them: {m}"
+    );
     b.wait_for("__lasertag.rated === true", 10).await;
-    // Played (a slot nobody plays lapses), then left standing until the robots tag the
-    // player or the two minutes are up; the end screen then shows the rating change.
-    b.tap("KeyW", Duration::from_millis(300)).await;
+    // The page kept the name the first time it played under it: only a kept name rates.
+    let kept = b.eval("__lasertag.nameKept").await;
+    assert_eq!(kept, "tester", "{kept}");
+    // Played (a result needs play: walking a few metres), then left standing until the
+    // robots tag the player or the two minutes are up; the end screen then shows the
+    // rating change.
+    b.key("KeyA", true).await;
+    b.tap("KeyW", Duration::from_secs(6)).await;
+    b.key("KeyA", false).await;
     let change = b
         .wait_for("__lasertag.ended && __lasertag.ratingChange", 150)
         .await;

@@ -61,6 +61,12 @@ async fn only_a_preset_as_measured_is_rated_and_its_owner_reads_it_late() {
         ("opponent_control", json!("bot")),
         ("localisation", json!(false)),
         ("map", common::duel_map()),
+        // Strangers would read it live, starts the presets were not measured with, a map
+        // they were not measured on.
+        ("spectator_delay_s", json!(0)),
+        ("spectator_delay_s", json!(29.9)),
+        ("placement", json!("random")),
+        ("map", json!("hallway")),
     ] {
         let mut body = rated_request();
         body[field] = value;
@@ -132,29 +138,72 @@ async fn until(s: &TestServer, path: &str, secs: u64, done: impl Fn(&Value) -> b
     }
 }
 
-/// A whole rated match, as a person plays one: it lasts until the robot tags them or the
-/// two minutes are up (whichever the secret seed brings), then rates them.
-#[tokio::test]
-async fn a_rated_match_played_to_its_end_rates_its_player() {
-    let s = stored_server("ratings-played").await;
+/// Claims `name` on the server: its token.
+async fn keep(s: &TestServer, name: &str) -> String {
+    let r = s.post_as("/api/names", &json!({"name": name}), None).await;
+    assert_eq!(r.status, 201, "{}", r.body);
+    r.body["name_token"].as_str().unwrap().to_string()
+}
+
+/// Creates a rated match and seats `name` in it (with `name_token` when given): the match
+/// and the person's WebSocket.
+async fn seated(s: &TestServer, name: &str, name_token: Option<&str>) -> (String, common::Ws) {
     let r = s.post_as("/api/matches", &rated_request(), None).await;
     assert_eq!(r.status, 201, "{}", r.body);
+    assert_eq!(r.body["rated"], true, "{}", r.body);
     let id = r.body["id"].as_str().unwrap().to_string();
-    let (_, token) = s.join(&id, "rita").await;
-    let mut ws = s.ws(&id, Some(&token)).await.expect("the player connects");
-    // The person plays (a slot held without input lapses), then stands where they spawned,
-    // connected, until the end.
-    let still = json!({"type": "input", "forward": 0.0, "turn": 0.0, "tag": false});
-    ws.send_json(&still).await.expect("input");
-    let finished = loop {
-        let deadline = Duration::from_secs(150);
-        let msg = tokio::time::timeout(deadline, ws.json())
+    let mut body = json!({"name": name});
+    if let Some(t) = name_token {
+        body["name_token"] = json!(t);
+    }
+    let r = s
+        .post_as(&format!("/api/matches/{id}/players"), &body, None)
+        .await;
+    assert_eq!(r.status, 201, "{}", r.body);
+    let token = r.body["token"].as_str().unwrap().to_string();
+    let ws = s.ws(&id, Some(&token)).await.expect("the player connects");
+    (id, ws)
+}
+
+/// Plays on `ws` until the match finishes: the `finished` message.
+async fn until_finished(ws: &mut common::Ws) -> Value {
+    loop {
+        let msg = tokio::time::timeout(Duration::from_secs(150), ws.json())
             .await
             .expect("the match ends within its two minutes");
         if msg["type"] == "finished" {
-            break msg;
+            return msg;
         }
-    };
+    }
+}
+
+/// Whole rated matches, as people play them, side by side: each lasts until the robot tags
+/// its person or the two minutes are up (whichever the secret seed brings). Only a kept
+/// name whose person played is rated: one who stands still all match, or plays under a
+/// name nobody keeps, rates nobody (a rating can be neither farmed by idling nor wrecked
+/// under a name one does not hold).
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_rated_match_played_to_its_end_rates_its_player() {
+    let s = stored_server("ratings-played").await;
+    let rita = keep(&s, "rita").await;
+    let idle = keep(&s, "idle").await;
+    let (id, mut ws) = seated(&s, "rita", Some(&rita)).await;
+    let (idle_id, mut idle_ws) = seated(&s, "idle", Some(&idle)).await;
+    let (_, mut free_ws) = seated(&s, "free", None).await;
+    // rita walks in a circle for eight seconds, then stands; the others send one input (a
+    // slot held without input lapses) and stand where they spawned, connected, to the end.
+    let walk = json!({"type": "input", "forward": 1.0, "turn": 0.5, "tag": false});
+    let still = json!({"type": "input", "forward": 0.0, "turn": 0.0, "tag": false});
+    ws.send_json(&walk).await.expect("input");
+    idle_ws.send_json(&still).await.expect("input");
+    free_ws.send_json(&walk).await.expect("input");
+    tokio::time::sleep(Duration::from_secs(8)).await;
+    ws.send_json(&still).await.expect("input");
+    let (finished, idle_finished, _) = tokio::join!(
+        until_finished(&mut ws),
+        until_finished(&mut idle_ws),
+        until_finished(&mut free_ws)
+    );
     let won = finished["winner"] == "opponents";
     s.flush_history();
 
@@ -171,9 +220,22 @@ async fn a_rated_match_played_to_its_end_rates_its_player() {
     assert_eq!(player["rating"]["matches"], 1, "{player}");
     assert!(player["rating"]["deviation"].as_f64().unwrap() < 350.0);
 
+    // Standing still: the match counts for the name's figures, not its rating.
+    let idler = until(&s, "/api/players/idle", 10, |_| true).await;
+    assert_eq!(idler["recent"][0]["id"], idle_id.as_str(), "{idler}");
+    assert!(idler["recent"][0]["rating_after"].is_null(), "{idler}");
+    assert!(idler["rating"].is_null(), "{idler} after {idle_finished}");
+    // A name nobody keeps has no figures at all.
+    assert_eq!(s.get("/api/players/free").await.status, 404);
+
     let board = until(&s, "/api/leaderboard?by=rating", 5, |_| true).await;
     assert_eq!(board["by"], "rating");
     assert_eq!(board["players"][0]["name"], "rita", "{board}");
+    assert_eq!(
+        board["players"].as_array().map(Vec::len),
+        Some(1),
+        "{board}"
+    );
     let replay = until(&s, &format!("/api/replays/{id}"), 5, |_| true).await;
     assert_eq!(replay["settings"]["rated"], true, "{replay}");
     assert_eq!(replay["settings"]["difficulty"], "recruit", "{replay}");

@@ -93,6 +93,7 @@ fn finish(id: &str, n: u64, name: &str, won: bool) -> Write {
                 tags: 2,
                 survived_ticks: n,
                 won,
+                rated: true,
             }],
             rated: None,
         },
@@ -371,6 +372,78 @@ fn a_series_of_rated_matches_rates_alike_in_both_databases() {
     let expected: Vec<String> = expected.into_iter().map(|(_, n)| n).collect();
     assert_eq!(postgres.by_rating, expected);
     assert_eq!(postgres.by_rating.len(), 3);
+}
+
+/// A script of claims, look-alikes, limits and releases, and what the backend answered.
+fn claims(db: &mut dyn Backend) -> Vec<String> {
+    use lasertag::store::{ClaimLimits, NameClaim};
+    let limits = ClaimLimits {
+        per_client: 2,
+        total: 3,
+    };
+    let mut claim = |db: &mut dyn Backend, name: &str, client: &str| {
+        let name = lasertag::names::Name::parse(name).expect("a name");
+        let claim = NameClaim {
+            name: name.as_str().into(),
+            key: name.key().into(),
+            token: format!("hash-of-{}", name.as_str()),
+            client: client.into(),
+            claimed_at: 1,
+        };
+        format!("{:?}", db.claim(&claim, limits))
+    };
+    let mut said = vec![
+        claim(db, "victim", "10.0.0.1"),
+        claim(db, "vi\u{0441}tim", "10.0.0.2"),
+        claim(db, "Victim", "10.0.0.2"),
+        claim(db, "ada", "10.0.0.1"),
+        claim(db, "bob", "10.0.0.1"),
+        claim(db, "cy", "10.0.0.3"),
+        claim(db, "dee", "10.0.0.4"),
+    ];
+    let key = |s: &str| lasertag::names::Name::parse(s).unwrap().key().to_string();
+    said.push(format!(
+        "{:?}",
+        db.claimed(&key("VICTIM")).map(|c| c.map(|c| c.name))
+    ));
+    said.push(format!("{:?}", db.release(&key("victim"), "not-its-hash")));
+    said.push(format!(
+        "{:?}",
+        db.release(&key("victim"), "hash-of-victim")
+    ));
+    said.push(format!(
+        "{:?}",
+        db.release(&key("victim"), "hash-of-victim")
+    ));
+    said.push(claim(db, "dee", "10.0.0.4"));
+    said
+}
+
+#[test]
+fn claims_of_names_answer_alike_in_both_databases() {
+    let database = pg::database("names");
+    let mut postgres = Postgres::open(&database.url, KEEP_ALL).expect("open");
+    let dir = common::temp_dir("sqlite-names");
+    let mut sqlite = Sqlite::open(&dir, KEEP_ALL).expect("open");
+    let said = claims(&mut postgres);
+    assert_eq!(said, claims(&mut sqlite));
+    assert_eq!(
+        said,
+        [
+            "Ok(Claimed)",
+            "Ok(Taken(\"victim\"))",
+            "Ok(Taken(\"victim\"))",
+            "Ok(Claimed)",
+            "Ok(ClientFull)",
+            "Ok(Claimed)",
+            "Ok(ServerFull)",
+            "Ok(Some(\"victim\"))",
+            "Ok(WrongToken)",
+            "Ok(Released)",
+            "Ok(NotClaimed)",
+            "Ok(Claimed)",
+        ]
+    );
 }
 
 #[test]

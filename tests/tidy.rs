@@ -43,7 +43,7 @@ const SIM_FLOORS: &[&str] = &[
 
 /// The server library's modules from the ground floor up.
 const SERVER_FLOORS: &[&str] = &[
-    "config", "access", "metrics", "schema", "maps", "store", "game", "protocol", "fleet",
+    "config", "access", "names", "metrics", "schema", "maps", "store", "game", "protocol", "fleet",
     "agones", "service", "http",
 ];
 

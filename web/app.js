@@ -70,13 +70,51 @@ async function homeOf(id) {
   return homes.get(id) || "";
 }
 
+/** The tokens of the names this browser keeps (`POST /api/names`), by name. */
+function keptNames() {
+  try {
+    return JSON.parse(localStorage.getItem("lasertag.names") || "{}") || {};
+  } catch {
+    return {};
+  }
+}
+
+/** The token of `name`'s claim on the node at `base`: kept in this browser, or claimed now
+ * (a name is claimed the first time it plays here, so its rating is its own). `null` when
+ * the server keeps no names or this address keeps its most: the name then plays unrated. A
+ * name somebody else keeps is an error naming it. */
+async function nameToken(name, base) {
+  const kept = keptNames();
+  if (kept[name]) return kept[name];
+  const r = await fetch(`${base}/api/names`, {
+    method: "POST",
+    headers: { "content-type": "application/json" },
+    body: JSON.stringify({ name }),
+  });
+  const data = await r.json().catch(() => null);
+  if (r.status === 201 && data) {
+    kept[name] = data.name_token;
+    kept[data.name] = data.name_token;
+    localStorage.setItem("lasertag.names", JSON.stringify(kept));
+    debug.nameKept = data.name;
+    return data.name_token;
+  }
+  if (r.status === 409 || r.status === 400) {
+    throw new Error(data && data.error ? `${data.error}; change “Your name” above` : `${r.status}`);
+  }
+  return null;
+}
+
 /** Takes a seat of match `id` on `team` (once per tab: `opponents`, or `robots` for a pursuer
  * slot) and returns the token. */
 async function tokenFor(id, base, team = "opponents") {
   const key = `lasertag.token.${id}${team === "robots" ? ".robots" : ""}`;
   let token = sessionStorage.getItem(key);
   if (!token) {
-    const body = team === "robots" ? { name: playerName(), team } : { name: playerName() };
+    const name = playerName();
+    const body = team === "robots" ? { name, team } : { name };
+    const nameTok = await nameToken(name, base);
+    if (nameTok) body.name_token = nameTok;
     const joined = await api("POST", `/api/matches/${encodeURIComponent(id)}/players`, body, base);
     token = joined.token;
     sessionStorage.setItem(key, token);
@@ -210,6 +248,9 @@ function showDifficulty() {
   }
   form.elements.robots.value = d.robots;
   form.elements.planner.value = d.planner;
+  // A preset plays for a rating on the map it was measured on: offered first.
+  const on = d.measured.length ? d.measured[0].map : null;
+  if (on && [...form.elements.map.options].some((o) => o.value === on)) form.elements.map.value = on;
   form.elements.minutes.value = d.time_limit_s / 60;
   const by = Object.fromEntries(d.measured.map((m) => [m.bot, m]));
   const pct = (m) => `${Math.round(100 * m.robots_win_rate)}%`;
@@ -221,7 +262,9 @@ function showDifficulty() {
       `(median tag ${Math.round(by.evade.median_tag_s)} s) and ${pct(by.wander)} against one that wanders ` +
       `(${Math.round(by.wander.median_tag_s)} s).`
     : "";
-  const rated = d.rating ? ` One person against it (people, 1 opponent) plays for a rating; this team stands at ${Math.round(d.rating)}.` : "";
+  const rated = d.rating
+    ? ` One person against it on ${on || "its map"} (people, 1 opponent) plays for a rating; this team stands at ${Math.round(d.rating)}.`
+    : "";
   $("difficulty-note").textContent = `${d.name[0].toUpperCase()}${d.name.slice(1)}: ${team}.${measured}${rated}`;
 }
 
@@ -355,8 +398,8 @@ async function route() {
   debug.page = "lobby";
   $("game").hidden = true;
   $("lobby").hidden = false;
-  loadMaps();
-  loadDifficulties();
+  // The presets choose their map, so the maps are there first.
+  loadMaps().then(loadDifficulties);
   refreshLobby();
   lobbyTimer = setInterval(refreshLobby, 1000);
 }

@@ -99,7 +99,7 @@ impl MatchHandle {
 
     pub async fn join(
         &self,
-        name: String,
+        name: crate::names::JoinName,
         team: Team,
         client: Option<ClientKey>,
     ) -> Result<Joined, MatchError> {

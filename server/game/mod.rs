@@ -68,6 +68,9 @@ pub struct Registry {
     pub work: work::WorkBudget,
     /// The seats each client holds over every match.
     pub seats: Arc<SeatLedger>,
+    /// Claims of names, all clients together (`service::names`; made at the first claim,
+    /// from `config`).
+    pub name_claims: std::sync::Mutex<Option<crate::access::Bucket>>,
     /// Matches a restarted server is still rebuilding from the store (`resume`): requests
     /// for them are answered 503 with `Retry-After` rather than 404.
     resuming: RwLock<std::collections::BTreeSet<String>>,

@@ -159,6 +159,7 @@ pub fn rebuild(
             catch_up,
             until,
             seats,
+            people: live.people.clone(),
             started_at,
             checkpoint_tick,
         },

@@ -45,6 +45,11 @@ impl<S: Send + Sync> axum::extract::FromRequestParts<S> for Bearer {
 }
 
 impl Bearer {
+    /// The token sent, if any.
+    pub fn token(&self) -> Option<&str> {
+        self.0.as_deref()
+    }
+
     /// Whether this is the operator's (admin) token: such requests are not held to the
     /// per-address rate and quotas (a local research client, the operator's own tools).
     pub fn is_admin(&self, state: &AppState) -> bool {

@@ -11,6 +11,7 @@ use crate::protocol::ErrorBody;
 use crate::service::admit::OverLimit;
 use crate::service::maps::MapsError;
 use crate::service::matches::CreateError;
+use crate::service::names::NamesError;
 use crate::service::players::StatsError;
 use crate::service::replays::ReplaysError;
 use crate::service::{PoolError, ReplayBusy};
@@ -241,6 +242,30 @@ impl From<StatsError> for ApiError {
             StatsError::Pool(e) => e.into(),
             StatsError::NoHistory | StatsError::NoPlayer(_) => ApiError::not_found(e.to_string()),
         }
+    }
+}
+
+impl From<NamesError> for ApiError {
+    fn from(e: NamesError) -> ApiError {
+        let status = match &e {
+            NamesError::History(_) => {
+                tracing::error!("names: {e}");
+                StatusCode::INTERNAL_SERVER_ERROR
+            }
+            NamesError::Pool(e) => return e.clone().into(),
+            NamesError::Invalid(_) => StatusCode::BAD_REQUEST,
+            NamesError::Taken { .. } => StatusCode::CONFLICT,
+            NamesError::ClientFull { .. } => StatusCode::TOO_MANY_REQUESTS,
+            NamesError::Busy { wait, .. } => {
+                let mut error = ApiError::new(StatusCode::TOO_MANY_REQUESTS, e.to_string());
+                error.retry_after = Some(wait.as_secs().clamp(1, u64::from(u32::MAX)) as u32);
+                return error;
+            }
+            NamesError::NoHistory | NamesError::ServerFull(_) => StatusCode::SERVICE_UNAVAILABLE,
+            NamesError::NotClaimed(_) => StatusCode::NOT_FOUND,
+            NamesError::NeedsToken(_) | NamesError::WrongToken(_) => StatusCode::FORBIDDEN,
+        };
+        ApiError::new(status, e.to_string())
     }
 }
 

@@ -298,6 +298,7 @@ pub async fn command(
 
 #[utoipa::path(post, path = "/api/matches/{id}/players", params(("id" = String, Path)), request_body = JoinRequest,
     responses((status = 201, body = Joined), (status = 400, body = ErrorBody), (status = 404, body = ErrorBody),
+              (status = 403, body = ErrorBody, description = "somebody keeps that name (POST /api/names): join with its name_token"),
               (status = 409, body = ErrorBody, description = "no free slot on that team, or the match is at the server's limit of players"),
               (status = 429, body = ErrorBody, description = "this client holds as many slots of the match as it may without playing them")))]
 pub async fn join(
@@ -308,9 +309,10 @@ pub async fn join(
 ) -> Result<impl IntoResponse, ApiError> {
     let handle = find(&state, &id)?;
     let team = crate::protocol::JoinTeam::team(body.team);
-    let joined = handle
-        .join(body.name, team, Some(ClientKey::of(ip)))
-        .await?;
+    let name =
+        crate::service::names::check_join(state.service(), &body.name, body.name_token.as_deref())
+            .await?;
+    let joined = handle.join(name, team, Some(ClientKey::of(ip))).await?;
     Ok((StatusCode::CREATED, Json(Joined::from(joined))))
 }
 

@@ -10,6 +10,7 @@ mod export;
 mod fleet;
 mod handlers;
 pub mod limits;
+mod names;
 mod openapi;
 mod players;
 mod rate_limit;
@@ -29,7 +30,7 @@ use axum::Router;
 use axum::extract::{DefaultBodyLimit, OriginalUri};
 use axum::handler::HandlerWithoutStateExt;
 use axum::http::StatusCode;
-use axum::routing::{get, post};
+use axum::routing::{delete, get, post};
 use tower_http::compression::CompressionLayer;
 use tower_http::services::ServeDir;
 use tower_http::trace::TraceLayer;
@@ -108,6 +109,8 @@ fn router(registry: Arc<Registry>, web_dir: PathBuf, fleet: Option<Arc<Fleet>>) 
         .route("/replays/{id}/belief", get(replays::belief_at))
         .route("/replays/{id}/export", get(export::export))
         .route("/players/{name}", get(players::player))
+        .route("/names", post(names::claim))
+        .route("/names/{name}", delete(names::release))
         .route("/leaderboard", get(players::leaderboard))
         .route("/matches/{id}/stats", get(handlers::stats))
         .fallback(not_found)

@@ -6,21 +6,41 @@ use utoipa::ToSchema;
 
 use lasertag_core::sim::AgentId;
 
+/// Body of `POST /api/names`.
+#[derive(Debug, Clone, Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct ClaimRequest {
+    /// The name to keep: the rules of a join's name; a look-alike of a kept name is taken.
+    #[schema(min_length = 1, max_length = 64)]
+    pub name: String,
+}
+
+/// Answer of `POST /api/names`.
+#[derive(Debug, Clone, Serialize, ToSchema)]
+pub struct NameKept {
+    /// The name as kept (normalised).
+    pub name: String,
+    /// The claim's secret, shown once: joins under the name need it, and so does giving
+    /// the name up (`DELETE /api/names/{name}`, `Authorization: Bearer <name_token>`).
+    pub name_token: String,
+}
+
 /// Body of `POST /api/matches/{id}/players`.
 #[derive(Debug, Clone, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct JoinRequest {
-    /// 1 to 32 characters, none of them control characters, not all whitespace (leading
-    /// and trailing whitespace is trimmed off).
-    #[schema(
-        min_length = 1,
-        max_length = 32,
-        pattern = r"^[^\u0000-\u001F\u007F-\u009F]*[^\s\u0000-\u001F\u007F-\u009F][^\u0000-\u001F\u007F-\u009F]*$"
-    )]
+    /// 1 to 24 characters once normalised (NFKC, outer spaces trimmed, runs of spaces made
+    /// one): letters and digits of the world's scripts, ASCII punctuation and spaces; no
+    /// control, bidirectional, invisible or tag characters, no line separators, no symbols
+    /// or emoji (docs/api.md, "Names").
+    #[schema(min_length = 1, max_length = 64)]
     pub name: String,
     /// `opponents` (default: a free opponent slot, the hunted) or `robots` (a free pursuer
     /// slot: a robot of the team, hunting beside the others).
     pub team: Option<JoinTeam>,
+    /// The token of the name's claim (`POST /api/names`): needed to join under a name
+    /// somebody keeps, and what makes the match count for the name's statistics and rating.
+    pub name_token: Option<String>,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, ToSchema)]

@@ -128,8 +128,13 @@ pub async fn create<R>(
     within_match_limits(service, &req.config)?;
     // Refused before anything is built; `try_start` checks again under the lock.
     registry.has_room(client)?;
-    // Only on a map the server ships: a map of one's own could wall the robots off.
-    req.rated &= shipped(service, &req.map);
+    // Only on a map the server ships (a map of one's own could wall the robots off) and the
+    // presets were measured on (their ratings say nothing of another).
+    req.rated &= shipped(service, &req.map)
+        && req
+            .map
+            .as_str()
+            .is_some_and(|m| lasertag_core::difficulty::Difficulty::MEASURED_ON.contains(&m));
     let source = map_source(service, req.map).await?;
     let price = admission::held_back(&req.config, req.spectator_delay_ticks)
         + match &source {

@@ -7,6 +7,7 @@
 pub mod admit;
 pub mod maps;
 pub mod matches;
+pub mod names;
 pub mod players;
 pub mod replays;
 

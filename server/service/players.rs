@@ -1,6 +1,6 @@
 //! The players' use cases: one name's totals and latest matches, and the leaderboard, read
-//! from the history's store on the blocking pool. Names are not accounts (see
-//! `store::results`).
+//! from the history's store on the blocking pool. Only kept names have figures
+//! (`service::names`).
 
 use crate::game::replay::HistoryError;
 use crate::protocol::replays::{Leaderboard, PlayedMatch, PlayerDetail, PlayerTotals, RatingDto};

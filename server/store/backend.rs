@@ -113,6 +113,60 @@ pub enum Write {
         to: String,
         reply: std::sync::mpsc::Sender<Vec<String>>,
     },
+    /// Claims a name (`Backend::claim`): claims go through the one writer, so two claims of
+    /// look-alikes cannot both win.
+    Claim {
+        claim: NameClaim,
+        limits: ClaimLimits,
+        reply: std::sync::mpsc::Sender<Result<ClaimOutcome, StoreError>>,
+    },
+    /// Gives a claim up (`Backend::release`).
+    Release {
+        key: String,
+        token: String,
+        reply: std::sync::mpsc::Sender<Result<ReleaseOutcome, StoreError>>,
+    },
+}
+
+/// A name somebody keeps (`POST /api/names`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct NameClaim {
+    pub name: String,
+    /// `names::Name::key`: look-alikes share it, and it is the claim's key.
+    pub key: String,
+    /// The name token's hash (hex): a copied database lets nobody play under the name.
+    pub token: String,
+    /// The client that claimed it, as an address: its claims count against it.
+    pub client: String,
+    /// Unix milliseconds.
+    pub claimed_at: i64,
+}
+
+/// How many names one client, and everyone, may keep.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ClaimLimits {
+    pub per_client: u64,
+    pub total: u64,
+}
+
+/// What became of a claim.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum ClaimOutcome {
+    Claimed,
+    /// This name, or a look-alike of it, is kept already (the name kept).
+    Taken(String),
+    /// The client keeps as many names as it may.
+    ClientFull,
+    /// The server keeps as many names as it may.
+    ServerFull,
+}
+
+/// What became of giving a claim up.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ReleaseOutcome {
+    Released,
+    NotClaimed,
+    WrongToken,
 }
 
 impl Write {
@@ -120,7 +174,11 @@ impl Write {
     pub fn is_control(&self) -> bool {
         matches!(
             self,
-            Write::Flush(_) | Write::Adopt { .. } | Write::HandOver { .. }
+            Write::Flush(_)
+                | Write::Adopt { .. }
+                | Write::HandOver { .. }
+                | Write::Claim { .. }
+                | Write::Release { .. }
         )
     }
 }
@@ -280,6 +338,15 @@ pub trait Backend: Send {
     fn load_unfinished(&mut self, _id: &str) -> Result<Option<Unfinished>, StoreError> {
         Ok(None)
     }
+    /// See [`Write::Claim`]: in one transaction, refused when the key is kept or a limit
+    /// is reached.
+    fn claim(&mut self, claim: &NameClaim, limits: ClaimLimits)
+    -> Result<ClaimOutcome, StoreError>;
+    /// Gives up the claim on `key` if its token's hash is `token`; the name's rating goes
+    /// with it (whoever keeps the name next starts afresh).
+    fn release(&mut self, key: &str, token: &str) -> Result<ReleaseOutcome, StoreError>;
+    /// The claim on `key`, if any.
+    fn claimed(&mut self, key: &str) -> Result<Option<NameClaim>, StoreError>;
     fn player(&mut self, name: &str) -> Result<Option<PlayerStats>, StoreError>;
     fn played(&mut self, name: &str, limit: usize) -> Result<Vec<Played>, StoreError>;
     fn leaders(&mut self, order: LeaderOrder, limit: usize)

@@ -25,7 +25,7 @@ use serde_json::{Map, Value as Json};
 
 mod live;
 mod names;
-pub use live::{StoredLive, StoredSeat};
+pub use live::{StoredLive, StoredPerson, StoredSeat};
 pub use names::StoredClock;
 use names::{StoredBot, StoredControl, StoredDifficulty, StoredPlanner};
 

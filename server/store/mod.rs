@@ -19,8 +19,9 @@ pub mod results;
 pub mod sqlite;
 
 pub use backend::{
-    Backend, Ended, HEARTBEAT, LeaderOrder, Listed, Played, PlayerStats, Rated, Retention,
-    StoreError, Stored, StoredCheckpoint, Unfinished, Write, unix_ms,
+    Backend, ClaimLimits, ClaimOutcome, Ended, HEARTBEAT, LeaderOrder, Listed, NameClaim, Played,
+    PlayerStats, Rated, ReleaseOutcome, Retention, StoreError, Stored, StoredCheckpoint,
+    Unfinished, Write, unix_ms,
 };
 pub use results::PlayerResult;
 
@@ -234,6 +235,39 @@ impl Store {
         rx.recv_timeout(timeout).map_err(|_| StoreError::Closed)
     }
 
+    /// Claims a name through the writer (blocking, at most `timeout`).
+    pub fn claim(
+        &self,
+        claim: NameClaim,
+        limits: ClaimLimits,
+        timeout: Duration,
+    ) -> Result<ClaimOutcome, StoreError> {
+        let (reply, rx) = std::sync::mpsc::channel();
+        self.writes
+            .try_send(Write::Claim {
+                claim,
+                limits,
+                reply,
+            })
+            .map_err(|_| StoreError::Closed)?;
+        rx.recv_timeout(timeout).map_err(|_| StoreError::Closed)?
+    }
+
+    /// Gives up the claim on `key` if `token` (the hash of its token) is its (blocking, at
+    /// most `timeout`).
+    pub fn release(
+        &self,
+        key: String,
+        token: String,
+        timeout: Duration,
+    ) -> Result<ReleaseOutcome, StoreError> {
+        let (reply, rx) = std::sync::mpsc::channel();
+        self.writes
+            .try_send(Write::Release { key, token, reply })
+            .map_err(|_| StoreError::Closed)?;
+        rx.recv_timeout(timeout).map_err(|_| StoreError::Closed)?
+    }
+
     /// Queues `w` for the writer; refuses (giving it back) when the queue is full.
     pub fn send(&self, w: Write) -> Result<(), Box<Write>> {
         self.writes.try_send(w).map_err(|e| match e {
@@ -401,6 +435,16 @@ fn answer(backend: &mut dyn Backend, w: Write) {
                 Vec::new()
             });
             let _ = reply.send(ids);
+        }
+        Write::Claim {
+            claim,
+            limits,
+            reply,
+        } => {
+            let _ = reply.send(backend.claim(&claim, limits));
+        }
+        Write::Release { key, token, reply } => {
+            let _ = reply.send(backend.release(&key, &token));
         }
         _ => {}
     }

@@ -33,6 +33,7 @@ use crate::store::backend::{
 };
 
 mod convert;
+mod names;
 mod schema;
 mod write;
 
@@ -511,6 +512,22 @@ impl Backend for Postgres {
                 chunks: r.try_get(11)?,
             }))
         })
+    }
+
+    fn claim(
+        &mut self,
+        claim: &backend::NameClaim,
+        limits: backend::ClaimLimits,
+    ) -> Result<backend::ClaimOutcome, StoreError> {
+        self.read(|c, _| names::claim(c, claim, limits))
+    }
+
+    fn release(&mut self, key: &str, token: &str) -> Result<backend::ReleaseOutcome, StoreError> {
+        self.read(|c, _| names::release(c, key, token))
+    }
+
+    fn claimed(&mut self, key: &str) -> Result<Option<backend::NameClaim>, StoreError> {
+        self.read(|c, _| names::claimed(c, key))
     }
 
     fn player(&mut self, name: &str) -> Result<Option<PlayerStats>, StoreError> {

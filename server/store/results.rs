@@ -1,8 +1,8 @@
 //! What each person did in a match, read from its events: the statistics people expect from
 //! a game (matches, wins, tags, longest survival), per player name.
 //!
-//! Names are not accounts: anyone may play as any name, and a name's totals are those of
-//! everyone who used it.
+//! Every name is read here; the match keeps the results of kept names only (their person
+//! showed the claim's token: `game::task::people`), so a name's totals are its keeper's.
 
 use lasertag_core::sim::AgentId;
 use lasertag_core::world::{EventKind, Side, World};
@@ -20,6 +20,9 @@ pub struct PlayerResult {
     pub survived_ticks: u64,
     /// Whether their side won with them still in the match.
     pub won: bool,
+    /// Whether this result moves the name's rating when the match is rated: the person
+    /// showed the name's token and played (`game::task::people`). `of` leaves it false.
+    pub rated: bool,
 }
 
 /// Each name that played `world` (which has ended), in the order they first joined.
@@ -55,6 +58,7 @@ pub fn of(world: &World) -> Vec<PlayerResult> {
                         tags: 0,
                         survived_ticks: 0,
                         won: false,
+                        rated: false,
                     });
                 }
                 if let Some((a, n, from)) = leave(&mut seated, *agent) {
@@ -161,6 +165,7 @@ mod tests {
                 tags: 1,
                 survived_ticks: 0,
                 won: true,
+                rated: false,
             }]
         );
     }

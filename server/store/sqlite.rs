@@ -75,6 +75,15 @@ const MIGRATIONS: &[&str] = &[
         state BLOB NOT NULL,
         PRIMARY KEY (seq, tick)
     );",
+    // 5: names people keep (`backend::NameClaim`), by their look-alikes' key.
+    "CREATE TABLE names (
+        key TEXT PRIMARY KEY,
+        name TEXT NOT NULL,
+        token TEXT NOT NULL,
+        client TEXT NOT NULL,
+        claimed_at INTEGER NOT NULL
+    );
+    CREATE INDEX names_by_client ON names(client);",
 ];
 
 /// The schema version this build writes.
@@ -220,7 +229,7 @@ pub fn finish(conn: &Connection, id: &str, ended: &Ended) -> Result<(), StoreErr
     )
     .map_err(db)?;
     for p in &ended.players {
-        let rating = match ended.rated {
+        let rating = match ended.rated.filter(|_| p.rated) {
             Some(preset) => Some(rate(conn, &p.name, preset, p.won, ended.ended_at)?),
             None => None,
         };
@@ -461,7 +470,11 @@ impl backend::Backend for Sqlite {
                     finished = true;
                     finish(&tx, id, ended)
                 }
-                Write::Flush(_) | Write::Adopt { .. } | Write::HandOver { .. } => Ok(()),
+                Write::Flush(_)
+                | Write::Adopt { .. }
+                | Write::HandOver { .. }
+                | Write::Claim { .. }
+                | Write::Release { .. } => Ok(()),
             };
             match done {
                 // The disk, not this write: the whole batch is undone, to be tried again.
@@ -508,6 +521,22 @@ impl backend::Backend for Sqlite {
         load_unfinished(&self.conn, id)
     }
 
+    fn claim(
+        &mut self,
+        claim: &backend::NameClaim,
+        limits: backend::ClaimLimits,
+    ) -> Result<backend::ClaimOutcome, StoreError> {
+        names::claim(&mut self.conn, claim, limits)
+    }
+
+    fn release(&mut self, key: &str, token: &str) -> Result<backend::ReleaseOutcome, StoreError> {
+        names::release(&mut self.conn, key, token)
+    }
+
+    fn claimed(&mut self, key: &str) -> Result<Option<backend::NameClaim>, StoreError> {
+        names::claimed(&self.conn, key)
+    }
+
     fn player(&mut self, name: &str) -> Result<Option<PlayerStats>, StoreError> {
         player(&self.conn, name)
     }
@@ -529,6 +558,7 @@ impl backend::Backend for Sqlite {
     }
 }
 
+mod names;
 mod players;
 mod rows;
 mod running;

@@ -29,6 +29,7 @@ impl MatchTask {
             reads_live: owner.reads_live,
             seats: self.stored_seats(),
             head_start_ticks: self.meta.head_start_ticks,
+            people: self.people.stored(),
         }
     }
 
@@ -67,7 +68,8 @@ impl MatchTask {
             return;
         }
         let inputs = self.recording.unstored().to_vec();
-        let seats_changed = self.recording.seats_unstored();
+        // `|` not `||`: the people's change is taken either way.
+        let seats_changed = self.people.take_changed() | self.recording.seats_unstored();
         let names = seats_changed.then(|| self.recording.names());
         let live = seats_changed.then(|| Box::new(self.live_record()));
         let n = inputs.len();
@@ -142,7 +144,7 @@ impl MatchTask {
                 lasertag_core::world::Side::Opponents => "opponents",
             }),
             reason: replay.reason.map(FinishReason::name),
-            players: results::of(&self.world),
+            players: self.people.kept(results::of(&self.world)),
             // Only an end by the rules rates anyone: a match stopped, abandoned or cut short
             // by the server says nothing about who was stronger.
             rated: self.meta.difficulty.filter(|_| {

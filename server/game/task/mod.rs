@@ -24,6 +24,7 @@ use std::time::{Duration, Instant};
 use tokio::sync::{mpsc, oneshot, watch};
 
 mod history;
+mod people;
 mod seats;
 mod step;
 use seats::Player;
@@ -98,7 +99,7 @@ pub enum Request {
         answer: Answer,
     },
     Join {
-        name: String,
+        name: crate::names::JoinName,
         team: Team,
         /// Who asks (for the rule of one unplayed hold per client).
         client: Option<ClientKey>,
@@ -152,7 +153,10 @@ impl std::fmt::Debug for Request {
                 .field("what", what)
                 .field("ticks", ticks)
                 .finish(),
-            Request::Join { name, .. } => f.debug_struct("Join").field("name", name).finish(),
+            Request::Join { name, .. } => f
+                .debug_struct("Join")
+                .field("name", &name.name.as_str())
+                .finish(),
             Request::Connect { .. } => f.write_str("Connect"),
             Request::Input { seat, seq, .. } => f
                 .debug_struct("Input")
@@ -336,6 +340,8 @@ pub struct Resumed {
     pub catch_up: Vec<(u64, WorldInput)>,
     pub until: u64,
     pub seats: Vec<ResumedSeat>,
+    /// Who has played it, by name.
+    pub people: Vec<crate::store::codec::StoredPerson>,
     pub started_at: std::time::SystemTime,
     /// The tick of the checkpoint it was rebuilt from, if any.
     pub checkpoint_tick: Option<u64>,
@@ -426,12 +432,13 @@ fn spawn(
         .store()
         .map(|s| (s.lease().clone(), s.lease().term()));
     let moved = hub.moved.clone();
-    let (recording, started_at, catch_up, seats, last_checkpoint) = match resumed {
+    let (recording, started_at, catch_up, seats, people, last_checkpoint) = match resumed {
         Some(r) => (
             r.recording,
             r.started_at,
             Some((r.catch_up, r.until)),
             r.seats,
+            people::People::restored(&r.people),
             r.checkpoint_tick,
         ),
         None => (
@@ -439,6 +446,7 @@ fn spawn(
             std::time::SystemTime::now(),
             None,
             Vec::new(),
+            people::People::default(),
             None,
         ),
     };
@@ -457,6 +465,7 @@ fn spawn(
         moved,
         started_at,
         players: MatchTask::bodies(&world).iter().map(|_| None).collect(),
+        people,
         bodies: MatchTask::bodies(&world),
         finished_at: None,
         last_activity: now,
@@ -553,6 +562,8 @@ struct MatchTask {
     settings: TaskSettings,
     /// Who holds each seat, and the body each seat plays (see `seats`).
     players: Vec<Option<Player>>,
+    /// Everyone who has played, by name: what their result counts for.
+    people: people::People,
     bodies: Vec<AgentId>,
     frames: watch::Sender<Arc<Frame>>,
     /// What spectators see, when people play (see `delay`).
@@ -801,6 +812,7 @@ impl MatchTask {
     /// One tick of the world, its team's halves timed into the metrics.
     fn step(&mut self) {
         self.feed_inputs();
+        let seated = self.seated_poses();
         let mut started: Option<Instant> = None;
         let h = &self.histograms;
         self.world.step_marked(&mut |m| {
@@ -820,6 +832,7 @@ impl MatchTask {
             }
             started = Some(now);
         });
+        self.count_walks(seated);
     }
 
     fn answer(&mut self, req: Request, realtime: bool, pending: &mut Option<PendingStep>) {

@@ -117,6 +117,34 @@ impl MatchTask {
         }
     }
 
+    /// Where each seated person's opponent stands before a tick (see [`Self::count_walks`]).
+    pub(super) fn seated_poses(&self) -> Vec<(usize, lasertag_core::sim::Pose)> {
+        self.players
+            .iter()
+            .enumerate()
+            .filter(|(_, p)| p.is_some())
+            .filter_map(|(seat, _)| match self.bodies[seat] {
+                AgentId::Opponent(slot) => Some((seat, self.world.opponents.get(slot)?.pose)),
+                AgentId::Robot(_) => None,
+            })
+            .collect()
+    }
+
+    /// Adds what each seated person's opponent walked this tick to their name's part.
+    pub(super) fn count_walks(&mut self, before: Vec<(usize, lasertag_core::sim::Pose)>) {
+        for (seat, pose) in before {
+            let (Some(Some(player)), AgentId::Opponent(slot)) =
+                (self.players.get(seat), self.bodies[seat])
+            else {
+                continue;
+            };
+            if let Some(now) = self.world.opponents.get(slot) {
+                let metres = (now.pose.pos - pose.pos).norm();
+                self.people.walked(&player.name, metres);
+            }
+        }
+    }
+
     /// The body each seat plays: opponent slots, then the robots that are pursuer slots.
     pub(super) fn bodies(world: &World) -> Vec<AgentId> {
         (0..world.opponents.len())
@@ -228,24 +256,15 @@ impl MatchTask {
         )
     }
 
+    /// Seats `joiner` (a name checked by `names`, and whether its claim's token was shown).
     pub(super) fn join(
         &mut self,
-        name: String,
+        joiner: crate::names::JoinName,
         team: Team,
         client: Option<ClientKey>,
     ) -> Result<Joined, MatchError> {
         let id = &self.meta.id;
-        // The length and the characters are checked on what was sent, as the OpenAPI
-        // schema (`maxLength`, `pattern`) does: a tab at the end is refused, not trimmed
-        // away. The name kept is trimmed.
-        let sent = name.chars().count();
-        let control = name.chars().any(char::is_control);
-        let name = name.trim().to_string();
-        if name.is_empty() || sent > 32 || control {
-            return Err(MatchError::Invalid(
-                "name: must be 1 to 32 printable characters".into(),
-            ));
-        }
+        let name = joiner.name.as_str().to_string();
         if self.world.status == MatchStatus::Finished {
             return Err(MatchError::Finished(id.clone()));
         }
@@ -339,6 +358,7 @@ impl MatchTask {
             token,
         };
         self.players[seat] = Some(player);
+        self.people.joined(&name, joiner.claimed);
         let _ = self.apply(match body {
             AgentId::Opponent(slot) => WorldInput::Seat { slot, name },
             AgentId::Robot(robot) => WorldInput::SeatRobot { robot, name },

@@ -23,6 +23,21 @@ pub struct StoredLive {
     /// Ticks it ran at once when it started (the showcase's head start), for its viewers.
     #[serde(default, skip_serializing_if = "is_zero_u64")]
     pub head_start_ticks: u64,
+    /// Everyone who has played it so far, by name (what their result counts for).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub people: Vec<StoredPerson>,
+}
+
+/// A name that has played a running match (`game::task::people`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct StoredPerson {
+    pub name: String,
+    /// Whether they showed the name's token.
+    #[serde(default)]
+    pub claimed: bool,
+    /// Whether they have played enough for their result to rate.
+    #[serde(default)]
+    pub played: bool,
 }
 
 fn is_zero_u64(n: &u64) -> bool {

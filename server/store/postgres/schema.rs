@@ -80,6 +80,15 @@ const MIGRATIONS: &[&str] = &[
         state BYTEA NOT NULL,
         PRIMARY KEY (seq, tick)
     );",
+    // 6: names people keep (`backend::NameClaim`), by their look-alikes' key.
+    "CREATE TABLE names (
+        key TEXT PRIMARY KEY,
+        name TEXT NOT NULL,
+        token TEXT NOT NULL,
+        client TEXT NOT NULL,
+        claimed_at BIGINT NOT NULL
+    );
+    CREATE INDEX names_by_client ON names(client);",
 ];
 
 /// The schema version this build writes.

@@ -102,7 +102,11 @@ impl<'a> Change<'a> {
                     state,
                 }
             }),
-            Write::Flush(_) | Write::Adopt { .. } | Write::HandOver { .. } => return None,
+            Write::Flush(_)
+            | Write::Adopt { .. }
+            | Write::HandOver { .. }
+            | Write::Claim { .. }
+            | Write::Release { .. } => return None,
         })
     }
 }
@@ -222,7 +226,7 @@ pub(super) fn apply(
                 let mut before: Vec<Option<f64>> = vec![None; p.len()];
                 let mut after: Vec<Option<f64>> = vec![None; p.len()];
                 if let Some(preset) = ended.rated {
-                    for (i, person) in p.iter().enumerate() {
+                    for (i, person) in p.iter().enumerate().filter(|(_, p)| p.rated) {
                         let (b, a) = rate(tx, st, &person.name, preset, person.won, now)?;
                         before[i] = Some(b.rating);
                         after[i] = Some(a.rating);

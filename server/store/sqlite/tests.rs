@@ -62,6 +62,7 @@ fn a_match(id: &str, n: usize, name: &str, won: bool) -> Vec<Write> {
                     tags: 2,
                     survived_ticks: n as u64,
                     won,
+                    rated: true,
                 }],
                 rated: None,
             },
