@@ -381,7 +381,7 @@ fn claims(db: &mut dyn Backend) -> Vec<String> {
         per_client: 2,
         total: 3,
     };
-    let mut claim = |db: &mut dyn Backend, name: &str, client: &str| {
+    let claim = |db: &mut dyn Backend, name: &str, client: &str| {
         let name = lasertag::names::Name::parse(name).expect("a name");
         let claim = NameClaim {
             name: name.as_str().into(),
