@@ -59,6 +59,8 @@ pub mod defaults {
     pub const MAX_NAMES_PER_ADDRESS: u64 = 5;
     pub const MAX_NAMES: u64 = 100_000;
     pub const NAME_CLAIMS_PER_MINUTE: f64 = 60.0;
+    pub const BELIEF_MB_PER_S: f64 = 4.0;
+    pub const BELIEF_MB_PER_S_ALL: f64 = 32.0;
 
     /// Tick milliseconds all matches together may be priced at: twice every core's 50 ms at
     /// 20 Hz. A match is priced at its p99 tick, and the heavy ticks of different matches
@@ -344,6 +346,19 @@ pub struct Config {
     #[arg(long, env = "LASERTAG_NAME_CLAIMS_PER_MINUTE", default_value_t = defaults::NAME_CLAIMS_PER_MINUTE,
           value_parser = positive)]
     pub name_claims_per_minute: f64,
+    /// Megabytes of beliefs (`GET …/belief`, as JSON before compression) one client (an
+    /// IPv4 address, or an IPv6 /64) may read a second, in bursts of two seconds' worth;
+    /// past it 429 with `Retry-After`. A belief bigger than the burst is let through when
+    /// the client has its whole burst, and the client then waits for what it overdrew.
+    #[arg(long, env = "LASERTAG_BELIEF_MB_PER_S", default_value_t = defaults::BELIEF_MB_PER_S,
+          value_parser = positive)]
+    pub belief_mb_per_s: f64,
+    /// Megabytes of beliefs all clients together may read a second (bursts of two seconds'
+    /// worth); past it 503 with `Retry-After`. Encoding and compressing them runs on the
+    /// blocking pool, once a tick per belief however many read it.
+    #[arg(long, env = "LASERTAG_BELIEF_MB_PER_S_ALL", default_value_t = defaults::BELIEF_MB_PER_S_ALL,
+          value_parser = positive)]
+    pub belief_mb_per_s_all: f64,
 }
 
 impl Default for Config {
@@ -396,6 +411,8 @@ impl Default for Config {
             max_names_per_address: defaults::MAX_NAMES_PER_ADDRESS,
             max_names: defaults::MAX_NAMES,
             name_claims_per_minute: defaults::NAME_CLAIMS_PER_MINUTE,
+            belief_mb_per_s: defaults::BELIEF_MB_PER_S,
+            belief_mb_per_s_all: defaults::BELIEF_MB_PER_S_ALL,
         }
     }
 }

@@ -288,6 +288,127 @@ async fn one_client_holds_at_most_its_share_of_the_budget() {
     unharmed(&s, &live, t0).await;
 }
 
+/// Every setting that changes what a tick costs enters the match's price: a `search`
+/// planner looking six poses deep over twelve branches each turn (seconds a tick) is refused
+/// at its price, as is one choosing every tick four deep; the default search is let in.
+#[tokio::test]
+async fn a_deep_wide_search_planner_is_refused_at_its_price() {
+    let s = TestServer::start().await;
+    let live = bystander(&s).await;
+    let t0 = tick_of(&s, &live).await;
+    for coordination in [
+        json!({"search_depth": 6, "search_branching": 12, "round_ticks": 1}),
+        json!({"search_depth": 6, "search_branching": 12}),
+        json!({"search_depth": 5, "search_branching": 12}),
+    ] {
+        let r = s
+            .post(
+                "/api/matches",
+                &json!({"map": "office", "planner": "search", "coordination": coordination}),
+            )
+            .await;
+        assert_error(&r, 400, "ms of CPU");
+    }
+    let r = s
+        .post(
+            "/api/matches",
+            &json!({"map": "office", "planner": "search"}),
+        )
+        .await;
+    assert_eq!(r.status, 201, "{}", r.body);
+    unharmed(&s, &live, t0).await;
+}
+
+#[tokio::test]
+async fn a_big_belief_is_thinned_on_request_and_its_reader_priced() {
+    let s = TestServer::start_with(Config {
+        belief_mb_per_s: 4.0,
+        belief_mb_per_s_all: 1000.0,
+        ..test_config()
+    })
+    .await;
+    let live = bystander(&s).await;
+    let t0 = tick_of(&s, &live).await;
+    let id = s
+        .create_match(
+            json!({"map": "office", "clock": "manual", "robots": 1, "opponents": 1,
+            "tracker": {"particles_per_role": 100000}}),
+        )
+        .await;
+    s.step(&id, 1).await;
+    let path = format!("/api/matches/{id}/belief");
+
+    // Thinned: every role at most the particles asked for, weights still summing to one.
+    let thin = s.get(&format!("{path}?particles=50")).await;
+    assert_eq!(thin.status, 200, "{}", thin.body);
+    for role in thin.body["roles"].as_array().unwrap() {
+        let n = role["particles"].as_array().unwrap().len();
+        assert!((1..=50).contains(&n), "{n} particles");
+        let total: f64 = role["weights"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|w| w.as_f64().unwrap())
+            .sum();
+        assert!((total - 1.0).abs() < 1e-6, "weights sum to {total}");
+    }
+    for bad in ["0", "100001", "many", "-3"] {
+        assert_error(
+            &s.get(&format!("{path}?particles={bad}")).await,
+            400,
+            "particles",
+        );
+    }
+
+    // The whole cloud, as fast as one address can ask: a few reads, then 429 saying when
+    // to come back and how to read less.
+    let reader = reqwest::Client::new();
+    let mut full = 0;
+    let refusal = loop {
+        let r = reader.get(s.url(&path)).send().await.unwrap();
+        if r.status() != 200 {
+            break r;
+        }
+        let body: serde_json::Value = r.json().await.unwrap();
+        assert_eq!(
+            body["roles"][0]["particles"].as_array().unwrap().len(),
+            100_000
+        );
+        full += 1;
+        assert!(
+            full < 10,
+            "{full} full reads of a 100,000-particle belief, no 429"
+        );
+    };
+    assert!(full >= 1, "the first read of a full belief goes through");
+    assert_eq!(refusal.status(), 429);
+    let wait: u64 = refusal.headers()["retry-after"]
+        .to_str()
+        .unwrap()
+        .parse()
+        .unwrap();
+    assert!(wait >= 1, "Retry-After: {wait}");
+    let text = refusal.text().await.unwrap();
+    assert!(text.contains("?particles=N"), "{text}");
+
+    // Another address is not charged for it.
+    let other = reqwest::Client::builder()
+        .local_address(std::net::IpAddr::V4(std::net::Ipv4Addr::new(127, 0, 0, 23)))
+        .build()
+        .unwrap();
+    let r = other
+        .get(s.url(&format!("{path}?particles=1000")))
+        .header("accept-encoding", "gzip")
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 200);
+    assert_eq!(r.headers()["content-encoding"], "gzip");
+    let body = r.bytes().await.unwrap();
+    assert_eq!(&body[..2], &[0x1f, 0x8b], "a gzip stream");
+    unharmed(&s, &live, t0).await;
+}
+
 #[tokio::test]
 async fn a_match_that_keeps_overrunning_its_ticks_is_ended() {
     // Every tick overruns a budget of a microsecond: the match is ended after 100 of them,

@@ -152,10 +152,16 @@ async fn a_person_drives_a_robot_sees_through_its_laser_and_tags() {
     tokio::time::sleep(Duration::from_millis(100)).await;
     s.step(&id, 31).await;
     let (snap, _) = until_tick(&mut ws, 32).await;
+    // o1, as the team's detector tells it: where, not who or which way it faces.
     assert_eq!(
         ids(&snap["opponents"]),
-        ["o1"].map(String::from).into(),
+        ["o?"].map(String::from).into(),
         "{snap}"
+    );
+    let seen = &snap["opponents"][0];
+    assert!(
+        seen.get("theta").is_none() && seen.get("control").is_none() && seen.get("name").is_none(),
+        "{seen}"
     );
     let belief = &snap["belief"];
     assert_eq!(
@@ -185,7 +191,7 @@ async fn a_person_drives_a_robot_sees_through_its_laser_and_tags() {
     assert!(
         events
             .iter()
-            .any(|e| e["kind"] == "tag" && e["by"] == "r1" && e["target"] == "o1"),
+            .any(|e| e["kind"] == "tag" && e["by"] == "r1" && e["target"] == "o?"),
         "{events:?}"
     );
     assert_eq!(snap["score"]["tags"], 1);
@@ -233,6 +239,23 @@ fn in_laser(arena: &lasertag_core::sim::arena::Arena, me: [f64; 3], at: [f64; 2]
             Point2::new(me[0] as f32, me[1] as f32),
             Point2::new(at[0] as f32, at[1] as f32),
         )
+}
+
+/// Whether a body at `c` comes within reach of the sight line from `a` to `b` (0.6 m: its
+/// radius and the other's, and a margin), so that it may hide `b` in part or whole.
+fn near_line(a: [f64; 2], b: [f64; 2], c: [f64; 2]) -> bool {
+    let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
+    let len2 = dx * dx + dy * dy;
+    let t = (((c[0] - a[0]) * dx + (c[1] - a[1]) * dy) / len2).clamp(0.0, 1.0);
+    let (px, py) = (a[0] + t * dx, a[1] + t * dy);
+    (c[0] - px).hypot(c[1] - py) < 0.6
+}
+
+/// `at` moved `d` metres across the line from `from` to it (either side of a disc there).
+fn across(from: [f64; 2], at: [f64; 2], d: f64) -> [f64; 2] {
+    let (dx, dy) = (at[0] - from[0], at[1] - from[1]);
+    let len = dx.hypot(dy).max(1e-9);
+    [at[0] - dy / len * d, at[1] + dx / len * d]
 }
 
 fn xy(v: &Value) -> [f64; 2] {
@@ -283,10 +306,12 @@ async fn the_fog_holds_on_both_sides_of_a_versus_match() {
         if opp["tagged"] == true || truth["status"] == "finished" {
             break;
         }
-        // Alice's socket: o0 exactly when r1's laser has it (skipping what millimetre
-        // rounding could flip: the edges of the range, the field of view and the walls).
+        // Alice's socket: an anonymous sighting exactly when r1's laser has o0 (skipping
+        // what millimetre rounding or the disc's width could flip: the edges of the range,
+        // the field of view and the walls, and r0's body near the line).
         let at = xy(opp);
         let expected = in_laser(&arena, me, at);
+        let r0 = xy(&truth["robots"][0]);
         let steady = [
             (0.003, 0.0, 0.0),
             (-0.003, 0.0, 0.0),
@@ -295,12 +320,20 @@ async fn the_fog_holds_on_both_sides_of_a_versus_match() {
             (0.0, 0.0, -0.002),
         ]
         .iter()
-        .all(|(dx, dy, dt)| in_laser(&arena, [me[0] + dx, me[1] + dy, me[2] + dt], at) == expected);
+        .all(|(dx, dy, dt)| in_laser(&arena, [me[0] + dx, me[1] + dy, me[2] + dt], at) == expected)
+            && [-0.26, 0.26]
+                .iter()
+                .all(|d| in_laser(&arena, me, across([me[0], me[1]], at, *d)) == expected)
+            && !near_line([me[0], me[1]], at, r0);
         if steady {
             assert_eq!(
-                ids(&a["opponents"]).contains("o0"),
+                ids(&a["opponents"]).contains("o?"),
                 expected,
                 "tick {tick}: alice on r1 at {me:?}, o0 at {at:?}"
+            );
+            assert!(
+                !ids(&a["opponents"]).contains("o0"),
+                "who it is stays hidden"
             );
             if expected {
                 alice_saw += 1
@@ -319,9 +352,17 @@ async fn the_fog_holds_on_both_sides_of_a_versus_match() {
             };
             let p = xy(r);
             let expected = los(p);
+            // The other robot's body may hide this one: not counted then.
+            let other = truth["robots"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .find(|o| o["id"] != r["id"])
+                .map(xy);
             let steady = [(0.003, 0.0), (-0.003, 0.0), (0.0, 0.003), (0.0, -0.003)]
                 .iter()
-                .all(|(dx, dy)| los([p[0] + dx, p[1] + dy]) == expected);
+                .all(|(dx, dy)| los([p[0] + dx, p[1] + dy]) == expected)
+                && other.is_none_or(|c| !near_line(at, p, c));
             if steady {
                 let rid = r["id"].as_str().unwrap();
                 assert_eq!(
@@ -419,5 +460,55 @@ async fn over_a_late_radio_a_hunter_sees_their_own_robots_belief() {
         particles(shown),
         particles(&pooled),
         "the pooled belief sums both trackers"
+    );
+}
+
+/// An open room: r0 at the west end facing east, o0 3 m ahead of it and o1 3 m behind o0
+/// on the same line, every seat held by a person.
+#[tokio::test]
+async fn bodies_hide_what_is_behind_them_and_the_robots_learn_no_names() {
+    let s = TestServer::start().await;
+    let id = s
+        .create_match(
+            json!({"map": {"name": "open-room", "width": 14.0, "height": 8.0,
+                "obstacles": [], "robot_spawns": [[2.0, 4.0, 0.0]],
+                "opponent_spawns": [[5.0, 4.0], [8.0, 4.0]]},
+            "robots": 1, "opponents": 2, "opponent_control": "human", "pursuer_slots": 1,
+            "clock": "manual", "time_limit_s": 60,
+            "robot_starts": [[2.0, 4.0, 0.0]], "opponent_starts": [[5.0, 4.0], [8.0, 4.0]]}),
+        )
+        .await;
+    let (robot, robot_token) = join_team(&s, &id, "alice", "robots").await;
+    let (front, _) = join_team(&s, &id, "bob", "opponents").await;
+    let (back, back_token) = join_team(&s, &id, "carol", "opponents").await;
+    assert_eq!(
+        (robot.as_str(), front.as_str(), back.as_str()),
+        ("r0", "o0", "o1")
+    );
+    let mut alice = s.ws(&id, Some(&robot_token)).await.unwrap();
+    let mut carol = s.ws(&id, Some(&back_token)).await.unwrap();
+    s.step(&id, 1).await;
+
+    // Alice's laser meets o0 and stops there: one sighting, without who or which way.
+    let (snap, _) = until_tick(&mut alice, 1).await;
+    let seen = snap["opponents"].as_array().unwrap();
+    assert_eq!(seen.len(), 1, "o1 stands behind o0: {snap}");
+    assert_eq!(seen[0]["id"], "o?", "{snap}");
+    assert!(
+        (seen[0]["x"].as_f64().unwrap() - 5.0).abs() < 0.01,
+        "{snap}"
+    );
+    for hidden in ["theta", "control", "name"] {
+        assert!(seen[0].get(hidden).is_none(), "{hidden} sent: {snap}");
+    }
+    let text = snap.to_string();
+    assert!(!text.contains("bob") && !text.contains("carol"), "{text}");
+
+    // Carol, behind o0, sees her teammate but not the robot o0's body hides.
+    let (snap, _) = until_tick(&mut carol, 1).await;
+    assert!(ids(&snap["robots"]).is_empty(), "r0 is behind o0: {snap}");
+    assert_eq!(
+        ids(&snap["opponents"]),
+        ["o0", "o1"].map(String::from).into()
     );
 }

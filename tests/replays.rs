@@ -142,7 +142,8 @@ async fn a_replay_follows_a_player_over_the_websocket() {
             "opponent_control": "human", "spectator_delay_s": 0}),
         )
         .await;
-    let (_, token) = s.join(&id, "ada").await;
+    // A kept name: only kept names have a history (docs/api.md, "Names people keep").
+    let (_, token) = s.join_kept(&id, "ada").await;
     let mut ws = s.ws(&id, Some(&token)).await.unwrap();
     ws.next_of("welcome").await;
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(4);

@@ -85,9 +85,12 @@ export class CompactDecoder {
     }
     const opponents = [];
     for (let n = u8(); n > 0; n--) {
-      const id = `o${u8()}`;
+      const index = u8();
       const p = pose();
       const bits = u8();
+      // An anonymous sighting (a person on the robot team's view): where, not who or which way.
+      if (bits & 32) { opponents.push({ id: "o?", x: p.x, y: p.y, tagged: (bits & 1) !== 0 }); continue; }
+      const id = `o${index}`;
       const o = { id, ...p, tagged: (bits & 1) !== 0, control: CONTROL[(bits >> 1) & 3] || "bot" };
       if (bits & 8) {
         const len = u8();

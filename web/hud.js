@@ -72,7 +72,8 @@ export function addBeam(beams, e, snap, segs) {
 export function between(a, b, f) {
   const move = (list0, list1) => list1.map((q) => {
     const p = list0.find((x) => x.id === q.id);
-    if (!p || q.tagged) return q;
+    // Anonymous sightings (`o?`) cannot be told apart: each is shown where it was seen.
+    if (!p || q.tagged || q.id === "o?") return q;
     return { ...q, x: p.x + (q.x - p.x) * f, y: p.y + (q.y - p.y) * f, theta: p.theta + angleDiff(p.theta, q.theta) * f };
   });
   return { robots: move(a.robots, b.robots), opponents: move(a.opponents, b.opponents) };

@@ -302,7 +302,7 @@ export function draw(ctx, v, scene) {
     if (o.tagged) continue;
     const mine = o.id === scene.you;
     disc(ctx, v, o.x, o.y, rules.agent_radius, mine ? COLORS.you : COLORS.opponent, "#fff", mine ? 3 : 2);
-    heading(ctx, v, o.x, o.y, o.theta, 0.45, "#fff");
+    if (Number.isFinite(o.theta)) heading(ctx, v, o.x, o.y, o.theta, 0.45, "#fff");
     label(ctx, v, o.x, o.y, mine ? "you" : o.name || o.id, mine ? COLORS.you : "#ffc2cd");
     counts.opponents++;
   }

@@ -93,7 +93,7 @@ const TICK_MS_PER_CELL: f64 = 0.8e-5;
 const TICK_MS_PER_ROBOT: f64 = 0.01;
 /// Per robot the `coordinated` planner drives: its turns (a distance field, every candidate
 /// pose scored).
-const TICK_MS_PER_COORDINATED_ROBOT: f64 = 0.1;
+const TICK_MS_PER_COORDINATED_ROBOT: f64 = 0.07;
 /// Per tracker particle and tracker copy, plus as much again per robot whose sightings it
 /// weighs (negative information tests each particle against each robot's scan; a
 /// teammate's late scan, behind an imperfect radio, takes the slower one-particle test).
@@ -101,6 +101,19 @@ const TICK_MS_PER_PARTICLE: f64 = 1e-5;
 const TICK_MS_PER_PARTICLE_ROBOT: f64 = 0.5e-5;
 /// Per landmark and localising robot.
 const TICK_MS_PER_LANDMARK: f64 = 2.2e-4;
+/// Per laser beam the localiser weighs and localising robot (each beam against every
+/// particle, at most `localise::Settings::max_particles`).
+const TICK_MS_PER_LOCALISER_BEAM: f64 = 0.6e-3;
+/// Per `search` planner's choice besides its look-ahead: the first level ranks every
+/// candidate pose with the travel table.
+const TICK_MS_PER_SEARCH_CHOICE: f64 = 0.2;
+/// Per view the `search` planner's look-ahead weighs (one pose's fresh share of the
+/// belief): a choice weighs `SHORTLIST` views at each node of its beam, and one robot
+/// chooses a tick.
+const TICK_MS_PER_SEARCH_VIEW: f64 = 0.3e-3;
+/// Per merge-grid cell and pair of roles the tracker compares at a merge (every
+/// `merge_interval` ticks; the p99 tick is a merging one when merges come often).
+const TICK_MS_PER_MERGE_CELL_PAIR: f64 = 0.1e-6;
 
 /// The price of keeping and building an arena for `def` (the planner's view table and the
 /// likelihood field it will derive included: a stored map keeps them once a match has been
@@ -259,6 +272,14 @@ pub fn match_on(def: &MapDef, config: &MatchConfig) -> Price {
         0.0
     };
     let (table_bytes, table_visits) = search_table(def, config, cells);
+    let beams = localising * config.localiser.beams as f64;
+    let merges = if tracker.merge {
+        // Pairs of roles, one role per opponent at most, in each tracker copy.
+        let roles = config.opponents as f64;
+        copies * roles * (roles - 1.0) / 2.0 * merge_cells
+    } else {
+        0.0
+    };
     Price {
         memory: (memory + table_bytes) as u64,
         disk: if takes_orders(config) {
@@ -276,13 +297,35 @@ pub fn match_on(def: &MapDef, config: &MatchConfig) -> Price {
             + robots * TICK_MS_PER_ROBOT
             + coordinated * TICK_MS_PER_COORDINATED_ROBOT
             + copies * particles * (TICK_MS_PER_PARTICLE + robots * TICK_MS_PER_PARTICLE_ROBOT)
-            + localising * landmarks * TICK_MS_PER_LANDMARK,
+            + localising * landmarks * TICK_MS_PER_LANDMARK
+            + beams * TICK_MS_PER_LOCALISER_BEAM
+            + search_views(config) * TICK_MS_PER_SEARCH_VIEW
+            + merges * TICK_MS_PER_MERGE_CELL_PAIR,
     }
+}
+
+/// Views the `search` planner's look-ahead weighs in one choice: `SHORTLIST` at each node
+/// below the first level, whose `search_branching` best poses each lead `search_depth - 1`
+/// levels down, `search_branching` continuations a node (0 for any other planner).
+fn search_views(config: &MatchConfig) -> f64 {
+    use lasertag_core::planner::coordinated::search::SHORTLIST;
+    if config.planner != lasertag_core::planner::PlannerKind::Search {
+        return 0.0;
+    }
+    // The choice's own ranking, in views.
+    let ranking = TICK_MS_PER_SEARCH_CHOICE / TICK_MS_PER_SEARCH_VIEW;
+    let branching = config.coordination.search_branching as f64;
+    let nodes: f64 = (1..config.coordination.search_depth)
+        .map(|level| branching.powi(level as i32))
+        .sum();
+    ranking + nodes * SHORTLIST as f64
 }
 
 /// The settings the tick prices are fitted to and checked against on every shipped map: the
 /// API's default match, the load test's, a large team, an imperfect radio (a tracker per
-/// robot), few particles, and the baseline planner; against `evade` bots, placed at random.
+/// robot), few particles, the baseline planner, the search planner (as it comes, and deep
+/// and wide, choosing every tick), every laser beam weighed by the localiser, and a fine
+/// merge grid merged every tick; against `evade` bots, placed at random.
 pub fn calibration_settings() -> Vec<(&'static str, MatchConfig)> {
     use lasertag_core::bots::BotKind;
     use lasertag_core::planner::PlannerKind;
@@ -302,6 +345,17 @@ pub fn calibration_settings() -> Vec<(&'static str, MatchConfig)> {
     light.tracker.particles_per_role = 250;
     let mut baseline = base(2, 3);
     baseline.planner = PlannerKind::Baseline;
+    let mut search = base(2, 3);
+    search.planner = PlannerKind::Search;
+    let mut deep = search.clone();
+    deep.coordination.search_depth = 5;
+    deep.coordination.search_branching = 6;
+    deep.coordination.round_ticks = 1;
+    let mut beams = base(2, 3);
+    beams.localiser.beams = 181;
+    let mut merging = base(2, 8);
+    merging.tracker.grid_cell = 0.25;
+    merging.tracker.merge_interval = 1;
     vec![
         ("default_2r_1o", base(2, 1)),
         ("loadtest_2r_3o", base(2, 3)),
@@ -309,6 +363,10 @@ pub fn calibration_settings() -> Vec<(&'static str, MatchConfig)> {
         ("radio_2r_3o", radio),
         ("light_2r_3o_250p", light),
         ("baseline_2r_3o", baseline),
+        ("search_2r_3o", search),
+        ("search_deep_2r_3o", deep),
+        ("beams_2r_3o", beams),
+        ("merging_2r_8o", merging),
     ]
 }
 
@@ -448,98 +506,4 @@ pub enum NoRoom {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-
-    fn empty(side: f32) -> MapDef {
-        MapDef {
-            name: "t".into(),
-            width: side,
-            height: side,
-            obstacles: vec![],
-            robot_spawns: vec![[1.0, 1.0, 0.0]],
-            opponent_spawns: vec![Point2::new(2.0, 2.0)],
-            landmarks: vec![],
-        }
-    }
-
-    #[test]
-    fn long_diagonal_walls_are_priced_by_the_area_of_their_boxes() {
-        let mut def = empty(500.0);
-        let plain = map(&def).build_s;
-        def.obstacles = (0..64)
-            .map(|k| {
-                let y = 1.0 + k as f32 * 0.01;
-                vec![
-                    Point2::new(10.0, y),
-                    Point2::new(490.0, y + 480.0),
-                    Point2::new(490.5, y + 480.0),
-                    Point2::new(10.5, y),
-                ]
-            })
-            .collect();
-        let slivers = map(&def).build_s;
-        // Measured: about 2.4 s to build the arena and 2 s more for the match's field.
-        assert!(plain < 0.2 && slivers > 2.0, "{plain} {slivers}");
-    }
-
-    #[test]
-    fn the_search_planners_travel_table_is_priced_within_its_bound() {
-        let config = |planner| MatchConfig {
-            planner,
-            ..MatchConfig::default()
-        };
-        let office = empty(24.0);
-        let (greedy, search) = (
-            match_on(
-                &office,
-                &config(lasertag_core::planner::PlannerKind::Coordinated),
-            ),
-            match_on(
-                &office,
-                &config(lasertag_core::planner::PlannerKind::Search),
-            ),
-        );
-        // Measured on `office` (24 m × 16 m): 0.29 s and 0.4 MB for its table.
-        assert!(search.build_s - greedy.build_s > 0.3, "{search:?}");
-        assert!(search.memory - greedy.memory > 1_000_000, "{search:?}");
-        // A huge map's table is bounded: at most 0.6 s and 2.6 MB more, or none at all.
-        let huge = empty(500.0);
-        let extra = match_on(&huge, &config(lasertag_core::planner::PlannerKind::Search)).build_s
-            - match_on(
-                &huge,
-                &config(lasertag_core::planner::PlannerKind::Coordinated),
-            )
-            .build_s;
-        assert!(extra <= 0.61, "{extra}");
-    }
-
-    #[test]
-    fn a_fine_merge_grid_behind_a_lossy_radio_is_priced_per_robot() {
-        let def = empty(500.0);
-        let mut config = MatchConfig {
-            robots: 8,
-            opponents: 8,
-            ..MatchConfig::default()
-        };
-        config.tracker.grid_cell = 0.1;
-        let shared = match_on(&def, &config).memory;
-        config.radio.loss = 0.5;
-        let lossy = match_on(&def, &config).memory;
-        // Measured: 210 MB kept with one tracker, 1.62 GB with eight.
-        assert!(
-            shared > 200_000_000 && lossy > 1_600_000_000,
-            "{shared} {lossy}"
-        );
-    }
-
-    #[test]
-    fn the_default_match_on_a_shipped_sized_map_is_cheap() {
-        let def = empty(24.0);
-        let p = map(&def) + match_on(&def, &MatchConfig::default());
-        assert!(
-            p.memory < 30_000_000 && p.tick_ms < 2.0 && p.build_s < 0.5,
-            "{p:?}"
-        );
-    }
-}
+mod tests;

@@ -45,6 +45,33 @@ pub struct HeldRole {
 }
 
 impl HeldBelief {
+    /// Each role's cloud thinned to at most `at_most` particles, for a reader who
+    /// does not need every one (`?particles=`): systematic resampling by weight (evenly spaced
+    /// draws at (i + ½) / n of the cumulative weight, no randomness, so every reader of a tick
+    /// gets the same), the drawn particles weighing alike. A role with fewer is left whole.
+    pub fn thin(&mut self, at_most: usize) {
+        let at_most = at_most.max(1);
+        for role in &mut self.roles {
+            let n = role.particles.len();
+            if n <= at_most {
+                continue;
+            }
+            let total: f64 = role.weights.iter().map(|w| f64::from(*w)).sum();
+            let mut particles = Vec::with_capacity(at_most);
+            let (mut i, mut cumulative) = (0, 0.0);
+            for j in 0..at_most {
+                let target = (j as f64 + 0.5) / at_most as f64 * total;
+                while i + 1 < n && cumulative + f64::from(role.weights[i]) < target {
+                    cumulative += f64::from(role.weights[i]);
+                    i += 1;
+                }
+                particles.push(role.particles[i]);
+            }
+            role.particles = particles;
+            role.weights = vec![1.0 / at_most as f32; at_most];
+        }
+    }
+
     /// The team's merged belief in `world` (with a perfect radio, the shared tracker's; see
     /// `Team::merged_belief`).
     pub fn team(world: &World) -> HeldBelief {

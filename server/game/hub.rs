@@ -60,6 +60,8 @@ pub struct Hub {
     /// Set when the match goes on on another server: its URL when known (a node that
     /// hands its matches over), none when the lobby must say (a lease that ran out).
     pub moved: Arc<std::sync::OnceLock<Option<String>>>,
+    /// Encodings its readers share, each made once a tick (`game::encoded`).
+    pub encoded: Arc<crate::game::encoded::EncodedCache>,
 }
 
 impl Hub {

@@ -8,6 +8,7 @@
 pub mod admission;
 pub mod background;
 pub mod delay;
+pub mod encoded;
 pub mod error;
 mod handle;
 pub mod hub;

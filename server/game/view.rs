@@ -28,7 +28,7 @@ use lasertag_core::localise::Localiser;
 use lasertag_core::planner::PlannerKind;
 use lasertag_core::sim::arena::Arena;
 use lasertag_core::sim::sensors::Detection;
-use lasertag_core::sim::{AgentId, Physics, Pose};
+use lasertag_core::sim::{AGENT_RADIUS, AgentId, Pose};
 use lasertag_core::tracker::estimate::tracking_quality;
 use lasertag_core::tracker::gospa::{Gospa, Params};
 use lasertag_core::tracker::{Confidence, Role};
@@ -54,6 +54,9 @@ pub struct RobotFrame {
     pub scan: Vec<f32>,
     /// This tick's anonymous sightings.
     pub detections: Vec<Detection>,
+    /// The opponents behind them (the referee's truth, which the robots never read): what
+    /// a person driving this robot is shown.
+    pub seen: Vec<usize>,
     /// The robot's own belief about its pose, and that belief's spread (m).
     pub estimate: Pose,
     pub spread: f32,
@@ -257,6 +260,7 @@ impl Frame {
                         goal: r.command.goal,
                         scan: r.scan.ranges.clone(),
                         detections: r.scan.detections.clone(),
+                        seen: r.scan.seen.clone(),
                         estimate: r.estimate,
                         spread: r.spread,
                         cloud: r
@@ -362,55 +366,108 @@ impl Frame {
     }
 }
 
-/// Which agents the person playing `you` can see, computed from ground truth on the server.
-/// An opponent sees along its own line of sight (walls occlude, agents do not); a tagged one
-/// has left the arena and sees everything, like a spectator (`None`). A person on the robot
-/// team sees every robot (their own team) and the opponents their robot's laser sees: in its
-/// field of view, within its range, in line of sight, and nothing while it is frozen (the
-/// laser is off); the team's belief tells them the rest.
-pub fn visible_to(
-    frame: &Frame,
-    arena: &Arena,
-    physics: &Physics,
-    you: AgentId,
-) -> Option<Visible> {
+/// Which agents the person playing `you` can see, computed from ground truth on the server,
+/// and how well.
+///
+/// An opponent sees along its own line of sight: walls occlude, and so do the other agents'
+/// bodies (discs of [`AGENT_RADIUS`], as the robots' laser meets them): another agent is in
+/// sight when the line to its centre clears the walls and one of three lines to it (its
+/// centre, and either side of it) clears every body in between. A tagged opponent has left
+/// the arena and sees everything, like a spectator (`None`).
+///
+/// A person on the robot team sees every robot (their own team) and the opponents their
+/// robot's laser saw this tick, exactly as the core cast it (walls and bodies stop beams;
+/// nothing while it is frozen, its laser off). The team's detector is anonymous: it tells
+/// where something is, not who or which way it faces, so neither is sent
+/// ([`Visible::anonymous`]); the team's belief tells them the rest.
+pub fn visible_to(frame: &Frame, arena: &Arena, you: AgentId) -> Option<Visible> {
     match you {
         AgentId::Opponent(slot) => {
             let me = frame.opponents.get(slot)?;
             if me.tagged {
                 return None;
             }
-            let sees = |p: Point2<f32>| arena.line_of_sight(me.pose.pos, p);
+            // Every body in the arena but the viewer's: the robots (frozen ones too) and
+            // the untagged opponents.
+            let bodies: Vec<(AgentId, Point2<f32>)> = (frame.robots.iter().enumerate())
+                .map(|(i, r)| (AgentId::Robot(i), r.pose.pos))
+                .chain(
+                    (frame.opponents.iter().enumerate())
+                        .filter(|(i, o)| *i != slot && !o.tagged)
+                        .map(|(i, o)| (AgentId::Opponent(i), o.pose.pos)),
+                )
+                .collect();
+            let sees = |who: AgentId, p: Point2<f32>| {
+                arena.line_of_sight(me.pose.pos, p)
+                    && in_sight_past_bodies(me.pose.pos, p, bodies.iter().filter(|b| b.0 != who))
+            };
             Some(Visible {
-                robots: frame.robots.iter().map(|r| sees(r.pose.pos)).collect(),
-                opponents: frame
-                    .opponents
-                    .iter()
-                    .enumerate()
-                    .map(|(i, o)| i == slot || (!o.tagged && sees(o.pose.pos)))
+                robots: (frame.robots.iter().enumerate())
+                    .map(|(i, r)| sees(AgentId::Robot(i), r.pose.pos))
                     .collect(),
+                opponents: (frame.opponents.iter().enumerate())
+                    .map(|(i, o)| {
+                        i == slot || (!o.tagged && sees(AgentId::Opponent(i), o.pose.pos))
+                    })
+                    .collect(),
+                anonymous: false,
             })
         }
         AgentId::Robot(r) => {
             let me = frame.robots.get(r)?;
-            let sees = |p: Point2<f32>| {
-                let to = p - me.pose.pos;
-                let bearing = lasertag_core::sim::wrap_angle(to.y.atan2(to.x) - me.pose.theta);
-                !me.frozen
-                    && to.norm() <= physics.laser_range
-                    && bearing.abs() <= physics.laser_fov / 2.0
-                    && arena.line_of_sight(me.pose.pos, p)
-            };
             Some(Visible {
                 robots: vec![true; frame.robots.len()],
-                opponents: frame
-                    .opponents
-                    .iter()
-                    .map(|o| !o.tagged && sees(o.pose.pos))
+                opponents: (frame.opponents.iter().enumerate())
+                    .map(|(i, o)| !me.frozen && !o.tagged && me.seen.contains(&i))
                     .collect(),
+                anonymous: true,
             })
         }
     }
+}
+
+/// Whether a body at `target` shows from `eye` past `bodies` (centres of discs of
+/// [`AGENT_RADIUS`]): one of the lines to its centre and to either side of it (at 0.8 of
+/// its radius) passes no body before it.
+fn in_sight_past_bodies<'a>(
+    eye: Point2<f32>,
+    target: Point2<f32>,
+    bodies: impl Iterator<Item = &'a (AgentId, Point2<f32>)> + Clone,
+) -> bool {
+    let to = target - eye;
+    let len = to.norm();
+    if len < 1e-6 {
+        return true;
+    }
+    let side = nalgebra::Vector2::new(-to.y, to.x) * (0.8 * AGENT_RADIUS / len);
+    [target, target + side, target - side]
+        .into_iter()
+        .any(|aim| {
+            bodies
+                .clone()
+                .all(|(_, c)| !blocks(eye, aim, *c, len - AGENT_RADIUS))
+        })
+}
+
+/// Whether a disc of [`AGENT_RADIUS`] at `centre` crosses the line from `eye` towards `aim`
+/// within `reach` of `eye`.
+fn blocks(eye: Point2<f32>, aim: Point2<f32>, centre: Point2<f32>, reach: f32) -> bool {
+    let d = aim - eye;
+    let len = d.norm();
+    if len < 1e-6 {
+        return false;
+    }
+    let d = d / len;
+    let v = centre - eye;
+    let along = v.dot(&d);
+    let across2 = v.norm_squared() - along * along;
+    let r2 = AGENT_RADIUS * AGENT_RADIUS;
+    if across2 > r2 {
+        return false;
+    }
+    // The line enters the disc at `along - half`: in front of the eye and before the target.
+    let enters = along - (r2 - across2).sqrt();
+    enters < reach && along + (r2 - across2).sqrt() > 0.0
 }
 
 /// The result of [`visible_to`], one flag per agent.
@@ -418,6 +475,9 @@ pub fn visible_to(
 pub struct Visible {
     pub robots: Vec<bool>,
     pub opponents: Vec<bool>,
+    /// The opponents in sight are anonymous sightings (a person on the robot team): shown
+    /// without who they are or their heading, and in an order that says nothing of it.
+    pub anonymous: bool,
 }
 
 impl Visible {
@@ -426,6 +486,7 @@ impl Visible {
         Visible {
             robots: Vec::new(),
             opponents: Vec::new(),
+            anonymous: false,
         }
     }
 
@@ -743,6 +804,25 @@ pub struct Joined {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_body_on_the_line_hides_what_is_behind_it_and_one_beside_it_does_not() {
+        let eye = Point2::new(0.0, 0.0);
+        let target = Point2::new(6.0, 0.0);
+        let body = |x: f32, y: f32| (AgentId::Robot(0), Point2::new(x, y));
+        let clear =
+            |bodies: &[(AgentId, Point2<f32>)]| in_sight_past_bodies(eye, target, bodies.iter());
+        assert!(clear(&[]));
+        assert!(!clear(&[body(3.0, 0.0)]), "squarely between");
+        assert!(clear(&[body(3.0, 0.2)]), "half the target shows past it");
+        assert!(clear(&[body(3.0, 0.6)]), "beside the line");
+        assert!(clear(&[body(7.0, 0.0)]), "behind the target");
+        assert!(clear(&[body(-1.0, 0.0)]), "behind the eye");
+        assert!(
+            !clear(&[body(3.0, 0.2), body(3.0, -0.2)]),
+            "two side by side"
+        );
+    }
 
     #[test]
     fn thinning_keeps_the_weighted_shape_and_caps_the_count() {

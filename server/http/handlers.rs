@@ -18,7 +18,7 @@ use crate::http::state::AppState;
 use crate::maps::MapFile;
 use crate::protocol::fleet::{Elsewhere, Listed, NodeRef, Place};
 use crate::protocol::{
-    self, Belief, CreateMatch, ErrorBody, Events, Health, JoinRequest, Joined, MapCreated, MapInfo,
+    self, CreateMatch, ErrorBody, Events, Health, JoinRequest, Joined, MapCreated, MapInfo,
     MatchCreated, MatchState, MatchStats, MatchSummary, OpponentCommand, StepRequest,
 };
 use crate::service::maps;
@@ -203,37 +203,6 @@ pub async fn step(
     let ticks = body.ticks()?;
     let state = handle.step("step", Vec::new(), ticks, protocol::read_state);
     Ok(Json(state.await?))
-}
-
-#[utoipa::path(get, path = "/api/matches/{id}/belief",
-    params(("id" = String, Path), ("robot" = Option<String>, Query, description = "a robot id (r0, r1, …): that robot's own belief (404 for anything that is not one of the match's robots); without it the team's merged view")),
-    security((), ("owner_token" = [])),
-    responses((status = 200, body = Belief), (status = 400, body = ErrorBody), (status = 401, body = ErrorBody),
-              (status = 403, body = ErrorBody), (status = 404, body = ErrorBody)))]
-pub async fn belief(
-    State(state): State<AppState>,
-    bearer: Bearer,
-    Path(id): Path<String>,
-    Query(query): Query<HashMap<String, String>>,
-) -> Result<Json<Belief>, ApiError> {
-    let (handle, sight) = readable(&state, &bearer, &id)?;
-    let robot = match query.get("robot") {
-        None => None,
-        // Anything that is not one of the match's robots is a robot it does not have: 404,
-        // like `r9` in a two-robot match. (A 400 for a malformed id made schema-valid strings
-        // fail schemathesis, and a `pattern` on the parameter crashed its generator.)
-        Some(r) => match r.parse() {
-            Ok(AgentId::Robot(i)) => Some(i),
-            _ => {
-                return Err(ApiError::not_found(format!(
-                    "robot: no robot {r:?} in this match (r0, r1, …)"
-                )));
-            }
-        },
-    };
-    Ok(Json(
-        handle.read(sight, protocol::read_belief(robot)).await?,
-    ))
 }
 
 #[utoipa::path(get, path = "/api/matches/{id}/events",

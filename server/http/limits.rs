@@ -33,6 +33,8 @@ struct PerAddress {
     exports: usize,
     /// Bytes of the replay sockets' cursors this client holds.
     cursor_bytes: u64,
+    /// Bytes of beliefs it may read (`http::belief`).
+    belief_bytes: Option<Bucket>,
 }
 
 /// The per-address state of one server.
@@ -45,6 +47,16 @@ pub struct AddressLimits {
     running: Mutex<Vec<Arc<ExportWatch>>>,
     /// Bytes of every replay socket's cursor (changed under `map`'s lock).
     cursor_bytes: std::sync::atomic::AtomicU64,
+    /// Bytes of beliefs every client together may read (taken under `map`'s lock).
+    belief_bytes: Mutex<Option<Bucket>>,
+}
+
+/// Why a belief was not read: the client's share of belief bytes (429) or everyone's (503)
+/// is spent for now; read again after the wait.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum BeliefBytesSpent {
+    Client(Duration),
+    Server(Duration),
 }
 
 /// Bytes the cursors of open replay sockets may take, all clients together: each holds a
@@ -122,6 +134,42 @@ impl AddressLimits {
             .requests
             .get_or_insert_with(|| Bucket::new(capacity, rate))
             .take()
+    }
+
+    /// Charges `bytes` of belief to `ip` and to everyone, at `per_client` and `all` bytes a
+    /// second (bursts of two seconds' worth), or says how long to wait. One read bigger
+    /// than a burst goes through when its bucket is full, which then owes the rest.
+    pub fn take_belief_bytes(
+        &self,
+        ip: IpAddr,
+        bytes: u64,
+        per_client: f64,
+        all: f64,
+    ) -> Result<(), BeliefBytesSpent> {
+        let now = Instant::now();
+        let mut map = self.map.lock().unwrap_or_else(|e| e.into_inner());
+        self.sweep(&mut map);
+        let mut everyone = self.belief_bytes.lock().unwrap_or_else(|e| e.into_inner());
+        let everyone = everyone.get_or_insert_with(|| Bucket::new(2.0 * all, all));
+        let client = map
+            .entry(ClientKey::of(ip))
+            .or_default()
+            .belief_bytes
+            .get_or_insert_with(|| Bucket::new(2.0 * per_client, per_client));
+        client.refill(now);
+        everyone.refill(now);
+        let bytes = bytes as f64;
+        let wait = client.wait_s(bytes.min(2.0 * per_client));
+        if wait > 0.0 {
+            return Err(BeliefBytesSpent::Client(Duration::from_secs_f64(wait)));
+        }
+        let wait = everyone.wait_s(bytes.min(2.0 * all));
+        if wait > 0.0 {
+            return Err(BeliefBytesSpent::Server(Duration::from_secs_f64(wait)));
+        }
+        client.spend(bytes);
+        everyone.spend(bytes);
+        Ok(())
     }
 
     /// Counts a WebSocket connection from `ip` unless it has `max` open already.
@@ -219,6 +267,9 @@ impl AddressLimits {
             a.connections > 0
                 || a.exports > 0
                 || a.cursor_bytes > 0
+                || a.belief_bytes
+                    .as_ref()
+                    .is_some_and(|b| b.idle(now) < FORGET_AFTER * 10)
                 || a.requests
                     .as_ref()
                     .is_some_and(|b| b.idle(now) < FORGET_AFTER)

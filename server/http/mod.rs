@@ -4,6 +4,7 @@
 
 mod admit;
 mod auth;
+mod belief;
 mod body;
 mod error;
 mod export;
@@ -91,7 +92,7 @@ fn router(registry: Arc<Registry>, web_dir: PathBuf, fleet: Option<Arc<Fleet>>) 
             get(handlers::get_match).delete(handlers::delete_match),
         )
         .route("/matches/{id}/step", post(handlers::step))
-        .route("/matches/{id}/belief", get(handlers::belief))
+        .route("/matches/{id}/belief", get(belief::belief))
         .route("/matches/{id}/events", get(handlers::events))
         .route(
             "/matches/{id}/opponents/{oid}/command",

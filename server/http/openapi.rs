@@ -27,7 +27,7 @@ use crate::protocol::*;
         handlers::get_match,
         handlers::delete_match,
         handlers::step,
-        handlers::belief,
+        crate::http::belief::belief,
         handlers::events,
         handlers::command,
         crate::http::robots::command,

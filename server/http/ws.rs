@@ -386,10 +386,9 @@ impl Connection {
         // What a player sees of the live frame; `None` for a spectator, or a player watching.
         let hub = &self.handle.hub;
         let sight = match &self.seat {
-            Some(seat) if !self.watching => Some((
-                seat.body,
-                visible_to(frame, &hub.arena, &hub.physics, seat.body),
-            )),
+            Some(seat) if !self.watching => {
+                Some((seat.body, visible_to(frame, &hub.arena, seat.body)))
+            }
             _ => None,
         };
         if self.on_robot_team() {

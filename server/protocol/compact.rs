@@ -20,7 +20,9 @@
 //!     [slow: u8 cloud points, each u16 x, y | u8 beams, each u8 range]
 //!     [name: u8 bytes, UTF-8]
 //! u8 opponents, each: u8 index | u16 x | u16 y | u16 theta | u8 bits (tagged, control ×2,
-//!     name, connected) [name: u8 bytes, UTF-8]
+//!     name, connected, anonymous) [name: u8 bytes, UTF-8]
+//!     (an anonymous sighting, in a person on the robot team's view: index 255, theta 0,
+//!     bit 32 set, no control or name: where something is, not who or which way it faces)
 //! [belief: u32 tick | u8 roles, each: u32 id | u8 count | u8 bits (tagged, state ×2) |
 //!     u8 confidence (/255) | u32 particles | u16 mean x, y | u16 points, each u16 x, y]
 //! ```
@@ -46,6 +48,9 @@
 use crate::game::view::{BeliefView, Frame, Visible};
 use lasertag_core::sim::AgentId;
 use lasertag_core::world::{ControlKind, MatchStatus, Side};
+
+/// The index an anonymous sighting of an opponent goes by (`o?`), its bits' 32 set.
+pub const ANONYMOUS_INDEX: u8 = u8::MAX;
 
 /// Scans and clouds come with every this many ticks' snapshot (5 Hz).
 pub const SLOW_EVERY: u64 = 4;
@@ -188,9 +193,24 @@ pub fn snapshot(
             o.0.extend_from_slice(n);
         }
     }
-    let opponents = shown(&frame.opponents, visible.map(|v| &v.opponents[..]));
+    let mut opponents = shown(&frame.opponents, visible.map(|v| &v.opponents[..]));
+    let anonymous = visible.is_some_and(|v| v.anonymous);
+    if anonymous {
+        // In the order of where they are: the slots' order would tell who is who.
+        opponents.sort_by(|(_, a), (_, b)| {
+            let (a, b) = (a.pose.pos, b.pose.pos);
+            a.x.total_cmp(&b.x).then(a.y.total_cmp(&b.y))
+        });
+    }
     o.count(opponents.len());
     for (i, p) in opponents {
+        if anonymous {
+            // Where something is, not who or which way it faces.
+            o.u8(ANONYMOUS_INDEX);
+            o.pose(p.pose.pos.x, p.pose.pos.y, 0.0);
+            o.u8(p.tagged as u8 | 1 << 5);
+            continue;
+        }
         o.u8(i as u8);
         o.pose(p.pose.pos.x, p.pose.pos.y, p.pose.theta);
         let control = match p.control {

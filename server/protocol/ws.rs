@@ -196,15 +196,23 @@ struct RobotWire {
 
 #[derive(Debug, Clone, Serialize)]
 struct OpponentWire {
+    /// `o0`, `o1`, …; `o?` for an anonymous sighting (a person on the robot team's view).
     id: String,
     x: f64,
     y: f64,
-    theta: f64,
+    /// Absent from an anonymous sighting: the robots' detector cannot tell a heading.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    theta: Option<f64>,
     tagged: bool,
-    control: OpponentControl,
+    /// Absent from an anonymous sighting.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    control: Option<OpponentControl>,
     #[serde(skip_serializing_if = "Option::is_none")]
     name: Option<String>,
 }
+
+/// The id an anonymous sighting of an opponent goes by.
+pub const ANONYMOUS_OPPONENT: &str = "o?";
 
 #[derive(Debug, Clone, Serialize)]
 struct Score {
@@ -332,21 +340,35 @@ fn snapshot_json(frame: &Frame, you: Option<AgentId>, visible: Option<&Visible>)
                 cloud: spectator.then(|| r.cloud.iter().flatten().copied().collect()),
             })
             .collect(),
-        opponents: frame
-            .opponents
-            .iter()
-            .enumerate()
-            .filter(|(i, _)| visible.is_none_or(|v| v.opponents[*i]))
-            .map(|(i, o)| OpponentWire {
-                id: AgentId::Opponent(i).to_string(),
-                x: mm(o.pose.pos.x),
-                y: mm(o.pose.pos.y),
-                theta: rad(o.pose.theta),
-                tagged: o.tagged,
-                control: o.control.into(),
-                name: o.player.as_deref().map(str::to_string),
-            })
-            .collect(),
+        opponents: {
+            let anonymous = visible.is_some_and(|v| v.anonymous);
+            let mut shown: Vec<OpponentWire> = frame
+                .opponents
+                .iter()
+                .enumerate()
+                .filter(|(i, _)| visible.is_none_or(|v| v.opponents[*i]))
+                .map(|(i, o)| OpponentWire {
+                    id: if anonymous {
+                        ANONYMOUS_OPPONENT.to_string()
+                    } else {
+                        AgentId::Opponent(i).to_string()
+                    },
+                    x: mm(o.pose.pos.x),
+                    y: mm(o.pose.pos.y),
+                    theta: (!anonymous).then(|| rad(o.pose.theta)),
+                    tagged: o.tagged,
+                    control: (!anonymous).then(|| o.control.into()),
+                    name: (!anonymous)
+                        .then(|| o.player.as_deref().map(str::to_string))
+                        .flatten(),
+                })
+                .collect();
+            if anonymous {
+                // In the order of where they are: the slots' order would tell who is who.
+                shown.sort_by(|a, b| a.x.total_cmp(&b.x).then(a.y.total_cmp(&b.y)));
+            }
+            shown
+        },
         score: Score {
             tags: frame.opponents.iter().filter(|o| o.tagged).count(),
             robot_tags: frame.robot_tags,
@@ -470,6 +492,30 @@ pub fn event(e: &Event) -> Utf8Bytes {
     }))
 }
 
+/// An `event` message as a player is told of it live: a person on the robot team
+/// (`anonymous`) is not told which opponent shot, was hit or was tagged, which the team's
+/// detector cannot tell (`o?`); a join or a departure is public and keeps its slot.
+pub fn event_seen(e: &Event, anonymous: bool) -> Utf8Bytes {
+    if !anonymous {
+        return event(e);
+    }
+    let mut dto = crate::protocol::event(e);
+    let hide = |id: &mut Option<String>| {
+        if id.as_deref().is_some_and(|i| i.starts_with('o')) {
+            *id = Some(ANONYMOUS_OPPONENT.to_string());
+        }
+    };
+    hide(&mut dto.by);
+    hide(&mut dto.target);
+    if let Some(hit) = dto.hit.as_mut() {
+        hide(hit);
+    }
+    Utf8Bytes::from(to_json(&EventWire {
+        kind: "event",
+        event: &dto,
+    }))
+}
+
 /// The `moved` message: the match goes on on another server, at `url` when known (else the
 /// lobby, `GET /api/matches/{id}` on any node, says where); the socket closes after it.
 #[derive(Serialize)]
@@ -516,52 +562,4 @@ pub fn welcome(w: &Welcome<'_>) -> Utf8Bytes {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn client_messages_are_parsed_strictly() {
-        assert_eq!(
-            ClientMessage::parse(r#"{"type":"input","forward":1,"turn":-0.5,"tag":true}"#),
-            Ok(ClientMessage::Input {
-                forward: 1.0,
-                turn: -0.5,
-                tag: true,
-                seq: None,
-                view_tick: None,
-            })
-        );
-        assert_eq!(
-            ClientMessage::parse(r#"{"type":"input","forward":0,"turn":1,"seq":7}"#),
-            Ok(ClientMessage::Input {
-                forward: 0.0,
-                turn: 1.0,
-                tag: false,
-                seq: Some(7),
-                view_tick: None,
-            })
-        );
-        assert_eq!(
-            ClientMessage::parse(r#"{"type":"belief","on":true}"#),
-            Ok(ClientMessage::Belief { on: true })
-        );
-        let e = ClientMessage::parse(r#"{"type":"input","forward":2,"turn":0}"#)
-            .unwrap_err()
-            .to_string();
-        assert_eq!(e, "forward: 2 must be in -1..=1");
-        let e = ClientMessage::parse(r#"{"type":"input","forward":0,"turn":0,"x":1}"#)
-            .unwrap_err()
-            .to_string();
-        assert!(e.contains("unknown field `x`"), "{e}");
-        let e = ClientMessage::parse(r#"{"type":"dance"}"#)
-            .unwrap_err()
-            .to_string();
-        assert!(e.starts_with("type: unknown message type"), "{e}");
-        let e = ClientMessage::parse(r#"{"type":"input","forward":"fast","turn":0}"#)
-            .unwrap_err()
-            .to_string();
-        assert!(e.starts_with("forward"), "{e}");
-        assert!(ClientMessage::parse("not json").is_err());
-        assert!(ClientMessage::parse(r#"{"forward":0}"#).is_err());
-    }
-}
+mod tests;

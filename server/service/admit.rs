@@ -29,7 +29,7 @@ pub enum OverLimit {
         limit_s: f64,
     },
     #[error(
-        "{what}: each tick would take about {tick_ms:.1} ms of CPU, over this server's limit of {limit_ms} ms per match (the map's area, robots, particles × tracker copies and landmarks weigh most)"
+        "{what}: each tick would take about {tick_ms:.1} ms of CPU, over this server's limit of {limit_ms} ms per match (the map's area, robots, particles × tracker copies, landmarks and the search planner's depth and branching weigh most)"
     )]
     Tick {
         what: &'static str,

@@ -75,6 +75,9 @@ pub fn test_config() -> Config {
         both_sides_per_address: true,
         max_exports_per_address: 1000,
         client_budget_share: 1.0,
+        // Tests read beliefs as fast as they step; tests/hostile.rs crosses the rate.
+        belief_mb_per_s: 1e4,
+        belief_mb_per_s_all: 1e4,
         ..Config::default()
     }
 }
@@ -167,12 +170,21 @@ impl TestServer {
 
     /// Joins match `id` as `name`: (opponent id, token).
     pub async fn join(&self, id: &str, name: &str) -> (String, String) {
-        let r = self
-            .post(
-                &format!("/api/matches/{id}/players"),
-                &json!({"name": name}),
-            )
-            .await;
+        self.join_with(id, &json!({"name": name})).await
+    }
+
+    /// Claims `name` and joins match `id` under it, so its result is kept in the name's
+    /// history (docs/api.md, "Names people keep"): (opponent id, token).
+    pub async fn join_kept(&self, id: &str, name: &str) -> (String, String) {
+        let claim = self.post("/api/names", &json!({"name": name})).await;
+        assert_eq!(claim.status, 201, "{}", claim.body);
+        let name_token = claim.body["name_token"].as_str().unwrap();
+        self.join_with(id, &json!({"name": name, "name_token": name_token}))
+            .await
+    }
+
+    async fn join_with(&self, id: &str, body: &Value) -> (String, String) {
+        let r = self.post(&format!("/api/matches/{id}/players"), body).await;
         assert_eq!(r.status, 201, "{}", r.body);
         (
             r.body["opponent_id"].as_str().unwrap().to_string(),

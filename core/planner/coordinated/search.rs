@@ -28,7 +28,7 @@ use crate::sim::arena::Arena;
 use crate::sim::views::ViewTable;
 
 /// Poses that see the most, ranked for the levels after the first.
-const SHORTLIST: usize = 32;
+pub const SHORTLIST: usize = 32;
 /// Seconds a robot spends at a pose turning and looking before it leaves for the next.
 const DWELL_S: f32 = 1.0;
 

@@ -237,6 +237,23 @@ impl<'a> Reading<'a> {
         })
     }
 
+    /// The tick of the belief [`Self::belief`] would give, without copying it.
+    pub fn belief_tick(&self, robot: Option<usize>) -> Result<u64, MatchError> {
+        let tick = match self.held() {
+            Some(held) => held.belief(robot).map(|b| b.tick),
+            None => robot
+                .is_none_or(|r| r < self.task.world.robots.len())
+                .then_some(self.task.world.tick),
+        };
+        tick.ok_or_else(|| {
+            MatchError::NoRobot(format!(
+                "robot: no robot r{} in this match (it has {})",
+                robot.unwrap_or_default(),
+                self.task.world.robots.len()
+            ))
+        })
+    }
+
     /// The events after `since` that this reader may see, oldest first.
     pub fn events(&self, since: u64) -> &[Event] {
         let shown = self.held().map_or(u64::MAX, HeldBack::shown_seq);
@@ -408,6 +425,7 @@ fn spawn(
         spectators: Arc::new(AtomicUsize::new(0)),
         watchers: Default::default(),
         moved: Default::default(),
+        encoded: Default::default(),
     };
     let span = tracing::info_span!("match", id = %meta.id);
     // A manual-clock match computes only when asked, so it runs on the runtime of the

@@ -90,9 +90,9 @@ pub fn show(replay: &Replay, world: &World, show: Show) -> Shown {
         .filter(|e| matches!(e.kind, EventKind::RobotTagged { .. }))
         .count() as u32;
     let frame = Frame::build(world, &seats(world), since, robot_tags, belief);
-    let visible = show.view.and_then(|you| {
-        visible_to(&frame, &world.arena, &world.config.physics, you).map(|v| (you, v))
-    });
+    let visible = show
+        .view
+        .and_then(|you| visible_to(&frame, &world.arena, you).map(|v| (you, v)));
     let snapshot = match (&visible, show.compact) {
         (None, false) => Message::Text(wire::spectator_snapshot(&frame, belief)),
         (None, true) => Message::Binary(wire::spectator_compact(&frame, belief, true)),

@@ -33,7 +33,7 @@ impl Connection {
                 match sight {
                     Some((you, v)) => {
                         if event_seen(e, v, *you) {
-                            self.sock.text(wire::event(e)).await?;
+                            self.sock.text(wire::event_seen(e, v.anonymous)).await?;
                             self.sent_live.push_back(e.seq);
                         }
                     }
