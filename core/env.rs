@@ -9,6 +9,11 @@
 //! digest), so every number here goes through the same roundings the JSON does (a
 //! millimetre, a ten-thousandth of a radian, `f64` arithmetic, then `f32`) and the same
 //! operations in the same order.
+//!
+//! [`engine`] is the in-process engine itself: the checked vector of episodes the Python
+//! module drives.
+
+pub mod engine;
 
 use std::sync::Arc;
 

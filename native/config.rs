@@ -4,19 +4,21 @@
 //!
 //! The server builds its `MatchConfig` from JSON (`server/protocol.rs`, `CreateMatch`); the
 //! engine builds the same one from a dict, in the same order (odometry before the
-//! localiser, whose defaults follow it). The bounds on robots, opponents and the time limit
-//! are checked by the Python package against the rules before this is called.
+//! localiser, whose defaults follow it). The counts are only read here: the core's engine
+//! checks them against their bounds (`lasertag_core::env::engine`) before anything is
+//! allocated for them.
 
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
 use lasertag_core::bots::BotKind;
+use lasertag_core::env::engine;
 use lasertag_core::localise;
 use lasertag_core::planner::PlannerKind;
 use lasertag_core::settings::{Group, Kind, Value};
 use lasertag_core::sim::map_rules::MapSpec;
-use lasertag_core::sim::{Odometry, Physics, TICK_HZ};
+use lasertag_core::sim::{Odometry, Physics};
 use lasertag_core::world::{MatchConfig, Placement};
 
 fn refuse(field: &str, message: impl std::fmt::Display) -> PyErr {
@@ -164,7 +166,8 @@ pub fn match_config(settings: &Bound<'_, PyDict>) -> PyResult<MatchConfig> {
             }
             "time_limit_s" => {
                 let s: f64 = get(&value, &key)?;
-                config.time_limit_ticks = (s * TICK_HZ as f64).round().max(1.0) as u64;
+                config.time_limit_ticks = engine::time_limit_ticks(s)
+                    .map_err(|e| PyValueError::new_err(e.to_string()))?;
             }
             "placement" => {
                 let name: String = get(&value, &key)?;

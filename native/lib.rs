@@ -8,24 +8,28 @@
 //! value, no copy. The step itself runs with the GIL released, the worlds spread over the
 //! cores by rayon. The arithmetic is the core's (`lasertag_core::env`), the same as the
 //! HTTP backend's bit for bit.
+//!
+//! Every check of what a caller gives (counts against their bounds before anything is
+//! allocated, floats for finiteness, arrays for their lengths, world indices) is the core's
+//! too (`lasertag_core::env::engine`, which says why it lives there: the fuzz target and
+//! `cargo test` reach it without Python). This shell adds what only numpy arrays have, their
+//! shapes, and turns a refusal into `ValueError` or `IndexError`.
 
 mod config;
 
-use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use numpy::{
     PyReadonlyArray2, PyReadonlyArray3, PyReadwriteArray1, PyReadwriteArray2, PyReadwriteArray3,
+    PyUntypedArrayMethods,
 };
 use pyo3::exceptions::{PyIndexError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use rayon::prelude::*;
 
-use lasertag_core::env::{
-    ACTION_SIZE, EnvSpec, Episode, EpisodeSeeds, Layout, Outcome, Rewards, mm, rad,
-};
-use lasertag_core::sim::arena::Arena;
+use lasertag_core::env::engine::{self, EngineArgs, Refusal, check_shape};
+use lasertag_core::env::{ACTION_SIZE, Rewards, mm, rad};
 use lasertag_core::sim::{AgentId, Pose};
 use lasertag_core::world::{FinishReason, Side};
 
@@ -37,36 +41,24 @@ const SHIPPED_MAPS: [(&str, &str); 4] = [
     ("warehouse", include_str!("../maps/warehouse.json")),
 ];
 
-/// One world of the vector.
-struct Slot {
-    episode: Episode,
-    seeds: EpisodeSeeds,
-    /// Its episode's seed.
-    seed: u64,
-    /// Its episode ended on the last step (the next one resets it).
-    ended: bool,
-}
-
-impl Slot {
-    /// Its episode (just put in place) begins: `seed` noted, its robots' first vectors
-    /// into `obs`.
-    fn begin(&mut self, seed: u64, spec: &EnvSpec, obs: &mut [f32]) {
-        self.seed = seed;
-        self.ended = false;
-        self.episode.observe_start(spec, obs);
-    }
-}
-
-/// A vector of lasertag worlds on one map, driven by a policy's actions.
+/// A vector of lasertag worlds on one map, driven by a policy's actions: the core's
+/// [`engine::Engine`], which checks every argument and array; this shell adds the numpy
+/// arrays' shapes, the GIL released while worlds step, and rayon's threads.
 #[pyclass(module = "lasertag_env._native")]
 struct Engine {
-    arena: Arc<Arena>,
-    spec: EnvSpec,
-    slots: Vec<Slot>,
+    inner: engine::Engine,
 }
 
 fn value_error(e: impl std::fmt::Display) -> PyErr {
     PyValueError::new_err(e.to_string())
+}
+
+/// A refusal as the Python exception it stands for.
+fn refused(e: Refusal) -> PyErr {
+    match e {
+        Refusal::NoWorld { .. } => PyIndexError::new_err(e.to_string()),
+        Refusal::Value { .. } | Refusal::Setup(_) => PyValueError::new_err(e.to_string()),
+    }
 }
 
 #[pymethods]
@@ -74,11 +66,13 @@ impl Engine {
     /// `map`: a map object (docs/map-format.md); `settings`: fields of `POST /api/matches`
     /// (robots, opponents, opponent_bot, time_limit_s, placement, robot_starts,
     /// opponent_starts, localisation, tracker, coordination, radio, odometry, localiser);
-    /// `rewards`: weights `tag`, `team_tag`, `tick`; the laser as the rules give it.
+    /// `rewards`: weights `tag`, `team_tag`, `tick`; the laser as the rules give it. Every
+    /// count is checked against `BOUNDS` before anything is allocated for it.
     #[new]
     #[pyo3(signature = (map, settings, worlds, seed, max_steps, ticks_per_step, rewards, detections, beams, laser_range, fov_deg))]
     #[allow(clippy::too_many_arguments)]
     fn new(
+        py: Python<'_>,
         map: &Bound<'_, PyDict>,
         settings: &Bound<'_, PyDict>,
         worlds: usize,
@@ -91,83 +85,58 @@ impl Engine {
         laser_range: f64,
         fov_deg: f64,
     ) -> PyResult<Engine> {
-        if worlds == 0 {
-            return Err(PyValueError::new_err("worlds: must be at least 1"));
-        }
-        if ticks_per_step == 0 {
-            return Err(PyValueError::new_err("ticks_per_step: must be at least 1"));
-        }
-        let spec_map = config::map_spec(map)?;
-        let (width, height) = (spec_map.width, spec_map.height);
-        let def = lasertag_core::sim::map_rules::validate(&spec_map)
-            .map_err(|e| PyValueError::new_err(format!("map.{e}")))?;
-        let match_config = config::match_config(settings)?;
-        let robots = match_config.robots;
-        let spec = EnvSpec {
-            config: match_config,
-            layout: Layout::new(
-                robots,
-                detections,
-                width,
-                height,
-                beams,
-                laser_range,
-                fov_deg,
-            ),
+        let args = EngineArgs {
+            map: config::map_spec(map)?,
+            config: config::match_config(settings)?,
+            worlds,
+            seed,
+            max_steps,
+            ticks_per_step,
             rewards: Rewards {
                 tag: rewards.0,
                 team_tag: rewards.1,
                 tick: rewards.2,
             },
-            max_steps,
-            ticks_per_step,
+            detections,
+            beams,
+            laser_range,
+            fov_deg,
         };
-        let arena = Arc::new(Arena::new(def));
-        let slots = (0..worlds)
-            .map(|i| {
-                let mut seeds = EpisodeSeeds::new(seed, i as u64);
-                let seed = seeds.draw();
-                let episode = Episode::new(arena.clone(), &spec, seed).map_err(value_error)?;
-                Ok(Slot {
-                    episode,
-                    seeds,
-                    seed,
-                    ended: false,
-                })
-            })
-            .collect::<PyResult<Vec<_>>>()?;
-        Ok(Engine { arena, spec, slots })
+        let checked = args.check().map_err(refused)?;
+        // Building thousands of worlds takes seconds: other Python threads run meanwhile.
+        let inner = py
+            .detach(|| engine::Engine::build(checked))
+            .map_err(refused)?;
+        Ok(Engine { inner })
     }
 
     /// Values in one robot's observation vector.
     #[getter]
     fn size(&self) -> usize {
-        self.spec.layout.size()
+        self.inner.size()
     }
 
     #[getter]
     fn robots(&self) -> usize {
-        self.spec.config.robots
+        self.inner.robots()
     }
 
     #[getter]
     fn worlds(&self) -> usize {
-        self.slots.len()
+        self.inner.worlds()
     }
 
     /// The vector's bounds, (low, high).
     #[getter]
     fn bounds(&self) -> (Vec<f32>, Vec<f32>) {
-        (
-            self.spec.layout.low().to_vec(),
-            self.spec.layout.high().to_vec(),
-        )
+        let layout = &self.inner.spec().layout;
+        (layout.low().to_vec(), layout.high().to_vec())
     }
 
     /// Each world's episode seed.
     #[getter]
     fn seeds(&self) -> Vec<u64> {
-        self.slots.iter().map(|s| s.seed).collect()
+        self.inner.seeds()
     }
 
     /// Starts world `world` afresh with `seed` and writes its robots' vectors into `obs`
@@ -178,17 +147,10 @@ impl Engine {
         seed: u64,
         mut obs: PyReadwriteArray2<'_, f32>,
     ) -> PyResult<()> {
+        let (robots, size) = (self.inner.robots(), self.inner.size());
+        check_shape("obs", obs.shape(), &[robots, size]).map_err(refused)?;
         let out = obs.as_slice_mut().map_err(value_error)?;
-        check_len(
-            "obs",
-            out.len(),
-            self.spec.config.robots * self.spec.layout.size(),
-        )?;
-        let episode = Episode::new(self.arena.clone(), &self.spec, seed).map_err(value_error)?;
-        let slot = slot_mut(&mut self.slots, world)?;
-        slot.episode = episode;
-        slot.begin(seed, &self.spec, out);
-        Ok(())
+        self.inner.reset(world, seed, out).map_err(refused)
     }
 
     /// Every world's next episode, its vectors into `obs` (worlds × robots × size). The
@@ -202,26 +164,12 @@ impl Engine {
         seed: Option<u64>,
         seeds: Option<Vec<u64>>,
     ) -> PyResult<()> {
+        let e = &self.inner;
+        check_shape("obs", obs.shape(), &[e.worlds(), e.robots(), e.size()]).map_err(refused)?;
         let out = obs.as_slice_mut().map_err(value_error)?;
-        let per_world = self.spec.config.robots * self.spec.layout.size();
-        check_len("obs", out.len(), per_world * self.slots.len())?;
-        if let Some(seeds) = &seeds {
-            check_len("seeds", seeds.len(), self.slots.len())?;
-        }
-        for (i, slot) in self.slots.iter_mut().enumerate() {
-            if let Some(seeds) = &seeds {
-                slot.seeds = EpisodeSeeds::new(seeds[i], 0);
-            } else if let Some(base) = seed {
-                slot.seeds = EpisodeSeeds::new(base, i as u64);
-            }
-        }
-        for (slot, rows) in self.slots.iter_mut().zip(out.chunks_exact_mut(per_world)) {
-            let seed = slot.seeds.draw();
-            slot.episode =
-                Episode::new(self.arena.clone(), &self.spec, seed).map_err(value_error)?;
-            slot.begin(seed, &self.spec, rows);
-        }
-        Ok(())
+        self.inner
+            .reset_all(out, seed, seeds.as_deref())
+            .map_err(refused)
     }
 
     /// One step of world `world`: `actions` (robots × 3) in, vectors into `obs` (robots ×
@@ -243,25 +191,29 @@ impl Engine {
         Option<&'static str>,
         Vec<u32>,
     )> {
-        let robots = self.spec.config.robots;
-        let size = self.spec.layout.size();
+        let (robots, size) = (self.inner.robots(), self.inner.size());
+        check_shape("actions", actions.shape(), &[robots, ACTION_SIZE]).map_err(refused)?;
+        check_shape("obs", obs.shape(), &[robots, size]).map_err(refused)?;
+        check_shape("rewards", rewards.shape(), &[robots]).map_err(refused)?;
         let actions = actions.as_slice().map_err(value_error)?;
-        check_len("actions", actions.len(), robots * ACTION_SIZE)?;
         let obs = obs.as_slice_mut().map_err(value_error)?;
-        check_len("obs", obs.len(), robots * size)?;
         let rewards = rewards.as_slice_mut().map_err(value_error)?;
-        check_len("rewards", rewards.len(), robots)?;
-        let spec = &self.spec;
-        let slot = slot_mut(&mut self.slots, world)?;
-        let out = py.detach(|| slot.episode.step(spec, actions, obs, rewards));
-        slot.ended = out.terminated || out.truncated;
+        let inner = &mut self.inner;
+        let out = py
+            .detach(|| inner.step(world, actions, obs, rewards))
+            .map_err(refused)?;
         Ok((
             out.tick,
             out.terminated,
             out.truncated,
             out.winner.map(winner_name),
             out.reason.map(FinishReason::name),
-            slot.episode.tags().to_vec(),
+            self.inner
+                .world(world)
+                .map_err(refused)?
+                .episode
+                .tags()
+                .to_vec(),
         ))
     }
 
@@ -278,22 +230,39 @@ impl Engine {
         mut terminated: PyReadwriteArray1<'_, bool>,
         mut truncated: PyReadwriteArray1<'_, bool>,
     ) -> PyResult<()> {
-        let worlds = self.slots.len();
-        let robots = self.spec.config.robots;
-        let per_world = robots * self.spec.layout.size();
+        let (worlds, robots, size) = (self.inner.worlds(), self.inner.robots(), self.inner.size());
+        for (name, shape, want) in [
+            (
+                "actions",
+                actions.shape(),
+                &[worlds, robots, ACTION_SIZE][..],
+            ),
+            ("obs", obs.shape(), &[worlds, robots, size][..]),
+            ("rewards", rewards.shape(), &[worlds, robots][..]),
+            ("terminated", terminated.shape(), &[worlds][..]),
+            ("truncated", truncated.shape(), &[worlds][..]),
+        ] {
+            check_shape(name, shape, want).map_err(refused)?;
+        }
         let actions = actions.as_slice().map_err(value_error)?;
-        check_len("actions", actions.len(), worlds * robots * ACTION_SIZE)?;
         let obs = obs.as_slice_mut().map_err(value_error)?;
-        check_len("obs", obs.len(), worlds * per_world)?;
         let rewards = rewards.as_slice_mut().map_err(value_error)?;
-        check_len("rewards", rewards.len(), worlds * robots)?;
         let terminated = terminated.as_slice_mut().map_err(value_error)?;
-        check_len("terminated", terminated.len(), worlds)?;
         let truncated = truncated.as_slice_mut().map_err(value_error)?;
-        check_len("truncated", truncated.len(), worlds)?;
-        let (arena, spec) = (&self.arena, &self.spec);
+        self.inner
+            .check_step_all(
+                actions.len(),
+                obs.len(),
+                rewards.len(),
+                terminated.len(),
+                truncated.len(),
+            )
+            .map_err(refused)?;
+        let per_world = robots * size;
+        let (arena, spec, slots) = self.inner.parts_mut();
+        // The core's `step_all` with the worlds spread over rayon's threads.
         py.detach(|| {
-            self.slots
+            slots
                 .par_iter_mut()
                 .zip(actions.par_chunks_exact(robots * ACTION_SIZE))
                 .zip(obs.par_chunks_exact_mut(per_world))
@@ -301,7 +270,7 @@ impl Engine {
                 .zip(terminated.par_iter_mut())
                 .zip(truncated.par_iter_mut())
                 .for_each(|(((((slot, a), o), r), term), trunc)| {
-                    (*term, *trunc) = step_world(arena, spec, slot, a, o, r);
+                    (*term, *trunc) = slot.step_or_restart(arena, spec, a, o, r);
                 });
         });
         Ok(())
@@ -318,19 +287,21 @@ impl Engine {
         steps: usize,
         actions: PyReadonlyArray3<'_, f32>,
     ) -> PyResult<(f64, f64)> {
-        let robots = self.spec.config.robots;
-        let actions = actions.as_slice().map_err(value_error)?;
-        let per_step = robots * ACTION_SIZE;
-        if actions.is_empty() || actions.len() % per_step != 0 {
-            return Err(PyValueError::new_err(format!(
-                "actions: {} values, a multiple of {per_step} (steps × robots × 3) is needed",
-                actions.len()
+        let (robots, size) = (self.inner.robots(), self.inner.size());
+        let shape = actions.shape();
+        if shape.len() != 3 || shape[0] == 0 || shape[1..] != [robots, ACTION_SIZE] {
+            return Err(refused(engine::refuse(
+                "actions",
+                format!("shape {shape:?}, the engine needs [steps ≥ 1, {robots}, {ACTION_SIZE}]"),
             )));
         }
-        let mut obs = vec![0.0; robots * self.spec.layout.size()];
+        let actions = actions.as_slice().map_err(value_error)?;
+        let per_step = robots * ACTION_SIZE;
+        let mut obs = vec![0.0; robots * size];
         let mut rewards = vec![0.0; robots];
-        let (arena, spec) = (&self.arena, &self.spec);
-        let slot = slot_mut(&mut self.slots, world)?;
+        self.inner.world(world).map_err(refused)?;
+        let (arena, spec, slots) = self.inner.parts_mut();
+        let slot = &mut slots[world];
         Ok(py.detach(|| {
             let (mut ticks, mut vectors) = (Duration::ZERO, Duration::ZERO);
             for a in actions.chunks_exact(per_step).cycle().take(steps) {
@@ -342,7 +313,7 @@ impl Engine {
                 ticks += t1 - t0;
                 if out.terminated || out.truncated {
                     slot.ended = true;
-                    step_world(arena, spec, slot, a, &mut obs, &mut rewards);
+                    slot.step_or_restart(arena, spec, a, &mut obs, &mut rewards);
                 }
             }
             (ticks.as_secs_f64(), vectors.as_secs_f64())
@@ -454,55 +425,8 @@ impl Engine {
 }
 
 impl Engine {
-    fn get(&self, world: usize) -> PyResult<&Slot> {
-        let n = self.slots.len();
-        self.slots.get(world).ok_or_else(|| no_world(world, n))
-    }
-}
-
-/// World `world` of `slots`, to change.
-fn slot_mut(slots: &mut [Slot], world: usize) -> PyResult<&mut Slot> {
-    let n = slots.len();
-    slots.get_mut(world).ok_or_else(|| no_world(world, n))
-}
-
-fn no_world(world: usize, worlds: usize) -> PyErr {
-    PyIndexError::new_err(format!("world {world}: out of range 0..{worlds}"))
-}
-
-/// One world's step in a vector: its episode's, or its next episode's start when the last
-/// step ended it. Returns (terminated, truncated).
-fn step_world(
-    arena: &Arc<Arena>,
-    spec: &EnvSpec,
-    slot: &mut Slot,
-    actions: &[f32],
-    obs: &mut [f32],
-    rewards: &mut [f64],
-) -> (bool, bool) {
-    if slot.ended {
-        let seed = slot.seeds.draw();
-        // The settings built a world once already: the same ones on the same arena build
-        // every later one.
-        if let Ok(episode) = Episode::new(arena.clone(), spec, seed) {
-            slot.episode = episode;
-        }
-        slot.begin(seed, spec, obs);
-        rewards.fill(0.0);
-        return (false, false);
-    }
-    let out: Outcome = slot.episode.step(spec, actions, obs, rewards);
-    slot.ended = out.terminated || out.truncated;
-    (out.terminated, out.truncated)
-}
-
-fn check_len(name: &str, got: usize, want: usize) -> PyResult<()> {
-    if got == want {
-        Ok(())
-    } else {
-        Err(PyValueError::new_err(format!(
-            "{name}: {got} values, the engine needs {want} (a C-contiguous array of the right shape)"
-        )))
+    fn get(&self, world: usize) -> PyResult<&engine::Slot> {
+        self.inner.world(world).map_err(refused)
     }
 }
 
@@ -519,9 +443,24 @@ fn shipped_maps() -> Vec<(&'static str, &'static str)> {
     SHIPPED_MAPS.to_vec()
 }
 
+/// The engine's bounds by argument (docs/research.md, "Bounds"): the most robots,
+/// opponents and detection slots, the longest time limit in seconds, the most ticks a step,
+/// and the most robots over all the worlds of one engine.
+fn bounds(py: Python<'_>) -> PyResult<Bound<'_, PyDict>> {
+    let d = PyDict::new(py);
+    d.set_item("robots", engine::MAX_ROBOTS)?;
+    d.set_item("opponents", engine::MAX_OPPONENTS)?;
+    d.set_item("detections", engine::MAX_DETECTIONS)?;
+    d.set_item("time_limit_s", engine::MAX_TIME_LIMIT_S)?;
+    d.set_item("ticks_per_step", engine::MAX_TICKS_PER_STEP)?;
+    d.set_item("agents", engine::MAX_AGENTS)?;
+    Ok(d)
+}
+
 #[pymodule]
 fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<Engine>()?;
     m.add_function(wrap_pyfunction!(shipped_maps, m)?)?;
+    m.add("BOUNDS", bounds(m.py())?)?;
     Ok(())
 }

@@ -3,6 +3,9 @@ integers and actions."""
 
 from __future__ import annotations
 
+import math
+import numbers
+
 import numpy as np
 
 __all__ = [
@@ -25,6 +28,9 @@ MAX_SEED = 2**63 - 1
 
 
 def unpack(a) -> tuple[float, float, float]:
+    if isinstance(a, (str, bytes)):
+        # A string of three digits would unpack into three numbers.
+        raise TypeError(f"an action is three numbers, not {a!r}")
     # tolist() turns a numpy vector into Python floats in one call (float32 values are
     # exact as float64, so the server gets the policy's numbers unchanged).
     forward, turn, tag = a.tolist() if isinstance(a, np.ndarray) else a
@@ -77,6 +83,11 @@ def check_arguments(*, robots, opponents, ticks_per_step, seed, max_steps, detec
         raise ValueError(
             f"rewards: unknown weight(s) {sorted(unknown)}; the weights are {sorted(DEFAULT_REWARDS)}"
         )
+    for name, weight in (rewards or {}).items():
+        if isinstance(weight, bool) or not isinstance(weight, numbers.Real):
+            raise TypeError(f"rewards.{name} must be a number, not {weight!r}")
+        if not math.isfinite(weight):
+            raise ValueError(f"rewards.{name}: {weight} must be finite")
     clash = set(match_settings or {}) & OWN_FIELDS
     if clash:
         raise ValueError(

@@ -25,8 +25,8 @@ from gymnasium.vector.utils import batch_space
 from . import _native
 from .args import DEFAULT_REWARDS, check_arguments, check_seed
 from .observation import ObservationLayout
-from .render import Renderer
-from .rules import SHIPPED, check_bound
+from .render import Renderer, check_scale
+from .rules import SHIPPED, check_bound, check_detections
 from .team import TeamEnv, action_space, agent_robots
 
 __all__ = ["NativeParallelEnv", "LasertagVectorEnv", "vector_env", "shipped_map", "SHIPPED_MAPS"]
@@ -46,6 +46,23 @@ def shipped_map(name: str) -> dict:
         raise ValueError(f"unknown map {name!r}; the shipped maps are {list(SHIPPED_MAPS)}") from None
 
 
+def _check(*, robots, opponents, ticks_per_step, seed, max_steps, detections, render_mode,
+           render_modes, rewards, match_settings, map, time_limit_s, rules) -> None:
+    """Every argument's type and range that the package can check, before anything is
+    allocated for a count (the engine checks them all again, against ``_native.BOUNDS``)."""
+    check_arguments(
+        robots=robots, opponents=opponents, ticks_per_step=ticks_per_step, seed=seed,
+        max_steps=max_steps, detections=detections, render_mode=render_mode,
+        render_modes=render_modes, rewards=rewards, match_settings=match_settings, map=map,
+    )
+    check_bound(rules, "robots", robots)
+    check_bound(rules, "opponents", opponents)
+    check_bound(rules, "ticks", ticks_per_step, "ticks_per_step")
+    check_detections(rules, detections)
+    if time_limit_s is not None:
+        check_bound(rules, "time_limit_s", time_limit_s)
+
+
 class _Setup:
     """What both in-process environments check and build the same way: the map, the match
     settings, the rules' bounds, the layout and the engine."""
@@ -53,17 +70,13 @@ class _Setup:
     def __init__(self, *, worlds, map, robots, opponents, seed, opponent_bot, max_steps,
                  ticks_per_step, render_mode, render_modes, time_limit_s, placement,
                  detections, rewards, match_settings, team_tracker, planner="api"):
-        check_arguments(
+        self.rules = rules = SHIPPED
+        _check(
             robots=robots, opponents=opponents, ticks_per_step=ticks_per_step, seed=seed,
             max_steps=max_steps, detections=detections, render_mode=render_mode,
             render_modes=render_modes, rewards=rewards, match_settings=match_settings, map=map,
+            time_limit_s=time_limit_s, rules=rules,
         )
-        self.rules = rules = SHIPPED
-        check_bound(rules, "robots", robots)
-        check_bound(rules, "opponents", opponents)
-        check_bound(rules, "ticks", ticks_per_step, "ticks_per_step")
-        if time_limit_s is not None:
-            check_bound(rules, "time_limit_s", time_limit_s)
         self.map_def = shipped_map(map) if isinstance(map, str) else map
         self.rewards = {**DEFAULT_REWARDS, **(rewards or {})}
         settings: dict[str, Any] = {
@@ -139,7 +152,15 @@ class NativeParallelEnv(TeamEnv):
         pixels_per_metre: float = 20.0,
         planner: str | list = "api",
     ):
-        agent_robots(robots, planner)  # a bad choice is refused before the engine is built
+        # Counts before anything is allocated for them (agent_robots lists the robots), and
+        # a bad planner before the engine is built.
+        _check(
+            robots=robots, opponents=opponents, ticks_per_step=ticks_per_step, seed=seed,
+            max_steps=max_steps, detections=detections, render_mode=render_mode,
+            render_modes=self.metadata["render_modes"], rewards=rewards,
+            match_settings=match_settings, map=map, time_limit_s=time_limit_s, rules=SHIPPED,
+        )
+        agent_robots(robots, planner)
         self._setup = _Setup(
             worlds=1, map=map, robots=robots, opponents=opponents, seed=seed,
             opponent_bot=opponent_bot, max_steps=max_steps, ticks_per_step=ticks_per_step,
@@ -151,6 +172,7 @@ class NativeParallelEnv(TeamEnv):
         self._engine = self._setup.engine
         self.rules = self._setup.rules
         self.map_def = self._setup.map_def
+        check_scale(self.map_def, pixels_per_metre)
         self.rewards = self._setup.rewards
         self._init_team(robots, self._setup.layout, seed, planner)
         self.render_mode = render_mode
@@ -317,6 +339,20 @@ class LasertagVectorEnv(VectorEnv):
     ):
         if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) or num_envs < 1:
             raise ValueError(f"num_envs: {num_envs!r} must be a positive integer")
+        _check(
+            robots=robots, opponents=opponents, ticks_per_step=ticks_per_step, seed=seed,
+            max_steps=max_steps, detections=detections, render_mode=None, render_modes=[],
+            rewards=rewards, match_settings=match_settings, map=map,
+            time_limit_s=time_limit_s, rules=SHIPPED,
+        )
+        # The worlds' robots share one budget (memory grows with them: docs/research.md,
+        # "Bounds"), checked before the engine builds any world.
+        most = _native.BOUNDS["agents"]
+        if num_envs * robots > most:
+            raise ValueError(
+                f"num_envs: {num_envs} worlds of {robots} robots are {num_envs * robots} "
+                f"robots, at most {most} in one vector (num_envs ≤ {most // robots})"
+            )
         self._setup = _Setup(
             worlds=int(num_envs), map=map, robots=robots, opponents=opponents, seed=seed,
             opponent_bot=opponent_bot, max_steps=max_steps, ticks_per_step=ticks_per_step,

@@ -15,8 +15,8 @@ from typing import Any
 from .args import DEFAULT_REWARDS, check_arguments
 from .client import Client, ServerError, error_message, loads
 from .observation import ObservationLayout
-from .render import Renderer
-from .rules import SHIPPED, check_bound, fetch
+from .render import Renderer, check_scale
+from .rules import SHIPPED, check_bound, check_detections, fetch
 from .server import LocalServer
 from .team import TeamEnv
 
@@ -90,10 +90,14 @@ class LasertagParallelEnv(TeamEnv):
             check_bound(self.rules, "robots", robots)
             check_bound(self.rules, "opponents", opponents)
             check_bound(self.rules, "ticks", ticks_per_step, "ticks_per_step")
+            check_detections(self.rules, detections)
+            if time_limit_s is not None:
+                check_bound(self.rules, "time_limit_s", time_limit_s)
             if isinstance(map, str):
                 self.map_def = self._fetch_map(map)
             else:
                 self.map_def = map
+            check_scale(self.map_def, pixels_per_metre)
         except BaseException:
             self.close()
             raise

@@ -14,7 +14,7 @@ import numpy as np
 
 from .rules import SHIPPED
 
-__all__ = ["Renderer"]
+__all__ = ["Renderer", "check_scale", "MAX_PIXELS"]
 
 BACKGROUND = (246, 246, 242)
 WALL = (60, 60, 66)
@@ -25,6 +25,29 @@ TAGGED = (175, 175, 175)
 LASER = (60, 170, 90)
 HEADING = (20, 20, 20)
 AGENT_RADIUS = SHIPPED["agent_radius"]  # metres
+#: The most pixels a frame may have: 10,000 × 10,000 (300 MB), the largest map (500 m a
+#: side) at the default scale.
+MAX_PIXELS = 100_000_000
+
+
+def check_scale(map_def: dict, ppm) -> None:
+    """Raises ``ValueError`` when ``ppm`` (pixels per metre) is not a positive finite number
+    or would make a frame of ``map_def`` larger than :data:`MAX_PIXELS`: the environments
+    check it at construction, before the first frame allocates anything."""
+    if isinstance(ppm, bool) or not isinstance(ppm, (int, float, np.integer, np.floating)):
+        raise TypeError(f"pixels_per_metre must be a number, not {ppm!r}")
+    if not (0 < ppm and math.isfinite(ppm)):
+        raise ValueError(f"pixels_per_metre: {ppm} must be finite and above 0")
+    try:
+        w = max(1, round(float(map_def["width"]) * ppm))
+        h = max(1, round(float(map_def["height"]) * ppm))
+    except (KeyError, TypeError, ValueError, OverflowError):
+        return  # a map without a finite size, which the map's own checks refuse
+    if w * h > MAX_PIXELS:
+        raise ValueError(
+            f"pixels_per_metre: {ppm} makes a frame of {w} × {h} pixels, at most "
+            f"{MAX_PIXELS:,}"
+        )
 
 
 class Renderer:

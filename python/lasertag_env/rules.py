@@ -11,11 +11,13 @@ write from the same declarations, so the two cannot drift apart).
 from __future__ import annotations
 
 import json
+import math
+import numbers
 import os
 
 from .client import Client, ServerError
 
-__all__ = ["SHIPPED", "fetch", "check_bound"]
+__all__ = ["SHIPPED", "fetch", "check_bound", "check_detections"]
 
 
 def _load_shipped() -> dict:
@@ -40,13 +42,31 @@ def fetch(client: Client) -> dict:
 def check_bound(rules: dict, field: str, value, name: str | None = None) -> None:
     """Raises ``ValueError`` as the server would (``robots: 9 must be in 1..=8``) when
     ``value`` is outside the server's bound of request field ``field`` (``name`` in the
-    message, ``field`` by default)."""
+    message, ``field`` by default), NaN included; ``TypeError`` when it is not a number."""
     b = rules["bounds"][field]
     lo, hi = b["minimum"], b["maximum"]
-    below = value <= lo if b["exclusive_minimum"] else value < lo
-    if below or value > hi:
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        raise TypeError(f"{name or field} must be a number, not {value!r}")
+    # Written as the range's membership, which NaN never has (NaN fails both `value < lo`
+    # and `value > hi`, so a test for being outside would let it through).
+    above = lo < value if b["exclusive_minimum"] else lo <= value
+    if not (above and value <= hi and math.isfinite(value)):
         if b["integer"]:
             bound = f"in {int(lo)}..={int(hi)}"
         else:
-            bound = f"in {'(' if b['exclusive_minimum'] else '['}{lo:g}, {hi:g}]"
+            bound = f"finite and in {'(' if b['exclusive_minimum'] else '['}{lo:g}, {hi:g}]"
         raise ValueError(f"{name or field}: {value} must be {bound}")
+
+
+def check_detections(rules: dict, detections) -> None:
+    """Raises ``ValueError`` when ``detections`` (slots in the observation vector) is more
+    than a match may have opponents (a slot past those would always be empty) or
+    negative."""
+    if detections is None:
+        return
+    most = int(rules["bounds"]["opponents"]["maximum"])
+    if not 0 <= detections <= most:
+        raise ValueError(
+            f"detections: {detections} must be in 0..={most} (at most the opponents a "
+            "match may have)"
+        )

@@ -5,6 +5,8 @@ what keeps their episodes the same for the same seeds."""
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+
 import numpy as np
 from gymnasium import spaces
 from pettingzoo import ParallelEnv
@@ -71,6 +73,7 @@ class TeamEnv(ParallelEnv):
         # (``planner=["coordinated", "api"]``) those listed ``"api"``, named by their ids.
         self._robots = agent_robots(robots, planner)
         self.possible_agents = [f"r{i}" for i in self._robots]
+        self._agent_names = frozenset(self.possible_agents)
         self.layout = layout
         self._obs_spaces = {a: layout.space() for a in self.possible_agents}
         self._act_spaces = {a: action_space() for a in self.possible_agents}
@@ -110,7 +113,16 @@ class TeamEnv(ParallelEnv):
     def _team_actions(self, actions: dict):
         """Each agent in order with its action as (forward, turn, fires), clipped as
         :func:`~lasertag_env.args.unpack` does, or None for an agent left out (it stands
-        still); a ValueError names the agent whose action is not three numbers."""
+        still). A ValueError names an id that is no agent (a typo, or a robot the team's
+        planner drives, would otherwise stand still unnoticed) and an agent whose action is
+        not three numbers."""
+        if not isinstance(actions, Mapping):
+            raise TypeError(f"actions must be a dict from agent to action, not {type(actions).__name__}")
+        if not self._agent_names.issuperset(actions):
+            unknown = next(a for a in actions if a not in self._agent_names)
+            raise ValueError(
+                f"actions: no agent {unknown!r}; the agents are {self.possible_agents}"
+            )
         for agent in self.possible_agents:
             a = actions.get(agent)
             if a is None:
