@@ -116,7 +116,7 @@ async fn a_person_hunts_with_the_robots_in_headless_chromium() {
     b.tap("Space", Duration::from_millis(60)).await;
     let feed = b
         .wait_for(
-            "__lasertag.feed.find((f) => f.kind === 'tag' && f.text === 'you tagged o1')",
+            "__lasertag.feed.find((f) => f.kind === 'tag' && f.text === 'you tagged o?')",
             5,
         )
         .await;
