@@ -29,7 +29,6 @@ use crate::http::limits::{BeliefBytesSpent, ClientIp};
 use crate::http::state::AppState;
 use crate::metrics::Refusal;
 use crate::protocol::{self, Belief, ErrorBody};
-use lasertag_core::sim::AgentId;
 
 /// The most particles a role may be thinned to (more is the whole cloud anyway).
 const MAX_THIN: usize = 100_000;
@@ -56,20 +55,7 @@ pub async fn belief(
     headers: HeaderMap,
 ) -> Result<Response, ApiError> {
     let (handle, sight) = readable(&state, &bearer, &id)?;
-    let robot = match query.get("robot") {
-        None => None,
-        // Anything that is not one of the match's robots is a robot it does not have: 404,
-        // like `r9` in a two-robot match. (A 400 for a malformed id made schema-valid strings
-        // fail schemathesis, and a `pattern` on the parameter crashed its generator.)
-        Some(r) => match r.parse() {
-            Ok(AgentId::Robot(i)) => Some(i),
-            _ => {
-                return Err(ApiError::not_found(format!(
-                    "robot: no robot {r:?} in this match (r0, r1, …)"
-                )));
-            }
-        },
-    };
+    let robot = crate::http::replays::robot(&query)?;
     let thin = match query.get("particles") {
         None => None,
         Some(v) => Some(

@@ -40,6 +40,22 @@ pub(crate) fn number(
     }
 }
 
+/// `?robot=` as a robot's index, or `None` when absent. Anything that is not a robot id is a
+/// robot the match does not have: 404, like `r9` in a two-robot match (a 400 for a
+/// malformed id made schema-valid strings fail schemathesis, and a `pattern` on the
+/// parameter crashed its generator).
+pub(crate) fn robot(query: &HashMap<String, String>) -> Result<Option<usize>, ApiError> {
+    match query.get("robot") {
+        None => Ok(None),
+        Some(v) => match v.parse() {
+            Ok(AgentId::Robot(i)) => Ok(Some(i)),
+            _ => Err(ApiError::not_found(format!(
+                "robot: no robot {v:?} in this match (r0, r1, …)"
+            ))),
+        },
+    }
+}
+
 #[utoipa::path(get, path = "/api/replays",
     params(("limit" = Option<u64>, Query, minimum = 1, maximum = 500, description = "at most this many (50)"),
            ("before" = Option<String>, Query, description = "only matches that ended before this one")),
@@ -104,17 +120,7 @@ pub async fn belief_at(
 ) -> Result<Json<Belief>, ApiError> {
     let r = find(&state, &id).await?;
     let tick = replays::tick(&r, number(&query, "tick", u64::MAX, None)?)?;
-    let robot = match query.get("robot") {
-        None => None,
-        Some(v) => match v.parse() {
-            Ok(AgentId::Robot(i)) => Some(i),
-            _ => {
-                return Err(ApiError::not_found(format!(
-                    "robot: no robot {v:?} in this match (r0, r1, …)"
-                )));
-            }
-        },
-    };
+    let robot = robot(&query)?;
     Ok(Json(
         replays::belief_at(state.service(), Some(ClientKey::of(ip)), r, tick, robot).await?,
     ))
