@@ -193,6 +193,7 @@ async fn run(args: Args) -> Result<(), String> {
                 memory_budget_mb: 1 << 20,
                 max_connections_per_address: usize::MAX,
                 max_spectators_per_match: usize::MAX,
+                max_spectators_per_address: usize::MAX,
                 max_matches_per_address: usize::MAX,
                 client_budget_share: 1.0,
                 requests_per_s: 1e6,

@@ -449,6 +449,7 @@ async fn run(args: Args) -> Result<bool, String> {
         tick_budget_ms: 1e6,
         memory_budget_mb: 1 << 20,
         max_connections_per_address: usize::MAX,
+        max_spectators_per_address: usize::MAX,
         max_seats_per_address: usize::MAX,
         max_matches_per_address: usize::MAX,
         client_budget_share: 1.0,

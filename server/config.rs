@@ -17,6 +17,7 @@ pub mod defaults {
     pub const MAX_PARTICLES_PER_MATCH: usize = 200_000;
     pub const MAX_PLAYERS_PER_MATCH: usize = 32;
     pub const MAX_SPECTATORS_PER_MATCH: usize = 200;
+    pub const MAX_SPECTATORS_PER_ADDRESS: usize = 10;
     pub const MAX_CONNECTIONS_PER_ADDRESS: usize = 64;
     pub const REQUESTS_PER_S: f64 = 100.0;
     pub const REQUEST_BURST: f64 = 200.0;
@@ -127,6 +128,12 @@ pub struct Config {
     #[arg(long, env = "LASERTAG_MAX_SPECTATORS_PER_MATCH", default_value_t = defaults::MAX_SPECTATORS_PER_MATCH,
           value_parser = clap::value_parser!(u64).map(|v| v as usize))]
     pub max_spectators_per_match: usize,
+    /// WebSocket spectators of one match from one client (an IPv4 address, or an IPv6
+    /// /64); more are refused with 429. A visitor finds a place to watch while fewer than
+    /// `--max-spectators-per-match` / this many addresses crowd a match.
+    #[arg(long, env = "LASERTAG_MAX_SPECTATORS_PER_ADDRESS", default_value_t = defaults::MAX_SPECTATORS_PER_ADDRESS,
+          value_parser = clap::value_parser!(u64).range(1..).map(|v| v as usize))]
+    pub max_spectators_per_address: usize,
     /// Open WebSocket connections from one IP address; more are refused with 429.
     #[arg(long, env = "LASERTAG_MAX_CONNECTIONS_PER_ADDRESS", default_value_t = defaults::MAX_CONNECTIONS_PER_ADDRESS,
           value_parser = clap::value_parser!(u64).range(1..).map(|v| v as usize))]
@@ -370,6 +377,7 @@ impl Default for Config {
             max_particles_per_match: defaults::MAX_PARTICLES_PER_MATCH,
             max_players_per_match: defaults::MAX_PLAYERS_PER_MATCH,
             max_spectators_per_match: defaults::MAX_SPECTATORS_PER_MATCH,
+            max_spectators_per_address: defaults::MAX_SPECTATORS_PER_ADDRESS,
             max_connections_per_address: defaults::MAX_CONNECTIONS_PER_ADDRESS,
             requests_per_s: defaults::REQUESTS_PER_S,
             request_burst: defaults::REQUEST_BURST,

@@ -193,6 +193,14 @@ async fn serve(args: ServeArgs) -> Result<(), String> {
     // Before anything opens a file: every connection holds a descriptor.
     let open_files = lasertag::http::raise_open_files_limit();
     tracing::info!(?open_files, "open files limit");
+    // Too few to serve stops the start here, before anything runs.
+    let config = &args.config;
+    lasertag::http::derive_caps(
+        open_files,
+        config.max_connections,
+        config.max_tcp_per_address,
+    )
+    .map_err(|e| e.to_string())?;
     lasertag::http::trim_memory_periodically();
     let maps = MapStore::load_dir(&args.maps).map_err(|e| format!("loading maps: {e}"))?;
     tracing::info!(maps = maps.len(), dir = %args.maps.display(), "maps loaded");
@@ -239,7 +247,7 @@ async fn serve(args: ServeArgs) -> Result<(), String> {
         Some(fleet) => lasertag::http::app_in_fleet(registry.clone(), args.web, fleet.clone()),
         None => lasertag::http::app(registry.clone(), args.web),
     };
-    let limits = lasertag::http::ConnectionLimits::of(&registry);
+    let limits = lasertag::http::ConnectionLimits::of(&registry).map_err(|e| e.to_string())?;
     // Under Agones, Ready once listening; Health, the matches counter and Allocated after.
     #[cfg(feature = "agones")]
     let sidecar = lasertag::agones::Sidecar::from_env();

@@ -21,6 +21,8 @@ pub enum Refusal {
     MatchesFull,
     /// A spectator past the per-match cap (503).
     SpectatorsFull,
+    /// A spectator past its address's share of one match's places (429).
+    SpectatorsPerAddress,
     /// A player past the per-match cap (409).
     PlayersFull,
     /// A match with more robots and opponents than allowed (400).
@@ -50,11 +52,12 @@ pub enum Refusal {
 }
 
 impl Refusal {
-    pub const ALL: [Refusal; 17] = [
+    pub const ALL: [Refusal; 18] = [
         Refusal::RateLimited,
         Refusal::ConnectionsPerAddress,
         Refusal::MatchesFull,
         Refusal::SpectatorsFull,
+        Refusal::SpectatorsPerAddress,
         Refusal::PlayersFull,
         Refusal::TooManyAgents,
         Refusal::TooManyParticles,
@@ -76,6 +79,7 @@ impl Refusal {
             Refusal::ConnectionsPerAddress => "connections_per_address",
             Refusal::MatchesFull => "matches_full",
             Refusal::SpectatorsFull => "spectators_full",
+            Refusal::SpectatorsPerAddress => "spectators_per_address",
             Refusal::PlayersFull => "players_full",
             Refusal::TooManyAgents => "too_many_agents",
             Refusal::TooManyParticles => "too_many_particles",

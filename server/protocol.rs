@@ -53,7 +53,9 @@ use lasertag_core::world::{ControlKind, FinishReason, MatchConfig, Placement};
 use lasertag_core::world::{EventKind, MatchStatus, Side, World};
 
 pub use difficulty_name::DifficultyName;
-pub use join::{ClaimRequest, JoinRequest, JoinTeam, Joined, NameKept};
+pub use join::{
+    ClaimRequest, JoinRequest, JoinTeam, Joined, NameKept, ShowcaseJoinRequest, ShowcaseSeat,
+};
 pub(crate) use planners::planner_dto;
 pub use planners::{Controller, Planner, PlannerChoice, planner_name};
 pub use refusal::{Invalid, invalid};

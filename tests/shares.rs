@@ -2,8 +2,9 @@
 //! says so in its last line and resumes with `from_tick`, one client runs only its share
 //! of exports, and one that reads nothing gives its slot to a newcomer; one address's TCP connections are capped at accept while another's
 //! health request is answered; a slot held by an idle socket lapses, a client holds few
-//! seats, another showcase starts while every one is full; a spectator that does not read
-//! makes way for a newcomer.
+//! seats, another showcase starts while every one is full, ten addresses lock no visitor
+//! out of a seat or a place to watch; a spectator that does not read makes way for a
+//! newcomer.
 //!
 //! Clients come from several loopback addresses (127.0.0.x, all of them this machine's)
 //! to be several clients.
@@ -380,6 +381,85 @@ async fn another_showcase_starts_while_every_one_is_full() {
     }
     let other = other.expect("another showcase starts");
     s.join(other["id"].as_str().unwrap(), "visitor").await;
+}
+
+/// A client of the HTTP API on `127.0.0.{from}`.
+fn client_at(from: u8) -> reqwest::Client {
+    reqwest::Client::builder()
+        .local_address(loopback(from))
+        .build()
+        .unwrap()
+}
+
+/// `POST /api/showcase/players` from `client`: the status and body.
+async fn showcase_seat(s: &TestServer, client: &reqwest::Client, name: &str) -> (u16, Value) {
+    let r = client
+        .post(s.url("/api/showcase/players"))
+        .json(&json!({ "name": name }))
+        .send()
+        .await
+        .unwrap();
+    (r.status().as_u16(), r.json().await.unwrap_or(Value::Null))
+}
+
+/// Ten addresses take every seat they may (join-or-create) and every place to watch the
+/// showcase they may; a visitor from an eleventh still finds both.
+#[tokio::test]
+async fn ten_hostile_addresses_lock_no_visitor_out() {
+    let s = TestServer::start_with(Config {
+        max_seats_per_address: 2,
+        max_spectators_per_address: 10,
+        ..test_config()
+    })
+    .await;
+    tokio::spawn(lasertag::game::showcase::keep_running(s.registry.clone()));
+    let hostile: Vec<u8> = (10..20).collect();
+    let mut seats = 0;
+    let mut watched = None;
+    for &from in &hostile {
+        let client = client_at(from);
+        loop {
+            let (status, body) = showcase_seat(&s, &client, &format!("h{from}-{seats}")).await;
+            if status == 429 {
+                break; // this address holds all it may
+            }
+            assert_eq!(status, 201, "{body}");
+            watched.get_or_insert(body["match_id"].as_str().unwrap().to_string());
+            seats += 1;
+        }
+    }
+    assert_eq!(seats, 2 * hostile.len(), "each address holds its two seats");
+    // Every place to watch the first showcase that each address may take.
+    let id = watched.unwrap();
+    let mut crowd = Vec::new();
+    for &from in &hostile {
+        let mut taken = 0;
+        let refused = loop {
+            match spectator(&s, from, &id).await {
+                Ok(ws) => crowd.push(ws),
+                Err(e) => break e,
+            }
+            taken += 1;
+            assert!(taken <= 10, "127.0.0.{from} watches past its share");
+        };
+        assert_eq!(taken, 10);
+        match refused {
+            tokio_tungstenite::tungstenite::Error::Http(r) => assert_eq!(r.status(), 429),
+            e => panic!("refused with {e}"),
+        }
+    }
+    // The visitor: a seat in a showcase (another one started if need be), and a place to
+    // watch the crowded one.
+    let visitor = client_at(50);
+    let (status, body) = showcase_seat(&s, &visitor, "visitor").await;
+    assert_eq!(status, 201, "{body}");
+    assert!(
+        body["token"].is_string() && body["opponent_id"].is_string(),
+        "{body}"
+    );
+    spectator(&s, 50, &id)
+        .await
+        .expect("the visitor watches the crowded showcase");
 }
 
 /// A spectator's WebSocket to match `id` from `127.0.0.{from}` that reads only when asked.

@@ -224,3 +224,23 @@ fn healthcheck_subcommand_tells_a_live_server_from_a_dead_one() {
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("unhealthy: cannot connect"), "{err}");
 }
+
+/// With an open files limit too low to serve (soft and hard), the server does not start:
+/// it exits with an error that names the limit and how to raise it, and listens nowhere.
+#[test]
+fn too_few_open_files_stops_the_start_with_a_clear_error() {
+    let out = Command::new("sh")
+        .arg("-c")
+        .arg(r#"ulimit -n 60 && exec "$0" serve --addr 127.0.0.1:0 --no-showcase"#)
+        .arg(env!("CARGO_BIN_EXE_lasertag"))
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .env("NO_COLOR", "1")
+        .output()
+        .expect("sh runs");
+    assert!(!out.status.success());
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.contains("open files limit (60)"), "{stderr}");
+    assert!(stderr.contains("ulimit"), "{stderr}");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(!stdout.contains("serving http://"), "{stdout}");
+}

@@ -122,6 +122,19 @@ async function tokenFor(id, base, team = "opponents") {
   return token;
 }
 
+/** Takes a seat in whichever showcase has one (the server starts another when all are
+ * full) and opens it. */
+async function playShowcase() {
+  const name = playerName();
+  const body = { name };
+  const nameTok = await nameToken(name, "");
+  if (nameTok) body.name_token = nameTok;
+  const seat = await api("POST", "/api/showcase/players", body);
+  homes.set(seat.match_id, "");
+  sessionStorage.setItem(`lasertag.token.${seat.match_id}`, seat.token);
+  location.hash = `#/play/${seat.match_id}`;
+}
+
 function fmtTime(s) {
   s = Math.max(0, Math.floor(s));
   return `${Math.floor(s / 60)}:${String(s % 60).padStart(2, "0")}`;
@@ -153,8 +166,9 @@ async function refreshLobby() {
       `${show.robots} robots hunt ${show.opponents_left} opponents on ${show.map} — ${fmtTime(show.time_limit_s - show.time_s)} left. ` +
       (show.free_slots ? "Take over a bot and play." : "");
     $("showcase-watch").onclick = () => (location.hash = `#/watch/${show.id}`);
-    $("showcase-play").onclick = () => (location.hash = `#/play/${show.id}`);
-    $("showcase-play").disabled = !show.free_slots;
+    // Join-or-create: the server seats the visitor in a showcase with a free slot, or in
+    // one more it starts when every one is full.
+    $("showcase-play").onclick = () => playShowcase().catch((e) => ($("lobby-error").textContent = e.message));
   }
   const rows = matches.map((m) => {
     const tr = document.createElement("tr");

@@ -83,6 +83,7 @@ pub fn start_node(
         // Every client is 127.0.0.1: lift what would refuse one machine's load.
         .args(["--max-connections-per-address", "100000"])
         .args(["--max-spectators-per-match", "100000"])
+        .args(["--max-spectators-per-address", "100000"])
         .args(["--max-matches-per-address", "100000"])
         .args(["--requests-per-s", "1000000", "--request-burst", "1000000"])
         .args(["--client-budget-share", "1"])

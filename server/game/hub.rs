@@ -65,31 +65,50 @@ pub struct Hub {
 }
 
 impl Hub {
-    /// Counts one more spectator unless there are `max` already and none of them has
-    /// stopped reading (one that has is told to go, and makes way at once); the count
-    /// falls back when the returned guard is dropped.
-    pub fn add_spectator(&self, max: usize) -> Option<SpectatorSeat> {
+    /// Counts one more spectator of `client` unless it watches `per_client` times already,
+    /// or there are `max` spectators and none of them has stopped reading (one that has is
+    /// told to go, and makes way at once); the count falls back when the returned guard is
+    /// dropped. The per-client count keeps a few addresses from filling every place of a
+    /// match: a visitor finds one while fewer than `max / per_client` addresses crowd it.
+    pub fn add_spectator(
+        &self,
+        client: ClientKey,
+        max: usize,
+        per_client: usize,
+    ) -> Result<SpectatorSeat, SpectatorsRefused> {
+        let watching = {
+            let mut watchers = self.watchers.lock().unwrap_or_else(|e| e.into_inner());
+            watchers.retain(|w| w.strong_count() > 0);
+            (watchers.iter().filter_map(Weak::upgrade))
+                .filter(|w| w.client == client && !w.released.load(Ordering::Acquire))
+                .count()
+        };
+        if watching >= per_client {
+            return Err(SpectatorsRefused::Client {
+                watching,
+                max: per_client,
+            });
+        }
         if !self.count_one(max) {
             let stalled = {
-                let mut watchers = self.watchers.lock().unwrap_or_else(|e| e.into_inner());
-                watchers.retain(|w| w.strong_count() > 0);
+                let watchers = self.watchers.lock().unwrap_or_else(|e| e.into_inner());
                 watchers
                     .iter()
                     .filter_map(Weak::upgrade)
                     .find(|w| w.stalled())
             };
-            let stalled = stalled?;
+            let stalled = stalled.ok_or(SpectatorsRefused::Full { max })?;
             stalled.release(&self.spectators);
             if !self.count_one(max) {
-                return None;
+                return Err(SpectatorsRefused::Full { max });
             }
         }
-        let watcher = Arc::new(Watcher::default());
+        let watcher = Arc::new(Watcher::of(client));
         self.watchers
             .lock()
             .unwrap_or_else(|e| e.into_inner())
             .push(Arc::downgrade(&watcher));
-        Some(SpectatorSeat {
+        Ok(SpectatorSeat {
             count: self.spectators.clone(),
             watcher,
         })
@@ -104,6 +123,18 @@ impl Hub {
     }
 }
 
+/// Why a spectator was not counted in: its client watches the match as often as one may
+/// (with how often), or every place is taken by spectators who read.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+pub enum SpectatorsRefused {
+    #[error(
+        "spectators: this address watches this match {watching} times already (at most {max} per address)"
+    )]
+    Client { watching: usize, max: usize },
+    #[error("spectators: this match is at this server's limit of {max} spectators")]
+    Full { max: usize },
+}
+
 /// What the hub knows of one spectator's socket: since when it has been sending one
 /// message (a socket that does not read blocks there), when the client last sent
 /// anything, and the signal to go.
@@ -115,20 +146,21 @@ pub struct Watcher {
     pub dropped: CancellationToken,
     /// Set once its place in the count was given up (by [`Watcher::release`] or the drop).
     released: std::sync::atomic::AtomicBool,
+    /// Whose socket it is.
+    client: ClientKey,
 }
 
-impl Default for Watcher {
-    fn default() -> Watcher {
+impl Watcher {
+    fn of(client: ClientKey) -> Watcher {
         Watcher {
             sending_since: Mutex::new(None),
             heard_at: Mutex::new(Instant::now()),
             dropped: CancellationToken::new(),
             released: Default::default(),
+            client,
         }
     }
-}
 
-impl Watcher {
     /// The client sent something (a pong, a message): it reads.
     pub fn heard(&self) {
         *self.heard_at.lock().unwrap_or_else(|e| e.into_inner()) = Instant::now();

@@ -78,6 +78,9 @@ pub struct Registry {
     /// Whether a stop ends the running matches even though the store could resume them: a
     /// fleet node's own store is not where its matches would be resumed (`fleet`).
     ends_matches_on_stop: std::sync::atomic::AtomicBool,
+    /// Held while a showcase starts, so that visitors who all find the showcases full start
+    /// one more between them, not one each (`showcase::join_or_create`).
+    pub showcase_starting: tokio::sync::Mutex<()>,
 }
 
 /// Counts an open WebSocket connection until dropped.

@@ -6,7 +6,9 @@ use axum::response::{IntoResponse, Response};
 
 use crate::game::MatchError;
 use crate::game::admission::NoRoom;
+use crate::game::hub::SpectatorsRefused;
 use crate::game::replay::HistoryError;
+use crate::game::showcase::{NoSeat, NoShowcase};
 use crate::protocol::ErrorBody;
 use crate::service::admit::OverLimit;
 use crate::service::maps::MapsError;
@@ -154,6 +156,32 @@ impl From<NoRoom> for ApiError {
             | NoRoom::Draining => StatusCode::SERVICE_UNAVAILABLE,
         };
         ApiError::new(status, e.to_string())
+    }
+}
+
+/// A spectator past its address's share of a match's places (429: its own sockets are in
+/// the way), or past the match's (503: try again, or watch another).
+impl From<SpectatorsRefused> for ApiError {
+    fn from(e: SpectatorsRefused) -> ApiError {
+        let status = match e {
+            SpectatorsRefused::Client { .. } => StatusCode::TOO_MANY_REQUESTS,
+            SpectatorsRefused::Full { .. } => StatusCode::SERVICE_UNAVAILABLE,
+        };
+        ApiError::new(status, e.to_string())
+    }
+}
+
+/// No showcase seat: the join's own refusal, the server's room (503), or every showcase
+/// full at the most the server runs (503).
+impl From<NoSeat> for ApiError {
+    fn from(e: NoSeat) -> ApiError {
+        match e {
+            NoSeat::Join(e) => e.into(),
+            NoSeat::NoShowcase(NoShowcase::NoRoom(e)) => e.into(),
+            NoSeat::NoShowcase(NoShowcase::NoMap) | NoSeat::AllFull => {
+                ApiError::new(StatusCode::SERVICE_UNAVAILABLE, e.to_string())
+            }
+        }
     }
 }
 

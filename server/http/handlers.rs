@@ -19,7 +19,8 @@ use crate::maps::MapFile;
 use crate::protocol::fleet::{Elsewhere, Listed, NodeRef, Place};
 use crate::protocol::{
     self, CreateMatch, ErrorBody, Events, Health, JoinRequest, Joined, MapCreated, MapInfo,
-    MatchCreated, MatchState, MatchStats, MatchSummary, OpponentCommand, StepRequest,
+    MatchCreated, MatchState, MatchStats, MatchSummary, OpponentCommand, ShowcaseJoinRequest,
+    ShowcaseSeat, StepRequest,
 };
 use crate::service::maps;
 use crate::service::matches::{self, Created};
@@ -283,6 +284,32 @@ pub async fn join(
             .await?;
     let joined = handle.join(name, team, Some(ClientKey::of(ip))).await?;
     Ok((StatusCode::CREATED, Json(Joined::from(joined))))
+}
+
+/// `POST /api/showcase/players`: a seat in a showcase, in one more started for it when
+/// every running one is full (join-or-create).
+#[utoipa::path(post, path = "/api/showcase/players", request_body = ShowcaseJoinRequest,
+    responses((status = 201, body = ShowcaseSeat), (status = 400, body = ErrorBody),
+              (status = 403, body = ErrorBody, description = "somebody keeps that name (POST /api/names): join with its name_token"),
+              (status = 429, body = ErrorBody, description = "this client holds as many seats as it may"),
+              (status = 503, body = ErrorBody, description = "every showcase is full and the server has no room for another")))]
+pub async fn join_showcase(
+    State(state): State<AppState>,
+    ClientIp(ip): ClientIp,
+    JsonBody(body): JsonBody<ShowcaseJoinRequest>,
+) -> Result<impl IntoResponse, ApiError> {
+    let name =
+        crate::service::names::check_join(state.service(), &body.name, body.name_token.as_deref())
+            .await?;
+    let (match_id, joined) =
+        crate::game::showcase::join_or_create(&state.registry, name, ClientKey::of(ip)).await?;
+    Ok((
+        StatusCode::CREATED,
+        Json(ShowcaseSeat {
+            match_id,
+            seat: Joined::from(joined),
+        }),
+    ))
 }
 
 #[utoipa::path(get, path = "/api/matches/{id}/stats", params(("id" = String, Path)),

@@ -40,7 +40,10 @@ use crate::fleet::Fleet;
 use crate::game::Registry;
 use crate::service::{Pool, ReplayPool};
 pub use error::ApiError;
-pub use serve::{ConnectionLimits, raise_open_files_limit, serve, trim_memory_periodically};
+pub use serve::{
+    ConnectionLimits, TooFewFiles, derive_caps, raise_open_files_limit, serve,
+    trim_memory_periodically,
+};
 pub use state::AppState;
 
 /// The whole HTTP surface: the API under `/api`, WebSockets under `/ws`, metrics at
@@ -104,6 +107,7 @@ fn router(registry: Arc<Registry>, web_dir: PathBuf, fleet: Option<Arc<Fleet>>) 
             get(robots::observation),
         )
         .route("/matches/{id}/players", post(handlers::join))
+        .route("/showcase/players", post(handlers::join_showcase))
         .route("/replays", get(replays::list))
         .route("/replays/{id}", get(replays::detail))
         .route("/replays/{id}/state", get(replays::state_at))

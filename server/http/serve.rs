@@ -12,8 +12,10 @@
 //!   one waiting behind it. The per-client cap sits well below the server's, so others find
 //!   room (`/api/health` keeps answering while one address floods).
 //! - The server's cap never exceeds the file descriptors the process may open, less a
-//!   reserve for its files, database and match runtimes, so `accept` never runs out of them;
-//!   [`raise_open_files_limit`] lifts the soft limit to the hard one at start.
+//!   reserve for its files, database and match runtimes, so `accept` never runs out of them,
+//!   and a client's cap is a small share of the server's ([`derive_caps`]);
+//!   [`raise_open_files_limit`] lifts the soft limit to the hard one at start, and a limit
+//!   too low to serve stops the start with an error that says so ([`TooFewFiles`]).
 //! - [`trim_memory_periodically`] hands freed memory back to the operating system, every 5 s
 //!   and only then.
 //! - A header read timeout: a connection that starts a request and does not finish its
@@ -48,8 +50,14 @@ use crate::game::Registry;
 use crate::metrics::Refusal;
 
 /// File descriptors kept out of the connection cap: the store's files, logs, maps and the
-/// runtimes of real-time matches need some too.
+/// runtimes of real-time matches need some too. A quarter of a small limit.
 const FD_RESERVE: u64 = 512;
+/// Fewest connections a server may start with: a handful of players, their spectators and
+/// the lobby's requests. Below it one client would take it down.
+pub const MIN_CONNECTIONS: usize = 64;
+/// Clients that always find room: the per-client cap is at most the server's cap divided
+/// by this.
+const CLIENTS_WITH_ROOM: usize = 16;
 
 /// What the accept loop enforces.
 #[derive(Debug, Clone)]
@@ -64,30 +72,73 @@ pub struct ConnectionLimits {
     pub registry: Option<Arc<Registry>>,
 }
 
+/// The open files limit leaves too few connections to serve: the server does not start.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error(
+    "the open files limit ({files}) leaves room for {room} connections once {reserve} are kept for files and matches; a server needs at least {MIN_CONNECTIONS}: raise the hard limit (`ulimit -Hn`, systemd's LimitNOFILE=, docker's --ulimit nofile=)"
+)]
+pub struct TooFewFiles {
+    pub files: u64,
+    pub room: u64,
+    pub reserve: u64,
+}
+
 impl ConnectionLimits {
-    /// The limits of `registry`'s config, the server's cap lowered to what the process's
-    /// file descriptors allow.
-    pub fn of(registry: &Arc<Registry>) -> ConnectionLimits {
+    /// The limits of `registry`'s config, derived from the file descriptors the process
+    /// may open (see [`derive_caps`]).
+    pub fn of(registry: &Arc<Registry>) -> Result<ConnectionLimits, TooFewFiles> {
         let config = &registry.config;
-        let mut max_connections = config.max_connections;
-        if let Some(files) = open_files_limit() {
-            let room = files.saturating_sub(FD_RESERVE).max(1);
-            if (max_connections as u64) > room {
-                tracing::warn!(
-                    max_connections,
-                    open_files = files,
-                    "fewer file descriptors than --max-connections needs: at most {room} connections"
-                );
-                max_connections = room as usize;
-            }
+        let (max_connections, max_per_address) = derive_caps(
+            open_files_limit(),
+            config.max_connections,
+            config.max_tcp_per_address,
+        )?;
+        if max_connections < config.max_connections || max_per_address < config.max_tcp_per_address
+        {
+            tracing::warn!(
+                max_connections,
+                max_per_address,
+                open_files = open_files_limit(),
+                "fewer file descriptors than --max-connections needs: caps lowered"
+            );
         }
-        ConnectionLimits {
+        Ok(ConnectionLimits {
             max_connections,
-            max_per_address: config.max_tcp_per_address,
+            max_per_address,
             header_read_timeout: config.header_read_timeout,
             registry: Some(registry.clone()),
-        }
+        })
     }
+}
+
+/// The server's and each client's connection caps under an open files limit of `files`
+/// (none: no limit): the server's at most what the files leave once a reserve is kept (a
+/// quarter of the limit, at most [`FD_RESERVE`]), each client's at most a
+/// [`CLIENTS_WITH_ROOM`]th of that, so that one client never takes what the files leave.
+/// Too few files to serve [`MIN_CONNECTIONS`] is an error. (An operator's own
+/// `--max-connections` below the files' room is theirs: it lowers no client's cap.)
+pub fn derive_caps(
+    files: Option<u64>,
+    max_connections: usize,
+    max_per_address: usize,
+) -> Result<(usize, usize), TooFewFiles> {
+    let Some(files) = files else {
+        return Ok((max_connections, max_per_address));
+    };
+    let reserve = (files / 4).min(FD_RESERVE);
+    let room = files - reserve;
+    if room < MIN_CONNECTIONS as u64 {
+        return Err(TooFewFiles {
+            files,
+            room,
+            reserve,
+        });
+    }
+    let room = usize::try_from(room).unwrap_or(usize::MAX);
+    Ok((
+        max_connections.min(room),
+        max_per_address.min(room / CLIENTS_WITH_ROOM),
+    ))
 }
 
 /// The soft limit of open files (`RLIMIT_NOFILE`), where the platform has one.
@@ -370,5 +421,32 @@ impl AsyncWrite for Counted {
 
     fn is_write_vectored(&self) -> bool {
         self.stream.is_write_vectored()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_generous_limit_keeps_the_configured_caps() {
+        assert_eq!(derive_caps(Some(1 << 20), 4096, 256), Ok((4096, 256)));
+        assert_eq!(derive_caps(None, 4096, 256), Ok((4096, 256)));
+    }
+
+    #[test]
+    fn a_small_limit_lowers_both_caps_so_one_client_cannot_take_the_room() {
+        // 256 files: 64 kept, 192 connections, 12 per client: 16 clients find room.
+        assert_eq!(derive_caps(Some(256), 4096, 256), Ok((192, 12)));
+        // 1024 files (a common soft default): 768 connections, 48 per client.
+        assert_eq!(derive_caps(Some(1024), 4096, 256), Ok((768, 48)));
+    }
+
+    #[test]
+    fn too_few_files_to_serve_is_an_error_naming_the_limit() {
+        let e = derive_caps(Some(64), 4096, 256).unwrap_err();
+        assert_eq!(e.files, 64);
+        assert!(e.to_string().contains("open files limit (64)"), "{e}");
+        assert!(e.to_string().contains("ulimit"), "{e}");
     }
 }

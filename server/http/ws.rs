@@ -22,10 +22,11 @@ use std::time::Duration;
 
 use axum::extract::State;
 use axum::extract::ws::Message;
-use axum::http::StatusCode;
 use axum::response::Response;
 
+use crate::access::ClientKey;
 use crate::config::Config;
+use crate::game::hub::SpectatorsRefused;
 use crate::game::view::{BELIEF_EVERY, Frame, Visible, visible_to};
 use crate::game::{MatchHandle, Seat, SpectatorSeat};
 use crate::http::error::ApiError;
@@ -61,19 +62,19 @@ pub async fn upgrade(
     // A bad token is refused here, before the upgrade (401); so is a spectator past the cap.
     let seat = match query.get("token") {
         Some(token) => Seated::Player(handle.connect(token.clone()).await?),
-        None => match handle.hub.add_spectator(cfg.max_spectators_per_match) {
-            Some(s) => Seated::Spectator(s),
-            None => {
-                registry.metrics.refuse(Refusal::SpectatorsFull);
-                return Err(ApiError::new(
-                    StatusCode::SERVICE_UNAVAILABLE,
-                    format!(
-                        "spectators: match {id} is at this server's limit of {} per match",
-                        cfg.max_spectators_per_match
-                    ),
-                ));
-            }
-        },
+        None => {
+            let spectator = handle.hub.add_spectator(
+                ClientKey::of(ip),
+                cfg.max_spectators_per_match,
+                cfg.max_spectators_per_address,
+            );
+            Seated::Spectator(spectator.inspect_err(|e| {
+                registry.metrics.refuse(match e {
+                    SpectatorsRefused::Client { .. } => Refusal::SpectatorsPerAddress,
+                    SpectatorsRefused::Full { .. } => Refusal::SpectatorsFull,
+                })
+            })?)
+        }
     };
     let role = match seat {
         Seated::Player(_) => "player",

@@ -83,3 +83,23 @@ impl From<crate::game::view::Joined> for Joined {
         }
     }
 }
+
+/// Body of `POST /api/showcase/players`: a name, as for any join (the seat is always an
+/// opponent: showcases have no pursuer slots).
+#[derive(Debug, Clone, Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct ShowcaseJoinRequest {
+    /// As in a join (`JoinRequest::name`).
+    #[schema(min_length = 1, max_length = 64)]
+    pub name: String,
+    /// As in a join (`JoinRequest::name_token`).
+    pub name_token: Option<String>,
+}
+
+/// Answer of `POST /api/showcase/players`: the showcase the seat is in, and the seat.
+#[derive(Debug, Clone, Serialize, ToSchema)]
+pub struct ShowcaseSeat {
+    pub match_id: String,
+    #[serde(flatten)]
+    pub seat: Joined,
+}

@@ -74,6 +74,7 @@ pub fn test_config() -> Config {
         // the rule.
         both_sides_per_address: true,
         max_exports_per_address: 1000,
+        max_spectators_per_address: 1000,
         client_budget_share: 1.0,
         // Tests read beliefs as fast as they step; tests/hostile.rs crosses the rate.
         belief_mb_per_s: 1e4,
@@ -142,8 +143,10 @@ impl TestServer {
         let app = lasertag::http::app(registry.clone(), root.join("web"));
         let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
         let addr = listener.local_addr().unwrap();
-        // As the binary serves it: its accept loop, with the peer's address on each request.
-        let limits = lasertag::http::ConnectionLimits::of(&registry);
+        // As the binary serves it: its open files limit raised, its accept loop, with the
+        // peer's address on each request.
+        lasertag::http::raise_open_files_limit();
+        let limits = lasertag::http::ConnectionLimits::of(&registry).expect("open files to serve");
         tokio::spawn(lasertag::http::serve(
             listener,
             app,
