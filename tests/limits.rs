@@ -181,8 +181,8 @@ async fn spectators_past_the_match_limit_are_refused_before_the_upgrade() {
     let _b = s.ws(&live, None).await.unwrap();
     let (status, body) = refusal(s.ws(&live, None).await.err().expect("refused"));
     assert_eq!(status, 503, "{body}");
-    assert!(body.contains("spectators: match"), "{body}");
-    assert!(body.contains("limit of 2 per match"), "{body}");
+    assert!(body.contains("spectators: this match"), "{body}");
+    assert!(body.contains("limit of 2 spectators"), "{body}");
     // The two still get snapshots; when one leaves, a new spectator is let in.
     a.next_of("snapshot").await;
     drop(a);

@@ -1,6 +1,7 @@
 //! People on the robot team (`pursuer_slots`) over a real server: joining a robot, driving
 //! it from a WebSocket with the team's belief live, its sightings feeding the team's
-//! tracker, its tag, and the fog on both sides of a match people play on both teams.
+//! tracker, its tag, and the fog on both sides of a match people play on both teams (a
+//! tagged player's too: it watches through its teammates' eyes).
 
 mod common;
 
@@ -510,5 +511,85 @@ async fn bodies_hide_what_is_behind_them_and_the_robots_learn_no_names() {
     assert_eq!(
         ids(&snap["opponents"]),
         ["o0", "o1"].map(String::from).into()
+    );
+}
+
+/// A room split by a wall: r0 (a person's seat) at the west end facing east with o0 3 m
+/// ahead of it; o1 east of the wall, where it cannot see r0. Once r0 tags o0, o0's player
+/// watches on live through o1's eyes: never the truth (r0 stays hidden), never back in time.
+#[tokio::test]
+async fn after_the_tag_a_player_watches_live_through_its_teammates_eyes() {
+    let s = TestServer::start().await;
+    let id = s
+        .create_match(
+            json!({"map": {"name": "split-room", "width": 14.0, "height": 8.0,
+                "obstacles": [[[9.0, 0.0], [10.0, 0.0], [10.0, 6.0], [9.0, 6.0]]],
+                "robot_spawns": [[2.0, 4.0, 0.0]],
+                "opponent_spawns": [[5.0, 4.0], [12.0, 2.0]]},
+            "robots": 1, "opponents": 2, "opponent_control": "human", "pursuer_slots": 1,
+            "clock": "manual", "time_limit_s": 60,
+            "robot_starts": [[2.0, 4.0, 0.0]], "opponent_starts": [[5.0, 4.0], [12.0, 2.0]]}),
+        )
+        .await;
+    let (_, robot_token) = join_team(&s, &id, "alice", "robots").await;
+    let (tagged, bob_token) = join_team(&s, &id, "bob", "opponents").await;
+    let (_, carol_token) = join_team(&s, &id, "carol", "opponents").await;
+    assert_eq!(tagged, "o0");
+    let mut alice = s.ws(&id, Some(&robot_token)).await.unwrap();
+    let mut bob = s.ws(&id, Some(&bob_token)).await.unwrap();
+    let _carol = s.ws(&id, Some(&carol_token)).await.unwrap();
+    s.step(&id, 1).await;
+    let (before, _) = until_tick(&mut bob, 1).await;
+    assert_eq!(before["view"], "player");
+    assert_eq!(ids(&before["robots"]), ["r0"].map(String::from).into());
+    until_tick(&mut alice, 1).await;
+    alice
+        .send_json(&json!({"type": "input", "forward": 0.0, "turn": 0.0, "tag": true}))
+        .await
+        .unwrap();
+    tokio::time::sleep(Duration::from_millis(100)).await;
+    let mut last_tick = 1;
+    let mut watched = 0;
+    for _ in 0..40 {
+        let truth = s.step(&id, 1).await;
+        let tick = truth["tick"].as_u64().unwrap();
+        let (snap, _) = until_tick(&mut bob, tick).await;
+        let snap_tick = snap["tick"].as_u64().unwrap();
+        assert!(
+            snap_tick >= last_tick,
+            "the clock went back: {snap_tick} < {last_tick}"
+        );
+        last_tick = snap_tick;
+        if truth["opponents"][0]["tagged"] != true {
+            continue;
+        }
+        // Live, in the teammates' view: o1 (and its own tagged body), never r0, which
+        // only o0 could see.
+        assert_eq!(snap_tick, tick, "{snap}");
+        assert_eq!(snap["view"], "teammates", "{snap}");
+        assert!(
+            ids(&snap["robots"]).is_empty(),
+            "r0 is out of o1's sight: {snap}"
+        );
+        assert!(ids(&snap["opponents"]).contains("o1"), "{snap}");
+        watched += 1;
+    }
+    assert!(
+        watched > 10,
+        "o0 was never tagged ({watched} ticks watched)"
+    );
+    // The page stops sending keys; a key sent anyway is refused, naming why.
+    bob.send_json(&json!({"type": "input", "forward": 1.0, "turn": 0.0, "tag": false}))
+        .await
+        .unwrap();
+    let error = loop {
+        let v = bob.json().await;
+        if v["type"] == "error" {
+            break v;
+        }
+    };
+    assert!(
+        error["error"].as_str().unwrap().contains("tagged"),
+        "{error}"
     );
 }

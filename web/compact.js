@@ -119,7 +119,7 @@ export class CompactDecoder {
     const winner = flags & 16 ? "robots" : flags & 32 ? "opponents" : null;
     const s = {
       type: "snapshot", tick, time_left_s: timeLeft, status: flags & 8 ? "finished" : "running", winner,
-      view: spectator ? "spectator" : "player", you: you ? `${youRobot ? "r" : "o"}${you - 1}` : null, robots, opponents, score,
+      view: spectator ? "spectator" : flags & 128 ? "teammates" : "player", you: you ? `${youRobot ? "r" : "o"}${you - 1}` : null, robots, opponents, score,
     };
     if (!spectator) s.ack = ack;
     if (belief) s.belief = belief;

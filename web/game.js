@@ -182,7 +182,8 @@ export class Game {
     const now = performance.now();
     const sample = now - s.tick * TICK_MS;
     if (this.snaps.length && s.tick < this.snaps[this.snaps.length - 1].tick) {
-      // Time went back (a tagged player now watches as late as spectators): start over.
+      // Time went back (a reconnect to a server that resumed the match from its record):
+      // start over.
       this.snaps = [];
       this.offset = null;
       this.arrivals = [];
@@ -211,8 +212,9 @@ export class Game {
       if (me) this.predictor.reconcile(me, s.ack, others);
       debug.ack = s.ack;
       debug.corrections = this.predictor.corrections;
-    } else if (s.view === "spectator") {
+    } else if (s.view === "teammates" || (s.view === "spectator" && this.role === "player")) {
       this.predictor = null; // tagged: nothing of ours moves any more
+      this.tagged = true; // and the keys drive nothing: no more inputs
     }
     // A player's snapshot holds only the other side's agents in its sight: one more is one
     // come into view.
@@ -229,8 +231,8 @@ export class Game {
     $("hud-score").textContent =
       `robots tagged ${sc.tags}/${sc.opponents} opponents · opponents tagged robots ${sc.robot_tags}×`;
     $("hud-timer").textContent = fmtTime(s.time_left_s);
-    if (this.role === "player" && s.view === "spectator" && !this.ended) {
-      $("hud-status").textContent = `you were tagged — spectating${this.delay ? `, delayed ${this.delay}` : ""}`;
+    if (this.role === "player" && s.view === "teammates" && !this.ended) {
+      $("hud-status").textContent = "you were tagged — watching through your teammates' eyes";
     }
     this.legend();
   }
@@ -395,7 +397,7 @@ export class Game {
    * in order) and predicts it. Timers run late in a busy or hidden tab: a long gap starts
    * the ticks again rather than sending a burst. */
   inputTicks(now) {
-    if (this.role !== "player" || !this.socket.open) return;
+    if (this.role !== "player" || this.tagged || !this.socket.open) return;
     if (this.tickAt === null || now - this.tickAt > 500) this.tickAt = now - TICK_MS;
     while (now - this.tickAt >= TICK_MS) {
       this.tickAt += TICK_MS;

@@ -31,9 +31,12 @@ pub(crate) enum Class {
     ReplayCost,
     ReplayMemory,
     DiskMaps,
+    SearchPlanner,
+    BeliefLoop,
+    NameClaims,
 }
 
-pub(crate) const CLASSES: [Class; 21] = [
+pub(crate) const CLASSES: [Class; 24] = [
     Class::Slivers(64),
     Class::Slivers(256),
     Class::ExpensiveMatch,
@@ -55,6 +58,9 @@ pub(crate) const CLASSES: [Class; 21] = [
     Class::ReplayCost,
     Class::ReplayMemory,
     Class::DiskMaps,
+    Class::SearchPlanner,
+    Class::BeliefLoop,
+    Class::NameClaims,
 ];
 
 impl Class {
@@ -80,6 +86,9 @@ impl Class {
             Class::ReplayCost => "replay-cost".into(),
             Class::ReplayMemory => "replay-memory".into(),
             Class::DiskMaps => "disk-maps".into(),
+            Class::SearchPlanner => "search-planner".into(),
+            Class::BeliefLoop => "belief-loop".into(),
+            Class::NameClaims => "name-claims".into(),
         }
     }
 
@@ -138,6 +147,9 @@ pub(crate) async fn attack(class: Class, ctx: &Ctx) -> Result<Outcome, String> {
         Class::ReplayCost => crate::history::replay_cost(ctx).await.map(Outcome::of),
         Class::ReplayMemory => crate::history::replay_memory(ctx).await.map(Outcome::of),
         Class::DiskMaps => crate::history::disk_maps(ctx).await.map(Outcome::of),
+        Class::SearchPlanner => crate::priced::search_planner(ctx).await.map(Outcome::of),
+        Class::BeliefLoop => crate::priced::belief_loop(ctx).await.map(Outcome::of),
+        Class::NameClaims => crate::priced::name_claims(ctx).await.map(Outcome::of),
     }
 }
 

@@ -38,7 +38,7 @@ pub(crate) fn client(from: u8) -> Result<reqwest::Client, String> {
         .map_err(|e| error_text(&e))
 }
 
-fn tally(statuses: &BTreeMap<String, usize>) -> String {
+pub(crate) fn tally(statuses: &BTreeMap<String, usize>) -> String {
     let parts: Vec<String> = statuses.iter().map(|(s, n)| format!("{n}×{s}")).collect();
     parts.join(", ")
 }
@@ -239,15 +239,15 @@ async fn sit(
     Some(ws)
 }
 
-/// Three addresses take every showcase seat they can and play each (one input), keep
-/// taking them for 30 s; every 2 s a visitor (each from an address of its own, .10 and
-/// up) tries to join a showcase with room.
+/// Ten addresses (.2 to .11) take every showcase seat they can (through the join-or-create
+/// door too, where the server has it) and play each (one input), keep taking them for
+/// 30 s; every 2 s a visitor (each from an address of its own, .30 and up) asks for a seat
+/// as the lobby's Play now does: join-or-create, or (an older server) a showcase with room.
 pub(crate) async fn seat_hold(ctx: &Ctx) -> Result<Report, String> {
-    let attackers: Vec<(u8, reqwest::Client)> = [2u8, 3, 4]
-        .into_iter()
+    let attackers: Vec<(u8, reqwest::Client)> = (2u8..12)
         .map(|a| client(a).map(|c| (a, c)))
         .collect::<Result<_, _>>()?;
-    let mut visitor_from = 10u8;
+    let mut visitor_from = 30u8;
     let mut sockets = Vec::new();
     let mut taken = BTreeMap::new();
     let mut visits = BTreeMap::new();
@@ -256,6 +256,24 @@ pub(crate) async fn seat_hold(ctx: &Ctx) -> Result<Report, String> {
     let mut next_visit = Instant::now() + Duration::from_secs(2);
     while Instant::now() < end {
         for (from, http) in &attackers {
+            if let Ok(r) = (http.post(ctx.url("/api/showcase/players")))
+                .json(&json!({"name": "squat"}))
+                .send()
+                .await
+            {
+                let status = r.status().as_u16();
+                if status != 404 {
+                    *taken.entry(status.to_string()).or_insert(0) += 1;
+                }
+                if status == 201
+                    && let Ok(body) = r.json::<Value>().await
+                    && let (Some(id), Some(token)) =
+                        (body["match_id"].as_str(), body["token"].as_str())
+                    && let Some(ws) = sit(*from, ctx, id, token).await
+                {
+                    sockets.push(ws);
+                }
+            }
             for (id, free) in showcases(http, ctx).await {
                 if free == 0 {
                     continue;
@@ -281,6 +299,17 @@ pub(crate) async fn seat_hold(ctx: &Ctx) -> Result<Report, String> {
             visitor_from += 1;
             let list = showcases(&visitor, ctx).await;
             showcases_seen = showcases_seen.max(list.len());
+            let asked = (visitor.post(ctx.url("/api/showcase/players")))
+                .json(&json!({"name": "visitor"}))
+                .send()
+                .await;
+            if let Ok(r) = &asked
+                && r.status() != 404
+            {
+                *visits.entry(r.status().as_u16().to_string()).or_insert(0) += 1;
+                tokio::time::sleep(Duration::from_millis(200)).await;
+                continue;
+            }
             // As the page does: a showcase with a free slot, else the first.
             let pick = list.iter().find(|(_, f)| *f > 0).or(list.first());
             let status = match pick {
@@ -313,7 +342,7 @@ pub(crate) async fn seat_hold(ctx: &Ctx) -> Result<Report, String> {
     ))
 }
 
-/// Four addresses open 60 spectator sockets each on the showcase and read nothing; a
+/// Ten addresses (.2 to .11) open 60 spectator sockets each on the showcase and read nothing; a
 /// visitor tries to watch once a second for 30 s. The showcase's spectators see it 30 s
 /// late, so nothing reaches them before it is that old: the class waits for one that is.
 pub(crate) async fn idle_spectators(ctx: &Ctx) -> Result<Report, String> {
@@ -339,7 +368,7 @@ pub(crate) async fn idle_spectators(ctx: &Ctx) -> Result<Report, String> {
     let url = format!("ws://{}/ws/matches/{id}", ctx.addr);
     let mut idle = Vec::new();
     let mut opened = BTreeMap::new();
-    for from in [2u8, 3, 4, 5] {
+    for from in 2u8..12 {
         for _ in 0..60 {
             let Ok(stream) = connect(from, ctx.addr).await else {
                 *opened.entry("tcp failed".to_string()).or_insert(0) += 1;
@@ -362,7 +391,7 @@ pub(crate) async fn idle_spectators(ctx: &Ctx) -> Result<Report, String> {
     let mut first_in = None;
     let mut watching = Vec::new();
     while start.elapsed() < Duration::from_secs(30) {
-        let status = match connect(7, ctx.addr).await {
+        let status = match connect(30, ctx.addr).await {
             Err(e) => e.to_string(),
             Ok(stream) => match tokio_tungstenite::client_async(url.clone(), stream).await {
                 Ok((mut ws, _)) => {
@@ -389,7 +418,7 @@ pub(crate) async fn idle_spectators(ctx: &Ctx) -> Result<Report, String> {
         format!("visitor: {}", tally(&tries)),
         first_in.map(|d| d.as_secs_f64() * 1e3),
         format!(
-            "idle sockets from .2-.5: {}; the visitor first got in after {}",
+            "idle sockets from .2-.11: {}; the visitor first got in after {}",
             tally(&opened),
             first_in.map_or("never".into(), |d| format!("{:.1} s", d.as_secs_f64()))
         ),

@@ -340,6 +340,8 @@ impl Ctx {
 pub(crate) struct Watch {
     pub(crate) rss_peak_kib: u64,
     pub(crate) health_max_ms: f64,
+    /// Every answered health request's time (ms), for the median.
+    pub(crate) health_ms: Vec<f64>,
     pub(crate) health_failed: u32,
     /// A health request sent and not answered yet, so that a hang shows at the end too.
     pub(crate) health_since: Option<Instant>,
@@ -358,8 +360,12 @@ pub(crate) fn with<T>(data: &Mutex<Watch>, f: impl FnOnce(&mut Watch) -> T) -> T
 impl Watchers {
     pub(crate) fn start(addr: SocketAddr, pid: u32, bystander: &str) -> Watchers {
         let data: Arc<Mutex<Watch>> = Arc::default();
-        // Their own client: the attack's connections must not queue the watchers'.
+        // Their own client, from an address of their own (127.0.0.250): the attack's
+        // connections must not queue the watchers', nor its address's limits refuse them.
         let http = reqwest::Client::builder()
+            .local_address(std::net::IpAddr::V4(std::net::Ipv4Addr::new(
+                127, 0, 0, 250,
+            )))
             .timeout(Duration::from_secs(30))
             .pool_idle_timeout(Duration::from_secs(5))
             .build()
@@ -385,7 +391,10 @@ impl Watchers {
                     with(&data, |w| {
                         w.health_since = None;
                         match r {
-                            Ok(a) if a.status == 200 => w.health_max_ms = w.health_max_ms.max(a.ms),
+                            Ok(a) if a.status == 200 => {
+                                w.health_max_ms = w.health_max_ms.max(a.ms);
+                                w.health_ms.push(a.ms);
+                            }
                             _ => w.health_failed += 1,
                         }
                     });

@@ -18,7 +18,8 @@
 //! - the bystander's tick (`GET /api/matches/{id}` every 100 ms): whether it advanced, its
 //!   ticks per second, and the longest time it did not advance (the sampling alone makes that
 //!   100–150 ms);
-//! - `GET /api/health` every 100 ms: the slowest answer, and answers that never came.
+//! - `GET /api/health` every 100 ms, from an address of its own (127.0.0.250): the median
+//!   and slowest answers, and answers that never came.
 //!
 //! Each class is bounded by `--timeout-s` (60 s): a class that takes longer is reported as
 //! hung, with whether the server still answers. The server is killed after every class, so one
@@ -54,12 +55,12 @@
 //!   got in the end (lines, and the last line: complete, or where to resume);
 //! - `conn-flood`: 1,000 connections from 127.0.0.2, each half a header: how many the server
 //!   closed at once, and `/api/health` from .3;
-//! - `seat-hold`: for 30 s three addresses (.2 to .4) take every showcase seat they can and
-//!   play each (one input), while every 2 s a visitor (each from its own address, .10 and
-//!   up) joins a showcase with room;
+//! - `seat-hold`: for 30 s ten addresses (.2 to .11) take every showcase seat they can
+//!   (join-or-create and plain joins) and play each (one input), while every 2 s a visitor
+//!   (each from its own address, .30 and up) asks for a seat as the lobby does;
 //! - `idle-spectators`: once the showcase is 30 s old (its spectators see it that late), 60
-//!   spectator sockets from each of four addresses (.2 to .5) on it, reading nothing; a
-//!   visitor from .7 tries to watch once a second for 30 s (run with `--timeout-s 120`);
+//!   spectator sockets from each of ten addresses (.2 to .11) on it, reading nothing; a
+//!   visitor from .30 tries to watch once a second for 30 s (run with `--timeout-s 120`);
 //! - `command-cost`: sixteen waypoints between the far corners of a 500 m map, sent again and
 //!   again to a manual match whose robots take orders (each a grid search);
 //! - `inputs-growth`: commands of 1,000 waypoints to an API-driven opponent until the match
@@ -70,7 +71,13 @@
 //!   many agents, a lossy radio, a fine merge grid), stepped 1,000 ticks, ended and read twice
 //!   by a stranger: the memory the reads take and leave;
 //! - `disk-maps`: thirty matches on ~185 KB inline maps, each ended, against `--keep-mb 1`:
-//!   the data directory's largest and last size.
+//!   the data directory's largest and last size;
+//! - `search-planner`: a real-time search planner past its price (depth 6, branching 12, a
+//!   round every tick), then four at the deepest priced in (depth 5, branching 6) from one
+//!   address, left to run 10 s;
+//! - `belief-loop`: four parallel loops of gzip'd `GET /belief` of a 100,000-particle role
+//!   from one address, for 5 s;
+//! - `name-claims`: `POST /api/names` of fresh names as fast as one address sends them, 10 s.
 //!
 //! "request ms" is the wall time of the class's main request (for `match-table`, all 100; for
 //! `slowloris`, the newcomer's request after 15 s; for `wallhack`, the first public read; for
@@ -87,7 +94,8 @@
 //! `harness.rs` starts and watches a server process; `classes.rs` holds the requests,
 //! `fair.rs` those of fair play, `doors.rs` those of the classes that take a door's share
 //! from other clients, `costs.rs` those that cost on a match's own thread, `history.rs`
-//! those of replays and the history on disk.
+//! those of replays and the history on disk, `priced.rs` those of the search planner,
+//! belief reads and name claims.
 
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
@@ -129,6 +137,7 @@ mod doors;
 mod fair;
 mod harness;
 mod history;
+mod priced;
 
 use classes::*;
 use harness::*;
@@ -146,6 +155,7 @@ struct Row {
     bystander_ticked: Option<bool>,
     ticks_per_s: Option<f64>,
     longest_gap_ms: Option<f64>,
+    health_p50_ms: Option<f64>,
     health_max_ms: Option<f64>,
     health_failed: u32,
     /// The history's directory after the class (KiB).
@@ -243,12 +253,19 @@ async fn measure(args: &Args, class: Class, version: &mut Option<String>) -> Row
     (row.bystander_ticked, row.ticks_per_s, row.longest_gap_ms) =
         bystander_figures(first, &watch.ticks, from, to);
     row.health_max_ms = (watch.health_max_ms > 0.0).then_some(watch.health_max_ms);
+    row.health_p50_ms = median(watch.health_ms);
     row.health_failed = watch.health_failed;
     row.data_kib = Some(dir_bytes(&server.data_dir) as f64 / 1024.0);
     row.server_exit = server.exited();
     server.kill().await;
     row.seconds = started.elapsed().as_secs_f64();
     row
+}
+
+/// The median of `xs`, none when empty.
+fn median(mut xs: Vec<f64>) -> Option<f64> {
+    xs.sort_by(f64::total_cmp);
+    xs.get(xs.len() / 2).copied()
 }
 
 fn num(x: Option<f64>) -> String {
@@ -272,12 +289,12 @@ fn notes(r: &Row) -> String {
 
 fn markdown(rows: &[Row]) -> String {
     let mut out = String::from(
-        "| class | status | request ms | RSS MiB before / peak / after | bystander ticked | bystander ticks/s | longest bystander gap ms | health max ms | data KiB after | notes |\n|---|---|---|---|---|---|---|---|---|---|\n",
+        "| class | status | request ms | RSS MiB before / peak / after | bystander ticked | bystander ticks/s | longest bystander gap ms | health p50 ms | health max ms | data KiB after | notes |\n|---|---|---|---|---|---|---|---|---|---|---|\n",
     );
     for r in rows {
         let [b, p, a] = r.rss_mib;
         out += &format!(
-            "| {} | {} | {} | {} / {} / {} | {} | {} | {} | {} | {} | {} |\n",
+            "| {} | {} | {} | {} / {} / {} | {} | {} | {} | {} | {} | {} | {} |\n",
             r.class,
             r.outcome.status,
             num(r.outcome.request_ms),
@@ -291,6 +308,7 @@ fn markdown(rows: &[Row]) -> String {
             },
             num(r.ticks_per_s),
             num(r.longest_gap_ms),
+            num(r.health_p50_ms),
             num(r.health_max_ms),
             num(r.data_kib),
             notes(r).replace('|', "\\|"),
@@ -308,7 +326,7 @@ fn to_json(rows: &[Row]) -> Value {
                    "rss_mib": {"before": r.rss_mib[0], "peak": r.rss_mib[1], "after": r.rss_mib[2]},
                    "bystander_ticked": r.bystander_ticked, "bystander_ticks_per_s": r.ticks_per_s,
                    "bystander_longest_gap_ms": r.longest_gap_ms,
-                   "health_max_ms": r.health_max_ms, "health_failed": r.health_failed,
+                   "health_p50_ms": r.health_p50_ms, "health_max_ms": r.health_max_ms, "health_failed": r.health_failed,
                    "data_kib_after": r.data_kib,
                    "server_exit": r.server_exit, "note": r.outcome.note, "seconds": r.seconds})
         })

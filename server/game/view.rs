@@ -373,7 +373,9 @@ impl Frame {
 /// bodies (discs of [`AGENT_RADIUS`], as the robots' laser meets them): another agent is in
 /// sight when the line to its centre clears the walls and one of three lines to it (its
 /// centre, and either side of it) clears every body in between. A tagged opponent has left
-/// the arena and sees everything, like a spectator (`None`).
+/// the arena: it watches on through its teammates' eyes (what any opponent still in the
+/// arena sees, and where it was tagged), as a dead player spectates teammates in
+/// Counter-Strike: live, and never more than its side could see ([`Visible::teammates`]).
 ///
 /// A person on the robot team sees every robot (their own team) and the opponents their
 /// robot's laser saw this tick, exactly as the core cast it (walls and bodies stop beams;
@@ -384,34 +386,28 @@ pub fn visible_to(frame: &Frame, arena: &Arena, you: AgentId) -> Option<Visible>
     match you {
         AgentId::Opponent(slot) => {
             let me = frame.opponents.get(slot)?;
-            if me.tagged {
-                return None;
+            if !me.tagged {
+                return Some(opponent_sight(frame, arena, slot));
             }
-            // Every body in the arena but the viewer's: the robots (frozen ones too) and
-            // the untagged opponents.
-            let bodies: Vec<(AgentId, Point2<f32>)> = (frame.robots.iter().enumerate())
-                .map(|(i, r)| (AgentId::Robot(i), r.pose.pos))
-                .chain(
-                    (frame.opponents.iter().enumerate())
-                        .filter(|(i, o)| *i != slot && !o.tagged)
-                        .map(|(i, o)| (AgentId::Opponent(i), o.pose.pos)),
-                )
-                .collect();
-            let sees = |who: AgentId, p: Point2<f32>| {
-                arena.line_of_sight(me.pose.pos, p)
-                    && in_sight_past_bodies(me.pose.pos, p, bodies.iter().filter(|b| b.0 != who))
-            };
-            Some(Visible {
-                robots: (frame.robots.iter().enumerate())
-                    .map(|(i, r)| sees(AgentId::Robot(i), r.pose.pos))
-                    .collect(),
-                opponents: (frame.opponents.iter().enumerate())
-                    .map(|(i, o)| {
-                        i == slot || (!o.tagged && sees(AgentId::Opponent(i), o.pose.pos))
-                    })
-                    .collect(),
+            let mut union = Visible {
+                robots: vec![false; frame.robots.len()],
+                opponents: vec![false; frame.opponents.len()],
                 anonymous: false,
-            })
+                teammates: true,
+            };
+            union.opponents[slot] = true;
+            let alive =
+                (frame.opponents.iter().enumerate()).filter(|(i, o)| *i != slot && !o.tagged);
+            for (mate, _) in alive {
+                let sight = opponent_sight(frame, arena, mate);
+                for (u, s) in union.robots.iter_mut().zip(&sight.robots) {
+                    *u |= s;
+                }
+                for (u, s) in union.opponents.iter_mut().zip(&sight.opponents) {
+                    *u |= s;
+                }
+            }
+            Some(union)
         }
         AgentId::Robot(r) => {
             let me = frame.robots.get(r)?;
@@ -421,8 +417,38 @@ pub fn visible_to(frame: &Frame, arena: &Arena, you: AgentId) -> Option<Visible>
                     .map(|(i, o)| !me.frozen && !o.tagged && me.seen.contains(&i))
                     .collect(),
                 anonymous: true,
+                teammates: false,
             })
         }
+    }
+}
+
+/// What the untagged opponent in `slot` sees (see [`visible_to`]).
+fn opponent_sight(frame: &Frame, arena: &Arena, slot: usize) -> Visible {
+    let eye = frame.opponents[slot].pose.pos;
+    // Every body in the arena but the viewer's: the robots (frozen ones too) and the
+    // untagged opponents.
+    let bodies: Vec<(AgentId, Point2<f32>)> = (frame.robots.iter().enumerate())
+        .map(|(i, r)| (AgentId::Robot(i), r.pose.pos))
+        .chain(
+            (frame.opponents.iter().enumerate())
+                .filter(|(i, o)| *i != slot && !o.tagged)
+                .map(|(i, o)| (AgentId::Opponent(i), o.pose.pos)),
+        )
+        .collect();
+    let sees = |who: AgentId, p: Point2<f32>| {
+        arena.line_of_sight(eye, p)
+            && in_sight_past_bodies(eye, p, bodies.iter().filter(|b| b.0 != who))
+    };
+    Visible {
+        robots: (frame.robots.iter().enumerate())
+            .map(|(i, r)| sees(AgentId::Robot(i), r.pose.pos))
+            .collect(),
+        opponents: (frame.opponents.iter().enumerate())
+            .map(|(i, o)| i == slot || (!o.tagged && sees(AgentId::Opponent(i), o.pose.pos)))
+            .collect(),
+        anonymous: false,
+        teammates: false,
     }
 }
 
@@ -478,18 +504,11 @@ pub struct Visible {
     /// The opponents in sight are anonymous sightings (a person on the robot team): shown
     /// without who they are or their heading, and in an order that says nothing of it.
     pub anonymous: bool,
+    /// The viewer has been tagged and sees through its surviving teammates' eyes.
+    pub teammates: bool,
 }
 
 impl Visible {
-    /// A view that holds nobody (a player whose opponent has just been tagged).
-    pub fn nothing() -> Visible {
-        Visible {
-            robots: Vec::new(),
-            opponents: Vec::new(),
-            anonymous: false,
-        }
-    }
-
     fn sees(&self, agent: AgentId) -> bool {
         let flags = match agent {
             AgentId::Robot(_) => &self.robots,

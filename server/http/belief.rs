@@ -15,7 +15,7 @@ use std::io::Write;
 use std::sync::Arc;
 
 use axum::extract::{Path, Query, State};
-use axum::http::{HeaderMap, HeaderValue, StatusCode, header};
+use axum::http::{HeaderMap, HeaderValue, header};
 use axum::response::{IntoResponse, Response};
 use flate2::Compression;
 use flate2::write::GzEncoder;
@@ -25,7 +25,7 @@ use crate::game::encoded::Encoded;
 use crate::http::auth::Bearer;
 use crate::http::error::ApiError;
 use crate::http::handlers::readable;
-use crate::http::limits::{BeliefBytesSpent, ClientIp};
+use crate::http::limits::{BeliefBytesSpent, BeliefRefused, ClientIp};
 use crate::http::state::AppState;
 use crate::metrics::Refusal;
 use crate::protocol::{self, Belief, ErrorBody};
@@ -106,10 +106,7 @@ pub async fn belief(
         None => match cell.get() {
             Some(encoded) => encoded,
             None => {
-                return Err(ApiError::new(
-                    StatusCode::SERVICE_UNAVAILABLE,
-                    "the belief moved on while it was read; read again",
-                ));
+                return Err(BeliefRefused::MovedOn.into());
             }
         },
     }
@@ -156,7 +153,7 @@ fn estimate(held: &HeldBelief, thin: Option<usize>) -> u64 {
         + 64
 }
 
-fn charge(state: &AppState, ip: std::net::IpAddr, bytes: u64) -> Result<(), ApiError> {
+fn charge(state: &AppState, ip: std::net::IpAddr, bytes: u64) -> Result<(), BeliefRefused> {
     let cfg = &state.registry.config;
     let mb = 1024.0 * 1024.0;
     let spent = match state.limits.take_belief_bytes(
@@ -168,30 +165,19 @@ fn charge(state: &AppState, ip: std::net::IpAddr, bytes: u64) -> Result<(), ApiE
         Ok(()) => return Ok(()),
         Err(spent) => spent,
     };
-    let (status, wait, message) = match spent {
-        BeliefBytesSpent::Client(wait) => (
-            StatusCode::TOO_MANY_REQUESTS,
-            wait,
-            format!(
-                "belief: {} reads at most {} MB of beliefs a second; thin them with ?particles=N, or",
-                crate::access::ClientKey::of(ip),
-                cfg.belief_mb_per_s
-            ),
-        ),
-        BeliefBytesSpent::Server(wait) => (
-            StatusCode::SERVICE_UNAVAILABLE,
-            wait,
-            format!(
-                "belief: this server serves at most {} MB of beliefs a second to everyone; thin them with ?particles=N, or",
-                cfg.belief_mb_per_s_all
-            ),
-        ),
-    };
     state.registry.metrics.refuse(Refusal::RateLimited);
-    let secs = wait.as_secs_f64().ceil().max(1.0) as u32;
-    let mut error = ApiError::new(status, format!("{message} retry in {secs} s"));
-    error.retry_after = Some(secs);
-    Err(error)
+    let secs = |wait: std::time::Duration| wait.as_secs_f64().ceil().max(1.0) as u32;
+    Err(match spent {
+        BeliefBytesSpent::Client(wait) => BeliefRefused::Client {
+            client: crate::access::ClientKey::of(ip),
+            mb_per_s: cfg.belief_mb_per_s,
+            retry_s: secs(wait),
+        },
+        BeliefBytesSpent::Server(wait) => BeliefRefused::Server {
+            mb_per_s: cfg.belief_mb_per_s_all,
+            retry_s: secs(wait),
+        },
+    })
 }
 
 /// The JSON of `held` (thinned to `thin`), as every reader of its tick gets it.

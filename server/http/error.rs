@@ -9,6 +9,7 @@ use crate::game::admission::NoRoom;
 use crate::game::hub::SpectatorsRefused;
 use crate::game::replay::HistoryError;
 use crate::game::showcase::{NoSeat, NoShowcase};
+use crate::http::limits::BeliefRefused;
 use crate::protocol::ErrorBody;
 use crate::service::admit::OverLimit;
 use crate::service::maps::MapsError;
@@ -181,6 +182,24 @@ impl From<NoSeat> for ApiError {
             NoSeat::NoShowcase(NoShowcase::NoMap) | NoSeat::AllFull => {
                 ApiError::new(StatusCode::SERVICE_UNAVAILABLE, e.to_string())
             }
+        }
+    }
+}
+
+/// A belief read past a share of belief bytes: the client's (429) or everyone's (503),
+/// with when to read again; or a belief that moved on mid-read (503).
+impl From<BeliefRefused> for ApiError {
+    fn from(e: BeliefRefused) -> ApiError {
+        let (status, retry_after) = match e {
+            BeliefRefused::Client { retry_s, .. } => (StatusCode::TOO_MANY_REQUESTS, Some(retry_s)),
+            BeliefRefused::Server { retry_s, .. } => {
+                (StatusCode::SERVICE_UNAVAILABLE, Some(retry_s))
+            }
+            BeliefRefused::MovedOn => (StatusCode::SERVICE_UNAVAILABLE, None),
+        };
+        ApiError {
+            retry_after,
+            ..ApiError::new(status, e.to_string())
         }
     }
 }

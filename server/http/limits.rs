@@ -59,6 +59,27 @@ pub enum BeliefBytesSpent {
     Server(Duration),
 }
 
+/// Why a belief was not read: the client's share of belief bytes a second (429) or
+/// everyone's (503) is spent for now, or the belief moved on to a newer tick while it was
+/// read (503: read again).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum BeliefRefused {
+    #[error(
+        "belief: {client} reads at most {mb_per_s} MB of beliefs a second; thin them with ?particles=N, or retry in {retry_s} s"
+    )]
+    Client {
+        client: crate::access::ClientKey,
+        mb_per_s: f64,
+        retry_s: u32,
+    },
+    #[error(
+        "belief: this server serves at most {mb_per_s} MB of beliefs a second to everyone; thin them with ?particles=N, or retry in {retry_s} s"
+    )]
+    Server { mb_per_s: f64, retry_s: u32 },
+    #[error("the belief moved on while it was read; read again")]
+    MovedOn,
+}
+
 /// Bytes the cursors of open replay sockets may take, all clients together: each holds a
 /// copy of its match's world while it plays.
 pub const CURSOR_BYTES: u64 = 256 << 20;

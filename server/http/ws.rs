@@ -9,6 +9,8 @@
 //! sight ([`visible_to`]), and its events follow the same rule ([`event_seen`]): what it saw
 //! or took part in comes at once, the rest as late as spectators get it, from the
 //! spectators' frames. The belief it may switch on is the one spectators see, as late.
+//! Once its opponent is tagged it watches on, live, through its surviving teammates' eyes
+//! (snapshots with `view: "teammates"`): never the truth, and never back in time.
 //!
 //! What a client sends is size-capped, parsed strictly, and rate-limited by a token bucket,
 //! as on every socket ([`crate::http::socket`]); which compact snapshot carries what is the
@@ -121,8 +123,9 @@ struct Connection {
     handle: MatchHandle,
     seat: Option<Seat>,
     config: Config,
-    /// Whether it is shown everything (from the spectators' frames): a spectator, or a
-    /// player whose opponent was tagged and has left the arena.
+    /// Whether it is shown everything (from the spectators' frames): a spectator. A player
+    /// whose opponent was tagged stays live, and sees what its teammates see
+    /// ([`visible_to`]).
     watching: bool,
     belief: bool,
     /// Snapshots as compact binary messages (else JSON text), and which parts each carries.
@@ -278,17 +281,6 @@ impl Connection {
                     }
                     let frame = frames.borrow_and_update().clone();
                     self.deliver(&frame, true).await?;
-                    if !self.watching && !self.finished_sent && self.tagged(&frame) {
-                        // Its opponent has left the arena: the player now watches, as
-                        // spectators do (as late as they do, or a tagged player could tell
-                        // the others where everyone is). Their events it has not had yet
-                        // come with their frames.
-                        self.watching = true;
-                        self.last_seq = self.held_seq;
-                        held = None;
-                        frames = self.handle.hub.spectate.clone();
-                        frames.mark_changed();
-                    }
                 }
                 changed = async {
                     match held.as_mut() {
@@ -341,14 +333,6 @@ impl Connection {
         }
     }
 
-    /// Whether this connection's opponent is tagged in `frame` (a robot is never removed).
-    fn tagged(&self, frame: &Frame) -> bool {
-        match self.seat.as_ref().map(|s| s.body) {
-            Some(AgentId::Opponent(slot)) => frame.opponents.get(slot).is_some_and(|o| o.tagged),
-            _ => false,
-        }
-    }
-
     /// How to close once the match has ended.
     fn ended(&self) -> End {
         if self.sock.shutdown().is_cancelled() {
@@ -396,17 +380,13 @@ impl Connection {
             // The team's belief is its own knowledge: a person on the team sees it live.
             self.keep_belief(frame);
         }
-        let ended = frame.status == MatchStatus::Finished;
         match &sight {
-            // Its opponent was tagged in this frame: the player watches from the next one
-            // on, late, and this live frame shows it nothing (unless the match has ended:
-            // then nothing is hidden).
-            Some((_, None)) if !ended => {}
             Some((you, Some(v))) => self.deliver_player(frame, *you, v).await?,
-            _ if self.compact => self.deliver_compact(frame).await?,
-            _ => self.deliver_json(frame).await?,
+            Some((_, None)) => {} // a body the match does not have: nothing to show
+            None if self.compact => self.deliver_compact(frame).await?,
+            None => self.deliver_json(frame).await?,
         }
-        let sight = sight.map(|(you, v)| (you, v.unwrap_or_else(Visible::nothing)));
+        let sight = sight.and_then(|(you, v)| Some((you, v?)));
         self.deliver_events(frame, with_events, sight.as_ref())
             .await
     }

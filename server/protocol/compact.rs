@@ -28,7 +28,8 @@
 //! ```
 //!
 //! `flags`: 1 spectator view, 2 belief, 4 slow parts, 8 finished, 16 robots won, 32
-//! opponents won, 64 `you` is a robot (a person on the robot team; else an opponent). A
+//! opponents won, 64 `you` is a robot (a person on the robot team; else an opponent), 128
+//! the teammates' view (a tagged player watching through its surviving teammates). A
 //! robot's slow part comes when its `slow` bit is set: in a spectator's slow snapshots, and
 //! for a person's own robot in their slow snapshots (its scan is their laser's view).
 //!
@@ -120,6 +121,9 @@ pub fn snapshot(
     let mut flags = 0u8;
     if spectator {
         flags |= 1;
+    }
+    if visible.is_some_and(|v| v.teammates) {
+        flags |= 128;
     }
     if belief.is_some() {
         flags |= 2;

@@ -310,7 +310,11 @@ fn snapshot_json(frame: &Frame, you: Option<AgentId>, visible: Option<&Visible>)
         time_left_s: ((frame.time_limit_s - frame.time_s).max(0.0) * 100.0).round() / 100.0,
         status: status(frame.status),
         winner: winner(frame.winner),
-        view: if spectator { "spectator" } else { "player" },
+        view: match visible {
+            None => "spectator",
+            Some(v) if v.teammates => "teammates",
+            Some(_) => "player",
+        },
         you: you_name.as_deref(),
         ack: you.and_then(|id| match id {
             AgentId::Opponent(i) => frame.opponents.get(i).map(|o| o.ack),
