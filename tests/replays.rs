@@ -278,3 +278,38 @@ async fn replays_name_what_is_wrong() {
     );
     assert_error(&s.get("/api/replays?limit=x").await, 400, "limit");
 }
+
+/// The history lists matches the last to end first (a match that started first and ended
+/// last comes first), and says what is wrong with a bad `showcase`.
+#[tokio::test]
+async fn past_matches_are_listed_in_the_order_they_ended() {
+    let dir = temp_dir("replays-end-order");
+    let s = TestServer::start_stored(&dir).await;
+    let body = json!({"map": "office", "clock": "manual", "planner": "idle"});
+    let first = s.create_match(body.clone()).await;
+    let second = s.create_match(body).await;
+    s.step(&first, 2).await;
+    s.step(&second, 2).await;
+    end(&s, &second).await;
+    // Ends are kept to the second.
+    tokio::time::sleep(std::time::Duration::from_millis(1100)).await;
+    end(&s, &first).await;
+    s.flush_history();
+    for query in ["", "?showcase=false", "?showcase=true"] {
+        let listed = s.get(&format!("/api/replays{query}")).await;
+        assert_eq!(listed.status, 200, "{}", listed.body);
+        let ids: Vec<&str> = (listed.body.as_array().unwrap().iter())
+            .map(|r| r["id"].as_str().unwrap())
+            .collect();
+        assert_eq!(ids, [first.as_str(), second.as_str()], "{query}");
+    }
+    let older = s.get(&format!("/api/replays?before={first}")).await;
+    assert_eq!(older.body.as_array().unwrap().len(), 1);
+    assert_eq!(older.body[0]["id"], second.as_str());
+    let r = s.get("/api/replays?showcase=maybe").await;
+    assert_error(&r, 400, "showcase");
+    // The browser's own request for an icon finds one.
+    let icon = reqwest::get(s.url("/favicon.ico")).await.unwrap();
+    assert_eq!(icon.status(), 200);
+    assert!(icon.text().await.unwrap().contains("<svg"));
+}

@@ -108,7 +108,7 @@ fn a_match(id: &str, n: u64, name: &str, won: bool) -> Vec<Write> {
 }
 
 fn ids(db: &mut dyn Backend, before: Option<&str>) -> Vec<String> {
-    let listed = db.list(10, before).expect("list");
+    let listed = db.list(10, before, None).expect("list");
     listed.into_iter().map(|l| l.id).collect()
 }
 
@@ -227,7 +227,7 @@ fn answers(open: &dyn Fn(Retention) -> Box<dyn Backend>) -> Answers {
         max_bytes: 1,
     });
     db.write(&a_match("m5", 5, "cy", true)).expect("write");
-    a.after_byte_limit = db.list(10, None).expect("list").len();
+    a.after_byte_limit = db.list(10, None, None).expect("list").len();
     a
 }
 
@@ -493,7 +493,7 @@ fn only_a_silent_writers_matches_are_closed_and_speaking_again_reopens_them() {
     let age = format!("UPDATE writers SET seen_at = now() - interval '1 hour' WHERE id = '{a_id}'");
     database.sql(&age);
     assert_eq!(b.close_interrupted().expect("close"), 1);
-    let cut = b.list(10, None).expect("list");
+    let cut = b.list(10, None, None).expect("list");
     assert_eq!(
         (cut[0].id.as_str(), cut[0].complete, cut[0].ticks),
         ("live", false, 7)

@@ -185,11 +185,14 @@ async function refreshLobby() {
     const people = m.pursuer_slots ? ` (${m.pursuer_slots} for people)` : "";
     const cells = [short + where, m.map, `${m.robots}${people} · ${team}`,
       `${m.opponents_left}/${m.opponents} ${m.opponent_control}`, m.players, m.spectators, left];
-    for (const c of cells) {
+    // Each cell names its column: on a phone the rows are cards, without the header.
+    const labels = ["match", "map", "robots", "opponents", "players", "spectators", "time left"];
+    cells.forEach((c, i) => {
       const td = document.createElement("td");
       td.textContent = c;
+      td.dataset.label = labels[i];
       tr.append(td);
-    }
+    });
     const td = document.createElement("td");
     const div = document.createElement("div");
     div.className = "buttons";
@@ -418,7 +421,9 @@ async function route() {
   lobbyTimer = setInterval(refreshLobby, 1000);
 }
 
-$("name").value = localStorage.getItem("lasertag.name") || "";
+// The page's modules wait for the rules (rules.js) before this runs: on a slow link a name
+// typed meanwhile is kept.
+if (!$("name").value) $("name").value = localStorage.getItem("lasertag.name") || "";
 // The form's ranges and defaults are the server's; the page offers no more opponents than
 // index.html's `max` (fewer than a match may have).
 for (const name of ["robots", "opponents"]) {

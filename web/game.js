@@ -65,6 +65,15 @@ export class Game {
     this.sound = new Sound($("hud-sound"));
     this.inSight = 0;
     $("hud-status").textContent = "connecting…";
+    // Closing the tab of a rated match one still plays counts as a loss: the browser asks
+    // first (its own words; the HUD says why).
+    this.onLeave = (e) => {
+      if (this.role === "player" && this.team === "opponents" && this.rated && !this.ended && !this.tagged) {
+        e.preventDefault();
+        e.returnValue = "";
+      }
+    };
+    window.addEventListener("beforeunload", this.onLeave);
     this.onKey = (e) => this.key(e);
     window.addEventListener("keydown", this.onKey);
     window.addEventListener("keyup", this.onKey);
@@ -93,6 +102,7 @@ export class Game {
     window.removeEventListener("keydown", this.onKey);
     window.removeEventListener("keyup", this.onKey);
     window.removeEventListener("blur", this.onBlur);
+    window.removeEventListener("beforeunload", this.onLeave);
     if (this.touch) this.touch.stop();
     this.socket.close(1000, "left");
   }
@@ -163,7 +173,8 @@ export class Game {
     this.predictor = predict ? new Predictor(w.map, this.segs, w.kinematics) : null;
     const watching = this.delay ? `spectating, delayed ${this.delay}` : "spectating";
     const playing = this.team === "robots" ? `hunting as robot ${w.you} (${w.name})` : `playing ${w.you} (${w.name})`;
-    $("hud-match").textContent = `${w.map.name} · ${w.role === "player" ? playing : watching}`;
+    const rated = this.rated && this.team === "opponents" ? " · rated: leaving before the end counts as a loss" : "";
+    $("hud-match").textContent = `${w.map.name} · ${w.role === "player" ? playing + rated : watching}`;
     $("hud-status").textContent = "";
     // On a touch screen a player drives with a stick and a tag button instead of keys.
     if (w.role === "player" && !this.touch && touchScreen()) {
@@ -184,6 +195,7 @@ export class Game {
     if (this.snaps.length && s.tick < this.snaps[this.snaps.length - 1].tick) {
       // Time went back (a reconnect to a server that resumed the match from its record):
       // start over.
+      debug.clockWentBack = (debug.clockWentBack || 0) + 1;
       this.snaps = [];
       this.offset = null;
       this.arrivals = [];

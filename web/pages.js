@@ -113,6 +113,16 @@ export async function showHistory(before) {
   try {
     const q = new URLSearchParams({ limit: String(PAGE) });
     if (before) q.set("before", before);
+    // The showcase runs all day: its runs would crowd out the matches people played.
+    const showcase = $("history-showcase");
+    showcase.checked = localStorage.getItem("lasertag.history.showcase") === "true";
+    showcase.onchange = () => {
+      localStorage.setItem("lasertag.history.showcase", String(showcase.checked));
+      trail.length = 0;
+      if (location.hash === "#/history") showHistory();
+      else location.hash = "#/history";
+    };
+    q.set("showcase", String(showcase.checked));
     rows = await getJson(`/api/replays?${q}`);
   } catch (e) {
     $("history-error").textContent = `cannot list the matches: ${e.message}`;

@@ -401,11 +401,17 @@ impl History {
         Ok(Some(self.keep(Replay::from_stored(stored)?)))
     }
 
-    /// Ended matches, newest first: at most `limit`, those before `before` when given.
-    /// Blocking with a store.
-    pub fn list(&self, limit: usize, before: Option<&str>) -> Result<Vec<Listed>, HistoryError> {
+    /// Ended matches, the last to end first: at most `limit`, those that ended before
+    /// `before` when given, and none whose id begins with `without_prefix`. Blocking with a
+    /// store. (Kept in memory, replays are kept as they end: their order is the end's.)
+    pub fn list(
+        &self,
+        limit: usize,
+        before: Option<&str>,
+        without_prefix: Option<&str>,
+    ) -> Result<Vec<Listed>, HistoryError> {
         if let Some(store) = &self.store {
-            return Ok(store.read(|b| b.list(limit, before))?);
+            return Ok(store.read(|b| b.list(limit, before, without_prefix))?);
         }
         let r = self.replays.lock().unwrap_or_else(|e| e.into_inner());
         let start = before
@@ -414,6 +420,7 @@ impl History {
         Ok(r.iter()
             .rev()
             .skip(start)
+            .filter(|x| without_prefix.is_none_or(|p| !x.meta.id.starts_with(p)))
             .take(limit)
             .map(|x| x.listed())
             .collect())

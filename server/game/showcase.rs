@@ -146,7 +146,7 @@ pub enum NoShowcase {
 pub const MAX_SHOWCASES: usize = 16;
 
 /// How a showcase's id begins.
-const SHOWCASE_PREFIX: &str = "showcase-";
+pub const SHOWCASE_PREFIX: &str = "showcase-";
 
 /// One showcase the keeper started, and when spectators saw it end.
 struct Round {

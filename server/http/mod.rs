@@ -33,7 +33,7 @@ use axum::handler::HandlerWithoutStateExt;
 use axum::http::StatusCode;
 use axum::routing::{delete, get, post};
 use tower_http::compression::CompressionLayer;
-use tower_http::services::ServeDir;
+use tower_http::services::{ServeDir, ServeFile};
 use tower_http::trace::TraceLayer;
 
 use crate::fleet::Fleet;
@@ -120,6 +120,9 @@ fn router(registry: Arc<Registry>, web_dir: PathBuf, fleet: Option<Arc<Fleet>>) 
         .route("/matches/{id}/stats", get(handlers::stats))
         .fallback(not_found)
         .method_not_allowed_fallback(method_not_allowed);
+    // Browsers ask for `/favicon.ico` by themselves (before, or without, the page's link):
+    // the page's icon answers it.
+    let favicon = ServeFile::new(web_dir.join("favicon.svg"));
     let static_files = ServeDir::new(web_dir).not_found_service(not_found.into_service());
     // The environment step, a research client's hot path: the same body and request
     // limits (and, in a fleet, the redirect to the node that hosts the match), but no
@@ -143,6 +146,7 @@ fn router(registry: Arc<Registry>, web_dir: PathBuf, fleet: Option<Arc<Fleet>>) 
         .route("/ws/matches/{id}", get(ws::upgrade))
         .route("/ws/replays/{id}", get(replay_ws::upgrade))
         .route("/metrics", get(handlers::metrics))
+        .route_service("/favicon.ico", favicon)
         .fallback_service(static_files)
         // Bodies are read (and limited) by `JsonBody`; this layer is the outer guard so a huge
         // upload is cut off even on routes that do not read bodies.

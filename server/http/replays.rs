@@ -58,7 +58,8 @@ pub(crate) fn robot(query: &HashMap<String, String>) -> Result<Option<usize>, Ap
 
 #[utoipa::path(get, path = "/api/replays",
     params(("limit" = Option<u64>, Query, minimum = 1, maximum = 500, description = "at most this many (50)"),
-           ("before" = Option<String>, Query, description = "only matches that ended before this one")),
+           ("before" = Option<String>, Query, description = "only matches that ended before this one"),
+           ("showcase" = Option<bool>, Query, description = "whether the showcase's runs are listed (true)")),
     responses((status = 200, body = [ReplayListed]), (status = 400, body = ErrorBody)))]
 pub async fn list(
     State(state): State<AppState>,
@@ -71,8 +72,17 @@ pub async fn list(
         ));
     }
     let before = query.get("before").cloned();
+    let showcases = match query.get("showcase").map(String::as_str) {
+        None | Some("true") => true,
+        Some("false") => false,
+        Some(other) => {
+            return Err(ApiError::bad_request(format!(
+                "showcase: {other:?} is not true or false"
+            )));
+        }
+    };
     Ok(Json(
-        replays::list(state.service(), limit as usize, before).await?,
+        replays::list(state.service(), limit as usize, before, showcases).await?,
     ))
 }
 

@@ -55,17 +55,20 @@ pub fn listed(l: &Listed) -> ReplayListed {
     }
 }
 
-/// At most `limit` finished matches, newest first; with `before`, those that ended before it.
+/// At most `limit` finished matches, the last to end first; with `before`, those that
+/// ended before it; without the showcase's runs unless `showcases`.
 pub async fn list(
     service: Service<'_>,
     limit: usize,
     before: Option<String>,
+    showcases: bool,
 ) -> Result<Vec<ReplayListed>, ReplaysError> {
     let history = service.registry.history.clone();
+    let without = (!showcases).then_some(crate::game::showcase::SHOWCASE_PREFIX);
     let replays = service
         .pool
         .run("listing the history", move || {
-            history.list(limit, before.as_deref())
+            history.list(limit, before.as_deref(), without)
         })
         .await??;
     Ok(replays.iter().map(listed).collect())

@@ -327,7 +327,15 @@ pub trait Backend: Send {
     }
     /// Commits `batch` in one transaction.
     fn write(&mut self, batch: &[Write]) -> Result<(), StoreError>;
-    fn list(&mut self, limit: usize, before: Option<&str>) -> Result<Vec<Listed>, StoreError>;
+    /// Ended matches, the last to end first (ties: the last to start first): at most
+    /// `limit`, those that ended before `before` when given (all, for an id it does not
+    /// hold), and none whose id begins with `without_prefix` when given.
+    fn list(
+        &mut self,
+        limit: usize,
+        before: Option<&str>,
+        without_prefix: Option<&str>,
+    ) -> Result<Vec<Listed>, StoreError>;
     fn load(&mut self, id: &str) -> Result<Option<Stored>, StoreError>;
     /// The ids of the matches this server may resume: left running by a process that has
     /// stopped, oldest first.

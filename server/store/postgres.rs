@@ -464,10 +464,15 @@ impl Backend for Postgres {
         })
     }
 
-    fn list(&mut self, limit: usize, before: Option<&str>) -> Result<Vec<Listed>, StoreError> {
+    fn list(
+        &mut self,
+        limit: usize,
+        before: Option<&str>,
+        without_prefix: Option<&str>,
+    ) -> Result<Vec<Listed>, StoreError> {
         let limit = big(limit as u64);
         self.read(|c, st| {
-            c.query(&st.list, &[&before, &limit])?
+            c.query(&st.list, &[&before, &limit, &without_prefix])?
                 .iter()
                 .map(listed)
                 .collect()

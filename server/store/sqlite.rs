@@ -251,21 +251,24 @@ pub fn finish(conn: &Connection, id: &str, ended: &Ended) -> Result<(), StoreErr
     Ok(())
 }
 
-/// Ended matches, newest first: at most `limit`, started before `before` when given.
+/// Ended matches (see [`Backend::list`]): in the order they ended, the newest first.
 pub fn list(
     conn: &Connection,
     limit: usize,
     before: Option<&str>,
+    without_prefix: Option<&str>,
 ) -> Result<Vec<Listed>, StoreError> {
     let mut stmt = conn
         .prepare_cached(&format!(
             "{LISTED} WHERE ended_at IS NOT NULL
-               AND seq < COALESCE((SELECT seq FROM matches WHERE id = ?1), 9223372036854775807)
-             ORDER BY seq DESC LIMIT ?2"
+               AND (?3 IS NULL OR substr(id, 1, length(?3)) <> ?3)
+               AND (NOT EXISTS (SELECT 1 FROM matches WHERE id = ?1 AND ended_at IS NOT NULL)
+                    OR (ended_at, seq) < (SELECT ended_at, seq FROM matches WHERE id = ?1))
+             ORDER BY ended_at DESC, seq DESC LIMIT ?2"
         ))
         .map_err(db)?;
     let rows = stmt
-        .query_map(params![before, limit as i64], listed)
+        .query_map(params![before, limit as i64, without_prefix], listed)
         .map_err(db)?;
     rows.collect::<Result<_, _>>().map_err(db)
 }
@@ -505,8 +508,13 @@ impl backend::Backend for Sqlite {
         Ok(())
     }
 
-    fn list(&mut self, limit: usize, before: Option<&str>) -> Result<Vec<Listed>, StoreError> {
-        list(&self.conn, limit, before)
+    fn list(
+        &mut self,
+        limit: usize,
+        before: Option<&str>,
+        without_prefix: Option<&str>,
+    ) -> Result<Vec<Listed>, StoreError> {
+        list(&self.conn, limit, before, without_prefix)
     }
 
     fn load(&mut self, id: &str) -> Result<Option<Stored>, StoreError> {

@@ -312,9 +312,12 @@ impl Statements {
             )?,
             list: c.prepare(&format!(
                 "{LISTED} WHERE ended_at IS NOT NULL
-                   AND seq < COALESCE((SELECT seq FROM matches WHERE id = $1),
-                                      9223372036854775807)
-                 ORDER BY seq DESC LIMIT $2"
+                   AND ($3::TEXT IS NULL OR NOT starts_with(id, $3::TEXT))
+                   AND (NOT EXISTS (SELECT 1 FROM matches
+                                    WHERE id = $1::TEXT AND ended_at IS NOT NULL)
+                        OR (ended_at, seq) < (SELECT ended_at, seq FROM matches
+                                              WHERE id = $1::TEXT))
+                 ORDER BY ended_at DESC, seq DESC LIMIT $2"
             ))?,
             // The chunks come in the same statement: an eviction between two reads cannot
             // leave a match without its inputs.

@@ -88,14 +88,14 @@ fn retention_keeps_the_newest_and_statistics_add_up() {
         .expect("write");
     }
     let listed: Vec<String> = db
-        .list(10, None)
+        .list(10, None, None)
         .expect("list")
         .into_iter()
         .map(|l| l.id)
         .collect();
     assert_eq!(listed, ["m4", "m3", "m2"]);
     let older: Vec<String> = db
-        .list(10, Some("m3"))
+        .list(10, Some("m3"), None)
         .expect("list")
         .into_iter()
         .map(|l| l.id)
@@ -126,7 +126,7 @@ fn retention_keeps_the_newest_and_statistics_add_up() {
     )
     .expect("reopen");
     db.write(&a_match("m5", 5, "cy", true)).expect("write");
-    assert!(db.list(10, None).expect("list").len() <= 1);
+    assert!(db.list(10, None, None).expect("list").len() <= 1);
     let _ = std::fs::remove_dir_all(&d);
 }
 
@@ -141,7 +141,10 @@ fn a_newer_schema_is_refused_and_an_unfinished_match_is_kept_for_resuming_or_los
     let mut writes = a_match("cut", 7, "ada", false);
     writes.pop();
     db.write(&writes).expect("write");
-    assert!(db.list(10, None).expect("list").is_empty(), "still running");
+    assert!(
+        db.list(10, None, None).expect("list").is_empty(),
+        "still running"
+    );
     assert_eq!(db.unfinished().expect("unfinished"), ["cut"]);
     let left = db
         .load_unfinished("cut")
@@ -154,7 +157,7 @@ fn a_newer_schema_is_refused_and_an_unfinished_match_is_kept_for_resuming_or_los
     assert!(db.load("cut").expect("load").is_none(), "not ended");
     db.write(&[Write::Lost { id: "cut".into() }]).expect("lost");
     assert!(db.unfinished().expect("unfinished").is_empty());
-    let cut = db.list(10, None).expect("list");
+    let cut = db.list(10, None, None).expect("list");
     assert_eq!((cut[0].complete, cut[0].ticks), (false, 7));
     assert_eq!(cut[0].reason.as_deref(), Some("lost"));
     assert_eq!(cut[0].players, ["ada"]);
@@ -301,5 +304,44 @@ fn retention_holds_the_data_directory_to_its_bytes_with_large_maps() {
     // The newest is kept; the oldest went.
     assert!(db.load("m15").expect("load").is_some());
     assert!(db.load("m0").expect("load").is_none());
+    let _ = std::fs::remove_dir_all(&d);
+}
+
+#[test]
+fn the_history_lists_matches_as_they_ended_and_can_leave_a_prefix_out() {
+    let d = dir("end-order");
+    let retention = Retention {
+        max_matches: 100,
+        max_bytes: 1 << 30,
+    };
+    let mut db = Sqlite::open(&d, retention).expect("open");
+    let ending_at = |id: &str, at| {
+        let mut w = a_match(id, 3, "ada", true);
+        if let Some(Write::Finish { ended, .. }) = w.last_mut() {
+            ended.ended_at = at;
+        }
+        w
+    };
+    // They start a, b, c and end c, b, a.
+    let all = [
+        ending_at("a", 30),
+        ending_at("showcase-b", 20),
+        ending_at("c", 10),
+    ];
+    for w in &all {
+        db.write(&w[..2]).expect("begin");
+    }
+    for w in all.iter().rev() {
+        db.write(&w[2..]).expect("finish");
+    }
+    let mut ids = |before, without| -> Vec<String> {
+        let listed = db.list(10, before, without).expect("list");
+        listed.into_iter().map(|l| l.id).collect()
+    };
+    assert_eq!(ids(None, None), ["a", "showcase-b", "c"]);
+    assert_eq!(ids(Some("a"), None), ["showcase-b", "c"]);
+    assert_eq!(ids(Some("showcase-b"), None), ["c"]);
+    assert_eq!(ids(None, Some("showcase-")), ["a", "c"]);
+    assert_eq!(ids(Some("unknown"), None).len(), 3);
     let _ = std::fs::remove_dir_all(&d);
 }

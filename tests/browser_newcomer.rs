@@ -1,0 +1,152 @@
+//! What a new player hits, in headless Chromium: after being tagged the page watches on live
+//! (the clock never goes back) and sends no more keys; a name typed while the page is still
+//! loading over a slow link is kept; on a phone the lobby fits the screen and its buttons
+//! are a thumb's size.
+//!
+//! Needs Chromium, as `tests/browser.rs`.
+
+#[path = "common/cdp.rs"]
+#[allow(dead_code)]
+mod cdp;
+mod common;
+#[path = "common/netem.rs"]
+mod netem;
+
+use std::time::Duration;
+
+use cdp::Browser;
+use common::TestServer;
+use serde_json::json;
+
+/// o0 (the page) stands 2 m behind a searching robot in a corridor, which turns and tags
+/// it; o1, in a far room, keeps the match going. The page then shows the teammates' view,
+/// live, and its input counter stops.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn after_the_tag_the_clock_never_goes_back_and_no_key_is_sent() {
+    let s = TestServer::start().await;
+    let id = s
+        .create_match(json!({"map": "office", "robots": 1, "opponents": 2,
+            "opponent_control": "human", "planner": "baseline", "time_limit_s": 120,
+            "robot_starts": [[5.0, 8.0, 0.0]],
+            "opponent_starts": [[3.0, 8.0], [22.0, 14.0]]}))
+        .await;
+    let mut b = Browser::launch().await;
+    let base = format!("http://{}", s.addr);
+    b.navigate(&format!("{base}/#/play/{id}")).await;
+    b.wait_for(
+        "__lasertag.role === 'player' && __lasertag.snapshots > 3",
+        20,
+    )
+    .await;
+    b.wait_for("__lasertag.view === 'teammates'", 60).await;
+    let status = b
+        .eval("document.getElementById('hud-status').textContent")
+        .await;
+    assert!(status.as_str().unwrap().contains("teammates"), "{status}");
+    // Keys sent in the moment between the tag and the snapshot that shows it are refused
+    // (in flight); none after.
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    let (sent, tick, errors) = (
+        b.eval("__lasertag.sent").await,
+        b.eval("__lasertag.lastTick").await.as_u64().unwrap(),
+        b.eval("__lasertag.errors.length").await,
+    );
+    tokio::time::sleep(Duration::from_secs(2)).await;
+    // Keys held down drive nothing any more: nothing is sent.
+    b.key("KeyW", true).await;
+    tokio::time::sleep(Duration::from_millis(500)).await;
+    b.key("KeyW", false).await;
+    assert_eq!(
+        b.eval("__lasertag.sent").await,
+        sent,
+        "inputs after the tag"
+    );
+    let later = b.eval("__lasertag.lastTick").await.as_u64().unwrap();
+    let ended = b.eval("Boolean(__lasertag.ended)").await == json!(true);
+    assert!(
+        later >= tick + 40 || (ended && later > tick),
+        "live: from tick {tick} to {later} in 2.5 s"
+    );
+    assert_eq!(
+        b.eval("__lasertag.clockWentBack || 0").await,
+        json!(0),
+        "the clock went back"
+    );
+    assert_eq!(
+        b.eval("__lasertag.errors.length").await,
+        errors,
+        "the server refused keys after the tag"
+    );
+}
+
+/// Over a 150 ms link the page's modules wait for the rules; a name typed meanwhile is not
+/// replaced by the one the page remembers.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_name_typed_while_the_page_loads_is_kept() {
+    let s = TestServer::start().await;
+    let net = netem::Netem::start(s.addr, netem::Conditions::rtt_ms(150)).await;
+    let base = format!("http://{}", net.addr);
+    let mut b = Browser::launch().await;
+    b.navigate(&format!("{base}/")).await;
+    b.wait_for("window.__lasertag && __lasertag.page === 'lobby'", 30)
+        .await;
+    b.eval("localStorage.setItem('lasertag.name', 'remembered')")
+        .await;
+    b.navigate(&format!("{base}/")).await;
+    // As soon as the field is there, before the page has its rules.
+    let typed = b
+        .wait_for(
+            "(() => { const n = document.getElementById('name'); if (!n) return false; \
+              const early = !(window.__lasertag && __lasertag.page === 'lobby'); \
+              n.value = 'typed-early'; return early ? 'early' : 'late'; })()",
+            30,
+        )
+        .await;
+    assert_eq!(
+        typed,
+        json!("early"),
+        "the page loaded before the name was typed"
+    );
+    b.wait_for("window.__lasertag && __lasertag.page === 'lobby'", 30)
+        .await;
+    assert_eq!(
+        b.eval("document.getElementById('name').value").await,
+        json!("typed-early")
+    );
+}
+
+/// At 390 × 844 the lobby is as wide as the screen (its matches are cards) and every button
+/// on it is at least 44 px each way.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn on_a_phone_the_lobby_fits_and_its_buttons_are_thumb_sized() {
+    let s = TestServer::start().await;
+    s.create_match(json!({"map": "office", "opponent_control": "human"}))
+        .await;
+    let mut b = Browser::launch().await;
+    b.call(
+        "Emulation.setDeviceMetricsOverride",
+        json!({"width": 390, "height": 844, "deviceScaleFactor": 2, "mobile": true}),
+    )
+    .await;
+    b.navigate(&format!("http://{}/", s.addr)).await;
+    b.wait_for(
+        "__lasertag.page === 'lobby' && document.querySelectorAll('#matches tr[data-id] button').length > 0",
+        20,
+    )
+    .await;
+    let fit = b
+        .eval(
+            "(() => { const buttons = [...document.querySelectorAll('#lobby button')]\
+               .map((e) => e.getBoundingClientRect()).filter((r) => r.width > 0);\
+             return {width: document.documentElement.scrollWidth, buttons: buttons.length,\
+               smallest: Math.min(...buttons.map((r) => Math.min(r.width, r.height)))}; })()",
+        )
+        .await;
+    assert!(fit["width"].as_f64().unwrap() <= 390.0, "{fit}");
+    assert!(fit["buttons"].as_u64().unwrap() >= 2, "{fit}");
+    assert!(fit["smallest"].as_f64().unwrap() >= 44.0, "{fit}");
+    if let Ok(dir) = std::env::var("LASERTAG_SCREENSHOTS") {
+        let png = b.screenshot().await;
+        std::fs::write(std::path::Path::new(&dir).join("lobby-phone.png"), png).unwrap();
+    }
+}
