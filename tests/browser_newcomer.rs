@@ -150,3 +150,53 @@ async fn on_a_phone_the_lobby_fits_and_its_buttons_are_thumb_sized() {
         std::fs::write(std::path::Path::new(&dir).join("lobby-phone.png"), png).unwrap();
     }
 }
+
+/// The seconds `t` of the page's address (`…?t=12.5&…`).
+fn address_seconds(address: &serde_json::Value) -> f64 {
+    let a = address.as_str().unwrap_or_default();
+    let t = a.split(['?', '&']).find_map(|p| p.strip_prefix("t="));
+    t.and_then(|t| t.parse().ok())
+        .unwrap_or_else(|| panic!("no t in {a}"))
+}
+
+/// A replay's address follows the moment shown: a link opens where it says and stays
+/// there, a seek moves it, and so does playing.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_replays_address_follows_the_moment_it_shows() {
+    let s = TestServer::start().await;
+    let id = s
+        .create_match(
+            json!({"map": "office", "clock": "manual", "planner": "idle",
+            "opponent_control": "api"}),
+        )
+        .await;
+    s.step(&id, 600).await;
+    assert_eq!(s.delete(&format!("/api/matches/{id}")).await.status, 204);
+    let mut b = Browser::launch().await;
+    let base = format!("http://{}", s.addr);
+    // Opened at 20 s (paused there), the address keeps saying 20 s.
+    b.navigate(&format!("{base}/#/replay/{id}?t=20&pov=full&belief=0"))
+        .await;
+    b.wait_for("__lasertag.lastTick === 400", 20).await;
+    tokio::time::sleep(Duration::from_millis(500)).await;
+    let at = b.eval("location.hash").await;
+    assert!((address_seconds(&at) - 20.0).abs() < 0.01, "{at}");
+    // A seek to 5 s (tick 100): the address says 5 s.
+    b.eval("(() => { const tl = document.getElementById('replay-timeline'); tl.value = '100'; tl.dispatchEvent(new Event('change')); })()")
+        .await;
+    b.wait_for("__lasertag.lastTick === 100", 10).await;
+    b.wait_for("location.hash.includes('t=5&')", 5).await;
+    // Played, the address keeps within a second of the moment shown.
+    b.eval("document.getElementById('replay-play').click()")
+        .await;
+    tokio::time::sleep(Duration::from_secs(3)).await;
+    let (shown, at) = (
+        b.eval("__lasertag.lastTick").await.as_f64().unwrap() / 20.0,
+        b.eval("location.hash").await,
+    );
+    assert!(shown > 6.0, "it plays: {shown} s");
+    assert!(
+        (address_seconds(&at) - shown).abs() <= 1.0,
+        "shown {shown} s, address {at}"
+    );
+}

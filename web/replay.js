@@ -179,7 +179,7 @@ export class Replay {
     play.title = s.playing ? "pause (Space)" : atEnd ? "play again from the start (Space)" : "play (Space)";
     for (const b of $("replay-speeds").children) b.classList.toggle("on", Number(b.dataset.speed) === s.speed);
     $("hud-status").textContent = atEnd ? this.outcome() : "";
-    if (!s.playing) this.address();
+    if (!s.playing) this.address(s.tick);
   }
 
   /** How the match ended, for the status line at the end of the replay. */
@@ -208,6 +208,12 @@ export class Replay {
     debug.snapshots++;
     debug.lastTick = s.tick;
     debug.snapView = s.view;
+    // The address follows the moment shown: at once after a jump (a seek, a mark), at most
+    // once a second while it plays (browsers throttle a page that rewrites it faster).
+    if (!forward || now - (this.addressAt || 0) >= 1000) {
+      this.addressAt = now;
+      this.address(s.tick);
+    }
     const tl = $("replay-timeline");
     if (!this.dragging) tl.value = String(s.tick);
     this.clock(s.tick);
@@ -298,19 +304,22 @@ export class Replay {
     this.send({ type: this.playing ? "pause" : "play" });
   }
 
-  /** The address of the moment shown, from this view, with the belief as it is. */
-  link() {
-    const tick = this.latest ? this.latest.tick : Number($("replay-timeline").value) || 0;
+  /** The address of the moment shown (or of `at`, a tick), from this view, with the belief
+   * as it is. */
+  link(at) {
+    const tick = at ?? (this.latest ? this.latest.tick : Number($("replay-timeline").value) || 0);
     return replayLink(this.id, {
       seconds: tick / (this.tickHz || 20), pov: this.fogged ? this.as : "full",
       belief: this.beliefOn, as: this.as,
     });
   }
 
-  /** Keeps the address bar on the moment shown when it stands still (paused, a view or the
-   * belief switched), so that the address itself is the link. */
-  address() {
-    const url = new URL(this.link());
+  /** Keeps the address bar on the moment shown (`at`, a tick, or the latest snapshot's),
+   * so that the address itself is the link; nothing before the first snapshot, which would
+   * rewrite the link the page was opened with. */
+  address(at) {
+    if (at === undefined && !this.latest) return;
+    const url = new URL(this.link(at));
     history.replaceState(null, "", url.hash);
     debug.address = url.hash;
   }
