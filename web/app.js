@@ -242,6 +242,39 @@ async function loadDifficulties() {
   sel.value = (difficulties.find((d) => d.default) || difficulties[0]).name;
   sel.onchange = showDifficulty;
   showDifficulty();
+  // The Play door offers the same teams, the last one played first.
+  const door = $("door-difficulty");
+  door.replaceChildren(...difficulties.map((d) => {
+    const o = document.createElement("option");
+    o.value = d.name;
+    o.textContent = d.rating ? `${d.name} (rated ${Math.round(d.rating)})` : d.name;
+    return o;
+  }));
+  const last = localStorage.getItem("lasertag.difficulty");
+  door.value = difficulties.some((d) => d.name === last) ? last : sel.value;
+}
+
+/** The Play door: a match of one's own against the chosen team, on the map its figures were
+ * measured on (what makes it rated), remembered for next time. */
+async function playRated() {
+  const d = difficulties.find((x) => x.name === $("door-difficulty").value);
+  if (!d) throw new Error("the robot teams are still loading; try again in a moment");
+  localStorage.setItem("lasertag.difficulty", d.name);
+  const map = d.measured.length ? d.measured[0].map : $("create").elements.map.value;
+  const m = await createMatch({ map, opponents: 1, opponent_control: "human", difficulty: d.name });
+  location.hash = `#/play/${m.id}`;
+}
+
+/** The co-op door: the chosen team plus one robot for the person, against bots that run. */
+async function huntWithRobots() {
+  const d = difficulties.find((x) => x.name === $("door-difficulty").value);
+  const robots = Math.min(rules.bounds.robots.maximum, (d ? d.robots : 2) + 1);
+  const map = d && d.measured.length ? d.measured[0].map : $("create").elements.map.value;
+  const m = await createMatch({
+    map, opponents: 2, opponent_control: "bot", opponent_bot: "evade", pursuer_slots: 1, robots,
+    ...(d ? { difficulty: d.name } : { planner: "coordinated" }),
+  });
+  location.hash = `#/play/${m.id}?team=robots`;
 }
 
 /** What each planner does, in a player's words (docs/planner.md, docs/search-planner.md). */
@@ -433,6 +466,9 @@ for (const name of ["robots", "opponents"]) {
   if (!input.max) input.max = bound.maximum;
 }
 $("create").addEventListener("submit", create);
+const lobbyError = (e) => ($("lobby-error").textContent = e.message);
+$("door-play").onclick = () => playRated().catch(lobbyError);
+$("door-hunt").onclick = () => huntWithRobots().catch(lobbyError);
 // Co-op and versus decide who the opponents are.
 $("create").elements.mode.addEventListener("change", (e) => {
   const mode = e.target.value;
