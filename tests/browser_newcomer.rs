@@ -1,7 +1,8 @@
 //! What a new player hits, in headless Chromium: after being tagged the page watches on live
 //! (the clock never goes back) and sends no more keys; a name typed while the page is still
-//! loading over a slow link is kept; on a phone the lobby fits the screen and its buttons
-//! are a thumb's size.
+//! loading over a slow link is kept; on a phone the lobby fits the screen, its buttons are a
+//! thumb's size and the arena turns to the screen's long side; the lobby shows the showcase
+//! moving and one's own rating; a replay's address follows its moment.
 //!
 //! Needs Chromium, as `tests/browser.rs`.
 
@@ -69,10 +70,11 @@ async fn after_the_tag_the_clock_never_goes_back_and_no_key_is_sent() {
     // Keys held down drive nothing any more: nothing is sent, while the match goes on.
     b.key("KeyW", true).await;
     let mut now = tagged_at;
+    let mut last = json!(null);
     for _ in 0..40 {
-        let truth = s.step(&id, 1).await;
-        now = truth["tick"].as_u64().unwrap();
-        if truth["status"] == "finished" {
+        last = s.step(&id, 1).await;
+        now = last["tick"].as_u64().unwrap();
+        if last["status"] == "finished" {
             break;
         }
         tokio::time::sleep(Duration::from_millis(20)).await;
@@ -96,6 +98,15 @@ async fn after_the_tag_the_clock_never_goes_back_and_no_key_is_sent() {
         errors,
         "the server refused keys after the tag"
     );
+    // The end card comes when the match ends in what the page shows: live, not behind.
+    while last["status"] != "finished" {
+        last = s.step(&id, 200).await;
+    }
+    let end = last["tick"].as_u64().unwrap();
+    b.wait_for("!document.getElementById('end').hidden", 10)
+        .await;
+    let shown = b.eval("__lasertag.lastTick").await.as_u64().unwrap();
+    assert!(shown + 20 >= end, "the end card at tick {shown} of {end}");
 }
 
 /// Over a 150 ms link the page's modules wait for the rules; a name typed meanwhile is not
@@ -164,10 +175,163 @@ async fn on_a_phone_the_lobby_fits_and_its_buttons_are_thumb_sized() {
     assert!(fit["width"].as_f64().unwrap() <= 390.0, "{fit}");
     assert!(fit["buttons"].as_u64().unwrap() >= 2, "{fit}");
     assert!(fit["smallest"].as_f64().unwrap() >= 44.0, "{fit}");
-    if let Ok(dir) = std::env::var("LASERTAG_SCREENSHOTS") {
-        let png = b.screenshot().await;
-        std::fs::write(std::path::Path::new(&dir).join("lobby-phone.png"), png).unwrap();
+    b.save("lobby-phone.png").await;
+}
+
+/// On a phone held upright the office (24 × 16 m) is turned to the screen's long side, half
+/// as large again as it would be upright, the page no wider than the screen, and a hint says
+/// the arena is larger sideways.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn on_a_phone_the_arena_turns_to_fill_the_screen() {
+    let s = TestServer::start().await;
+    let id = s
+        .create_match(json!({"map": "office", "opponent_control": "human"}))
+        .await;
+    let mut b = Browser::launch().await;
+    b.call(
+        "Emulation.setDeviceMetricsOverride",
+        json!({"width": 390, "height": 844, "deviceScaleFactor": 2, "mobile": true}),
+    )
+    .await;
+    b.call(
+        "Emulation.setTouchEmulationEnabled",
+        json!({"enabled": true, "maxTouchPoints": 5}),
+    )
+    .await;
+    b.navigate(&format!("http://{}/#/play/{id}", s.addr)).await;
+    b.wait_for(
+        "__lasertag.role === 'player' && __lasertag.snapshots > 0 && __lasertag.fit",
+        20,
+    )
+    .await;
+    let fit = b.eval("__lasertag.fit").await;
+    assert_eq!(fit["rot"], true, "{fit}");
+    // Upright the office would be (390 - 2 * 15.6) / 24 = 14.95 px a metre.
+    let scale = fit["s"].as_f64().unwrap();
+    assert!(scale >= 1.4 * 14.95, "{fit}");
+    let page = b
+        .eval(
+            "(() => ({width: document.documentElement.scrollWidth, touch: __lasertag.touch,\
+               hint: getComputedStyle(document.getElementById('hud-hint')).display}))()",
+        )
+        .await;
+    assert!(page["width"].as_f64().unwrap() <= 390.0, "{page}");
+    assert_eq!(page["touch"], true, "{page}");
+    assert_eq!(page["hint"], "block", "{page}");
+    b.save("arena-phone.png").await;
+    // Sideways, the office lies as it is, and no hint is shown.
+    b.call(
+        "Emulation.setDeviceMetricsOverride",
+        json!({"width": 844, "height": 390, "deviceScaleFactor": 2, "mobile": true}),
+    )
+    .await;
+    b.wait_for("__lasertag.fit.rot === false", 10).await;
+    assert_eq!(
+        b.eval("getComputedStyle(document.getElementById('hud-hint')).display")
+            .await,
+        "none"
+    );
+}
+
+/// The lobby shows the showcase in a live thumbnail (a spectator's view, drawn), its words
+/// count what that picture shows and say how late it is; leaving the lobby closes it.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_lobby_shows_the_showcase_live_and_says_what_it_shows() {
+    let s = TestServer::start().await;
+    tokio::spawn(lasertag::game::showcase::keep_running(s.registry.clone()));
+    let mut b = Browser::launch().await;
+    let base = format!("http://{}", s.addr);
+    b.navigate(&format!("{base}/")).await;
+    b.wait_for(
+        "__lasertag.thumbnail && __lasertag.thumbnail.snapshots > 10 && __lasertag.thumbnail.view",
+        30,
+    )
+    .await;
+    let shown = b.eval("__lasertag.thumbnail").await;
+    let view = &shown["view"];
+    let text = b
+        .eval("document.getElementById('showcase-text').textContent")
+        .await;
+    let words = format!(
+        "{} robots hunt {} of {} opponents on {}, shown 30 s behind the players",
+        view["robots"],
+        view["alive"],
+        view["opponents"],
+        view["map"].as_str().unwrap()
+    );
+    assert!(text.as_str().unwrap().contains(&words), "{text} / {shown}");
+    // The thumbnail is drawn: walls, on more than a tenth of its pixels.
+    let drawn = b
+        .eval(
+            "(() => { const c = document.getElementById('showcase-view');\
+               const d = c.getContext('2d').getImageData(0, 0, c.width, c.height).data;\
+               let wall = 0; for (let i = 0; i < d.length; i += 4)\
+                 if (d[i] === 0x3a && d[i + 1] === 0x45 && d[i + 2] === 0x56) wall++;\
+               return wall / (c.width * c.height); })()",
+        )
+        .await;
+    assert!(drawn.as_f64().unwrap() > 0.05, "{drawn}");
+    b.save("lobby.png").await;
+    // Its socket is a spectator's; watching the showcase closes it (one spectator: the page).
+    let id = shown["id"].as_str().unwrap().to_string();
+    b.eval("document.getElementById('showcase-watch').click()")
+        .await;
+    b.wait_for(
+        "__lasertag.role === 'spectator' && __lasertag.snapshots > 0",
+        20,
+    )
+    .await;
+    let mut spectators = 0;
+    for _ in 0..50 {
+        let listed = s.get("/api/matches").await.body;
+        spectators = listed
+            .as_array()
+            .and_then(|l| l.iter().find(|m| m["id"] == id.as_str()))
+            .and_then(|m| m["spectators"].as_u64())
+            .unwrap_or(0);
+        if spectators == 1 {
+            break;
+        }
+        tokio::time::sleep(Duration::from_millis(100)).await;
     }
+    assert_eq!(spectators, 1);
+}
+
+/// The lobby says, under the name, what a name this browser keeps stands at (or that it
+/// has no rating yet), and that a name nobody keeps here has none.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_lobby_names_ones_own_rating() {
+    let s = TestServer::start_stored(&common::temp_dir("own-rating")).await;
+    let r = s
+        .post_as("/api/names", &json!({"name": "rita"}), None)
+        .await;
+    assert_eq!(r.status, 201, "{}", r.body);
+    let token = r.body["name_token"].as_str().unwrap().to_string();
+    let mut b = Browser::launch().await;
+    let base = format!("http://{}", s.addr);
+    b.navigate(&format!("{base}/")).await;
+    b.wait_for("__lasertag.page === 'lobby'", 20).await;
+    b.eval(&format!(
+        "localStorage.setItem('lasertag.names', JSON.stringify({{rita: '{token}'}}));\
+         localStorage.setItem('lasertag.name', 'rita')"
+    ))
+    .await;
+    b.navigate(&format!("{base}/?again")).await;
+    b.wait_for(
+        "__lasertag.page === 'lobby' && document.getElementById('own-rating').textContent.includes('kept here')",
+        20,
+    )
+    .await;
+    b.eval(
+        "(() => { const n = document.getElementById('name'); n.value = 'stranger';\
+             n.dispatchEvent(new Event('input')); })()",
+    )
+    .await;
+    b.wait_for(
+        "document.getElementById('own-rating').textContent.includes('once it has played')",
+        10,
+    )
+    .await;
 }
 
 /// The seconds `t` of the page's address (`…?t=12.5&…`).

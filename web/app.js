@@ -9,6 +9,7 @@ import { Game, debug } from "./game.js";
 import { Replay } from "./replay.js";
 import { showHistory, showLeaderboard, showPlayer } from "./pages.js";
 import { rules } from "./rules.js";
+import { Thumbnail } from "./thumbnail.js";
 
 const $ = (id) => document.getElementById(id);
 let game = null;
@@ -148,6 +149,39 @@ function button(text, onclick, cls) {
   return b;
 }
 
+/** The showcase the lobby offers (its listing), and its live thumbnail. */
+let showcase = null;
+const thumbnail = new Thumbnail($("showcase-view"), (view) => showcase && teaser(showcase, view));
+
+/** The words beside the thumbnail: what its picture shows (`view`, as late as spectators see
+ * the match) once it shows something, else the listing's live counts. */
+function teaser(show, view) {
+  const seat = show.free_slots ? " Play now takes over one of its bots." : "";
+  $("showcase-text").textContent = view
+    ? `${view.robots} robots hunt ${view.alive} of ${view.opponents} opponents on ${view.map}` +
+      (view.delayS ? `, shown ${Math.round(view.delayS)} s behind the players.` : ".") + seat
+    : `${show.robots} robots hunt ${show.opponents} opponents on ${show.map}, ` +
+      `${fmtTime(show.time_limit_s - show.time_s)} left.${seat}`;
+}
+
+/** The lobby's line under the name: the rating of a name this browser keeps. */
+async function showOwnRating() {
+  const name = $("name").value.trim();
+  const out = $("own-rating");
+  if (!name || !keptNames()[name]) {
+    out.textContent = name ? "a name is kept, and rated, once it has played here" : "";
+    return;
+  }
+  const r = await fetch(`/api/players/${encodeURIComponent(name)}`).catch(() => null);
+  if (name !== $("name").value.trim()) return;
+  const p = r && r.ok ? await r.json().catch(() => null) : null;
+  const rating = p && p.rating;
+  out.textContent = rating
+    ? `your rating ${Math.round(rating.rating)} ± ${Math.round(2 * rating.deviation)} over ${rating.matches} rated match${rating.matches === 1 ? "" : "es"}`
+    : "your name is kept here; play a rated match for a rating";
+  debug.ownRating = rating ? Math.round(rating.rating) : null;
+}
+
 async function refreshLobby() {
   let matches;
   try {
@@ -159,16 +193,20 @@ async function refreshLobby() {
   debug.matches = matches.length;
   // Several showcases run while people fill them: offer one with a free slot.
   const shows = matches.filter((m) => m.id.startsWith("showcase-") && m.status === "running");
-  const show = shows.find((m) => m.free_slots > 0) || shows[0];
+  // The one the thumbnail already shows stays while it runs; else one with a free slot.
+  const show = shows.find((m) => m.id === thumbnail.id) || shows.find((m) => m.free_slots > 0) || shows[0];
   $("showcase").hidden = !show;
   if (show) {
-    $("showcase-text").textContent =
-      `${show.robots} robots hunt ${show.opponents_left} opponents on ${show.map} — ${fmtTime(show.time_limit_s - show.time_s)} left. ` +
-      (show.free_slots ? "Take over a bot and play." : "");
+    if (show.id !== thumbnail.id) teaser(show, null);
+    thumbnail.show(show.id, homes.get(show.id) || "");
+    showcase = show;
     $("showcase-watch").onclick = () => (location.hash = `#/watch/${show.id}`);
+    $("showcase-view").onclick = $("showcase-watch").onclick;
     // Join-or-create: the server seats the visitor in a showcase with a free slot, or in
     // one more it starts when every one is full.
     $("showcase-play").onclick = () => playShowcase().catch((e) => ($("lobby-error").textContent = e.message));
+  } else {
+    thumbnail.stop();
   }
   const rows = matches.map((m) => {
     const tr = document.createElement("tr");
@@ -377,6 +415,7 @@ async function replay(g) {
 async function route() {
   if (game) { game.stop(); game = null; }
   clearInterval(lobbyTimer);
+  thumbnail.stop();
   const [hashPath, hashQuery] = location.hash.split("?");
   const params = new URLSearchParams(hashQuery || "");
   const [, page, id] = hashPath.split("/");
@@ -451,6 +490,7 @@ async function route() {
   // The presets choose their map, so the maps are there first.
   loadMaps().then(loadDifficulties);
   refreshLobby();
+  showOwnRating();
   lobbyTimer = setInterval(refreshLobby, 1000);
 }
 
@@ -466,6 +506,11 @@ for (const name of ["robots", "opponents"]) {
   if (!input.max) input.max = bound.maximum;
 }
 $("create").addEventListener("submit", create);
+let ratingTimer = null;
+$("name").addEventListener("input", () => {
+  clearTimeout(ratingTimer);
+  ratingTimer = setTimeout(showOwnRating, 400);
+});
 const lobbyError = (e) => ($("lobby-error").textContent = e.message);
 $("door-play").onclick = () => playRated().catch(lobbyError);
 $("door-hunt").onclick = () => huntWithRobots().catch(lobbyError);

@@ -186,7 +186,7 @@ export class Game {
     $("controls").hidden = Boolean(this.touch);
     $("controls").innerHTML = w.role === "player"
       ? `<kbd>W</kbd><kbd>A</kbd><kbd>S</kbd><kbd>D</kbd> / arrows move and turn · <kbd>Space</kbd> tag · <kbd>B</kbd> ${this.team === "robots" ? "your team's" : "robots'"} belief · <kbd>M</kbd> sound`
-      : `spectating${this.delay ? ` (delayed ${this.delay}: people are playing)` : ""}: true positions, scans, goals and belief · <kbd>B</kbd> belief on/off`;
+      : `spectating${this.delay ? ` (${this.delay}: a match people can play is shown late)` : ""}: true positions, scans, goals and belief · <kbd>B</kbd> belief on/off`;
   }
 
   snapshot(s) {
@@ -463,7 +463,7 @@ export class Game {
     }
     const left = Math.max(0, Math.ceil((this.viewStartsAt - now) / 1000));
     $("hud-status").textContent =
-      `people are playing, so spectators see this match ${this.delay}: it starts to move in ${left} s (everyone at their starts until then)`;
+      `people can play this match, so spectators see it ${this.delay}: it starts to move in ${left} s (everyone at their starts until then)`;
   }
 
   frame(now) {
@@ -501,6 +501,7 @@ export class Game {
       belief: this.beliefOn ? this.belief : null, beams: this.beams, now,
     });
     debug.drawn = counts;
+    debug.fit = { rot: v.rot, s: v.s };
     debug.drawnAgents = [...robotsDrawn, ...opponents].map((a) => [a.id, +a.x.toFixed(2), +a.y.toFixed(2)]);
     debug.frames = (debug.frames || 0) + 1;
   }

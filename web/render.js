@@ -35,23 +35,50 @@ export function roleColor(id) {
   return ROLE_PALETTE[((id % ROLE_PALETTE.length) + ROLE_PALETTE.length) % ROLE_PALETTE.length];
 }
 
-/** World-to-screen transform fitting the map in the canvas (y up in the world). */
-export function fit(canvas, map) {
+/** World-to-screen transform fitting the map in the canvas (y up in the world). A map whose
+ * long side lies across a tall screen (a phone held upright) is turned a quarter turn when
+ * that shows it markedly larger (`rot`): `x`/`y` then place points in the turned frame,
+ * which `draw` turns back with the canvas's own transform; text stays upright. Room is kept
+ * for the HUD's lines unless `hud` is false (a thumbnail has none). */
+export function fit(canvas, map, { hud: withHud = true } = {}) {
   const dpr = window.devicePixelRatio || 1;
   const w = canvas.clientWidth, h = canvas.clientHeight;
   if (canvas.width !== Math.round(w * dpr) || canvas.height !== Math.round(h * dpr)) {
     canvas.width = Math.round(w * dpr);
     canvas.height = Math.round(h * dpr);
   }
-  const margin = 28;
-  const s = Math.min((w - 2 * margin) / map.width, (h - 2 * margin - 40) / map.height);
-  const ox = (w - map.width * s) / 2;
-  const oy = (h - map.height * s) / 2 + 12;
+  // Room for the HUD's line above and the controls below (a small canvas keeps less).
+  const margin = Math.min(28, 0.04 * Math.min(w, h));
+  const hud = withHud ? Math.min(40, 0.08 * Math.max(w, h)) : 0;
+  const upright = Math.min((w - 2 * margin) / map.width, (h - 2 * margin - hud) / map.height);
+  // Turned, the screen's height (with the HUD's room) runs along the map's width.
+  const turned = Math.min((h - 2 * margin - hud) / map.width, (w - 2 * margin) / map.height);
+  const rot = turned > upright * 1.15;
+  const [fw, fh] = rot ? [h, w] : [w, h];
+  const s = rot ? turned : upright;
+  const ox = (fw - map.width * s) / 2 + (rot ? hud / 3 : 0);
+  const oy = (fh - map.height * s) / 2 + (rot ? 0 : hud / 3);
   return {
-    dpr, s, ox, oy,
+    dpr, s, ox, oy, rot, width: w,
     x: (x) => ox + x * s,
     y: (y) => oy + (map.height - y) * s,
   };
+}
+
+/** Sets the canvas's transform for frame `v`: device pixels, and the quarter turn if any
+ * (the turned frame's x runs down the screen, its y from right to left). */
+function frame(ctx, v) {
+  if (v.rot) ctx.setTransform(0, v.dpr, -v.dpr, 0, v.width * v.dpr, 0);
+  else ctx.setTransform(v.dpr, 0, 0, v.dpr, 0, 0);
+}
+
+/** Runs `text()` with the origin at (px, py) of frame `v` and the text upright on screen. */
+function upright(ctx, v, px, py, text) {
+  ctx.save();
+  ctx.translate(px, py);
+  if (v.rot) ctx.rotate(-Math.PI / 2);
+  text();
+  ctx.restore();
 }
 
 function path(ctx, v, pts) {
@@ -81,15 +108,20 @@ function heading(ctx, v, x, y, theta, len, color) {
   ctx.stroke();
 }
 
-function label(ctx, v, x, y, text, color, dy = -0.42) {
+function label(ctx, v, x, y, text, color, above = 0.42) {
   ctx.font = "600 12px system-ui, sans-serif";
   ctx.textAlign = "center";
   ctx.textBaseline = "middle";
   ctx.lineWidth = 3;
   ctx.strokeStyle = "rgba(0,0,0,0.75)";
-  ctx.strokeText(text, v.x(x), v.y(y - dy));
   ctx.fillStyle = color;
-  ctx.fillText(text, v.x(x), v.y(y - dy));
+  // Above the agent on screen, whichever way the map is turned.
+  const up = above * v.s;
+  const [px, py] = v.rot ? [v.x(x) - up, v.y(y)] : [v.x(x), v.y(y) - up];
+  upright(ctx, v, px, py, () => {
+    ctx.strokeText(text, 0, 0);
+    ctx.fillText(text, 0, 0);
+  });
 }
 
 /**
@@ -101,9 +133,10 @@ export function draw(ctx, v, scene) {
   const counts = {
     walls: 0, robots: 0, opponents: 0, particles: 0, roles: 0, fans: 0, beams: 0, localisation: 0,
   };
-  ctx.setTransform(v.dpr, 0, 0, v.dpr, 0, 0);
+  ctx.setTransform(1, 0, 0, 1, 0, 0);
   ctx.fillStyle = "#0d1117";
   ctx.fillRect(0, 0, ctx.canvas.width, ctx.canvas.height);
+  frame(ctx, v);
 
   // Floor with a one-metre grid.
   ctx.fillStyle = COLORS.floor;
@@ -191,7 +224,7 @@ export function draw(ctx, v, scene) {
       ctx.textAlign = "center";
       ctx.textBaseline = "middle";
       ctx.fillStyle = color;
-      ctx.fillText(String(role.count), v.x(mx), v.y(my) + 0.5);
+      upright(ctx, v, v.x(mx), v.y(my), () => ctx.fillText(String(role.count), 0, 0.5));
     }
   }
 
