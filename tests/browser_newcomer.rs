@@ -145,8 +145,8 @@ async fn a_name_typed_while_the_page_loads_is_kept() {
     );
 }
 
-/// At 390 × 844 the lobby is as wide as the screen (its matches are cards) and every button
-/// on it is at least 44 px each way.
+/// At 390 × 844 the lobby is as wide as the screen (its matches are cards), every button on
+/// it is at least 44 px each way, and no text is under 12 px.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn on_a_phone_the_lobby_fits_and_its_buttons_are_thumb_sized() {
     let s = TestServer::start().await;
@@ -175,6 +175,16 @@ async fn on_a_phone_the_lobby_fits_and_its_buttons_are_thumb_sized() {
     assert!(fit["width"].as_f64().unwrap() <= 390.0, "{fit}");
     assert!(fit["buttons"].as_u64().unwrap() >= 2, "{fit}");
     assert!(fit["smallest"].as_f64().unwrap() >= 44.0, "{fit}");
+    // Legible text (Lighthouse's rule): no visible words of the lobby under 12 px.
+    let small = b
+        .eval(
+            "(() => [...document.querySelectorAll('#lobby *')].filter((e) =>\
+               [...e.childNodes].some((n) => n.nodeType === 3 && n.textContent.trim()) &&\
+               e.getBoundingClientRect().width > 0 &&\
+               parseFloat(getComputedStyle(e).fontSize) < 12).map((e) => e.outerHTML.slice(0, 80)))()",
+        )
+        .await;
+    assert_eq!(small, json!([]), "text under 12 px");
     b.save("lobby-phone.png").await;
 }
 
