@@ -36,7 +36,8 @@ COPY web web
 RUN mkdir /app/data && chown lasertag:lasertag /app/data
 VOLUME /app/data
 USER lasertag
-EXPOSE 8080
+# HTTP and WebSockets over TCP, WebTransport over UDP, on the same port.
+EXPOSE 8080/tcp 8080/udp
 # Listen on every interface inside the container; publish the port with `-p`.
 ENV LASERTAG_ADDR=0.0.0.0:8080 \
     LASERTAG_MAPS=/app/maps \

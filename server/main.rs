@@ -10,6 +10,7 @@ use std::time::Duration;
 use clap::{Parser, Subcommand};
 use lasertag::fleet::Fleet;
 use lasertag::game::Registry;
+use lasertag::http::transport::Source;
 use lasertag::maps::MapStore;
 
 #[derive(Debug, Parser)]
@@ -60,6 +61,17 @@ struct ServeArgs {
     /// Start without the showcase match.
     #[arg(long, env = "LASERTAG_NO_SHOWCASE")]
     no_showcase: bool,
+    /// Serve no WebTransport (HTTP/3 over UDP on the same port): pages then play over
+    /// WebSockets only.
+    #[arg(long, env = "LASERTAG_NO_WEBTRANSPORT")]
+    no_webtransport: bool,
+    /// The certificate (PEM, a chain) for WebTransport, with `--tls-key`; without them the
+    /// server makes its own, which browsers pin by its hash (`GET /api/transport`).
+    #[arg(long, env = "LASERTAG_TLS_CERT", requires = "tls_key")]
+    tls_cert: Option<PathBuf>,
+    /// The private key (PEM) of `--tls-cert`.
+    #[arg(long, env = "LASERTAG_TLS_KEY", requires = "tls_cert")]
+    tls_key: Option<PathBuf>,
     #[command(flatten)]
     history: lasertag::store::StoreArgs,
     #[command(flatten)]
@@ -243,10 +255,17 @@ async fn serve(args: ServeArgs) -> Result<(), String> {
     // On a shared store, the matches other servers can no longer run are taken over here.
     tokio::spawn(lasertag::game::resume::adopt_forever(registry.clone()));
     tracing::info!("serving http://{local}");
-    let app = match &fleet {
-        Some(fleet) => lasertag::http::app_in_fleet(registry.clone(), args.web, fleet.clone()),
-        None => lasertag::http::app(registry.clone(), args.web),
-    };
+    let (app, state) = lasertag::http::app_and_state(registry.clone(), args.web, fleet.clone());
+    if !args.no_webtransport {
+        let source = match (args.tls_cert, args.tls_key) {
+            (Some(cert), Some(key)) => Source::Files { cert, key },
+            _ => Source::SelfSigned,
+        };
+        // Beside the TCP listener, on the same address and port in UDP.
+        lasertag::http::transport::start(state, local, source)
+            .await
+            .map_err(|e| e.to_string())?;
+    }
     let limits = lasertag::http::ConnectionLimits::of(&registry).map_err(|e| e.to_string())?;
     // Under Agones, Ready once listening; Health, the matches counter and Allocated after.
     #[cfg(feature = "agones")]

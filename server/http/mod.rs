@@ -22,6 +22,7 @@ mod rules;
 mod serve;
 pub mod socket;
 mod state;
+pub mod transport;
 pub mod ws;
 
 use std::path::PathBuf;
@@ -51,17 +52,31 @@ pub use state::AppState;
 /// `config`. Serve it with `into_make_service_with_connect_info::<SocketAddr>()`: the
 /// per-address limits key on the peer's address.
 pub fn app(registry: Arc<Registry>, web_dir: PathBuf) -> Router {
-    router(registry, web_dir, None)
+    router(registry, web_dir, None).0
+}
+
+/// [`app`] (or [`app_in_fleet`], with `fleet`) and the state its handlers share, for
+/// [`transport::start`] to serve the same sockets over WebTransport.
+pub fn app_and_state(
+    registry: Arc<Registry>,
+    web_dir: PathBuf,
+    fleet: Option<Arc<Fleet>>,
+) -> (Router, AppState) {
+    router(registry, web_dir, fleet)
 }
 
 /// [`app`] for a node of a fleet: the listing shows every node's matches, a request for a
 /// match another node hosts is redirected there, a new match may be placed elsewhere, and
 /// the API answers cross-origin requests (see [`fleet`]).
 pub fn app_in_fleet(registry: Arc<Registry>, web_dir: PathBuf, fleet: Arc<Fleet>) -> Router {
-    router(registry, web_dir, Some(fleet))
+    router(registry, web_dir, Some(fleet)).0
 }
 
-fn router(registry: Arc<Registry>, web_dir: PathBuf, fleet: Option<Arc<Fleet>>) -> Router {
+fn router(
+    registry: Arc<Registry>,
+    web_dir: PathBuf,
+    fleet: Option<Arc<Fleet>>,
+) -> (Router, AppState) {
     let max_body = registry.config.max_body_bytes;
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
     let in_fleet = fleet.is_some();
@@ -75,11 +90,13 @@ fn router(registry: Arc<Registry>, web_dir: PathBuf, fleet: Option<Arc<Fleet>>) 
         pool: Pool::new(cores),
         replays,
         fleet,
+        transport: Arc::default(),
     };
     let api = Router::new()
         .route("/health", get(handlers::health))
         .route("/openapi.json", get(openapi::document))
         .route("/rules", get(rules::rules))
+        .route("/transport", get(transport::transport))
         .route("/difficulties", get(rules::difficulties))
         .route("/maps", get(handlers::list_maps).post(handlers::add_map))
         .route(
@@ -171,7 +188,7 @@ fn router(registry: Arc<Registry>, web_dir: PathBuf, fleet: Option<Arc<Fleet>>) 
         // page reads neither without it).
         router = router.layer(fleet::cors());
     }
-    router.with_state(state)
+    (router.with_state(state.clone()), state)
 }
 
 async fn not_found(OriginalUri(uri): OriginalUri) -> ApiError {

@@ -18,6 +18,7 @@ use crate::protocol::*;
         handlers::health,
         crate::http::rules::rules,
         crate::http::rules::difficulties,
+        crate::http::transport::transport,
         handlers::list_maps,
         handlers::get_map,
         handlers::add_map,
@@ -50,6 +51,9 @@ use crate::protocol::*;
     components(schemas(
         ErrorBody,
         Health,
+        crate::http::transport::TransportReply,
+        crate::http::transport::WebTransportAt,
+        crate::http::transport::CertificateHash,
         rules::Rules,
         crate::protocol::difficulties::DifficultyDto,
         crate::protocol::difficulties::MeasuredDto,

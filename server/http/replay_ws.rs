@@ -275,7 +275,12 @@ impl Viewer {
             })
             .sum();
         self.sock.count_snapshot(bytes);
-        for m in shown.messages.iter().cloned() {
+        // The snapshot first (a datagram over WebTransport), then the ticks' events.
+        let mut messages = shown.messages.iter().cloned();
+        if let Some(snapshot) = messages.next() {
+            self.sock.snapshot(snapshot).await?;
+        }
+        for m in messages {
             self.sock.send(m).await?;
         }
         Ok(shown)

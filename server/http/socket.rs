@@ -1,8 +1,9 @@
-//! What every WebSocket of the server does alike (`ws`: a live match, `replay_ws`: a
-//! replay): the checks before the upgrade that are not about what is shown, the counts a
-//! connection holds while it is open, and a [`Socket`] that sends with a time-out, caps,
-//! rate-limits and parses what the client sends (every bad message gets an `error`; a client
-//! that keeps sending them is closed, close code 1008), and closes with a code and a reason.
+//! What every socket of the server does alike (`ws`: a live match, `replay_ws`: a replay),
+//! over either carrier (a WebSocket, or a WebTransport session: [`Carrier`]): the checks
+//! before the upgrade that are not about what is shown, the counts a connection holds while
+//! it is open, and a [`Socket`] that sends with a time-out, caps, rate-limits and parses what
+//! the client sends (every bad message gets an `error`; a client that keeps sending them is
+//! closed, close code 1008), and closes with a code and a reason.
 //!
 //! Each socket's loop is its own (what it waits on differs); it reads with [`Socket::recv`],
 //! which is cancel-safe in a `select!`, and hands what came to [`Socket::read`].
@@ -22,6 +23,8 @@ use axum::http::request::Parts;
 use axum::response::{IntoResponse, Response};
 use tokio_util::sync::CancellationToken;
 use tracing::Instrument;
+
+use crate::http::transport::session::{Refusable, Session};
 
 use crate::game::{ConnectionGuard, Registry};
 use crate::http::error::ApiError;
@@ -98,7 +101,22 @@ pub struct Asked {
     pub id: String,
     pub query: HashMap<String, String>,
     pub ip: IpAddr,
-    pub ws: Result<WebSocketUpgrade, WebSocketUpgradeRejection>,
+    pub ws: Pending,
+}
+
+/// The carrier a socket is asked over, before it is admitted.
+pub enum Pending {
+    /// A WebSocket upgrade (or why the request is none).
+    WebSocket(Result<WebSocketUpgrade, WebSocketUpgradeRejection>),
+    /// A WebTransport session's request (`http::transport`), which refuses it with the
+    /// error's status when the socket is not admitted.
+    WebTransport(Refusable),
+}
+
+/// The carrier of an admitted socket.
+pub enum Carrier {
+    WebSocket(Box<WebSocket>),
+    WebTransport(Box<Session>),
 }
 
 impl FromRequestParts<AppState> for Asked {
@@ -114,7 +132,7 @@ impl FromRequestParts<AppState> for Asked {
         let ClientIp(ip) = ClientIp::from_request_parts(parts, state)
             .await
             .unwrap_or_else(|never| match never {});
-        let ws = WebSocketUpgrade::from_request_parts(parts, state).await;
+        let ws = Pending::WebSocket(WebSocketUpgrade::from_request_parts(parts, state).await);
         Ok(Asked { id, query, ip, ws })
     }
 }
@@ -152,20 +170,26 @@ pub fn compact_format(query: &HashMap<String, String>) -> Result<bool, ApiError>
     }
 }
 
-/// An upgrade request that is a WebSocket's, counted against its address's open sockets.
+/// An upgrade request that is a socket's, counted against its address's open sockets.
 pub struct Admitted {
-    ws: WebSocketUpgrade,
+    ws: Ready,
     address: AddressConnection,
 }
 
+enum Ready {
+    WebSocket(WebSocketUpgrade),
+    WebTransport(Refusable),
+}
+
 /// 400 for a request that is no WebSocket upgrade, 429 for an address with all the sockets
-/// it may have open.
-pub fn admit(
-    state: &AppState,
-    ip: IpAddr,
-    ws: Result<WebSocketUpgrade, WebSocketUpgradeRejection>,
-) -> Result<Admitted, ApiError> {
-    let ws = ws.map_err(|e| ApiError::bad_request(format!("not a WebSocket upgrade: {e}")))?;
+/// it may have open (WebSockets and WebTransport sessions counted together).
+pub fn admit(state: &AppState, ip: IpAddr, ws: Pending) -> Result<Admitted, ApiError> {
+    let ws = match ws {
+        Pending::WebSocket(ws) => Ready::WebSocket(
+            ws.map_err(|e| ApiError::bad_request(format!("not a WebSocket upgrade: {e}")))?,
+        ),
+        Pending::WebTransport(request) => Ready::WebTransport(request),
+    };
     let registry = &state.registry;
     let max = registry.config.max_connections_per_address;
     let Some(address) = state.limits.open_connection(ip, max) else {
@@ -173,7 +197,7 @@ pub fn admit(
         return Err(ApiError::new(
             StatusCode::TOO_MANY_REQUESTS,
             format!(
-                "too many connections from {ip}: at most {max} WebSockets open at once per address"
+                "too many connections from {ip}: at most {max} WebSockets and WebTransport sessions open at once per address"
             ),
         ));
     };
@@ -192,7 +216,8 @@ pub struct Manner {
 
 impl Admitted {
     /// Upgrades, with messages capped at the hard size, and serves the connection with
-    /// `serve` in its own task, inside `span`.
+    /// `serve` in its own task, inside `span`. A WebTransport session is accepted in that
+    /// task (the response is then only the handler's: nobody reads it).
     pub fn open<F, Fut>(
         self,
         state: &AppState,
@@ -207,18 +232,36 @@ impl Admitted {
         let registry = state.registry.clone();
         let hard = registry.config.hard_message_bytes();
         let address = self.address;
-        self.ws
-            .max_message_size(hard)
-            .max_frame_size(hard)
-            .read_buffer_size(READ_BUFFER_BYTES)
-            .on_upgrade(move |socket| {
-                async move {
-                    tracing::debug!("connected");
-                    serve(Socket::new(socket, &registry, manner, address)).await;
-                    tracing::debug!("disconnected");
-                }
-                .instrument(span)
-            })
+        match self.ws {
+            Ready::WebSocket(ws) => ws
+                .max_message_size(hard)
+                .max_frame_size(hard)
+                .read_buffer_size(READ_BUFFER_BYTES)
+                .on_upgrade(move |socket| {
+                    async move {
+                        tracing::debug!("connected");
+                        let carrier = Carrier::WebSocket(Box::new(socket));
+                        serve(Socket::new(carrier, &registry, manner, address)).await;
+                        tracing::debug!("disconnected");
+                    }
+                    .instrument(span)
+                }),
+            Ready::WebTransport(request) => {
+                tokio::spawn(
+                    async move {
+                        let Some(session) = request.accept(hard).await else {
+                            return;
+                        };
+                        tracing::debug!("connected over WebTransport");
+                        let carrier = Carrier::WebTransport(Box::new(session));
+                        serve(Socket::new(carrier, &registry, manner, address)).await;
+                        tracing::debug!("disconnected");
+                    }
+                    .instrument(span),
+                );
+                StatusCode::OK.into_response()
+            }
+        }
     }
 }
 
@@ -234,9 +277,9 @@ struct Guards {
     _client: ClientGuard,
 }
 
-/// One client's WebSocket, with its limits.
+/// One client's socket, with its limits.
 pub struct Socket {
-    socket: WebSocket,
+    carrier: Carrier,
     manner: Manner,
     metrics: Metrics,
     shutdown: CancellationToken,
@@ -253,14 +296,14 @@ pub struct Socket {
 
 impl Socket {
     fn new(
-        socket: WebSocket,
+        carrier: Carrier,
         registry: &Registry,
         manner: Manner,
         address: AddressConnection,
     ) -> Socket {
         let cfg = &registry.config;
         Socket {
-            socket,
+            carrier,
             metrics: registry.metrics.clone(),
             shutdown: registry.shutdown.clone(),
             resumes: registry.suspends_on_stop(),
@@ -297,9 +340,18 @@ impl Socket {
             .inc_by(bytes as u64);
     }
 
+    /// Whether snapshots may be lost on the way (they go as datagrams): each then stands on
+    /// its own, never a delta against one the client may not have.
+    pub fn lossy(&self) -> bool {
+        matches!(self.carrier, Carrier::WebTransport(_))
+    }
+
     /// The client's next message, as it came: hand it to [`Socket::read`]. Cancel-safe.
     pub async fn recv(&mut self) -> Option<Result<Message, axum::Error>> {
-        self.socket.recv().await
+        match &mut self.carrier {
+            Carrier::WebSocket(socket) => socket.recv().await,
+            Carrier::WebTransport(session) => session.recv().await,
+        }
     }
 
     /// What the client sent, checked: a text message within the size cap and the rate
@@ -380,9 +432,31 @@ impl Socket {
 
     /// Sends `message`, or ends the connection if the client cannot take it in time.
     pub async fn send(&mut self, message: Message) -> Result<(), End> {
-        match tokio::time::timeout(SEND_TIMEOUT, self.socket.send(message)).await {
+        let sent = match &mut self.carrier {
+            Carrier::WebSocket(socket) => tokio::time::timeout(SEND_TIMEOUT, socket.send(message))
+                .await
+                .map(|r| r.map_err(|e| e.to_string())),
+            Carrier::WebTransport(session) => {
+                tokio::time::timeout(SEND_TIMEOUT, session.send(message)).await
+            }
+        };
+        match sent {
             Ok(Ok(())) => Ok(()),
             _ => Err(End::Gone),
+        }
+    }
+
+    /// Sends a snapshot: as [`Socket::send`] over a WebSocket; over WebTransport as a datagram
+    /// when it fits one (a client that does not read loses datagrams, and holds nothing up).
+    pub async fn snapshot(&mut self, message: Message) -> Result<(), End> {
+        match &mut self.carrier {
+            Carrier::WebSocket(_) => self.send(message).await,
+            Carrier::WebTransport(session) => {
+                match tokio::time::timeout(SEND_TIMEOUT, session.send_snapshot(message)).await {
+                    Ok(Ok(())) => Ok(()),
+                    _ => Err(End::Gone),
+                }
+            }
         }
     }
 
@@ -401,15 +475,23 @@ impl Socket {
         } else {
             self.manner.close_drain
         };
+        let socket = match &mut self.carrier {
+            Carrier::WebSocket(socket) => socket,
+            Carrier::WebTransport(session) => {
+                return session
+                    .close(code, &truncate(&reason, REASON_BYTES), drain)
+                    .await;
+            }
+        };
         let close = Message::Close(Some(CloseFrame {
             code,
             reason: Utf8Bytes::from(truncate(&reason, REASON_BYTES)),
         }));
-        if let Ok(Ok(())) = tokio::time::timeout(SEND_TIMEOUT, self.socket.send(close)).await {
+        if let Ok(Ok(())) = tokio::time::timeout(SEND_TIMEOUT, socket.send(close)).await {
             // Finish the closing handshake: read (and drop) what the client still sends
             // until its close, so the socket is not reset under the close frame.
             let drain_fut = async {
-                while let Some(Ok(m)) = self.socket.recv().await {
+                while let Some(Ok(m)) = socket.recv().await {
                     if matches!(m, Message::Close(_)) {
                         break;
                     }

@@ -18,6 +18,8 @@ pub struct AppState {
     pub replays: ReplayPool,
     /// This node's part in a fleet (`--fleet`), if it is in one.
     pub fleet: Option<Arc<Fleet>>,
+    /// Where WebTransport is served, once [`crate::http::transport::start`] runs.
+    pub transport: Arc<crate::http::transport::published::Published>,
 }
 
 impl AppState {

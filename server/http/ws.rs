@@ -150,6 +150,7 @@ impl Connection {
             Seated::Player(s) => (Some(s), None),
             Seated::Spectator(s) => (None, Some(s)),
         };
+        let deltas = !sock.lossy();
         Connection {
             sock,
             watching: seat.is_none(),
@@ -159,7 +160,8 @@ impl Connection {
                 .as_ref()
                 .is_none_or(|s| matches!(s.body, AgentId::Robot(_))),
             compact: false,
-            schedule: Schedule::default(),
+            // Datagrams may be lost: no delta against one the client may not have.
+            schedule: Schedule::new(deltas),
             seat,
             handle,
             config,
@@ -399,14 +401,14 @@ impl Connection {
         let whole = wire::spectator_compact(frame, parts.belief, parts.slow);
         let bytes = self.schedule.sent(frame.tick, parts, whole);
         self.sock.count_snapshot(bytes.len());
-        self.sock.send(Message::Binary(bytes)).await
+        self.sock.snapshot(Message::Binary(bytes)).await
     }
 
     /// A spectator's snapshot of `frame`, as JSON.
     async fn deliver_json(&mut self, frame: &Frame) -> Result<(), End> {
         let snapshot = wire::spectator_snapshot(frame, self.belief);
         self.sock.count_snapshot(snapshot.len());
-        self.sock.text(snapshot).await
+        self.sock.snapshot(Message::Text(snapshot)).await
     }
 
     /// A player's snapshot of the live `frame`: what `visible` holds, and the belief when
@@ -437,13 +439,13 @@ impl Connection {
             let whole = compact::snapshot(frame, Some(you), Some(v), belief, parts.slow).into();
             let bytes = self.schedule.sent(frame.tick, parts, whole);
             self.sock.count_snapshot(bytes.len());
-            self.sock.send(Message::Binary(bytes)).await
+            self.sock.snapshot(Message::Binary(bytes)).await
         } else {
             // On the live frames' belief ticks, as spectators get theirs.
             let belief = held.filter(|_| frame.belief.is_some());
             let snapshot = wire::player_snapshot(frame, seat.body, v, belief);
             self.sock.count_snapshot(snapshot.len());
-            self.sock.text(snapshot).await
+            self.sock.snapshot(Message::Text(snapshot)).await
         }
     }
 

@@ -137,12 +137,32 @@ impl TestServer {
         config: Config,
         history: lasertag::game::replay::History,
     ) -> TestServer {
+        TestServer::start_serving(config, history, false).await
+    }
+
+    /// [`TestServer::start_with`], with WebTransport on the same port in UDP (a certificate
+    /// of the server's own, `GET /api/transport`), as the binary serves it.
+    pub async fn with_webtransport(config: Config) -> TestServer {
+        TestServer::start_serving(config, lasertag::game::replay::History::default(), true).await
+    }
+
+    async fn start_serving(
+        config: Config,
+        history: lasertag::game::replay::History,
+        webtransport: bool,
+    ) -> TestServer {
         let root = Path::new(env!("CARGO_MANIFEST_DIR"));
         let maps = MapStore::load_dir(&root.join("maps")).expect("shipped maps load");
         let registry = Registry::with_history(maps, config, history);
-        let app = lasertag::http::app(registry.clone(), root.join("web"));
+        let (app, state) = lasertag::http::app_and_state(registry.clone(), root.join("web"), None);
         let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
         let addr = listener.local_addr().unwrap();
+        if webtransport {
+            let source = lasertag::http::transport::Source::SelfSigned;
+            lasertag::http::transport::start(state, addr, source)
+                .await
+                .expect("WebTransport serves on the same port");
+        }
         // As the binary serves it: its open files limit raised, its accept loop, with the
         // peer's address on each request.
         lasertag::http::raise_open_files_limit();

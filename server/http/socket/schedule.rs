@@ -1,7 +1,7 @@
 //! Which of a connection's compact snapshots carries what (`protocol::compact`): the slow
 //! parts (scans, clouds) every [`SLOW_EVERY`] ticks, the belief every
 //! [`BELIEF_COMPACT_EVERY`], both on the last snapshot; and each snapshot goes as a delta
-//! against the whole one sent before it when that is shorter.
+//! against the whole one sent before it when that is shorter, on a carrier that loses none.
 
 use axum::body::Bytes;
 
@@ -28,9 +28,19 @@ pub struct Schedule {
     slow_at: Option<u64>,
     belief_at: Option<u64>,
     sent: Option<Bytes>,
+    /// Whether snapshots go as deltas (on a carrier that loses none).
+    deltas: bool,
 }
 
 impl Schedule {
+    /// A connection's schedule; `deltas`: whether its snapshots may go as deltas.
+    pub fn new(deltas: bool) -> Schedule {
+        Schedule {
+            deltas,
+            ..Schedule::default()
+        }
+    }
+
     /// What the snapshot of `tick` carries: each part when it is due, and the belief only
     /// when the connection wants it and the frame has one.
     pub fn parts(&self, tick: u64, finished: bool, belief: bool) -> Parts {
@@ -46,6 +56,7 @@ impl Schedule {
         let bytes = match self
             .sent
             .as_deref()
+            .filter(|_| self.deltas)
             .and_then(|base| compact::delta(base, &whole))
         {
             Some(d) => d.into(),
@@ -69,7 +80,7 @@ mod tests {
 
     #[test]
     fn parts_come_when_due_and_again_after_time_went_back() {
-        let mut s = Schedule::default();
+        let mut s = Schedule::new(true);
         let all = Parts {
             slow: true,
             belief: true,
@@ -94,7 +105,7 @@ mod tests {
 
     #[test]
     fn a_players_own_view_leaves_the_slow_parts_due() {
-        let mut s = Schedule::default();
+        let mut s = Schedule::new(true);
         let own = Parts {
             slow: false,
             belief: true,
@@ -106,7 +117,7 @@ mod tests {
 
     #[test]
     fn each_snapshot_after_the_first_is_a_delta_when_shorter() {
-        let mut s = Schedule::default();
+        let mut s = Schedule::new(true);
         let none = Parts {
             slow: false,
             belief: false,
@@ -124,5 +135,9 @@ mod tests {
         // Another length: no delta.
         let other = whole(3, &[7; 41]);
         assert_eq!(s.sent(3, none, other.clone()), other);
+        // A carrier that may lose snapshots: each goes whole.
+        let mut lossy = Schedule::new(false);
+        lossy.sent(1, none, first.clone());
+        assert_eq!(lossy.sent(2, none, whole(2, &[7; 40]))[0], KIND_WHOLE);
     }
 }

@@ -1,0 +1,198 @@
+//! WebTransport over the real server (UDP on the HTTP port, its own certificate pinned by the
+//! hash `GET /api/transport` publishes): a spectator gets `welcome` on the reliable stream and
+//! snapshots as datagrams; a player's input datagrams, each repeating the ones before it,
+//! move its body; bad sessions are refused as a WebSocket's upgrade is, and bad messages
+//! struck and closed with the WebSocket's codes.
+
+mod common;
+#[path = "common/wt.rs"]
+mod wt;
+
+use std::time::Duration;
+
+use common::TestServer;
+use lasertag::config::Config;
+use serde_json::{Value, json};
+use wt::{BINARY, TEXT, WtClient};
+
+async fn server() -> TestServer {
+    TestServer::with_webtransport(common::test_config()).await
+}
+
+/// The published URL and hash, and the URL of `path` there.
+async fn at(s: &TestServer, path: &str) -> (String, wtransport::tls::Sha256Digest) {
+    let r = s.get("/api/transport").await;
+    assert_eq!(r.status, 200, "{}", r.body);
+    let (url, hash) = wt::published(&r.body);
+    (format!("{url}{path}"), hash)
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_transport_is_published_with_the_servers_port_and_hash() {
+    let s = server().await;
+    let r = s.get("/api/transport").await;
+    let url = r.body["webtransport"]["url"].as_str().unwrap();
+    assert_eq!(url, format!("https://127.0.0.1:{}", s.addr.port()));
+    let hash = &r.body["webtransport"]["certificate_hashes"][0];
+    assert_eq!(hash["algorithm"], "sha-256");
+    assert_eq!(hash["value"].as_str().unwrap().len(), 64);
+    // A server without it says so.
+    let plain = TestServer::start().await;
+    assert_eq!(
+        plain.get("/api/transport").await.body,
+        json!({"webtransport": null})
+    );
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_spectator_gets_welcome_on_the_stream_and_snapshots_as_datagrams() {
+    let s = server().await;
+    let id = s
+        .create_match(json!({"map": "office", "opponent_control": "bot"}))
+        .await;
+    let (url, hash) = at(&s, &format!("/ws/matches/{id}?format=compact")).await;
+    let mut c = WtClient::connect(&url, &hash).await.expect("connects");
+    let welcome = c.json().await;
+    assert_eq!(welcome["type"], "welcome", "{welcome}");
+    assert_eq!(welcome["role"], "spectator");
+    assert_eq!(welcome["format"], "compact");
+    let mut ticks = Vec::new();
+    while ticks.len() < 10 {
+        let (kind, payload) = c.datagram().await;
+        assert_eq!(kind, BINARY);
+        // Each stands on its own: a whole compact snapshot, never a delta.
+        assert_eq!(payload[0], 1, "a whole snapshot");
+        ticks.push(u32::from_le_bytes([
+            payload[2], payload[3], payload[4], payload[5],
+        ]));
+        assert!(payload.len() < 1024);
+    }
+    assert!(ticks.windows(2).all(|w| w[0] < w[1]), "{ticks:?}");
+    // It counts as its address's spectator, as a WebSocket does.
+    let listed = s.get("/api/matches").await.body;
+    assert_eq!(listed[0]["spectators"], 1, "{listed}");
+}
+
+/// Where opponent `oid` is in the truth.
+async fn position(s: &TestServer, id: &str, oid: &str) -> (f64, f64) {
+    let state = s.get(&format!("/api/matches/{id}")).await.body;
+    let o = state["opponents"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|o| o["id"] == oid)
+        .cloned()
+        .unwrap_or(Value::Null);
+    (o["x"].as_f64().unwrap(), o["y"].as_f64().unwrap())
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_players_input_datagrams_move_it_and_repeats_are_harmless() {
+    let s = server().await;
+    let id = s
+        .create_match(json!({"map": "office", "opponent_control": "human", "planner": "idle"}))
+        .await;
+    let (oid, token) = s.join(&id, "udp").await;
+    let (url, hash) = at(
+        &s,
+        &format!("/ws/matches/{id}?token={token}&format=compact"),
+    )
+    .await;
+    let mut c = WtClient::connect(&url, &hash).await.expect("connects");
+    let welcome = c.json().await;
+    assert_eq!(welcome["role"], "player", "{welcome}");
+    let start = position(&s, &id, &oid).await;
+    // Forward, each datagram with the two inputs before it.
+    let input =
+        |seq: u64| json!({"type": "input", "forward": 1.0, "turn": 0.0, "tag": false, "seq": seq});
+    for seq in 1..=30u64 {
+        let batch: Vec<Value> = (seq.saturating_sub(2).max(1)..=seq).map(input).collect();
+        c.send_datagram(TEXT, json!(batch).to_string().as_bytes());
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    let end = position(&s, &id, &oid).await;
+    let moved = ((end.0 - start.0).powi(2) + (end.1 - start.1).powi(2)).sqrt();
+    assert!(moved > 0.5, "moved {moved} m");
+    // Each input once: 30 ticks of walking at most (with repeats applied again it would be
+    // more), at the opponent's speed (1.4 m/s).
+    assert!(moved <= 30.0 * 0.05 * 1.4 + 0.05, "moved {moved} m");
+    // The snapshots it gets are its own view, as datagrams.
+    let (kind, _) = c.datagram().await;
+    assert_eq!(kind, BINARY);
+    // No error came for any of it.
+    c.send_frame(TEXT, br#"{"type":"ping","t":1}"#, None).await;
+    let pong = c.next_of("pong").await;
+    assert_eq!(pong["t"], 1.0, "{pong}");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn bad_sessions_are_refused_as_websockets_are() {
+    let s = TestServer::with_webtransport(Config {
+        max_connections_per_address: 2,
+        ..common::test_config()
+    })
+    .await;
+    let id = s
+        .create_match(json!({"map": "office", "opponent_control": "human"}))
+        .await;
+    let refused = |r: Result<WtClient, wtransport::error::ConnectingError>| match r {
+        Err(wtransport::error::ConnectingError::SessionRejected) => {}
+        Err(e) => panic!("refused otherwise: {e}"),
+        Ok(_) => panic!("admitted"),
+    };
+    let (url, hash) = at(&s, "/ws/matches/nope").await;
+    refused(WtClient::connect(&url, &hash).await);
+    let (url, hash) = at(&s, &format!("/ws/matches/{id}?token=forged")).await;
+    refused(WtClient::connect(&url, &hash).await);
+    let (url, hash) = at(&s, &format!("/ws/matches/{id}?colour=red")).await;
+    refused(WtClient::connect(&url, &hash).await);
+    let (url, hash) = at(&s, "/elsewhere").await;
+    refused(WtClient::connect(&url, &hash).await);
+    // The address's sockets: a WebSocket and a session, then no third of either kind.
+    let _ws = s.ws(&id, None).await.expect("a WebSocket");
+    let (url, hash) = at(&s, &format!("/ws/matches/{id}")).await;
+    let mut first = WtClient::connect(&url, &hash).await.expect("a session");
+    assert_eq!(first.json().await["type"], "welcome");
+    refused(WtClient::connect(&url, &hash).await);
+    assert!(s.ws(&id, None).await.is_err(), "a third socket");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn bad_messages_are_struck_then_closed_with_the_websockets_codes() {
+    let s = server().await;
+    let id = s
+        .create_match(json!({"map": "office", "opponent_control": "human"}))
+        .await;
+    let (url, hash) = at(&s, &format!("/ws/matches/{id}")).await;
+    let mut c = WtClient::connect(&url, &hash).await.expect("connects");
+    assert_eq!(c.json().await["type"], "welcome");
+    c.send_datagram(TEXT, b"{not json");
+    let error = c.next_of("error").await;
+    assert!(error["error"].as_str().is_some(), "{error}");
+    c.send_datagram(BINARY, &[1, 2, 3]);
+    let error = c.next_of("error").await;
+    assert!(
+        error["error"].as_str().unwrap().contains("binary"),
+        "{error}"
+    );
+    // Too many bad ones: closed, 1008, the reason named in the last frame.
+    for _ in 0..20 {
+        c.send_datagram(TEXT, b"[1,2,3]");
+    }
+    let close = c.next_of("close").await;
+    assert_eq!(close["code"], 1008, "{close}");
+    assert!(
+        close["reason"]
+            .as_str()
+            .unwrap()
+            .contains("too many bad messages")
+    );
+
+    // A frame over the hard cap on the client's stream: 1009 at once.
+    let mut big = WtClient::connect(&url, &hash).await.expect("connects");
+    assert_eq!(big.json().await["type"], "welcome");
+    big.send_frame(TEXT, b"{}", Some(64 << 20)).await;
+    let close = big.next_of("close").await;
+    assert_eq!(close["code"], 1009, "{close}");
+}
