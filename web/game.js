@@ -26,6 +26,28 @@ const JITTER_WINDOW = 60;
 /** What tests read: counts of what was drawn, the feed, the end. */
 export const debug = (window.__lasertag = window.__lasertag || {});
 
+/** The share of ticks, over the last few seconds, whose snapshot never came: a gap of a few
+ * ticks between two snapshots (a longer one is a pause or a jump, not loss). */
+class Missed {
+  constructor() {
+    this.last = null;
+    this.window = []; // per snapshot: the ticks missed just before it
+  }
+
+  saw(tick) {
+    const gap = this.last === null ? 1 : tick - this.last;
+    this.last = tick;
+    if (gap < 1) return;
+    this.window.push(gap <= 10 ? gap - 1 : 0);
+    if (this.window.length > 200) this.window.shift();
+  }
+
+  rate() {
+    const missed = this.window.reduce((a, b) => a + b, 0);
+    return this.window.length ? missed / (missed + this.window.length) : 0;
+  }
+}
+
 export class Game {
   constructor({ matchId, token, base = "", onLobby, onReplay, onStaleToken }) {
     this.matchId = matchId;
@@ -43,6 +65,7 @@ export class Game {
     this.arrivals = []; // recent arrivals' times less their ticks' (ms)
     this.delayTicks = MAX_DELAY_TICKS / 2;
     this.beams = [];
+    this.missed = new Missed();
     this.names = {};
     this.keys = new Set();
     this.beliefOn = !token;
@@ -134,7 +157,13 @@ export class Game {
     const jitter = debug.jitterMs || 0;
     // A hint a player can act on: what the round trip and the jitter will feel like.
     const quality = rtt < 120 && jitter < 40 ? "good" : rtt < 250 && jitter < 100 ? "fair" : "poor";
-    $("hud-ping").textContent = `ping ${rtt.toFixed(0)} ms · jitter ${jitter.toFixed(0)} ms · ${quality}`;
+    // The carrier, and the share of ticks whose snapshot never came (datagrams lost; over
+    // a WebSocket none is lost, only late).
+    const transport = this.socket.transport === "webtransport" ? "WebTransport" : "WebSocket";
+    const loss = this.missed.rate();
+    debug.loss = loss;
+    $("hud-ping").textContent = `ping ${rtt.toFixed(0)} ms · jitter ${jitter.toFixed(0)} ms · ${quality} · ${transport}` +
+      (this.socket.transport === "webtransport" ? ` · loss ${(100 * loss).toFixed(1)}%` : "");
     $("hud-ping").dataset.quality = quality;
   }
 
@@ -215,6 +244,7 @@ export class Game {
     this.delayTicks = Math.max(MIN_DELAY_TICKS, Math.min(MAX_DELAY_TICKS, (jitter + MARGIN_MS) / TICK_MS));
     debug.jitterMs = jitter;
     debug.delayMs = this.delayTicks * TICK_MS;
+    this.missed.saw(s.tick);
     this.snaps.push(s);
     if (this.snaps.length > 12) this.snaps.shift();
     if (s.belief) this.belief = s.belief;

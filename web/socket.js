@@ -1,10 +1,12 @@
-// A page's WebSocket (game.js: a live match, replay.js: a replay): the URL on the node that
+// A page's socket (game.js: a live match, replay.js: a replay), over WebTransport where it
+// opens within a second and else a WebSocket (transport.js): the URL on the node that
 // serves it, compact binary snapshots decoded and JSON text parsed, each message handed to
 // the page's handler for its `type`, the server's `error`s kept for the tests, and a
 // connection lost tried again with a growing wait, for up to 30 s (a restarting server
 // resumes its matches within seconds: docs/operations.md).
 
 import { CompactDecoder } from "./compact.js";
+import { wantedTransport, webSocketCarrier, webTransportCarrier } from "./transport.js";
 
 /** The first wait before a lost connection is tried again; each next wait doubles, up to
  * `RETRY_MAX_MS`, until `GIVE_UP_MS` have passed since the connection was lost. */
@@ -36,7 +38,8 @@ export class PageSocket {
     Object.assign(this, { page, url, types, giveUpMs });
     this.tries = 0;
     this.lostAt = null;
-    this.ws = null;
+    this.carrier = null;
+    this.attempt = null;
   }
 
   /** Where to connect now: `url()`, on the node the match moved to when it did. */
@@ -60,42 +63,74 @@ export class PageSocket {
   }
 
   connect() {
-    const ws = new WebSocket(this.target());
-    ws.binaryType = "arraybuffer";
+    this.closed = false;
+    const url = this.target();
     const decoder = new CompactDecoder();
-    this.ws = ws;
-    ws.onopen = () => {
-      debug.connected = true;
-      if (this.lostAt !== null) debug.reconnects = (debug.reconnects || 0) + 1;
-      this.tries = 0;
-      this.lostAt = null;
+    const token = {};
+    this.attempt = token;
+    const on = {
+      open: () => {
+        if (this.attempt !== token) return;
+        debug.connected = true;
+        if (this.lostAt !== null) debug.reconnects = (debug.reconnects || 0) + 1;
+        this.tries = 0;
+        this.lostAt = null;
+      },
+      message: (data) => {
+        if (this.attempt !== token) return;
+        const binary = typeof data !== "string";
+        // What the page receives, for measurements of the bandwidth a client needs.
+        debug.rxBytes = (debug.rxBytes || 0) + (binary ? data.byteLength : data.length);
+        let msg;
+        try { msg = binary ? decoder.decode(data) : JSON.parse(data); } catch (e) {
+          debug.errors.push(String(e));
+          return;
+        }
+        this.dispatch(msg);
+      },
+      close: (e) => {
+        if (this.attempt !== token) return;
+        this.attempt = null;
+        this.carrier = null;
+        this.lost(e);
+      },
     };
-    ws.onmessage = (m) => {
-      const binary = typeof m.data !== "string";
-      // What the page receives, for measurements of the bandwidth a client needs.
-      debug.rxBytes = (debug.rxBytes || 0) + (binary ? m.data.byteLength : m.data.length);
-      let msg;
-      try { msg = binary ? decoder.decode(m.data) : JSON.parse(m.data); } catch (e) {
-        debug.errors.push(String(e));
-        return;
-      }
-      this.dispatch(msg);
+    const viaWebSocket = () => {
+      this.carrier = webSocketCarrier(url, on);
+      debug.transport = "websocket";
     };
-    ws.onclose = (e) => {
-      debug.connected = false;
-      if (this.page.lost(e)) return;
-      const now = performance.now();
-      if (this.lostAt === null) this.lostAt = now;
-      if (now - this.lostAt < this.giveUpMs) {
-        // 1012: the server is restarting and resumes the match, or the match moved to
-        // another node (docs/api.md).
-        status(e.code === 1012 ? "server restarting — reconnecting…" : "connection lost — reconnecting…");
-        const wait = Math.min(RETRY_FIRST_MS * 2 ** this.tries++, RETRY_MAX_MS);
-        setTimeout(() => { if (this.ws === ws) this.connect(); }, wait);
-      } else {
-        status("connection lost");
-      }
-    };
+    this.carrier = null;
+    if (wantedTransport() !== "webtransport") return viaWebSocket();
+    // WebTransport first; the WebSocket when it does not open within a second.
+    const asked = performance.now();
+    webTransportCarrier(url, on).then((carrier) => {
+      if (this.attempt !== token) return carrier.close();
+      this.carrier = carrier;
+      debug.transport = "webtransport";
+    }, (e) => {
+      if (this.attempt !== token) return;
+      debug.transportError = String(e);
+      debug.fallbackMs = performance.now() - asked;
+      viaWebSocket();
+    });
+  }
+
+  /** The carrier closed without the page asking: tried again with a growing wait, unless
+   * the page has dealt with it. */
+  lost(e) {
+    debug.connected = false;
+    if (this.page.lost(e)) return;
+    const now = performance.now();
+    if (this.lostAt === null) this.lostAt = now;
+    if (now - this.lostAt < this.giveUpMs) {
+      // 1012: the server is restarting and resumes the match, or the match moved to
+      // another node (docs/api.md).
+      status(e.code === 1012 ? "server restarting — reconnecting…" : "connection lost — reconnecting…");
+      const wait = Math.min(RETRY_FIRST_MS * 2 ** this.tries++, RETRY_MAX_MS);
+      setTimeout(() => { if (this.attempt === null && !this.closed) this.connect(); }, wait);
+    } else {
+      status("connection lost");
+    }
   }
 
   dispatch(msg) {
@@ -110,21 +145,25 @@ export class PageSocket {
 
   /** Whether a message sent now goes out. */
   get open() {
-    return Boolean(this.ws) && this.ws.readyState === WebSocket.OPEN;
+    return Boolean(this.carrier) && this.carrier.open;
+  }
+
+  /** The carrier in use: `webtransport` or `websocket` (null while connecting). */
+  get transport() {
+    return this.carrier ? this.carrier.kind : null;
   }
 
   send(obj) {
-    if (this.open) this.ws.send(JSON.stringify(obj));
+    if (this.open) this.carrier.send(obj);
   }
 
   /** Closes the socket the page is done with: no handler hears from it again. */
   close(code, reason) {
-    const ws = this.ws;
-    this.ws = null;
-    if (!ws) return;
-    ws.onmessage = null;
-    ws.onclose = null;
+    const carrier = this.carrier;
+    this.closed = true;
+    this.attempt = null;
+    this.carrier = null;
     debug.connected = false;
-    ws.close(code, reason);
+    if (carrier) carrier.close(code, reason);
   }
 }

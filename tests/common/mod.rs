@@ -137,19 +137,28 @@ impl TestServer {
         config: Config,
         history: lasertag::game::replay::History,
     ) -> TestServer {
-        TestServer::start_serving(config, history, false).await
+        TestServer::start_serving(config, history, None).await
     }
 
     /// [`TestServer::start_with`], with WebTransport on the same port in UDP (a certificate
     /// of the server's own, `GET /api/transport`), as the binary serves it.
     pub async fn with_webtransport(config: Config) -> TestServer {
-        TestServer::start_serving(config, lasertag::game::replay::History::default(), true).await
+        let history = lasertag::game::replay::History::default();
+        TestServer::start_serving(config, history, Some("127.0.0.1".parse().unwrap())).await
+    }
+
+    /// [`TestServer::with_webtransport`] with its UDP socket on another loopback address
+    /// (`ip`, the same port): what it publishes (the page's host, the port) then reaches
+    /// whatever the test puts there, a black hole for UDP blocked on the way.
+    pub async fn with_webtransport_on(config: Config, ip: std::net::IpAddr) -> TestServer {
+        let history = lasertag::game::replay::History::default();
+        TestServer::start_serving(config, history, Some(ip)).await
     }
 
     async fn start_serving(
         config: Config,
         history: lasertag::game::replay::History,
-        webtransport: bool,
+        webtransport: Option<std::net::IpAddr>,
     ) -> TestServer {
         let root = Path::new(env!("CARGO_MANIFEST_DIR"));
         let maps = MapStore::load_dir(&root.join("maps")).expect("shipped maps load");
@@ -157,9 +166,10 @@ impl TestServer {
         let (app, state) = lasertag::http::app_and_state(registry.clone(), root.join("web"), None);
         let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
         let addr = listener.local_addr().unwrap();
-        if webtransport {
+        if let Some(ip) = webtransport {
             let source = lasertag::http::transport::Source::SelfSigned;
-            lasertag::http::transport::start(state, addr, source)
+            let at = SocketAddr::new(ip, addr.port());
+            lasertag::http::transport::start(state, at, source)
                 .await
                 .expect("WebTransport serves on the same port");
         }

@@ -1,0 +1,56 @@
+//! Packet loss on loopback for the tests, from nftables: a table of its own whose input hook
+//! drops a share of the UDP packets to or from one port, at random (both directions: on
+//! loopback every packet passes the input hook). Dropping in the output hook instead makes
+//! the sender's `sendmsg` fail (EPERM), which QUIC takes for a dead path. Removed on drop.
+//! Needs root and `nft` (tests/run.sh installs nftables).
+
+use std::process::Command;
+
+pub struct UdpLoss {
+    table: String,
+}
+
+fn nft(script: &str) -> Result<(), String> {
+    let out = Command::new("nft")
+        .args(["-f", "-"])
+        .stdin(std::process::Stdio::piped())
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .and_then(|mut child| {
+            use std::io::Write;
+            if let Some(mut stdin) = child.stdin.take() {
+                stdin.write_all(script.as_bytes())?;
+            }
+            child.wait_with_output()
+        })
+        .map_err(|e| format!("nft: {e} (install nftables; tests/run.sh does)"))?;
+    if out.status.success() {
+        Ok(())
+    } else {
+        Err(format!("nft: {}", String::from_utf8_lossy(&out.stderr)))
+    }
+}
+
+impl UdpLoss {
+    /// Drops `percent` of the UDP packets to `port` and of those from it; 100 drops all.
+    pub fn start(port: u16, percent: u32) -> UdpLoss {
+        let table = format!("lasertag_test_{port}");
+        let drop = if percent >= 100 {
+            "drop".to_string()
+        } else {
+            format!("numgen random mod 100 < {percent} drop")
+        };
+        let script = format!(
+            "table inet {table} {{\n chain input {{\n  type filter hook input priority 0; policy accept;\n  udp dport {port} {drop}\n  udp sport {port} {drop}\n }}\n}}\n"
+        );
+        nft(&script).expect("an nftables table for the loss");
+        UdpLoss { table }
+    }
+}
+
+impl Drop for UdpLoss {
+    fn drop(&mut self) {
+        let _ = nft(&format!("delete table inet {}\n", self.table));
+    }
+}
