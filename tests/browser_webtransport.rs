@@ -27,7 +27,7 @@ async fn o0(s: &TestServer, id: &str) -> (f64, f64) {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_match_plays_over_webtransport_through_loss() {
     let s = TestServer::with_webtransport(common::test_config()).await;
-    let _loss = nft::UdpLoss::start(s.addr.port(), 2);
+    let _loss = nft::Loss::udp(s.addr.port(), 2);
     let id = s
         .create_match(json!({"map": "office", "opponent_control": "human", "planner": "idle"}))
         .await;

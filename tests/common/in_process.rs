@@ -5,6 +5,7 @@ use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
 
 /// Serves the maps of `maps` and the page of `web/` with the default settings; the address.
+#[allow(dead_code)]
 pub async fn start(maps: &Path) -> Result<SocketAddr, String> {
     let maps =
         lasertag::maps::MapStore::load_dir(maps).map_err(|e| format!("loading maps: {e}"))?;
@@ -15,6 +16,26 @@ pub async fn start(maps: &Path) -> Result<SocketAddr, String> {
         .await
         .map_err(|e| e.to_string())?;
     let addr = listener.local_addr().map_err(|e| e.to_string())?;
+    tokio::spawn(async move { axum::serve(listener, app).await });
+    Ok(addr)
+}
+
+/// [`start`], with WebTransport on the same port in UDP (its own certificate).
+#[allow(dead_code)]
+pub async fn start_with_webtransport(maps: &Path) -> Result<SocketAddr, String> {
+    let maps =
+        lasertag::maps::MapStore::load_dir(maps).map_err(|e| format!("loading maps: {e}"))?;
+    let registry = lasertag::game::Registry::with_config(maps, lasertag::config::Config::default());
+    let (app, state) = lasertag::http::app_and_state(registry, PathBuf::from("web"), None);
+    let app = app.into_make_service_with_connect_info::<SocketAddr>();
+    let listener = tokio::net::TcpListener::bind("127.0.0.1:0")
+        .await
+        .map_err(|e| e.to_string())?;
+    let addr = listener.local_addr().map_err(|e| e.to_string())?;
+    let source = lasertag::http::transport::Source::SelfSigned;
+    lasertag::http::transport::start(state, addr, source)
+        .await
+        .map_err(|e| e.to_string())?;
     tokio::spawn(async move { axum::serve(listener, app).await });
     Ok(addr)
 }
