@@ -4,7 +4,8 @@
 //! the delay of a real link is the link emulator's). For each loss it reports, per carrier,
 //! the gaps between snapshots as they arrive (p50, p99, max), the stalls (gaps over 150 ms)
 //! per minute, and the bytes per second; over WebTransport also how many snapshots came as
-//! datagrams and how many on the stream (too large for one).
+//! datagrams and how many on the stream (too large for one: their motion also came as a
+//! datagram, and a tick counts when its first piece arrives).
 //!
 //! ```sh
 //! cargo run --release --example transport_probe                      # 0, 1, 2, 5% for 40 s each
@@ -61,7 +62,11 @@ impl Watched {
     fn row(&self, carrier: &str, loss: u32, seconds: f64) -> String {
         let mut g = self.gaps_ms.clone();
         g.sort_by(f64::total_cmp);
-        let q = |p: f64| g.get(((g.len() as f64 - 1.0) * p).round() as usize).copied().unwrap_or(f64::NAN);
+        let q = |p: f64| {
+            g.get(((g.len() as f64 - 1.0) * p).round() as usize)
+                .copied()
+                .unwrap_or(f64::NAN)
+        };
         let stalls = g.iter().filter(|&&x| x > STALL_MS).count() as f64 * 60.0 / seconds;
         format!(
             "{loss},{carrier},{},{:.0},{:.0},{:.0},{stalls:.1},{:.0},{},{}",
@@ -85,7 +90,9 @@ fn gaps(arrivals: &[Instant]) -> Vec<f64> {
 
 async fn over_websocket(addr: std::net::SocketAddr, id: &str, until: Instant) -> Watched {
     let url = format!("ws://{addr}/ws/matches/{id}?format=compact");
-    let (mut ws, _) = tokio_tungstenite::connect_async(url).await.expect("a WebSocket");
+    let (mut ws, _) = tokio_tungstenite::connect_async(url)
+        .await
+        .expect("a WebSocket");
     let (mut arrivals, mut bytes) = (Vec::new(), 0);
     while let Ok(Some(Ok(m))) = tokio::time::timeout_at(until.into(), ws.next()).await {
         if let tokio_tungstenite::tungstenite::Message::Binary(b) = m {
@@ -93,7 +100,12 @@ async fn over_websocket(addr: std::net::SocketAddr, id: &str, until: Instant) ->
             arrivals.push(Instant::now());
         }
     }
-    Watched { gaps_ms: gaps(&arrivals), bytes, datagrams: 0, streamed: 0 }
+    Watched {
+        gaps_ms: gaps(&arrivals),
+        bytes,
+        datagrams: 0,
+        streamed: 0,
+    }
 }
 
 async fn over_webtransport(addr: std::net::SocketAddr, id: &str, until: Instant) -> Watched {
@@ -108,6 +120,18 @@ async fn over_webtransport(addr: std::net::SocketAddr, id: &str, until: Instant)
         .await
         .expect("a session");
     let (mut arrivals, mut bytes, mut datagrams, mut streamed) = (Vec::new(), 0, 0, 0);
+    // A tick's first arrival is when the page can show it (a large snapshot comes twice:
+    // its motion as a datagram, the whole on the stream).
+    let mut newest = None;
+    let mut arrived = |payload: &[u8]| {
+        let tick = payload
+            .get(2..6)
+            .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]));
+        if tick > newest {
+            newest = tick;
+            arrivals.push(Instant::now());
+        }
+    };
     let conn = c.conn.clone();
     loop {
         tokio::select! {
@@ -115,31 +139,45 @@ async fn over_webtransport(addr: std::net::SocketAddr, id: &str, until: Instant)
                 let Ok(d) = d else { break };
                 bytes += d.len();
                 datagrams += 1;
-                arrivals.push(Instant::now());
+                arrived(&d[1..]);
             }
             f = c.frame() => {
                 let Some((kind, payload)) = f else { break };
                 bytes += payload.len() + 5;
                 if kind == wt::BINARY {
                     streamed += 1;
-                    arrivals.push(Instant::now());
+                    arrived(&payload);
                 }
             }
             () = tokio::time::sleep_until(until.into()) => break,
         }
     }
-    Watched { gaps_ms: gaps(&arrivals), bytes, datagrams, streamed }
+    Watched {
+        gaps_ms: gaps(&arrivals),
+        bytes,
+        datagrams,
+        streamed,
+    }
 }
 
 #[tokio::main]
 async fn main() {
     let args = Args::parse();
-    let losses = if args.loss.is_empty() { vec![0, 1, 2, 5] } else { args.loss.clone() };
-    assert!(losses.iter().all(|&l| l <= 50), "--loss: percentages in 0..=50");
+    let losses = if args.loss.is_empty() {
+        vec![0, 1, 2, 5]
+    } else {
+        args.loss.clone()
+    };
+    assert!(
+        losses.iter().all(|&l| l <= 50),
+        "--loss: percentages in 0..=50"
+    );
     assert!((5..=600).contains(&args.seconds), "--seconds: 5..=600");
     let header = "loss_pct,carrier,snapshots,gap_p50_ms,gap_p99_ms,gap_max_ms,stalls_per_min,bytes_per_s,datagrams,streamed";
     let mut rows = vec![header.to_string()];
-    println!("| loss each way | carrier | snapshots | gap p50 / p99 / max (ms) | stalls > 150 ms per minute | bytes/s | datagrams / on the stream |");
+    println!(
+        "| loss each way | carrier | snapshots | gap p50 / p99 / max (ms) | stalls > 150 ms per minute | bytes/s | datagrams / on the stream |"
+    );
     println!("|---|---|---|---|---|---|---|");
     for loss in losses {
         let addr = in_process::start_with_webtransport(&args.maps)
@@ -148,8 +186,10 @@ async fn main() {
         let client = reqwest::Client::new();
         let created: Value = client
             .post(format!("http://{addr}/api/matches"))
-            .json(&json!({"map": "office", "robots": 2, "opponents": 2, "opponent_control": "bot",
-                "planner": "idle", "time_limit_s": 900}))
+            .json(
+                &json!({"map": "office", "robots": 2, "opponents": 2, "opponent_control": "bot",
+                "planner": "idle", "time_limit_s": 900}),
+            )
             .send()
             .await
             .expect("POST /api/matches")
@@ -159,15 +199,27 @@ async fn main() {
         let id = created["id"].as_str().expect("a match").to_string();
         let _loss = (loss > 0).then(|| nft::Loss::udp_and_tcp(addr.port(), loss));
         let until = Instant::now() + Duration::from_secs(args.seconds);
-        let (ws, wt) = tokio::join!(over_websocket(addr, &id, until), over_webtransport(addr, &id, until));
+        let (ws, wt) = tokio::join!(
+            over_websocket(addr, &id, until),
+            over_webtransport(addr, &id, until)
+        );
         let seconds = args.seconds as f64;
         for (name, w) in [("websocket", &ws), ("webtransport", &wt)] {
             let row = w.row(name, loss, seconds);
             let f: Vec<&str> = row.split(',').collect();
             println!(
                 "| {loss}% | {name} | {} | {} / {} / {} | {} | {} | {} |",
-                f[2], f[3], f[4], f[5], f[6], f[7],
-                if name == "webtransport" { format!("{} / {}", f[8], f[9]) } else { "–".into() }
+                f[2],
+                f[3],
+                f[4],
+                f[5],
+                f[6],
+                f[7],
+                if name == "webtransport" {
+                    format!("{} / {}", f[8], f[9])
+                } else {
+                    "–".into()
+                }
             );
             rows.push(row);
         }

@@ -9,6 +9,7 @@
 mod cdp;
 mod common;
 #[path = "common/nft.rs"]
+#[allow(dead_code)]
 mod nft;
 
 use std::time::Duration;

@@ -219,6 +219,13 @@ export class Game {
   }
 
   snapshot(s) {
+    // A tick already shown: over WebTransport a large snapshot comes twice, its motion as a
+    // datagram and the whole (scans, belief) on the stream. The decoder has kept the
+    // second's scans; the belief is taken here.
+    if (this.snaps.length && s.tick === this.snaps[this.snaps.length - 1].tick) {
+      if (s.belief) this.belief = s.belief;
+      return;
+    }
     const now = performance.now();
     const sample = now - s.tick * TICK_MS;
     if (this.snaps.length && s.tick < this.snaps[this.snaps.length - 1].tick) {

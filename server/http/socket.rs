@@ -346,6 +346,15 @@ impl Socket {
         matches!(self.carrier, Carrier::WebTransport(_))
     }
 
+    /// Whether a snapshot of `len` bytes reaches the client as one piece that may be lost on
+    /// its own (a datagram): over a WebSocket always.
+    pub fn fits_datagram(&self, len: usize) -> bool {
+        match &self.carrier {
+            Carrier::WebSocket(_) => true,
+            Carrier::WebTransport(session) => session.fits_datagram(len),
+        }
+    }
+
     /// The client's next message, as it came: hand it to [`Socket::read`]. Cancel-safe.
     pub async fn recv(&mut self) -> Option<Result<Message, axum::Error>> {
         match &mut self.carrier {

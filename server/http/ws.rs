@@ -400,8 +400,24 @@ impl Connection {
         let parts = self.schedule.parts(frame.tick, finished, wanted);
         let whole = wire::spectator_compact(frame, parts.belief, parts.slow);
         let bytes = self.schedule.sent(frame.tick, parts, whole);
+        if !self.sock.fits_datagram(bytes.len()) {
+            let motion = wire::spectator_compact(frame, false, false);
+            self.send_motion_first(motion).await?;
+        }
         self.sock.count_snapshot(bytes.len());
         self.sock.snapshot(Message::Binary(bytes)).await
+    }
+
+    /// A compact snapshot too large for a datagram (its scans, its belief) goes in two: its
+    /// `motion` alone first, as a datagram (what moves is never held up by a loss on the
+    /// stream), then the whole on the stream; the page takes the second's scans and belief
+    /// and skips a tick it already has.
+    async fn send_motion_first(&mut self, motion: axum::body::Bytes) -> Result<(), End> {
+        if !self.sock.fits_datagram(motion.len()) {
+            return Ok(());
+        }
+        self.sock.count_snapshot(motion.len());
+        self.sock.snapshot(Message::Binary(motion)).await
     }
 
     /// A spectator's snapshot of `frame`, as JSON.
@@ -438,6 +454,10 @@ impl Connection {
                 .filter(|_| parts.belief);
             let whole = compact::snapshot(frame, Some(you), Some(v), belief, parts.slow).into();
             let bytes = self.schedule.sent(frame.tick, parts, whole);
+            if !self.sock.fits_datagram(bytes.len()) {
+                let motion = compact::snapshot(frame, Some(you), Some(v), None, false).into();
+                self.send_motion_first(motion).await?;
+            }
             self.sock.count_snapshot(bytes.len());
             self.sock.snapshot(Message::Binary(bytes)).await
         } else {

@@ -98,6 +98,16 @@ impl Session {
             .map_err(|e| e.to_string())
     }
 
+    /// Whether a snapshot of `len` bytes goes as one datagram (with its kind byte).
+    pub fn fits_datagram(&self, len: usize) -> bool {
+        let room = self
+            .conn
+            .max_datagram_size()
+            .unwrap_or(0)
+            .min(MAX_DATAGRAM_BYTES);
+        len < room
+    }
+
     /// Sends a snapshot: as a datagram when it fits one, else on the stream.
     pub async fn send_snapshot(&mut self, message: Message) -> Result<(), String> {
         let (kind, payload) = match &message {
@@ -105,12 +115,7 @@ impl Session {
             Message::Binary(b) => (BINARY, &b[..]),
             _ => return Ok(()),
         };
-        let room = self
-            .conn
-            .max_datagram_size()
-            .unwrap_or(0)
-            .min(MAX_DATAGRAM_BYTES);
-        if payload.len() < room {
+        if self.fits_datagram(payload.len()) {
             let mut datagram = Vec::with_capacity(payload.len() + 1);
             datagram.push(kind);
             datagram.extend_from_slice(payload);
