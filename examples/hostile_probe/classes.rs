@@ -34,9 +34,11 @@ pub(crate) enum Class {
     SearchPlanner,
     BeliefLoop,
     NameClaims,
+    QuicDatagrams,
+    QuicSessions,
 }
 
-pub(crate) const CLASSES: [Class; 24] = [
+pub(crate) const CLASSES: [Class; 26] = [
     Class::Slivers(64),
     Class::Slivers(256),
     Class::ExpensiveMatch,
@@ -61,6 +63,8 @@ pub(crate) const CLASSES: [Class; 24] = [
     Class::SearchPlanner,
     Class::BeliefLoop,
     Class::NameClaims,
+    Class::QuicDatagrams,
+    Class::QuicSessions,
 ];
 
 impl Class {
@@ -89,6 +93,8 @@ impl Class {
             Class::SearchPlanner => "search-planner".into(),
             Class::BeliefLoop => "belief-loop".into(),
             Class::NameClaims => "name-claims".into(),
+            Class::QuicDatagrams => "quic-datagrams".into(),
+            Class::QuicSessions => "quic-sessions".into(),
         }
     }
 
@@ -150,6 +156,8 @@ pub(crate) async fn attack(class: Class, ctx: &Ctx) -> Result<Outcome, String> {
         Class::SearchPlanner => crate::priced::search_planner(ctx).await.map(Outcome::of),
         Class::BeliefLoop => crate::priced::belief_loop(ctx).await.map(Outcome::of),
         Class::NameClaims => crate::priced::name_claims(ctx).await.map(Outcome::of),
+        Class::QuicDatagrams => crate::quic::datagrams(ctx).await.map(Outcome::of),
+        Class::QuicSessions => crate::quic::sessions(ctx).await.map(Outcome::of),
     }
 }
 

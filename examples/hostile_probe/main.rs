@@ -77,7 +77,11 @@
 //!   address, left to run 10 s;
 //! - `belief-loop`: four parallel loops of gzip'd `GET /belief` of a 100,000-particle role
 //!   from one address, for 5 s;
-//! - `name-claims`: `POST /api/names` of fresh names as fast as one address sends them, 10 s.
+//! - `name-claims`: `POST /api/names` of fresh names as fast as one address sends them, 10 s;
+//! - `quic-datagrams`: over WebTransport, 5 s of datagrams of every bad kind (malformed,
+//!   binary, oversized, 50 inputs at once) as fast as one session sends them, beside a
+//!   session of the same address that reads nothing;
+//! - `quic-sessions`: 40 WebTransport sessions on one match from one address, held 5 s.
 //!
 //! "request ms" is the wall time of the class's main request (for `match-table`, all 100; for
 //! `slowloris`, the newcomer's request after 15 s; for `wallhack`, the first public read; for
@@ -95,7 +99,7 @@
 //! `fair.rs` those of fair play, `doors.rs` those of the classes that take a door's share
 //! from other clients, `costs.rs` those that cost on a match's own thread, `history.rs`
 //! those of replays and the history on disk, `priced.rs` those of the search planner,
-//! belief reads and name claims.
+//! belief reads and name claims, `quic.rs` those of WebTransport.
 
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
@@ -138,6 +142,10 @@ mod fair;
 mod harness;
 mod history;
 mod priced;
+mod quic;
+#[allow(dead_code)]
+#[path = "../../tests/common/wt.rs"]
+mod wt;
 
 use classes::*;
 use harness::*;

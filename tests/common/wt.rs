@@ -35,8 +35,21 @@ pub fn published(reply: &Value) -> (String, Sha256Digest) {
 impl WtClient {
     /// Opens `url` (`https://host:port/ws/...?...`), pinning `hash`.
     pub async fn connect(url: &str, hash: &Sha256Digest) -> Result<WtClient, ConnectingError> {
-        let config = ClientConfig::builder()
-            .with_bind_default()
+        WtClient::connect_from(url, hash, None).await
+    }
+
+    /// [`WtClient::connect`] from the address `from` (its port chosen), or any.
+    pub async fn connect_from(
+        url: &str,
+        hash: &Sha256Digest,
+        from: Option<std::net::IpAddr>,
+    ) -> Result<WtClient, ConnectingError> {
+        let builder = ClientConfig::builder();
+        let builder = match from {
+            Some(ip) => builder.with_bind_address(std::net::SocketAddr::new(ip, 0)),
+            None => builder.with_bind_default(),
+        };
+        let config = builder
             .with_server_certificate_hashes([hash.clone()])
             .build();
         let endpoint = Endpoint::client(config).expect("a client endpoint");
