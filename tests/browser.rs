@@ -8,6 +8,7 @@
 //! the ones in `docs/` were taken); otherwise it writes nothing outside a temporary profile.
 
 #[path = "common/cdp.rs"]
+#[allow(dead_code)] // the phone's helpers
 mod cdp;
 mod common;
 #[path = "common/netem.rs"]

@@ -153,11 +153,7 @@ async fn on_a_phone_the_lobby_fits_and_its_buttons_are_thumb_sized() {
     s.create_match(json!({"map": "office", "opponent_control": "human"}))
         .await;
     let mut b = Browser::launch().await;
-    b.call(
-        "Emulation.setDeviceMetricsOverride",
-        json!({"width": 390, "height": 844, "deviceScaleFactor": 2, "mobile": true}),
-    )
-    .await;
+    b.screen(390, 844).await;
     b.navigate(&format!("http://{}/", s.addr)).await;
     b.wait_for(
         "__lasertag.page === 'lobby' && document.querySelectorAll('#matches tr[data-id] button').length > 0",
@@ -198,16 +194,7 @@ async fn on_a_phone_the_arena_turns_to_fill_the_screen() {
         .create_match(json!({"map": "office", "opponent_control": "human"}))
         .await;
     let mut b = Browser::launch().await;
-    b.call(
-        "Emulation.setDeviceMetricsOverride",
-        json!({"width": 390, "height": 844, "deviceScaleFactor": 2, "mobile": true}),
-    )
-    .await;
-    b.call(
-        "Emulation.setTouchEmulationEnabled",
-        json!({"enabled": true, "maxTouchPoints": 5}),
-    )
-    .await;
+    b.phone().await;
     b.navigate(&format!("http://{}/#/play/{id}", s.addr)).await;
     b.wait_for(
         "__lasertag.role === 'player' && __lasertag.snapshots > 0 && __lasertag.fit",
@@ -230,11 +217,7 @@ async fn on_a_phone_the_arena_turns_to_fill_the_screen() {
     assert_eq!(page["hint"], "block", "{page}");
     b.save("arena-phone.png").await;
     // Sideways, the office lies as it is, and no hint is shown.
-    b.call(
-        "Emulation.setDeviceMetricsOverride",
-        json!({"width": 844, "height": 390, "deviceScaleFactor": 2, "mobile": true}),
-    )
-    .await;
+    b.screen(844, 390).await;
     b.wait_for("__lasertag.fit.rot === false", 10).await;
     assert_eq!(
         b.eval("getComputedStyle(document.getElementById('hud-hint')).display")

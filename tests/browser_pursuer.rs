@@ -8,6 +8,7 @@
 //! `LASERTAG_SCREENSHOTS=<dir>` set, the test also saves its screenshot there.
 
 #[path = "common/cdp.rs"]
+#[allow(dead_code)] // the phone's helpers
 mod cdp;
 mod common;
 #[path = "common/netem.rs"]

@@ -213,16 +213,7 @@ async fn on_a_phone_the_touch_stick_drives_and_the_button_tags() {
     let s = TestServer::start().await;
     let id = s.create_match(common::corridor_duel()).await;
     let mut b = Browser::launch().await;
-    b.call(
-        "Emulation.setDeviceMetricsOverride",
-        json!({"width": 390, "height": 844, "deviceScaleFactor": 2, "mobile": true}),
-    )
-    .await;
-    b.call(
-        "Emulation.setTouchEmulationEnabled",
-        json!({"enabled": true, "maxTouchPoints": 5}),
-    )
-    .await;
+    b.phone().await;
     b.navigate(&format!("http://{}/#/play/{id}", s.addr)).await;
     b.wait_for(
         &format!("__lasertag.matchId === '{id}' && __lasertag.role === 'player' && __lasertag.snapshots > 5 && __lasertag.touch === true && __lasertag.drawn"),

@@ -205,6 +205,25 @@ impl Browser {
         self.key(code, false).await;
     }
 
+    /// A phone's screen, `width` × `height` CSS pixels at twice the density.
+    pub async fn screen(&mut self, width: u32, height: u32) {
+        self.call(
+            "Emulation.setDeviceMetricsOverride",
+            json!({"width": width, "height": height, "deviceScaleFactor": 2, "mobile": true}),
+        )
+        .await;
+    }
+
+    /// A phone held upright (390 × 844) with a touch screen.
+    pub async fn phone(&mut self) {
+        self.screen(390, 844).await;
+        self.call(
+            "Emulation.setTouchEmulationEnabled",
+            json!({"enabled": true, "maxTouchPoints": 5}),
+        )
+        .await;
+    }
+
     /// A PNG of the page.
     /// Saves a screenshot as `name` in `LASERTAG_SCREENSHOTS` when that is set (how the
     /// pictures in docs/screenshots are taken); otherwise does nothing.
