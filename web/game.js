@@ -169,6 +169,7 @@ export class Game {
 
   welcome(w) {
     this.welcomed = true;
+    this.newConnection = true;
     this.map = w.map;
     this.segs = segments(w.map);
     this.you = w.you;
@@ -219,13 +220,18 @@ export class Game {
   }
 
   snapshot(s) {
-    // A tick already shown: over WebTransport a large snapshot comes twice, its motion as a
-    // datagram and the whole (scans, belief) on the stream. The decoder has kept the
-    // second's scans; the belief is taken here.
-    if (this.snaps.length && s.tick === this.snaps[this.snaps.length - 1].tick) {
+    // A tick already passed on this connection: over WebTransport a large snapshot comes
+    // twice, its motion as a datagram and the whole (scans, belief) on the stream, which
+    // may come after later ticks' datagrams when a loss holds it up. The decoder has kept
+    // its scans; the belief is taken here. (A connection's ticks only go on; a new one,
+    // to a server that resumed the match, may start earlier: see below.)
+    const newest = this.snaps.length ? this.snaps[this.snaps.length - 1].tick : null;
+    if (!this.newConnection && newest !== null && s.tick <= newest) {
       if (s.belief) this.belief = s.belief;
+      debug.late = (debug.late || 0) + 1;
       return;
     }
+    this.newConnection = false;
     const now = performance.now();
     const sample = now - s.tick * TICK_MS;
     if (this.snaps.length && s.tick < this.snaps[this.snaps.length - 1].tick) {
