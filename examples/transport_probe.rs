@@ -10,13 +10,21 @@
 //! ```sh
 //! cargo run --release --example transport_probe                      # 0, 1, 2, 5% for 40 s each
 //! cargo run --release --example transport_probe -- --loss 2 --seconds 60
+//! cargo run --release --example transport_probe -- --rtt-ms 150   # through the link emulator
 //! ```
+//!
+//! With `--rtt-ms` the server runs inside the link emulator's namespace
+//! (tests/common/link.rs) and the link adds the round trip and the loss, each way, to TCP and
+//! UDP alike.
 //!
 //! Needs root and nftables (`apt-get install nftables`). The table is removed on exit.
 
 #[allow(dead_code)]
 #[path = "../tests/common/in_process.rs"]
 mod in_process;
+#[allow(dead_code)]
+#[path = "../tests/common/link.rs"]
+mod link;
 #[allow(dead_code)]
 #[path = "../tests/common/nft.rs"]
 mod nft;
@@ -37,6 +45,9 @@ struct Args {
     /// Loss each way, in percent (0..=50), one run each; default 0, 1, 2 and 5.
     #[arg(long, value_delimiter = ',')]
     loss: Vec<u32>,
+    /// Round trip added by the link emulator (ms, 0..=1000); 0: loopback, loss from nftables.
+    #[arg(long, default_value_t = 0)]
+    rtt_ms: u64,
     /// Seconds each run watches (5..=600).
     #[arg(long, default_value_t = 40)]
     seconds: u64,
@@ -179,10 +190,42 @@ async fn main() {
         "| loss each way | carrier | snapshots | gap p50 / p99 / max (ms) | stalls > 150 ms per minute | bytes/s | datagrams / on the stream |"
     );
     println!("|---|---|---|---|---|---|---|");
+    assert!(args.rtt_ms <= 1000, "--rtt-ms: 0..=1000");
     for loss in losses {
-        let addr = in_process::start_with_webtransport(&args.maps)
-            .await
-            .expect("the server starts");
+        // Through the link emulator (delay and loss both ways, the server in its namespace),
+        // or on loopback with nftables' loss.
+        let link = (args.rtt_ms > 0).then(|| {
+            link::Link::start(link::Shape {
+                rtt: Duration::from_millis(args.rtt_ms),
+                loss: f64::from(loss) / 100.0,
+                seed: u64::from(loss),
+            })
+            .expect("the link emulator starts (root, ip, nftables)")
+        });
+        let addr = match &link {
+            None => in_process::start_with_webtransport(&args.maps)
+                .await
+                .expect("the server starts"),
+            Some(link) => {
+                let (tx, rx) = tokio::sync::oneshot::channel();
+                let (maps, ip) = (args.maps.clone(), link.server_ip.into());
+                link.run_inside(move || {
+                    let rt = tokio::runtime::Builder::new_multi_thread()
+                        .worker_threads(2)
+                        .enable_all()
+                        .build()
+                        .expect("the server's runtime");
+                    rt.block_on(async move {
+                        let _ = tx.send(in_process::start_with_webtransport_on(&maps, ip).await);
+                        std::future::pending::<()>().await
+                    })
+                })
+                .expect("a thread inside the link");
+                rx.await
+                    .expect("the server's thread")
+                    .expect("the server starts")
+            }
+        };
         let client = reqwest::Client::new();
         let created: Value = client
             .post(format!("http://{addr}/api/matches"))
@@ -197,13 +240,14 @@ async fn main() {
             .await
             .expect("JSON");
         let id = created["id"].as_str().expect("a match").to_string();
-        let _loss = (loss > 0).then(|| nft::Loss::udp_and_tcp(addr.port(), loss));
+        let _loss = (loss > 0 && link.is_none()).then(|| nft::Loss::udp_and_tcp(addr.port(), loss));
         let until = Instant::now() + Duration::from_secs(args.seconds);
         let (ws, wt) = tokio::join!(
             over_websocket(addr, &id, until),
             over_webtransport(addr, &id, until)
         );
         let seconds = args.seconds as f64;
+        drop(link);
         for (name, w) in [("websocket", &ws), ("webtransport", &wt)] {
             let row = w.row(name, loss, seconds);
             let f: Vec<&str> = row.split(',').collect();

@@ -7,12 +7,14 @@ cd "$(dirname "$0")/.."
 # What the tests need from Debian, installed when missing (CI runs as root on a fresh
 # machine; elsewhere sudo is used when available): Chromium for the browser tests, Redis
 # for the fleet's directory (tests/fleet.rs), PostgreSQL's server for the shared history
-# (tests/store_postgres.rs), nftables for packet loss on loopback (tests/browser_webtransport.rs).
+# (tests/store_postgres.rs), nftables and iproute2 for packet loss and the link emulator
+# (tests/browser_webtransport.rs, tests/link.rs).
 # The tests start and stop their own servers.
 NEED=()
 if ! command -v chromium >/dev/null 2>&1 && [ -z "${LASERTAG_CHROMIUM:-}" ]; then NEED+=(chromium); fi
 if ! command -v redis-server >/dev/null 2>&1 && [ -z "${LASERTAG_REDIS_SERVER:-}" ]; then NEED+=(redis-server); fi
 if ! command -v nft >/dev/null 2>&1; then NEED+=(nftables); fi
+if ! command -v ip >/dev/null 2>&1; then NEED+=(iproute2); fi
 if ! command -v initdb >/dev/null 2>&1 && ! ls /usr/lib/postgresql/*/bin/initdb >/dev/null 2>&1 \
   && [ -z "${LASERTAG_PG_BIN:-}" ]; then NEED+=(postgresql); fi
 if [ "${#NEED[@]}" -gt 0 ]; then

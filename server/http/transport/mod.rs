@@ -112,7 +112,10 @@ fn host_of(header: &str) -> &str {
 }
 
 /// QUIC's settings for the server's sessions: few streams (the session's own, HTTP/3's
-/// three and the client's one), small buffers, and an idle time-out.
+/// three and the client's one), small buffers, an idle time-out, and BBR for congestion
+/// control: CUBIC halves its window at each loss, and at a snapshot stream's trickle the
+/// window sat at its floor with datagrams queued behind it (15 stalls a minute at 150 ms and
+/// 2% loss, none with BBR: docs/network.md).
 fn quic_transport() -> QuicTransportConfig {
     use wtransport::quinn::VarInt;
     let mut t = QuicTransportConfig::default();
@@ -123,7 +126,10 @@ fn quic_transport() -> QuicTransportConfig {
         .send_window(4 << 20)
         .datagram_receive_buffer_size(Some(64 << 10))
         .datagram_send_buffer_size(256 << 10)
-        .keep_alive_interval(Some(Duration::from_secs(5)));
+        .keep_alive_interval(Some(Duration::from_secs(5)))
+        .congestion_controller_factory(Arc::new(
+            wtransport::quinn::congestion::BbrConfig::default(),
+        ));
     if let Ok(idle) = IDLE_TIMEOUT.try_into() {
         t.max_idle_timeout(Some(idle));
     }
