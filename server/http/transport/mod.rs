@@ -227,16 +227,15 @@ async fn handshake(state: AppState, incoming: IncomingSession, ip: IpAddr) {
     let Ok(Ok(request)) = tokio::time::timeout(HANDSHAKE_TIMEOUT, incoming).await else {
         return;
     };
-    let path = request.path().to_string();
-    let (route, query) = path.split_once('?').unwrap_or((&path, ""));
-    let query: HashMap<String, String> = match Query::try_from_uri(
-        &format!("/?{query}")
-            .parse()
-            .unwrap_or_else(|_| axum::http::Uri::from_static("/")),
-    ) {
-        Ok(Query(q)) => q,
-        Err(_) => return request.forbidden().await,
+    // The path and query as the WebSocket's extractors read them: a query that is no query
+    // is refused, as axum's `Query` refuses it.
+    let Ok(uri) = request.path().parse::<axum::http::Uri>() else {
+        return request.forbidden().await;
     };
+    let Ok(Query(query)) = Query::<HashMap<String, String>>::try_from_uri(&uri) else {
+        return request.forbidden().await;
+    };
+    let route = uri.path();
     let (kind, id) = match route.trim_start_matches('/').split_once('/') {
         Some(("ws", rest)) => match rest.split_once('/') {
             Some((kind, id)) if !id.is_empty() && !id.contains('/') => (kind, id),
@@ -244,7 +243,10 @@ async fn handshake(state: AppState, incoming: IncomingSession, ip: IpAddr) {
         },
         _ => return request.not_found().await,
     };
-    let id = percent_decode(id);
+    let Ok(id) = percent_encoding::percent_decode_str(id).decode_utf8() else {
+        return request.not_found().await;
+    };
+    let (kind, id) = (kind.to_string(), id.into_owned());
     let refusable = Refusable::new(request);
     let asked = Asked {
         id,
@@ -252,38 +254,15 @@ async fn handshake(state: AppState, incoming: IncomingSession, ip: IpAddr) {
         ip,
         ws: Pending::WebTransport(refusable.clone()),
     };
-    let answer = match kind {
+    let answer = match kind.as_str() {
         "matches" => ws::upgrade(State(state), asked).await,
         "replays" => replay_ws::upgrade(State(state), asked).await,
-        _ => Err(ApiError::not_found(format!("no socket at {route}"))),
+        _ => Err(ApiError::not_found(format!("no socket at {}", uri.path()))),
     };
     if let Err(e) = answer {
         tracing::debug!(%ip, status = %e.status, error = %e.message, "WebTransport session refused");
         refusable.refuse(e.status).await;
     }
-}
-
-/// `%xx` escapes of a path segment decoded (an id is ASCII; anything else stays as sent).
-fn percent_decode(segment: &str) -> String {
-    let bytes = segment.as_bytes();
-    let mut out = Vec::with_capacity(bytes.len());
-    let mut i = 0;
-    while i < bytes.len() {
-        let hex = |b: u8| (b as char).to_digit(16);
-        if bytes[i] == b'%'
-            && let (Some(h), Some(l)) = (
-                bytes.get(i + 1).copied().and_then(hex),
-                bytes.get(i + 2).copied().and_then(hex),
-            )
-        {
-            out.push((h * 16 + l) as u8);
-            i += 3;
-            continue;
-        }
-        out.push(bytes[i]);
-        i += 1;
-    }
-    String::from_utf8(out).unwrap_or_else(|_| segment.to_string())
 }
 
 /// Handshakes in progress, in all and by address.
@@ -323,12 +302,10 @@ mod tests {
     use super::*;
 
     #[test]
-    fn hosts_and_ids_are_read_as_a_browser_sends_them() {
+    fn hosts_are_read_as_a_browser_sends_them() {
         assert_eq!(host_of("127.0.0.1:8080"), "127.0.0.1");
         assert_eq!(host_of("example.org"), "example.org");
         assert_eq!(host_of("[::1]:8080"), "[::1]");
-        assert_eq!(percent_decode("showcase-1"), "showcase-1");
-        assert_eq!(percent_decode("a%2Fb%zz"), "a/b%zz");
     }
 
     #[test]
