@@ -26,6 +26,9 @@ if [ "${#NEED[@]}" -gt 0 ]; then
   # of their own on free ports.
   DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq "${NEED[@]}" >/dev/null
 fi
+# No incremental compilation caches: a full run builds every test binary once, and the
+# caches (as large again as the binaries) only fill the disk of a fresh machine.
+export CARGO_INCREMENTAL="${CARGO_INCREMENTAL:-0}"
 # Lints first (tests/tidy.rs checks formatting and the floors; clippy would wait on the build
 # directory that `cargo test` holds if the tidy test ran it).
 cargo clippy --locked --workspace --all-targets -- -D warnings
