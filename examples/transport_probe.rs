@@ -127,40 +127,31 @@ async fn over_webtransport(addr: std::net::SocketAddr, id: &str, until: Instant)
         .await
         .expect("JSON");
     let (url, hash) = wt::published(&reply);
-    let mut c = wt::WtClient::connect(&format!("{url}/ws/matches/{id}?format=compact"), &hash)
+    let c = wt::WtClient::connect(&format!("{url}/ws/matches/{id}?format=compact"), &hash)
         .await
         .expect("a session");
+    let (mut snapshots, conn) = c.snapshots();
     let (mut arrivals, mut bytes, mut datagrams, mut streamed) = (Vec::new(), 0, 0, 0);
     // A tick's first arrival is when the page can show it (a large snapshot comes twice:
-    // its motion as a datagram, the whole on the stream).
+    // its motion as a datagram, the whole on the stream). The client acknowledges what it
+    // holds, as the page does, so snapshots come as deltas against those.
     let mut newest = None;
-    let mut arrived = |payload: &[u8]| {
-        let tick = payload
-            .get(2..6)
-            .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]));
+    let mut held = wt::Held::default();
+    while let Ok(Some(a)) = tokio::time::timeout_at(until.into(), snapshots.recv()).await {
+        if a.datagram {
+            bytes += a.bytes.len() + 1;
+            datagrams += 1;
+        } else {
+            bytes += a.bytes.len() + 5;
+            streamed += 1;
+        }
+        let tick = lasertag::protocol::compact::tick_of(&a.bytes);
         if tick > newest {
             newest = tick;
             arrivals.push(Instant::now());
         }
-    };
-    let conn = c.conn.clone();
-    loop {
-        tokio::select! {
-            d = conn.receive_datagram() => {
-                let Ok(d) = d else { break };
-                bytes += d.len();
-                datagrams += 1;
-                arrived(&d[1..]);
-            }
-            f = c.frame() => {
-                let Some((kind, payload)) = f else { break };
-                bytes += payload.len() + 5;
-                if kind == wt::BINARY {
-                    streamed += 1;
-                    arrived(&payload);
-                }
-            }
-            () = tokio::time::sleep_until(until.into()) => break,
+        if let Ok(Some(_)) = held.take(a.bytes) {
+            let _ = conn.send_datagram(held.ack());
         }
     }
     Watched {
@@ -207,23 +198,13 @@ async fn main() {
                 .await
                 .expect("the server starts"),
             Some(link) => {
-                let (tx, rx) = tokio::sync::oneshot::channel();
                 let (maps, ip) = (args.maps.clone(), link.server_ip.into());
-                link.run_inside(move || {
-                    let rt = tokio::runtime::Builder::new_multi_thread()
-                        .worker_threads(2)
-                        .enable_all()
-                        .build()
-                        .expect("the server's runtime");
-                    rt.block_on(async move {
-                        let _ = tx.send(in_process::start_with_webtransport_on(&maps, ip).await);
-                        std::future::pending::<()>().await
-                    })
+                link.serve_inside(move || async move {
+                    in_process::start_with_webtransport_on(&maps, ip).await
                 })
-                .expect("a thread inside the link");
-                rx.await
-                    .expect("the server's thread")
-                    .expect("the server starts")
+                .await
+                .expect("a runtime inside the link")
+                .expect("the server starts")
             }
         };
         let client = reqwest::Client::new();

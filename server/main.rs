@@ -65,8 +65,10 @@ struct ServeArgs {
     /// WebSockets only.
     #[arg(long, env = "LASERTAG_NO_WEBTRANSPORT")]
     no_webtransport: bool,
-    /// The certificate (PEM, a chain) for WebTransport, with `--tls-key`; without them the
-    /// server makes its own, which browsers pin by its hash (`GET /api/transport`).
+    /// The certificate (PEM, a chain), with `--tls-key`: the server then speaks HTTPS on
+    /// its TCP port and WebTransport with it. Without them it speaks plain HTTP, and makes
+    /// its own certificate for WebTransport, which browsers pin by its hash
+    /// (`GET /api/transport`).
     #[arg(long, env = "LASERTAG_TLS_CERT", requires = "tls_key")]
     tls_cert: Option<PathBuf>,
     /// The private key (PEM) of `--tls-cert`.
@@ -254,7 +256,16 @@ async fn serve(args: ServeArgs) -> Result<(), String> {
     }
     // On a shared store, the matches other servers can no longer run are taken over here.
     tokio::spawn(lasertag::game::resume::adopt_forever(registry.clone()));
-    tracing::info!("serving http://{local}");
+    // The operator's certificate: HTTPS on the TCP port (read before anything is served, so
+    // a bad file stops the start with its name).
+    let tls = match (&args.tls_cert, &args.tls_key) {
+        (Some(cert), Some(key)) => {
+            Some(lasertag::http::tls::acceptor(cert, key).map_err(|e| e.to_string())?)
+        }
+        _ => None,
+    };
+    let scheme = if tls.is_some() { "https" } else { "http" };
+    tracing::info!("serving {scheme}://{local}");
     let (app, state) = lasertag::http::app_and_state(registry.clone(), args.web, fleet.clone());
     if !args.no_webtransport {
         let source = match (args.tls_cert, args.tls_key) {
@@ -266,7 +277,8 @@ async fn serve(args: ServeArgs) -> Result<(), String> {
             .await
             .map_err(|e| e.to_string())?;
     }
-    let limits = lasertag::http::ConnectionLimits::of(&registry).map_err(|e| e.to_string())?;
+    let mut limits = lasertag::http::ConnectionLimits::of(&registry).map_err(|e| e.to_string())?;
+    limits.tls = tls;
     // Under Agones, Ready once listening; Health, the matches counter and Allocated after.
     #[cfg(feature = "agones")]
     let sidecar = lasertag::agones::Sidecar::from_env();

@@ -53,6 +53,10 @@ async fn a_match_plays_over_webtransport_through_loss() {
     assert!(last >= first + 20, "ticks {first} to {last}");
     assert_eq!(b.eval("__lasertag.clockWentBack || 0").await, json!(0));
     assert_eq!(b.eval("__lasertag.errors").await, json!([]));
+    // The page acknowledges what it holds: snapshots come as deltas against those, and
+    // every one applied (no error above).
+    let deltas = b.eval("__lasertag.deltas || 0").await.as_u64().unwrap();
+    assert!(deltas > 10, "{deltas} deltas");
     let hud = b
         .wait_for(
             "document.getElementById('hud-ping').textContent.includes('WebTransport') && document.getElementById('hud-ping').textContent",

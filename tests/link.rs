@@ -5,6 +5,7 @@
 //! Needs root, `ip` and nftables (tests/run.sh installs nftables).
 
 #[path = "common/link.rs"]
+#[allow(dead_code)]
 mod link;
 
 use std::time::{Duration, Instant};

@@ -1,11 +1,14 @@
 //! WebTransport over the real server (UDP on the HTTP port, its own certificate pinned by the
 //! hash `GET /api/transport` publishes): a spectator gets `welcome` on the reliable stream and
-//! snapshots as datagrams; a player's input datagrams, each repeating the ones before it,
+//! snapshots as datagrams, deltas against the ones it acknowledged; a player's input datagrams, each repeating the ones before it,
 //! move its body; bad sessions are refused as a WebSocket's upgrade is, and bad messages
 //! struck and closed with the WebSocket's codes.
 
 mod common;
+#[path = "common/process.rs"]
+mod process;
 #[path = "common/wt.rs"]
+#[allow(dead_code)]
 mod wt;
 
 use std::time::Duration;
@@ -60,8 +63,13 @@ async fn a_spectator_gets_welcome_on_the_stream_and_snapshots_as_datagrams() {
     while ticks.len() < 40 {
         let (kind, payload) = c.datagram().await;
         assert_eq!(kind, BINARY);
-        // Each stands on its own: a whole compact snapshot, never a delta.
-        assert_eq!(payload[0], 1, "a whole snapshot");
+        // Each stands on its own to a client that acknowledges none: a whole compact
+        // snapshot, or the motion part of one (kind 3) whose whole comes on the stream.
+        assert!(
+            matches!(payload[0], 1 | 3),
+            "a whole snapshot: {}",
+            payload[0]
+        );
         ticks.push(u32::from_le_bytes([
             payload[2], payload[3], payload[4], payload[5],
         ]));
@@ -83,6 +91,77 @@ async fn a_spectator_gets_welcome_on_the_stream_and_snapshots_as_datagrams() {
     // It counts as its address's spectator, as a WebSocket does.
     let listed = s.get("/api/matches").await.body;
     assert_eq!(listed[0]["spectators"], 1, "{listed}");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_client_that_acknowledges_gets_deltas_against_what_it_holds() {
+    use lasertag::protocol::compact;
+    use std::collections::HashMap;
+    let s = server().await;
+    let id = s
+        .create_match(json!({"map": "office", "opponent_control": "bot"}))
+        .await;
+    let (url, hash) = at(&s, &format!("/ws/matches/{id}?format=compact")).await;
+    // Two spectators of one match are sent the same snapshot each tick: one acknowledges
+    // and gets deltas, the other none and gets wholes to check them against.
+    let (mut acking, conn) = WtClient::connect(&url, &hash)
+        .await
+        .expect("connects")
+        .snapshots();
+    let (mut plain, _plain_conn) = WtClient::connect(&url, &hash)
+        .await
+        .expect("connects")
+        .snapshots();
+    let mut held = wt::Held::default();
+    let (mut decoded, mut deltas, mut delta_bytes, mut whole_bytes) =
+        (HashMap::new(), 0, 0usize, 0usize);
+    let deadline = tokio::time::Instant::now() + Duration::from_secs(20);
+    while deltas < 30 {
+        let a = tokio::time::timeout_at(deadline, acking.recv())
+            .await
+            .expect("30 deltas within 20 s")
+            .expect("the session is open");
+        let (kind, len) = (a.bytes[0], a.bytes.len());
+        // A delta only against a tick acknowledged (held), and it applies.
+        let Some(whole) = held.take(a.bytes).expect("a snapshot the client can read") else {
+            continue;
+        };
+        if kind == compact::KIND_DELTA {
+            deltas += 1;
+            delta_bytes += len;
+        } else {
+            whole_bytes += len;
+        }
+        decoded.insert(compact::tick_of(&whole).unwrap(), whole);
+        conn.send_datagram(held.ack())
+            .expect("an acknowledgement goes");
+    }
+    // What the deltas stand for is, byte for byte, what the other spectator got whole (on
+    // the ticks whose snapshots carry the same parts).
+    let mut compared = 0;
+    let last = *decoded.keys().max().unwrap();
+    while let Ok(Some(a)) = tokio::time::timeout(Duration::from_secs(5), plain.recv()).await {
+        let tick = compact::tick_of(&a.bytes).unwrap();
+        if tick > last {
+            break;
+        }
+        if a.bytes[0] != compact::KIND_WHOLE {
+            continue;
+        }
+        // The same parts (scans, belief: each spectator on its own schedule).
+        if let Some(d) = decoded.get(&tick).filter(|d| d[1] == a.bytes[1]) {
+            assert_eq!(d, &a.bytes, "tick {:?}", compact::tick_of(&a.bytes));
+            compared += 1;
+        }
+    }
+    assert!(compared >= 10, "compared {compared} ticks");
+    let mean = |bytes: usize, n: usize| bytes as f64 / n.max(1) as f64;
+    assert!(
+        mean(delta_bytes, deltas) < mean(whole_bytes, decoded.len() - deltas),
+        "deltas average {} bytes, wholes {}",
+        mean(delta_bytes, deltas),
+        mean(whole_bytes, decoded.len() - deltas)
+    );
 }
 
 /// Where opponent `oid` is in the truth.
@@ -207,4 +286,104 @@ async fn bad_messages_are_struck_then_closed_with_the_websockets_codes() {
     big.send_frame(TEXT, b"{}", Some(64 << 20)).await;
     let close = big.next_of("close").await;
     assert_eq!(close["code"], 1009, "{close}");
+}
+
+/// `method path` (with a JSON `body` when not null) over HTTPS at `addr`, trusting `cert`
+/// alone for `localhost`: status and body.
+async fn https(
+    addr: std::net::SocketAddr,
+    cert: &[u8],
+    method: &str,
+    path: &str,
+    body: Value,
+) -> (u16, Value) {
+    use rustls::pki_types::{CertificateDer, ServerName};
+    use tokio::io::{AsyncReadExt, AsyncWriteExt};
+    let mut roots = rustls::RootCertStore::empty();
+    roots
+        .add(CertificateDer::from(cert.to_vec()))
+        .expect("the certificate is a root");
+    let config = rustls::ClientConfig::builder()
+        .with_root_certificates(roots)
+        .with_no_client_auth();
+    let connector = tokio_rustls::TlsConnector::from(std::sync::Arc::new(config));
+    let tcp = tokio::net::TcpStream::connect(addr)
+        .await
+        .expect("connects");
+    let name = ServerName::try_from("localhost").expect("a name");
+    let mut tls = connector.connect(name, tcp).await.expect("a TLS handshake");
+    let body = if body.is_null() {
+        String::new()
+    } else {
+        body.to_string()
+    };
+    let request = format!(
+        "{method} {path} HTTP/1.1\r\nHost: localhost:{}\r\nConnection: close\r\n\
+         Content-Type: application/json\r\nContent-Length: {}\r\n\r\n{body}",
+        addr.port(),
+        body.len()
+    );
+    tls.write_all(request.as_bytes()).await.expect("sent");
+    let mut reply = String::new();
+    tls.read_to_string(&mut reply).await.expect("a reply");
+    let status = reply
+        .split(' ')
+        .nth(1)
+        .and_then(|s| s.parse().ok())
+        .expect("a status line");
+    let body = reply.split("\r\n\r\n").nth(1).unwrap_or_default();
+    (status, serde_json::from_str(body).unwrap_or(Value::Null))
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_operators_certificate_serves_https_and_webtransport() {
+    let dir = common::temp_dir("tls");
+    let identity = wtransport::Identity::self_signed(["localhost"]).expect("an identity");
+    let (cert, key) = (dir.join("cert.pem"), dir.join("key.pem"));
+    identity
+        .certificate_chain()
+        .store_pemfile(&cert)
+        .await
+        .expect("cert written");
+    identity
+        .private_key()
+        .store_secret_pemfile(&key)
+        .await
+        .expect("key written");
+    let leaf = &identity.certificate_chain().as_slice()[0];
+    let s = process::Server::start(&[
+        "--no-showcase",
+        "--tls-cert",
+        cert.to_str().unwrap(),
+        "--tls-key",
+        key.to_str().unwrap(),
+    ]);
+    // The API over HTTPS; WebTransport published with no hash to pin (the certificate is
+    // trusted as any HTTPS one).
+    let get = |path: &'static str| https(s.addr, leaf.der(), "GET", path, Value::Null);
+    let (status, transport) = get("/api/transport").await;
+    assert_eq!(status, 200, "{transport}");
+    assert_eq!(
+        transport["webtransport"]["url"],
+        format!("https://localhost:{}", s.addr.port())
+    );
+    assert_eq!(transport["webtransport"]["certificate_hashes"], json!([]));
+    let (status, health) = get("/api/health").await;
+    assert_eq!(status, 200, "{health}");
+    // Plain HTTP on that port gets no answer it can read.
+    let plain = reqwest::get(format!("http://{}/api/health", s.addr)).await;
+    assert!(plain.is_err(), "plain HTTP answered: {plain:?}");
+    // A match made over HTTPS, watched over WebTransport with the same certificate.
+    let body = json!({"map": "office", "opponent_control": "bot"});
+    let (status, created) = https(s.addr, leaf.der(), "POST", "/api/matches", body).await;
+    assert_eq!(status, 201, "{created}");
+    let url = format!(
+        "https://127.0.0.1:{}/ws/matches/{}?format=compact",
+        s.addr.port(),
+        created["id"].as_str().unwrap()
+    );
+    let mut c = WtClient::connect(&url, &leaf.hash())
+        .await
+        .expect("a session with the operator's certificate");
+    assert_eq!(c.json().await["type"], "welcome");
 }

@@ -2,26 +2,47 @@
 // into the same object the JSON form gives, so the rest of the page does not know which it
 // got. The layout is in server/protocol/compact.rs and docs/api.md. Scans and localisation
 // clouds come only every few ticks: between them each robot keeps its last ones. A delta
-// (kind 2) patches the last whole snapshot into the next one.
+// (kind 2) patches a whole snapshot the page holds (the one it names) into the next one; a
+// motion part (kind 3, over WebTransport: the whole of that tick follows) is shown and kept
+// as no baseline.
 
 const TURN = (Math.PI * 2) / 65536;
 const CONTROL = ["bot", "api", "human"];
 const STATE = ["valid", "suspicious", "invalid"];
 const utf8 = new TextDecoder();
+/** How far behind the newest a kept baseline may be (ticks): what an acknowledgement names. */
+const HELD = 32;
 
 export class CompactDecoder {
   constructor() {
     this.slow = new Map(); // robot id -> {scan, cloud} from the last snapshot that had them
-    this.base = null; // the last whole snapshot (Uint8Array): what a delta is against
+    this.held = new Map(); // tick -> whole snapshot (Uint8Array): what a delta may be against
+    this.newest = null; // the newest tick held
+  }
+
+  /** Which snapshots the page holds, for an acknowledgement (docs/api.md, "WebTransport"):
+   * the newest tick and, in bit i, whether it holds tick newest - 1 - i. */
+  acks() {
+    if (this.newest === null) return null;
+    let bits = 0;
+    for (let i = 0; i < 32; i++) if (this.held.has(this.newest - 1 - i)) bits |= 1 << i;
+    return { newest: this.newest, bits: bits >>> 0 };
+  }
+
+  /** Keeps `bytes` (a whole snapshot of `tick`) as a baseline: the newest 33 ticks, the
+   * rest dropped; a tick far behind the newest (time went back) starts over. */
+  keep(tick, bytes) {
+    if (this.newest !== null && tick + HELD < this.newest) this.held.clear();
+    this.held.set(tick, bytes);
+    if (this.newest === null || tick > this.newest || this.held.size === 1) this.newest = tick;
+    for (const t of this.held.keys()) if (t + HELD < this.newest) this.held.delete(t);
   }
 
   /** The whole snapshot a delta message stands for (see `apply_delta` in compact.rs). */
   undelta(bytes) {
     const d = new DataView(bytes.buffer, bytes.byteOffset, bytes.byteLength);
-    const base = this.base;
-    if (!base || d.getUint32(6, true) !== new DataView(base.buffer).getUint32(2, true)) {
-      throw new Error("a delta against a snapshot this page does not hold");
-    }
+    const base = this.held.get(d.getUint32(6, true));
+    if (!base) throw new Error("a delta against a snapshot this page does not hold");
     const out = base.slice();
     let at = 0;
     for (let i = 10; i < bytes.length; ) {
@@ -39,10 +60,11 @@ export class CompactDecoder {
   /** Decodes one binary message (an ArrayBuffer) into a snapshot object. */
   decode(message) {
     let bytes = new Uint8Array(message);
+    const motion = bytes[0] === 3;
     if (bytes[0] === 2) bytes = this.undelta(bytes);
-    this.base = bytes;
     const buffer = bytes.buffer;
     const d = new DataView(buffer);
+    if (!motion) this.keep(d.getUint32(2, true), bytes);
     let at = 0;
     const u8 = () => d.getUint8(at++);
     const u16 = () => { const v = d.getUint16(at, true); at += 2; return v; };
@@ -50,7 +72,7 @@ export class CompactDecoder {
     const m = () => u16() / 100;
     const angle = () => { const a = u16() * TURN; return a > Math.PI ? a - Math.PI * 2 : a; };
     const pose = () => ({ x: m(), y: m(), theta: angle() });
-    if (u8() !== 1) throw new Error("not a compact snapshot");
+    if (u8() !== 1 && !motion) throw new Error("not a compact snapshot");
     const flags = u8();
     const spectator = (flags & 1) !== 0, hasBelief = (flags & 2) !== 0, youRobot = (flags & 64) !== 0;
     const tick = u32();

@@ -81,11 +81,15 @@ export class PageSocket {
         const binary = typeof data !== "string";
         // What the page receives, for measurements of the bandwidth a client needs.
         debug.rxBytes = (debug.rxBytes || 0) + (binary ? data.byteLength : data.length);
+        if (binary && new Uint8Array(data, 0, 1)[0] === 2) debug.deltas = (debug.deltas || 0) + 1;
         let msg;
         try { msg = binary ? decoder.decode(data) : JSON.parse(data); } catch (e) {
           debug.errors.push(String(e));
           return;
         }
+        // Over a carrier that may lose snapshots, the server's deltas are against those the
+        // page says it holds.
+        if (binary && this.carrier && this.carrier.ack) this.carrier.ack(decoder.acks());
         this.dispatch(msg);
       },
       close: (e) => {

@@ -2,7 +2,8 @@
 // session (docs/api.md, "WebTransport"), both opened with the same handlers and sending the
 // same messages. Over WebTransport snapshots come as datagrams (a lost one costs that
 // snapshot only), everything else in frames on the server's stream; inputs go as datagrams
-// that repeat the last few, the rest in frames on the page's own stream.
+// that repeat the last few, the rest in frames on the page's own stream, and the page says
+// in a datagram which snapshots it holds (the server's deltas are against those).
 
 /** How long a WebTransport session may take to open before the page takes the WebSocket
  * (UDP blocked drops the handshake silently: it would never fail by itself). */
@@ -10,6 +11,8 @@ export const WEBTRANSPORT_WAIT_MS = 1000;
 /** The inputs each input datagram carries: the newest and the ones before it. */
 const INPUTS_PER_DATAGRAM = 3;
 const TEXT = 0;
+/** A datagram's kind: which snapshots the page holds (`u32 newest | u32 bits`). */
+const ACK = 2;
 const utf8 = new TextDecoder();
 const encode = (s) => new TextEncoder().encode(s);
 
@@ -156,6 +159,16 @@ export async function webTransportCarrier(wsUrl, on) {
       } else {
         frame(JSON.stringify(obj)).catch(() => {});
       }
+    },
+    /** Says which snapshots the page holds (`CompactDecoder.acks()`): a datagram. */
+    ack(acks) {
+      if (closed || !acks) return;
+      const d = new Uint8Array(9);
+      d[0] = ACK;
+      const v = new DataView(d.buffer);
+      v.setUint32(1, acks.newest, true);
+      v.setUint32(5, acks.bits, true);
+      datagrams.write(d).catch(() => {});
     },
     close() {
       closed = true;

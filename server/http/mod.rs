@@ -22,6 +22,7 @@ mod rules;
 mod serve;
 pub mod socket;
 mod state;
+pub mod tls;
 pub mod transport;
 pub mod ws;
 

@@ -21,6 +21,8 @@
 //! - A header read timeout: a connection that starts a request and does not finish its
 //!   header in time, or sits idle between keep-alive requests that long, is closed. Without
 //!   it a client sending half a header held its socket forever.
+//! - HTTPS when the operator gives a certificate ([`super::tls`]): each connection's TLS
+//!   handshake runs in its own task, within the header read timeout.
 //! - Graceful shutdown like `axum::serve`'s: stop accepting, let every connection finish
 //!   its request, then return.
 //!
@@ -60,7 +62,7 @@ pub const MIN_CONNECTIONS: usize = 64;
 const CLIENTS_WITH_ROOM: usize = 16;
 
 /// What the accept loop enforces.
-#[derive(Debug, Clone)]
+#[derive(Clone)]
 pub struct ConnectionLimits {
     /// Connections open at once, WebSockets included.
     pub max_connections: usize,
@@ -70,6 +72,8 @@ pub struct ConnectionLimits {
     pub header_read_timeout: Duration,
     /// Where refused connections are counted.
     pub registry: Option<Arc<Registry>>,
+    /// HTTPS: the TLS each connection starts with; `None`, plain HTTP.
+    pub tls: Option<tokio_rustls::TlsAcceptor>,
 }
 
 /// The open files limit leaves too few connections to serve: the server does not start.
@@ -107,6 +111,7 @@ impl ConnectionLimits {
             max_per_address,
             header_read_timeout: config.header_read_timeout,
             registry: Some(registry.clone()),
+            tls: None,
         })
     }
 }
@@ -327,39 +332,73 @@ pub async fn serve(
                 req.extensions_mut().insert(ConnectInfo(peer));
                 req.map(Body::new)
             });
-        let io = TokioIo::new(Counted {
+        let counted = Counted {
             stream,
             _permit: permit,
             _slot: slot,
-        });
-        let conn = builder
-            .serve_connection(io, TowerToHyperService::new(service))
-            .with_upgrades();
-        let mut signal = signal_rx.clone();
-        let closed = closed_rx.clone();
-        tokio::spawn(async move {
-            tokio::pin!(conn);
-            loop {
-                tokio::select! {
-                    result = conn.as_mut() => {
-                        if let Err(e) = result {
-                            tracing::debug!(%peer, "connection ended: {e}");
-                        }
-                        break;
-                    }
-                    _ = signal.changed() => {
-                        conn.as_mut().graceful_shutdown();
-                    }
-                }
+        };
+        let (builder, signal, closed) = (builder.clone(), signal_rx.clone(), closed_rx.clone());
+        let service = TowerToHyperService::new(service);
+        match limits.tls.clone() {
+            None => {
+                tokio::spawn(drive(counted, builder, service, signal, closed, peer));
             }
-            drop(closed);
-        });
+            Some(tls) => {
+                let handshake_time = limits.header_read_timeout;
+                tokio::spawn(async move {
+                    match tokio::time::timeout(handshake_time, tls.accept(counted)).await {
+                        Ok(Ok(stream)) => {
+                            drive(stream, builder, service, signal, closed, peer).await
+                        }
+                        Ok(Err(e)) => tracing::debug!(%peer, "TLS handshake failed: {e}"),
+                        Err(_) => tracing::debug!(%peer, "TLS handshake timed out"),
+                    }
+                });
+            }
+        }
     }
     drop(listener);
     drop(signal_tx);
     drop(closed_rx);
     closed_tx.closed().await;
     Ok(())
+}
+
+/// Serves one connection (`io`, after TLS if any) until it ends, shutting it down gracefully
+/// when `signal` changes; `closed` is held until then (the loop waits for every one).
+async fn drive<S, T>(
+    io: S,
+    builder: hyper::server::conn::http1::Builder,
+    service: T,
+    mut signal: watch::Receiver<()>,
+    closed: watch::Receiver<()>,
+    peer: std::net::SocketAddr,
+) where
+    S: AsyncRead + AsyncWrite + Unpin + Send + 'static,
+    T: hyper::service::Service<hyper::Request<Incoming>, Response = axum::response::Response>
+        + Send
+        + 'static,
+    T::Future: Send + 'static,
+    T::Error: std::error::Error + Send + Sync + 'static,
+{
+    let conn = builder
+        .serve_connection(TokioIo::new(io), service)
+        .with_upgrades();
+    tokio::pin!(conn);
+    loop {
+        tokio::select! {
+            result = conn.as_mut() => {
+                if let Err(e) = result {
+                    tracing::debug!(%peer, "connection ended: {e}");
+                }
+                break;
+            }
+            _ = signal.changed() => {
+                conn.as_mut().graceful_shutdown();
+            }
+        }
+    }
+    drop(closed);
 }
 
 /// Errors of `accept` that concern one connection (reset before it was taken) are skipped;

@@ -346,6 +346,15 @@ impl Socket {
         matches!(self.carrier, Carrier::WebTransport(_))
     }
 
+    /// Which snapshots the client says it holds, over a carrier that may lose them (a
+    /// WebSocket's client holds each one sent: `None`).
+    pub fn acks(&self) -> Option<crate::protocol::compact::Acks> {
+        match &self.carrier {
+            Carrier::WebSocket(_) => None,
+            Carrier::WebTransport(session) => session.acks(),
+        }
+    }
+
     /// Whether a snapshot of `len` bytes reaches the client as one piece that may be lost on
     /// its own (a datagram): over a WebSocket always.
     pub fn fits_datagram(&self, len: usize) -> bool {

@@ -150,7 +150,7 @@ impl Connection {
             Seated::Player(s) => (Some(s), None),
             Seated::Spectator(s) => (None, Some(s)),
         };
-        let deltas = !sock.lossy();
+        let lossy = sock.lossy();
         Connection {
             sock,
             watching: seat.is_none(),
@@ -160,8 +160,8 @@ impl Connection {
                 .as_ref()
                 .is_none_or(|s| matches!(s.body, AgentId::Robot(_))),
             compact: false,
-            // Datagrams may be lost: no delta against one the client may not have.
-            schedule: Schedule::new(deltas),
+            // Datagrams may be lost: deltas only against what the client acknowledged.
+            schedule: Schedule::new(lossy),
             seat,
             handle,
             config,
@@ -399,25 +399,28 @@ impl Connection {
         let wanted = self.belief && frame.belief.is_some();
         let parts = self.schedule.parts(frame.tick, finished, wanted);
         let whole = wire::spectator_compact(frame, parts.belief, parts.slow);
-        let bytes = self.schedule.sent(frame.tick, parts, whole);
+        let bytes = self
+            .schedule
+            .sent(frame.tick, parts, whole, self.sock.acks());
         if !self.sock.fits_datagram(bytes.len()) {
             let motion = wire::spectator_compact(frame, false, false);
-            self.send_motion_first(motion).await?;
+            self.send_motion_first(motion.into()).await?;
         }
         self.sock.count_snapshot(bytes.len());
         self.sock.snapshot(Message::Binary(bytes)).await
     }
 
     /// A compact snapshot too large for a datagram (its scans, its belief) goes in two: its
-    /// `motion` alone first, as a datagram (what moves is never held up by a loss on the
+    /// `motion` alone first, as a datagram of kind 3 (what moves is never held up by a loss on the
     /// stream), then the whole on the stream; the page takes the second's scans and belief
     /// and skips a tick it already has.
-    async fn send_motion_first(&mut self, motion: axum::body::Bytes) -> Result<(), End> {
+    async fn send_motion_first(&mut self, motion: Vec<u8>) -> Result<(), End> {
         if !self.sock.fits_datagram(motion.len()) {
             return Ok(());
         }
         self.sock.count_snapshot(motion.len());
-        self.sock.snapshot(Message::Binary(motion)).await
+        let motion = crate::protocol::compact::as_motion(motion);
+        self.sock.snapshot(Message::Binary(motion.into())).await
     }
 
     /// A spectator's snapshot of `frame`, as JSON.
@@ -453,9 +456,11 @@ impl Connection {
                 .and_then(|f| f.own_belief(you).or(f.belief.as_deref()))
                 .filter(|_| parts.belief);
             let whole = compact::snapshot(frame, Some(you), Some(v), belief, parts.slow).into();
-            let bytes = self.schedule.sent(frame.tick, parts, whole);
+            let bytes = self
+                .schedule
+                .sent(frame.tick, parts, whole, self.sock.acks());
             if !self.sock.fits_datagram(bytes.len()) {
-                let motion = compact::snapshot(frame, Some(you), Some(v), None, false).into();
+                let motion = compact::snapshot(frame, Some(you), Some(v), None, false);
                 self.send_motion_first(motion).await?;
             }
             self.sock.count_snapshot(bytes.len());

@@ -45,6 +45,13 @@
 //! ```
 //!
 //! Bytes after the last run are the baseline's.
+//!
+//! Over WebTransport snapshots go as datagrams, which may be lost or come out of order, so
+//! the client says which it holds: an acknowledgement ([`Acks`]) names the newest tick it
+//! holds and, in 32 bits, which of the 32 before it; a delta is against the newest snapshot
+//! the server sent that the client last said it holds. A snapshot too large for a datagram
+//! goes on the stream, its motion alone first as a datagram of kind 3 ([`KIND_MOTION`]):
+//! laid out as kind 1, shown, never a baseline (the whole of that tick follows).
 
 use crate::game::view::{BeliefView, Frame, Visible};
 use lasertag_core::sim::AgentId;
@@ -244,6 +251,73 @@ pub fn snapshot(
 /// Kind byte of a whole snapshot and of a delta against the one before it.
 pub const KIND_WHOLE: u8 = 1;
 pub const KIND_DELTA: u8 = 2;
+/// Kind byte of a snapshot's motion sent ahead of its whole (laid out as [`KIND_WHOLE`]):
+/// the client shows it and keeps it as no baseline.
+pub const KIND_MOTION: u8 = 3;
+
+/// The tick of a compact message (whole, delta or motion), when it has one.
+pub fn tick_of(message: &[u8]) -> Option<u32> {
+    message
+        .get(2..6)
+        .map(|t| u32::from_le_bytes([t[0], t[1], t[2], t[3]]))
+}
+
+/// Which snapshots a client holds, as it last said (over a carrier that may lose them): the
+/// newest tick, and bit `i` for tick `newest - 1 - i`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Acks {
+    pub newest: u32,
+    pub bits: u32,
+}
+
+impl Acks {
+    /// The length of an acknowledgement: `u32 newest | u32 bits`.
+    pub const LEN: usize = 8;
+
+    pub fn holds(&self, tick: u32) -> bool {
+        match self.newest.checked_sub(tick) {
+            Some(0) => true,
+            Some(back @ 1..=32) => self.bits & (1 << (back - 1)) != 0,
+            _ => false,
+        }
+    }
+
+    /// An acknowledgement's bytes, as a client sends them; `None` when malformed.
+    pub fn parse(bytes: &[u8]) -> Option<Acks> {
+        let b: &[u8; Acks::LEN] = bytes.try_into().ok()?;
+        Some(Acks {
+            newest: u32::from_le_bytes([b[0], b[1], b[2], b[3]]),
+            bits: u32::from_le_bytes([b[4], b[5], b[6], b[7]]),
+        })
+    }
+
+    pub fn to_bytes(self) -> [u8; Acks::LEN] {
+        let mut b = [0u8; Acks::LEN];
+        b[..4].copy_from_slice(&self.newest.to_le_bytes());
+        b[4..].copy_from_slice(&self.bits.to_le_bytes());
+        b
+    }
+
+    /// As an atomic's word (see [`Acks::from_word`]).
+    pub fn to_word(self) -> u64 {
+        u64::from(self.newest) << 32 | u64::from(self.bits)
+    }
+
+    pub fn from_word(word: u64) -> Acks {
+        Acks {
+            newest: (word >> 32) as u32,
+            bits: word as u32,
+        }
+    }
+}
+
+/// `whole` (a whole snapshot) as a motion part sent ahead of it: kind [`KIND_MOTION`].
+pub fn as_motion(mut whole: Vec<u8>) -> Vec<u8> {
+    if let Some(kind) = whole.first_mut() {
+        *kind = KIND_MOTION;
+    }
+    whole
+}
 
 /// `next` as a delta against `base` (both whole snapshots), when they are the same length
 /// and the delta is shorter; `None` means send `next` whole.
@@ -380,6 +454,30 @@ mod tests {
         assert_eq!(cm(12.344), 1234);
         assert_eq!(cm(-1.0), 0);
         assert_eq!(cm(1e6), u16::MAX);
+    }
+
+    #[test]
+    fn acks_name_the_newest_tick_and_the_32_before_it() {
+        let a = Acks {
+            newest: 100,
+            bits: 0b101,
+        };
+        assert!(a.holds(100) && a.holds(99) && !a.holds(98) && a.holds(97));
+        assert!(!a.holds(101) && !a.holds(67));
+        let all = Acks {
+            newest: 100,
+            bits: u32::MAX,
+        };
+        assert!(all.holds(68) && !all.holds(67));
+        let early = Acks {
+            newest: 3,
+            bits: u32::MAX,
+        };
+        assert!(early.holds(0) && !early.holds(u32::MAX));
+        assert_eq!(Acks::parse(&a.to_bytes()), Some(a));
+        assert_eq!(Acks::from_word(a.to_word()), a);
+        assert_eq!(Acks::parse(&[1, 2, 3]), None);
+        assert_eq!(Acks::parse(&[0; 9]), None);
     }
 
     fn snapshot_like(tick: u32, tail: &[u8]) -> Vec<u8> {

@@ -208,6 +208,33 @@ impl Link {
     }
 }
 
+impl Link {
+    /// Runs `start` on a tokio runtime of its own (2 workers) inside the link's namespace,
+    /// kept running for the rest of the process (a server started there goes on serving);
+    /// what `start` returns.
+    pub async fn serve_inside<T, F, Fut>(&self, start: F) -> io::Result<T>
+    where
+        T: Send + 'static,
+        F: FnOnce() -> Fut + Send + 'static,
+        Fut: std::future::Future<Output = T>,
+    {
+        let (tx, rx) = tokio::sync::oneshot::channel();
+        self.run_inside(move || {
+            let rt = tokio::runtime::Builder::new_multi_thread()
+                .worker_threads(2)
+                .enable_all()
+                .build()
+                .expect("a runtime inside the link");
+            rt.block_on(async move {
+                let _ = tx.send(start().await);
+                std::future::pending::<()>().await
+            })
+        })?;
+        rx.await
+            .map_err(|_| io::Error::other("the thread inside the link ended"))
+    }
+}
+
 impl Drop for Link {
     fn drop(&mut self) {
         self.stop.store(true, Ordering::Relaxed);

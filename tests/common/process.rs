@@ -64,7 +64,8 @@ impl Server {
                         kept.push(line.clone());
                     }
                 }
-                if let Some(rest) = line.split("serving http://").nth(1) {
+                let served = line.split("serving http://").nth(1);
+                if let Some(rest) = served.or_else(|| line.split("serving https://").nth(1)) {
                     let addr: String = rest
                         .chars()
                         .take_while(|c| !c.is_whitespace() && *c != '\u{1b}')

@@ -11,6 +11,14 @@ use wtransport::{ClientConfig, Connection, Endpoint, RecvStream, SendStream};
 
 pub const TEXT: u8 = 0;
 pub const BINARY: u8 = 1;
+pub const ACK: u8 = 2;
+
+/// A compact snapshot as it came: by datagram or on the stream.
+#[derive(Debug)]
+pub struct Arrived {
+    pub datagram: bool,
+    pub bytes: Vec<u8>,
+}
 
 pub struct WtClient {
     pub conn: Connection,
@@ -30,6 +38,53 @@ pub fn published(reply: &Value) -> (String, Sha256Digest) {
         *b = u8::from_str_radix(&hex[2 * i..2 * i + 2], 16).expect("hex");
     }
     (url, Sha256Digest::new(bytes))
+}
+
+/// The whole snapshots a client holds, as the page keeps them (web/compact.js): the newest
+/// 33 ticks, what its acknowledgements name.
+#[derive(Default)]
+pub struct Held {
+    pub wholes: std::collections::BTreeMap<u32, Vec<u8>>,
+}
+
+impl Held {
+    /// Takes a compact snapshot as it came: a whole is kept, a delta applied to the whole it
+    /// names (which must be held) and kept, a motion part left; what it stands for.
+    pub fn take(&mut self, bytes: Vec<u8>) -> Result<Option<Vec<u8>>, String> {
+        use lasertag::protocol::compact;
+        let tick = compact::tick_of(&bytes).ok_or("a snapshot without a tick")?;
+        let whole = match bytes[0] {
+            compact::KIND_MOTION => return Ok(None),
+            compact::KIND_DELTA => {
+                let base = compact::tick_of(&bytes[4..]).ok_or("a delta without a base")?;
+                let b = self
+                    .wholes
+                    .get(&base)
+                    .ok_or_else(|| format!("a delta of {tick} against {base}, not held"))?;
+                compact::apply_delta(b, &bytes).map_err(|e| e.to_string())?
+            }
+            _ => bytes,
+        };
+        self.wholes.insert(tick, whole.clone());
+        while self.wholes.len() > 33 {
+            self.wholes.pop_first();
+        }
+        Ok(Some(whole))
+    }
+
+    /// The acknowledgement datagram of what is held.
+    pub fn ack(&self) -> Vec<u8> {
+        let newest = self.wholes.keys().next_back().copied().unwrap_or(0);
+        let bits = (0..32u32)
+            .filter(|i| {
+                newest
+                    .checked_sub(1 + i)
+                    .is_some_and(|t| self.wholes.contains_key(&t))
+            })
+            .fold(0u32, |b, i| b | 1 << i);
+        let acks = lasertag::protocol::compact::Acks { newest, bits };
+        [&[ACK][..], &acks.to_bytes()].concat()
+    }
 }
 
 impl WtClient {
@@ -110,6 +165,57 @@ impl WtClient {
             .expect("the session is open");
         let (kind, payload) = d.split_first().expect("a kind byte");
         (*kind, payload.to_vec())
+    }
+
+    /// Every compact snapshot from now on, by datagram or on the stream, in the order they
+    /// arrive (each read by a task of its own: a frame half read is never given up).
+    pub fn snapshots(mut self) -> (tokio::sync::mpsc::UnboundedReceiver<Arrived>, Connection) {
+        let (tx, rx) = tokio::sync::mpsc::unbounded_channel();
+        let conn = self.conn.clone();
+        let by_datagram = tx.clone();
+        let datagrams = conn.clone();
+        tokio::spawn(async move {
+            while let Ok(d) = datagrams.receive_datagram().await {
+                if d.first() == Some(&BINARY) {
+                    let bytes = d[1..].to_vec();
+                    if by_datagram
+                        .send(Arrived {
+                            datagram: true,
+                            bytes,
+                        })
+                        .is_err()
+                    {
+                        break;
+                    }
+                }
+            }
+        });
+        tokio::spawn(async move {
+            let stream = match self.frames.take() {
+                Some(s) => Some(s),
+                None => self.conn.accept_uni().await.ok(),
+            };
+            let Some(mut s) = stream else { return };
+            let mut head = [0u8; 5];
+            while s.read_exact(&mut head).await.is_ok() {
+                let len = u32::from_le_bytes([head[1], head[2], head[3], head[4]]) as usize;
+                let mut bytes = vec![0u8; len];
+                if s.read_exact(&mut bytes).await.is_err() {
+                    break;
+                }
+                if head[0] == BINARY
+                    && tx
+                        .send(Arrived {
+                            datagram: false,
+                            bytes,
+                        })
+                        .is_err()
+                {
+                    break;
+                }
+            }
+        });
+        (rx, conn)
     }
 
     pub fn send_datagram(&self, kind: u8, payload: &[u8]) {

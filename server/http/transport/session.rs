@@ -9,8 +9,11 @@
 //! a compact snapshot) and the payload; on a stream the payload's length (`u32`, little
 //! endian) comes between the two. An input datagram may hold a JSON array of inputs, oldest
 //! first (the few before the newest, so that one lost datagram loses no input): those already
-//! seen (by `seq`) are dropped here, so the socket sees each input once.
+//! seen (by `seq`) are dropped here, so the socket sees each input once. A datagram of kind
+//! [`ACK`] says which snapshots the client holds ([`Acks`]): kept here for the socket's next
+//! delta, never a message (each costs a store, as cheap as QUIC's own reading of it).
 
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
@@ -22,10 +25,16 @@ use tokio::sync::mpsc;
 use wtransport::endpoint::SessionRequest;
 use wtransport::{Connection, RecvStream, SendStream, VarInt};
 
+use crate::protocol::compact::Acks;
+
 /// A frame's or datagram's kind: JSON text.
 pub const TEXT: u8 = 0;
 /// ... or a compact binary snapshot.
 pub const BINARY: u8 = 1;
+/// ... or, from the client, a datagram acknowledging snapshots ([`Acks`]).
+pub const ACK: u8 = 2;
+/// [`Session::acks`]'s word before the client has acknowledged any.
+const NO_ACKS: u64 = u64::MAX;
 /// The most inputs one datagram may repeat.
 pub const MAX_INPUTS_PER_DATAGRAM: usize = 8;
 /// The largest snapshot sent as a datagram (kind byte included): what every browser takes
@@ -43,6 +52,8 @@ pub struct Session {
     out: SendStream,
     incoming: mpsc::Receiver<Received>,
     reader: tokio::task::JoinHandle<()>,
+    /// What the client last said it holds ([`Acks::to_word`]), or [`NO_ACKS`].
+    acks: Arc<AtomicU64>,
     /// Snapshots sent as datagrams, and on the stream (too large for one).
     pub datagrams: u64,
     pub streamed: u64,
@@ -65,12 +76,14 @@ impl Session {
             .await
             .map_err(|e| e.to_string())?;
         let (tx, incoming) = mpsc::channel(QUEUE);
-        let reader = tokio::spawn(read(conn.clone(), tx, hard_bytes));
+        let acks = Arc::new(AtomicU64::new(NO_ACKS));
+        let reader = tokio::spawn(read(conn.clone(), tx, acks.clone(), hard_bytes));
         Ok(Session {
             conn,
             out,
             incoming,
             reader,
+            acks,
             datagrams: 0,
             streamed: 0,
         })
@@ -79,6 +92,12 @@ impl Session {
     /// The client's next message; `None` once it has gone. Cancel-safe.
     pub async fn recv(&mut self) -> Option<Received> {
         self.incoming.recv().await
+    }
+
+    /// The snapshots the client last said it holds, if it has said.
+    pub fn acks(&self) -> Option<Acks> {
+        let word = self.acks.load(Ordering::Relaxed);
+        (word != NO_ACKS).then(|| Acks::from_word(word))
     }
 
     /// Sends `message` on the reliable stream (a ping is QUIC's own business: nothing).
@@ -189,13 +208,24 @@ struct Numbered {
 }
 
 /// Reads the client's datagrams and its stream into `tx` until either side ends.
-async fn read(conn: Connection, tx: mpsc::Sender<Received>, hard_bytes: usize) {
+async fn read(
+    conn: Connection,
+    tx: mpsc::Sender<Received>,
+    acks: Arc<AtomicU64>,
+    hard_bytes: usize,
+) {
     let mut stream: Option<RecvStream> = None;
     let mut newest_seq = 0u64;
     loop {
         let got = tokio::select! {
             datagram = conn.receive_datagram() => match datagram {
-                Ok(d) => inputs(&d, &mut newest_seq),
+                Ok(d) => {
+                    if let Some(a) = acknowledged(&d) {
+                        acks.store(a.to_word(), Ordering::Relaxed);
+                        continue;
+                    }
+                    inputs(&d, &mut newest_seq)
+                }
                 Err(_) => return,
             },
             accepted = conn.accept_uni(), if stream.is_none() => match accepted {
@@ -222,6 +252,15 @@ async fn read(conn: Connection, tx: mpsc::Sender<Received>, hard_bytes: usize) {
                 return;
             }
         }
+    }
+}
+
+/// What an acknowledgement datagram says; `None` for any other datagram (a malformed
+/// acknowledgement goes to the socket, which refuses it).
+fn acknowledged(datagram: &[u8]) -> Option<Acks> {
+    match datagram.split_first() {
+        Some((&ACK, rest)) => Acks::parse(rest).filter(|a| a.to_word() != NO_ACKS),
+        _ => None,
     }
 }
 
@@ -314,6 +353,23 @@ mod tests {
             texts(inputs(&d(r#"{"type":"ping","t":1}"#), &mut newest)),
             [r#"{"type":"ping","t":1}"#]
         );
+    }
+
+    #[test]
+    fn acknowledgements_are_read_apart_from_messages() {
+        let a = Acks {
+            newest: 70,
+            bits: 3,
+        };
+        let d = [&[ACK][..], &a.to_bytes()].concat();
+        assert_eq!(acknowledged(&d), Some(a));
+        assert_eq!(acknowledged(&d[..5]), None);
+        assert_eq!(acknowledged(&[TEXT, b'{', b'}']), None);
+        let mut newest = 0;
+        assert!(matches!(
+            inputs(&d[..5], &mut newest)[0],
+            Ok(Message::Binary(_))
+        ));
     }
 
     #[test]
