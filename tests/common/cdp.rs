@@ -40,6 +40,11 @@ fn chromium() -> PathBuf {
 impl Browser {
     /// Starts headless Chromium with a fresh profile in a temporary directory.
     pub async fn launch() -> Browser {
+        Browser::launch_with(&[]).await
+    }
+
+    /// [`Browser::launch`] with `extra` flags on Chromium's command line.
+    pub async fn launch_with(extra: &[String]) -> Browser {
         let profile = std::env::temp_dir().join(format!(
             "lasertag-chromium-{}-{}",
             std::process::id(),
@@ -63,6 +68,7 @@ impl Browser {
                 "--remote-debugging-port=0",
                 "--remote-allow-origins=*",
             ])
+            .args(extra)
             .arg(format!("--user-data-dir={}", profile.display()))
             .arg("about:blank")
             .stdout(Stdio::null())
