@@ -18,10 +18,19 @@
 //! - bytes per snapshot, with and without the belief.
 //!
 //! The matches are deleted at the end.
+//!
+//! `--transport webtransport` watches over WebTransport instead (compact snapshots as
+//! datagrams, each spectator acknowledging what it holds as the page does, so snapshots come
+//! as deltas against those): the in-process server then also serves it in UDP, and the
+//! spectators open their sessions 8 at a time (a client's handshakes in progress are capped).
 
 use std::net::SocketAddr;
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
+
+#[allow(dead_code)]
+#[path = "../tests/common/wt.rs"]
+mod wt;
 
 use clap::Parser;
 use futures_util::StreamExt;
@@ -58,6 +67,69 @@ struct Args {
     /// Directory of map files (in-process server).
     #[arg(long, default_value = "maps")]
     maps: PathBuf,
+    /// What the spectators watch over: `websocket` or `webtransport` (compact only).
+    #[arg(long, default_value = "websocket", value_parser = ["websocket", "webtransport"])]
+    transport: String,
+}
+
+/// Where WebTransport sessions open, and the hash to pin (`GET /api/transport`).
+#[derive(Clone)]
+struct Published {
+    url: String,
+    hash: wtransport::tls::Sha256Digest,
+    /// Handshakes in progress at once (a client's are capped at 8 on the server).
+    handshakes: std::sync::Arc<tokio::sync::Semaphore>,
+}
+
+/// [`spectate`] over WebTransport: compact snapshots by datagram or on the stream, what is
+/// held acknowledged after each.
+async fn spectate_webtransport(
+    at: Published,
+    id: String,
+    until: Instant,
+    start: Instant,
+) -> ClientStats {
+    let mut st = ClientStats::default();
+    let url = format!("{}/ws/matches/{id}?format=compact", at.url);
+    let connected = {
+        let _permit = at.handshakes.acquire().await;
+        wt::WtClient::connect(&url, &at.hash).await
+    };
+    let Ok(client) = connected else {
+        st.closed_early = true;
+        return st;
+    };
+    let (mut snapshots, conn) = client.snapshots();
+    let mut held = wt::Held::default();
+    let mut last_tick = None;
+    loop {
+        let now = Instant::now();
+        if now >= until {
+            break;
+        }
+        let a = match tokio::time::timeout(until - now, snapshots.recv()).await {
+            Err(_) => break,
+            Ok(Some(a)) => a,
+            Ok(None) => {
+                st.closed_early = true;
+                break;
+            }
+        };
+        let (kind, flags, len) = (a.bytes[0], a.bytes.get(1).copied(), a.bytes.len() as u64);
+        let tick = lasertag::protocol::compact::tick_of(&a.bytes);
+        if let (Ok(Some(_)), Some(ack)) = (held.take(a.bytes), held.ack_due()) {
+            let _ = conn.send_datagram(ack);
+        }
+        // Wholes and deltas (a motion part is followed by its whole).
+        if Instant::now() >= start
+            && matches!(kind, 1 | 2)
+            && let (Some(t), Some(f)) = (tick, flags)
+        {
+            st.count(u64::from(t), &mut last_tick, f & 2 != 0, len);
+        }
+    }
+    conn.close(0u32.into(), b"done");
+    st
 }
 
 #[derive(Debug, Default, Clone)]
@@ -203,18 +275,50 @@ async fn run(args: Args) -> Result<(), String> {
             // The allocator policy the server's `main` sets.
             lasertag::http::trim_memory_periodically();
             let registry = lasertag::game::Registry::with_config(maps, config);
-            let app = lasertag::http::app(registry, PathBuf::from("web"))
-                .into_make_service_with_connect_info::<std::net::SocketAddr>();
+            let (app, state) = lasertag::http::app_and_state(registry, PathBuf::from("web"), None);
             let listener = tokio::net::TcpListener::bind("127.0.0.1:0")
                 .await
                 .map_err(|e| e.to_string())?;
             let addr = listener.local_addr().map_err(|e| e.to_string())?;
+            if args.transport == "webtransport" {
+                let source = lasertag::http::transport::Source::SelfSigned;
+                lasertag::http::transport::start(state, addr, source)
+                    .await
+                    .map_err(|e| e.to_string())?;
+            }
+            let app = app.into_make_service_with_connect_info::<std::net::SocketAddr>();
             tokio::spawn(async move { axum::serve(listener, app).await });
             addr
         }
     };
     let http = reqwest::Client::new();
     let base = format!("http://{addr}");
+    let published = if args.transport == "webtransport" {
+        if args.format != "compact" {
+            return Err(
+                "--transport webtransport watches compact snapshots: add --format compact".into(),
+            );
+        }
+        let reply: Value = http
+            .get(format!("{base}/api/transport"))
+            .send()
+            .await
+            .map_err(|e| e.to_string())?
+            .json()
+            .await
+            .map_err(|e| e.to_string())?;
+        if reply["webtransport"].is_null() {
+            return Err(format!("{base} offers no WebTransport"));
+        }
+        let (url, hash) = wt::published(&reply);
+        Some(Published {
+            url,
+            hash,
+            handshakes: std::sync::Arc::new(tokio::sync::Semaphore::new(8)),
+        })
+    } else {
+        None
+    };
     let mut ids = Vec::new();
     let mut owner_tokens = Vec::new();
     for i in 0..args.matches {
@@ -239,8 +343,15 @@ async fn run(args: Args) -> Result<(), String> {
         owner_tokens.push(v["owner_token"].as_str().unwrap_or_default().to_string());
     }
     println!(
-        "{} real-time matches on {} (2 {} robots, {} evade bots), {} spectators, {} s, server {addr}",
-        args.matches, args.map, args.planner, args.opponents, args.spectators, args.seconds
+        "{} real-time matches on {} (2 {} robots, {} evade bots), {} spectators over {} ({}), {} s, server {addr}",
+        args.matches,
+        args.map,
+        args.planner,
+        args.opponents,
+        args.spectators,
+        args.transport,
+        args.format,
+        args.seconds
     );
     let warmup = Duration::from_secs(3);
     let start = Instant::now() + warmup;
@@ -249,8 +360,12 @@ async fn run(args: Args) -> Result<(), String> {
     for k in 0..args.spectators {
         let id = ids[k % ids.len()].clone();
         let format = args.format.clone();
+        let published = published.clone();
         clients.push(tokio::spawn(async move {
-            spectate(addr, id, until, start, &format).await
+            match published {
+                Some(at) => spectate_webtransport(at, id, until, start).await,
+                None => spectate(addr, id, until, start, &format).await,
+            }
         }));
         if k % 50 == 49 {
             tokio::time::sleep(Duration::from_millis(20)).await;

@@ -17,8 +17,10 @@
 //! context and has no WebTransport, so Chromium is told to treat that one origin as secure
 //! (`--unsafely-treat-insecure-origin-as-secure`), as an HTTPS page would be.
 //!
-//! The match: the page plays one of 8 opponents (the other 7 seats stand), two robots hunt
-//! from the far side of the office. Over the first part of the run the page presses W and S in
+//! The match: 8 evading bots about the office, two robots hunting them from the far side;
+//! the page takes over one of the bots (a `bots_joinable` match, as the showcase) and plays
+//! it. Stalls are counted over the time from the first tick drawn to the last (a match whose
+//! robots tagged every opponent stops ticking: the rest of the run is not counted). Over the first part of the run the page presses W and S in
 //! turn once a second (own-motion latency, with the page's prediction on); all the while a
 //! hook notes the time of every animation frame that draws a newer tick than the last.
 //!
@@ -72,7 +74,7 @@ const PRESSES: usize = 15;
 /// first frame in which the player's own disc has moved.
 const HOOK: &str = r#"(() => {
   const p = window.__probe = { lat: [], drawn: [], waiting: false, tick: null,
-    rx0: window.__lasertag.rxBytes || 0, t0: performance.now() };
+    rx0: window.__lasertag.rxBytes || 0 };
   addEventListener("keydown", (e) => {
     if ((e.code === "KeyW" || e.code === "KeyS") && !e.repeat) {
       const o = window.__lasertag.own;
@@ -141,11 +143,11 @@ async fn run(args: Args) -> Result<(), String> {
         return Err(format!("--seconds {} must be in 10..=600", args.seconds));
     }
     println!(
-        "| loss each way | carrier | drawn ticks | gap p50 / p99 / max (ms) | stalls > 150 ms per minute | key → own disc moves, p50 / max (ms) | bytes/s received |"
+        "| loss each way | carrier | drawn ticks (s) | gap p50 / p99 / max (ms) | stalls > 150 ms per minute | key → own disc moves, p50 / max (ms) | bytes/s received |"
     );
     println!("|---|---|---|---|---|---|---|");
     let mut rows = vec![
-        "rtt_ms,loss_pct,carrier,drawn,gap_p50_ms,gap_p99_ms,gap_max_ms,stalls_per_min,own_p50_ms,own_max_ms,presses_seen,bytes_per_s".to_string(),
+        "rtt_ms,loss_pct,carrier,drawn,seconds,gap_p50_ms,gap_p99_ms,gap_max_ms,stalls_per_min,own_p50_ms,own_max_ms,presses_seen,bytes_per_s".to_string(),
     ];
     let mut curves: Vec<(&str, Vec<(f64, f64)>)> =
         vec![("WebSocket", Vec::new()), ("WebTransport", Vec::new())];
@@ -171,9 +173,10 @@ async fn run(args: Args) -> Result<(), String> {
             .await;
             let r = play(&mut browser, &origin, carrier, args.seconds).await?;
             let row = format!(
-                "{},{loss},{carrier},{},{:.0},{:.0},{:.0},{:.1},{:.0},{:.0},{},{:.0}",
+                "{},{loss},{carrier},{},{:.1},{:.0},{:.0},{:.0},{:.1},{:.0},{:.0},{},{:.0}",
                 args.rtt_ms,
                 r.gaps_ms.len() + 1,
+                r.seconds,
                 percentile(&r.gaps_ms, 0.5),
                 percentile(&r.gaps_ms, 0.99),
                 percentile(&r.gaps_ms, 1.0),
@@ -184,8 +187,9 @@ async fn run(args: Args) -> Result<(), String> {
                 r.bytes_per_s,
             );
             println!(
-                "| {loss}% | {carrier} | {} | {:.0} / {:.0} / {:.0} | {:.1} | {:.0} / {:.0} ({} presses) | {:.0} |",
+                "| {loss}% | {carrier} | {} ({:.0}) | {:.0} / {:.0} / {:.0} | {:.1} | {:.0} / {:.0} ({} presses) | {:.0} |",
                 r.gaps_ms.len() + 1,
+                r.seconds,
                 percentile(&r.gaps_ms, 0.5),
                 percentile(&r.gaps_ms, 0.99),
                 percentile(&r.gaps_ms, 1.0),
@@ -234,9 +238,11 @@ async fn play(
 ) -> Result<Run, String> {
     let http = reqwest::Client::new();
     let body = json!({"map": "office", "robots": 2, "opponents": 8,
-        "opponent_control": "human", "time_limit_s": 900,
+        "opponent_control": "bot", "opponent_bot": "evade", "bots_joinable": true,
+        "time_limit_s": 900,
         "robot_starts": [[22.0, 1.5, 0.0], [22.0, 14.0, 0.0]],
-        "opponent_starts": [[6.0, 8.0]]});
+        "opponent_starts": [[6.0, 8.0], [10.0, 14.5], [14.0, 1.5], [14.0, 15.2], [2.0, 5.2],
+            [3.0, 12.5], [21.5, 10.8], [23.0, 8.0]]});
     let created: Value = http
         .post(format!("{origin}/api/matches"))
         .json(&body)
@@ -276,8 +282,8 @@ async fn play(
     tokio::time::sleep(rest).await;
     let probe = b
         .eval(
-            "(() => { const p = window.__probe; const now = performance.now(); \
-             return { lat: p.lat, drawn: p.drawn, seconds: (now - p.t0) / 1000, \
+            "(() => { const p = window.__probe; \
+             return { lat: p.lat, drawn: p.drawn, \
              bytes: (window.__lasertag.rxBytes || 0) - p.rx0, \
              transport: window.__lasertag.transport }; })()",
         )
@@ -292,7 +298,11 @@ async fn play(
         serde_json::from_value(probe["drawn"].clone()).map_err(|e| e.to_string())?;
     let latencies_ms: Vec<f64> =
         serde_json::from_value(probe["lat"].clone()).map_err(|e| e.to_string())?;
-    let seconds = probe["seconds"].as_f64().unwrap_or(seconds as f64);
+    // Over the span drawn: a match that ended draws no more ticks.
+    let seconds = match (drawn.first(), drawn.last()) {
+        (Some(a), Some(b)) if b > a => (b - a) / 1000.0,
+        _ => return Err(format!("the page drew {} ticks", drawn.len())),
+    };
     let _ = http
         .delete(format!("{origin}/api/matches/{id}"))
         .bearer_auth(created["owner_token"].as_str().unwrap_or_default())

@@ -150,8 +150,8 @@ async fn over_webtransport(addr: std::net::SocketAddr, id: &str, until: Instant)
             newest = tick;
             arrivals.push(Instant::now());
         }
-        if let Ok(Some(_)) = held.take(a.bytes) {
-            let _ = conn.send_datagram(held.ack());
+        if let (Ok(Some(_)), Some(ack)) = (held.take(a.bytes), held.ack_due()) {
+            let _ = conn.send_datagram(ack);
         }
     }
     Watched {

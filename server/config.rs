@@ -33,6 +33,7 @@ pub mod defaults {
     pub const MAX_MAPS_PER_ADDRESS: usize = 10;
     pub const IDLE_MANUAL_AFTER: &str = "600";
     pub const MAX_CONNECTIONS: usize = 4096;
+    pub const MAX_WEBTRANSPORT_SESSIONS: usize = 500;
     pub const MAX_REQUEST_MEMORY_MB: u64 = 512;
     pub const MAX_BUILD_S: f64 = 2.0;
     pub const MAX_TICK_MS: f64 = 20.0;
@@ -210,6 +211,13 @@ pub struct Config {
     #[arg(long, env = "LASERTAG_MAX_CONNECTIONS", default_value_t = defaults::MAX_CONNECTIONS,
           value_parser = clap::value_parser!(u64).range(1..).map(|v| v as usize))]
     pub max_connections: usize,
+    /// WebTransport sessions open at once. Each costs the server far more CPU than a
+    /// WebSocket (QUIC encrypts and paces every datagram itself: about 24 µs a snapshot,
+    /// docs/network.md); past it a new session is refused at once and the page plays over
+    /// its WebSocket instead.
+    #[arg(long, env = "LASERTAG_MAX_WEBTRANSPORT_SESSIONS", default_value_t = defaults::MAX_WEBTRANSPORT_SESSIONS,
+          value_parser = clap::value_parser!(u64).range(0..).map(|v| v as usize))]
+    pub max_webtransport_sessions: usize,
     /// Seconds a client has to send a request's header, and the most a connection may sit
     /// idle between requests; then it is closed.
     #[arg(long = "header-read-timeout-s", value_name = "SECONDS", env = "LASERTAG_HEADER_READ_TIMEOUT_S",
@@ -394,6 +402,7 @@ impl Default for Config {
             max_maps_per_address: defaults::MAX_MAPS_PER_ADDRESS,
             idle_manual_after: secs(defaults::IDLE_MANUAL_AFTER),
             max_connections: defaults::MAX_CONNECTIONS,
+            max_webtransport_sessions: defaults::MAX_WEBTRANSPORT_SESSIONS,
             header_read_timeout: secs(defaults::HEADER_READ_TIMEOUT),
             max_request_memory_mb: defaults::MAX_REQUEST_MEMORY_MB,
             max_build_s: defaults::MAX_BUILD_S,

@@ -49,10 +49,12 @@ pub enum Refusal {
     Budget,
     /// A TCP connection past the per-address cap, closed as soon as it was accepted.
     TcpPerAddress,
+    /// A WebTransport session past the server's cap, refused at its first packet.
+    WebTransportFull,
 }
 
 impl Refusal {
-    pub const ALL: [Refusal; 18] = [
+    pub const ALL: [Refusal; 19] = [
         Refusal::RateLimited,
         Refusal::ConnectionsPerAddress,
         Refusal::MatchesFull,
@@ -71,6 +73,7 @@ impl Refusal {
         Refusal::Forbidden,
         Refusal::Budget,
         Refusal::TcpPerAddress,
+        Refusal::WebTransportFull,
     ];
 
     pub fn label(self) -> &'static str {
@@ -93,6 +96,7 @@ impl Refusal {
             Refusal::Forbidden => "forbidden",
             Refusal::Budget => "budget",
             Refusal::TcpPerAddress => "tcp_per_address",
+            Refusal::WebTransportFull => "webtransport_full",
         }
     }
 }

@@ -164,6 +164,43 @@ async fn a_client_that_acknowledges_gets_deltas_against_what_it_holds() {
     );
 }
 
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn past_the_servers_sessions_a_new_one_is_refused_at_once() {
+    let s = TestServer::with_webtransport(Config {
+        max_webtransport_sessions: 1,
+        ..common::test_config()
+    })
+    .await;
+    let id = s
+        .create_match(json!({"map": "office", "opponent_control": "bot"}))
+        .await;
+    let (url, hash) = at(&s, &format!("/ws/matches/{id}?format=compact")).await;
+    let mut first = WtClient::connect(&url, &hash).await.expect("the first");
+    assert_eq!(first.json().await["type"], "welcome");
+    let started = std::time::Instant::now();
+    let second = WtClient::connect(&url, &hash).await;
+    assert!(second.is_err(), "a second session past the cap");
+    // Refused at its first packet, not left to time out (a page then takes its WebSocket).
+    assert!(started.elapsed() < Duration::from_secs(5));
+    let text = s
+        .client
+        .get(s.url("/metrics"))
+        .send()
+        .await
+        .unwrap()
+        .text()
+        .await
+        .unwrap();
+    assert!(
+        text.contains("reason=\"webtransport_full\"} 1"),
+        "{}",
+        &text[..text.len().min(400)]
+    );
+    // The first one goes on.
+    let (kind, _) = first.datagram().await;
+    assert_eq!(kind, BINARY);
+}
+
 /// Where opponent `oid` is in the truth.
 async fn position(s: &TestServer, id: &str, oid: &str) -> (f64, f64) {
     let state = s.get(&format!("/api/matches/{id}")).await.body;

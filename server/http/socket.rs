@@ -340,8 +340,8 @@ impl Socket {
             .inc_by(bytes as u64);
     }
 
-    /// Whether snapshots may be lost on the way (they go as datagrams): each then stands on
-    /// its own, never a delta against one the client may not have.
+    /// Whether snapshots may be lost on the way (they go as datagrams): a delta is then only
+    /// against one the client acknowledged ([`Socket::acks`]).
     pub fn lossy(&self) -> bool {
         matches!(self.carrier, Carrier::WebTransport(_))
     }

@@ -56,7 +56,26 @@ pub struct Link {
     stop: Arc<std::sync::atomic::AtomicBool>,
 }
 
+/// Makes the TUN device node where a container left it out (`/dev/net/tun`, character
+/// device 10:200, as the kernel's documentation gives it); a no-op where it exists.
+fn ensure_tun_node() {
+    let path = std::path::Path::new("/dev/net/tun");
+    if path.exists() {
+        return;
+    }
+    let _ = std::fs::create_dir_all("/dev/net");
+    // SAFETY: mknod with a constant path and device number.
+    unsafe {
+        libc::mknod(
+            c"/dev/net/tun".as_ptr(),
+            libc::S_IFCHR | 0o666,
+            libc::makedev(10, 200),
+        );
+    }
+}
+
 fn open_tun(name: &str) -> io::Result<File> {
+    ensure_tun_node();
     // SAFETY: plain system calls on a descriptor this function owns; `ifreq` is zeroed and
     // its name bounded by the array's length (interface names are at most 15 bytes).
     unsafe {

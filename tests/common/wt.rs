@@ -45,7 +45,12 @@ pub fn published(reply: &Value) -> (String, Sha256Digest) {
 #[derive(Default)]
 pub struct Held {
     pub wholes: std::collections::BTreeMap<u32, Vec<u8>>,
+    /// Snapshots taken (wholes and deltas).
+    pub taken: u64,
 }
+
+/// The page acknowledges every this many snapshots it takes (web/socket.js).
+pub const ACK_EVERY: u64 = 2;
 
 impl Held {
     /// Takes a compact snapshot as it came: a whole is kept, a delta applied to the whole it
@@ -65,11 +70,18 @@ impl Held {
             }
             _ => bytes,
         };
+        self.taken += 1;
         self.wholes.insert(tick, whole.clone());
         while self.wholes.len() > 33 {
             self.wholes.pop_first();
         }
         Ok(Some(whole))
+    }
+
+    /// The acknowledgement datagram of what is held, when the page would send one (every
+    /// [`ACK_EVERY`] snapshots taken).
+    pub fn ack_due(&self) -> Option<Vec<u8>> {
+        self.taken.is_multiple_of(ACK_EVERY).then(|| self.ack())
     }
 
     /// The acknowledgement datagram of what is held.

@@ -32,6 +32,7 @@ use crate::http::error::ApiError;
 use crate::http::socket::{Asked, Pending};
 use crate::http::state::AppState;
 use crate::http::{replay_ws, ws};
+use crate::metrics::Refusal;
 pub use certificate::{CertificateError, Source};
 use published::Info;
 pub use published::Published;
@@ -204,6 +205,13 @@ async fn accept_loop(state: AppState, endpoint: Arc<Endpoint<Server>>) {
             () = shutdown.cancelled() => break,
         };
         let ip = incoming.remote_address().ip().to_canonical();
+        // Past the sessions the server is sized for, refused at once: the page's session
+        // fails within a round trip and it plays over its WebSocket.
+        if endpoint.open_connections() >= state.registry.config.max_webtransport_sessions {
+            state.registry.metrics.refuse(Refusal::WebTransportFull);
+            incoming.refuse();
+            continue;
+        }
         let Some(slot) = pending.open(ip) else {
             incoming.refuse();
             continue;
