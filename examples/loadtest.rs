@@ -23,6 +23,8 @@
 //! datagrams, each spectator acknowledging what it holds as the page does, so snapshots come
 //! as deltas against those): the in-process server then also serves it in UDP, and the
 //! spectators open their sessions 8 at a time (a client's handshakes in progress are capped).
+//! A spectator whose session is refused (past `--max-webtransport-sessions`) watches over a
+//! WebSocket, as the page does; the report says how many did.
 
 use std::net::SocketAddr;
 use std::path::PathBuf;
@@ -67,6 +69,9 @@ struct Args {
     /// Directory of map files (in-process server).
     #[arg(long, default_value = "maps")]
     maps: PathBuf,
+    /// WebTransport sessions the in-process server takes (its `--max-webtransport-sessions`).
+    #[arg(long, default_value_t = lasertag::config::defaults::MAX_WEBTRANSPORT_SESSIONS)]
+    max_webtransport_sessions: usize,
     /// What the spectators watch over: `websocket` or `webtransport` (compact only).
     #[arg(long, default_value = "websocket", value_parser = ["websocket", "webtransport"])]
     transport: String,
@@ -79,11 +84,15 @@ struct Published {
     hash: wtransport::tls::Sha256Digest,
     /// Handshakes in progress at once (a client's are capped at 8 on the server).
     handshakes: std::sync::Arc<tokio::sync::Semaphore>,
+    /// Spectators whose session was refused, watching over a WebSocket.
+    fell_back: std::sync::Arc<std::sync::atomic::AtomicUsize>,
 }
 
 /// [`spectate`] over WebTransport: compact snapshots by datagram or on the stream, what is
-/// held acknowledged after each.
+/// held acknowledged every second one, as the page does; a session refused (the server's
+/// sessions full) watches over a WebSocket instead, as the page does.
 async fn spectate_webtransport(
+    addr: SocketAddr,
     at: Published,
     id: String,
     until: Instant,
@@ -96,8 +105,9 @@ async fn spectate_webtransport(
         wt::WtClient::connect(&url, &at.hash).await
     };
     let Ok(client) = connected else {
-        st.closed_early = true;
-        return st;
+        at.fell_back
+            .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        return spectate(addr, id, until, start, "compact").await;
     };
     let (mut snapshots, conn) = client.snapshots();
     let mut held = wt::Held::default();
@@ -270,6 +280,7 @@ async fn run(args: Args) -> Result<(), String> {
                 client_budget_share: 1.0,
                 requests_per_s: 1e6,
                 request_burst: 1e6,
+                max_webtransport_sessions: args.max_webtransport_sessions,
                 ..lasertag::config::Config::default()
             };
             // The allocator policy the server's `main` sets.
@@ -315,6 +326,7 @@ async fn run(args: Args) -> Result<(), String> {
             url,
             hash,
             handshakes: std::sync::Arc::new(tokio::sync::Semaphore::new(8)),
+            fell_back: Default::default(),
         })
     } else {
         None
@@ -363,7 +375,7 @@ async fn run(args: Args) -> Result<(), String> {
         let published = published.clone();
         clients.push(tokio::spawn(async move {
             match published {
-                Some(at) => spectate_webtransport(at, id, until, start).await,
+                Some(at) => spectate_webtransport(addr, at, id, until, start).await,
                 None => spectate(addr, id, until, start, &format).await,
             }
         }));
@@ -500,6 +512,12 @@ async fn run(args: Args) -> Result<(), String> {
         distinct.iter().sum::<f64>() / distinct.len().max(1) as f64
     );
     println!("  starved (<15/s)  {starved}; closed early {closed}");
+    if let Some(at) = &published {
+        println!(
+            "  over WebSockets  {} (their WebTransport session refused: the server's sessions full)",
+            at.fell_back.load(std::sync::atomic::Ordering::Relaxed)
+        );
+    }
     let sum = |f: fn(&ClientStats) -> u64| stats.iter().map(f).sum::<u64>();
     let (bb, nb, bp, np) = (
         sum(|s| s.bytes_belief),

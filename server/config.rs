@@ -33,7 +33,7 @@ pub mod defaults {
     pub const MAX_MAPS_PER_ADDRESS: usize = 10;
     pub const IDLE_MANUAL_AFTER: &str = "600";
     pub const MAX_CONNECTIONS: usize = 4096;
-    pub const MAX_WEBTRANSPORT_SESSIONS: usize = 500;
+    pub const MAX_WEBTRANSPORT_SESSIONS: usize = 200;
     pub const MAX_REQUEST_MEMORY_MB: u64 = 512;
     pub const MAX_BUILD_S: f64 = 2.0;
     pub const MAX_TICK_MS: f64 = 20.0;
@@ -214,7 +214,8 @@ pub struct Config {
     /// WebTransport sessions open at once. Each costs the server far more CPU than a
     /// WebSocket (QUIC encrypts and paces every datagram itself: about 24 µs a snapshot,
     /// docs/network.md); past it a new session is refused at once and the page plays over
-    /// its WebSocket instead.
+    /// its WebSocket instead. The default is what 2 cores carry beside 100 matches and
+    /// 1,800 WebSocket spectators; raise it with cores.
     #[arg(long, env = "LASERTAG_MAX_WEBTRANSPORT_SESSIONS", default_value_t = defaults::MAX_WEBTRANSPORT_SESSIONS,
           value_parser = clap::value_parser!(u64).range(0..).map(|v| v as usize))]
     pub max_webtransport_sessions: usize,
