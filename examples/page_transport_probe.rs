@@ -172,10 +172,9 @@ async fn run(args: Args) -> Result<(), String> {
             )])
             .await;
             let r = play(&mut browser, &origin, carrier, args.seconds).await?;
-            let row = format!(
-                "{},{loss},{carrier},{},{:.1},{:.0},{:.0},{:.0},{:.1},{:.0},{:.0},{},{:.0}",
-                args.rtt_ms,
-                r.gaps_ms.len() + 1,
+            // The figures once, then as a CSV row and as a table row.
+            let f = [
+                (r.gaps_ms.len() + 1) as f64,
                 r.seconds,
                 percentile(&r.gaps_ms, 0.5),
                 percentile(&r.gaps_ms, 0.99),
@@ -183,21 +182,16 @@ async fn run(args: Args) -> Result<(), String> {
                 r.stalls_per_min(),
                 percentile(&r.latencies_ms, 0.5),
                 percentile(&r.latencies_ms, 1.0),
-                r.latencies_ms.len(),
+                r.latencies_ms.len() as f64,
                 r.bytes_per_s,
+            ];
+            let row = format!(
+                "{},{loss},{carrier},{:.0},{:.1},{:.0},{:.0},{:.0},{:.1},{:.0},{:.0},{:.0},{:.0}",
+                args.rtt_ms, f[0], f[1], f[2], f[3], f[4], f[5], f[6], f[7], f[8], f[9]
             );
             println!(
-                "| {loss}% | {carrier} | {} ({:.0}) | {:.0} / {:.0} / {:.0} | {:.1} | {:.0} / {:.0} ({} presses) | {:.0} |",
-                r.gaps_ms.len() + 1,
-                r.seconds,
-                percentile(&r.gaps_ms, 0.5),
-                percentile(&r.gaps_ms, 0.99),
-                percentile(&r.gaps_ms, 1.0),
-                r.stalls_per_min(),
-                percentile(&r.latencies_ms, 0.5),
-                percentile(&r.latencies_ms, 1.0),
-                r.latencies_ms.len(),
-                r.bytes_per_s
+                "| {loss}% | {carrier} | {:.0} ({:.0}) | {:.0} / {:.0} / {:.0} | {:.1} | {:.0} / {:.0} ({:.0} presses) | {:.0} |",
+                f[0], f[1], f[2], f[3], f[4], f[5], f[6], f[7], f[8], f[9]
             );
             rows.push(row);
             curves[c].1.push((f64::from(loss), r.stalls_per_min()));
