@@ -28,11 +28,14 @@ mod netem;
 
 #[path = "../tests/common/in_process.rs"]
 mod in_process;
+#[path = "../tests/common/own_motion.rs"]
+mod own_motion;
 
 use std::path::PathBuf;
 use std::time::Duration;
 
 use clap::Parser;
+use own_motion::{HOOK, percentile};
 use serde_json::{Value, json};
 
 #[derive(Debug, Parser)]
@@ -50,37 +53,6 @@ struct Args {
     /// Directory of map files.
     #[arg(long, default_value = "maps")]
     maps: PathBuf,
-}
-
-/// The page-side hook: times each W/S key event to the first frame its disc has moved.
-const HOOK: &str = r#"(() => {
-  const p = window.__probe = { lat: [], waiting: false };
-  addEventListener("keydown", (e) => {
-    if ((e.code === "KeyW" || e.code === "KeyS") && !e.repeat) {
-      const o = window.__lasertag.own;
-      p.t0 = performance.now(); p.start = o ? { x: o.x, y: o.y } : null; p.waiting = true;
-    }
-  }, true);
-  const me = () => window.__lasertag.own;
-  const loop = () => requestAnimationFrame(() => {
-    const o = me();
-    if (p.waiting && o && p.start && Math.hypot(o.x - p.start.x, o.y - p.start.y) > 0.001) {
-      p.lat.push(performance.now() - p.t0);
-      p.waiting = false;
-    }
-    loop();
-  });
-  loop();
-  return true;
-})()"#;
-
-fn percentile(v: &[f64], q: f64) -> f64 {
-    if v.is_empty() {
-        return f64::NAN;
-    }
-    let mut s = v.to_vec();
-    s.sort_by(f64::total_cmp);
-    s[((s.len() - 1) as f64 * q).round() as usize]
 }
 
 #[tokio::main]
@@ -197,8 +169,8 @@ async fn trials(
         // Let it come to rest (and the server's answers settle) before the next press.
         tokio::time::sleep(Duration::from_millis(600)).await;
     }
-    let lat: Vec<f64> =
-        serde_json::from_value(b.eval("window.__probe.lat").await).map_err(|e| e.to_string())?;
+    let lat: Vec<f64> = serde_json::from_value(b.eval("window.__ownMotion.lat").await)
+        .map_err(|e| e.to_string())?;
     let mut corrections: Vec<f64> =
         serde_json::from_value(b.eval("window.__lasertag.corrections || []").await)
             .unwrap_or_default();

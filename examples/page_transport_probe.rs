@@ -35,11 +35,14 @@ mod in_process;
 #[allow(dead_code)]
 #[path = "../tests/common/link.rs"]
 mod link;
+#[path = "../tests/common/own_motion.rs"]
+mod own_motion;
 
 use std::path::PathBuf;
 use std::time::Duration;
 
 use clap::Parser;
+use own_motion::percentile;
 use serde_json::{Value, json};
 
 #[derive(Debug, Parser)]
@@ -70,25 +73,13 @@ const STALL_MS: f64 = 150.0;
 /// Key presses for own-motion latency (one a second from the start of the run).
 const PRESSES: usize = 15;
 
-/// The page-side hooks: the frames that draw a newer tick, and each W/S key event to the
-/// first frame in which the player's own disc has moved.
-const HOOK: &str = r#"(() => {
-  const p = window.__probe = { lat: [], drawn: [], waiting: false, tick: null,
-    rx0: window.__lasertag.rxBytes || 0 };
-  addEventListener("keydown", (e) => {
-    if ((e.code === "KeyW" || e.code === "KeyS") && !e.repeat) {
-      const o = window.__lasertag.own;
-      p.k0 = performance.now(); p.start = o ? { x: o.x, y: o.y } : null; p.waiting = true;
-    }
-  }, true);
+/// The page-side hook for the stalls: the time of every frame that draws a newer tick (and
+/// the bytes received so far). Own motion is `own_motion::HOOK`'s.
+const DRAWN_HOOK: &str = r#"(() => {
+  const p = window.__probe = { drawn: [], tick: null, rx0: window.__lasertag.rxBytes || 0 };
   const loop = () => requestAnimationFrame(() => {
     const d = window.__lasertag;
     if (d.lastTick !== p.tick) { p.tick = d.lastTick; p.drawn.push(performance.now()); }
-    const o = d.own;
-    if (p.waiting && o && p.start && Math.hypot(o.x - p.start.x, o.y - p.start.y) > 0.001) {
-      p.lat.push(performance.now() - p.k0);
-      p.waiting = false;
-    }
     loop();
   });
   loop();
@@ -101,15 +92,6 @@ struct Run {
     latencies_ms: Vec<f64>,
     bytes_per_s: f64,
     seconds: f64,
-}
-
-fn percentile(v: &[f64], q: f64) -> f64 {
-    if v.is_empty() {
-        return f64::NAN;
-    }
-    let mut s = v.to_vec();
-    s.sort_by(f64::total_cmp);
-    s[((s.len() - 1) as f64 * q).round() as usize]
 }
 
 impl Run {
@@ -265,7 +247,8 @@ async fn play(
         30,
     )
     .await;
-    b.eval(HOOK).await;
+    b.eval(DRAWN_HOOK).await;
+    b.eval(own_motion::HOOK).await;
     let started = std::time::Instant::now();
     for k in 0..PRESSES {
         let key = if k % 2 == 0 { "KeyW" } else { "KeyS" };
@@ -277,7 +260,7 @@ async fn play(
     let probe = b
         .eval(
             "(() => { const p = window.__probe; \
-             return { lat: p.lat, drawn: p.drawn, \
+             return { lat: window.__ownMotion.lat, drawn: p.drawn, \
              bytes: (window.__lasertag.rxBytes || 0) - p.rx0, \
              transport: window.__lasertag.transport }; })()",
         )
