@@ -3,11 +3,12 @@
 FROM rust:1.95-bookworm AS build
 WORKDIR /src
 COPY Cargo.toml Cargo.lock ./
-# The workspace's crates (the server, the core, the lab, and the Python engine, which is not
-# built here but is a member cargo reads); cargo reads every target the manifest declares,
-# and the benchmarks are declared by name.
+# The workspace's crates (the server, the core, the policy runtime, the lab, and the Python
+# engine, which is not built here but is a member cargo reads); cargo reads every target the
+# manifest declares, and the benchmarks are declared by name.
 COPY server server
 COPY core core
+COPY policy policy
 COPY lab lab
 COPY native native
 COPY benches benches
