@@ -620,3 +620,26 @@ fn every_relative_link_in_the_docs_resolves() {
     }
     assert!(dead.is_empty(), "links to nothing:\n{}", dead.join("\n"));
 }
+
+/// The container builds the workspace: its Dockerfile copies every member crate (cargo
+/// refuses a workspace with one missing).
+#[test]
+fn the_dockerfile_copies_every_workspace_member() {
+    let manifest = read(&root().join("Cargo.toml"));
+    let members = manifest
+        .lines()
+        .find(|l| l.trim_start().starts_with("members"))
+        .expect("the workspace lists its members");
+    let dockerfile = read(&root().join("Dockerfile"));
+    let missing: Vec<&str> = members
+        .split('"')
+        .skip(1)
+        .step_by(2)
+        .filter(|m| !dockerfile.contains(&format!("COPY {m} {m}")))
+        .collect();
+    assert!(
+        missing.is_empty(),
+        "the Dockerfile does not copy {missing:?}"
+    );
+    assert!(dockerfile.contains("COPY server server"));
+}
