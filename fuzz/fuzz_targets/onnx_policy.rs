@@ -30,8 +30,14 @@ fuzz_target!(|data: &[u8]| {
             let weights = (0..outputs)
                 .map(|_| (0..width).map(|_| f32::from(next() as i8) / 16.0).collect())
                 .collect();
-            let bias = (0..outputs).map(|_| f32::from(next() as i8) / 16.0).collect();
-            layers.push((weights, bias, ACTIVATIONS[usize::from(next()) % ACTIVATIONS.len()]));
+            let bias = (0..outputs)
+                .map(|_| f32::from(next() as i8) / 16.0)
+                .collect();
+            layers.push((
+                weights,
+                bias,
+                ACTIVATIONS[usize::from(next()) % ACTIVATIONS.len()],
+            ));
             width = outputs;
         }
         let mut m = model(inputs, &layers);
