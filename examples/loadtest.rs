@@ -200,9 +200,14 @@ async fn spectate(
         if let Message::Binary(b) = &msg {
             // A compact snapshot, whole (kind 1) or a delta (2): flags (2: with the
             // belief), the tick.
-            if b.len() >= 6 && (b[0] == 1 || b[0] == 2) {
-                let tick = u32::from_le_bytes([b[2], b[3], b[4], b[5]]) as u64;
-                st.count(tick, &mut last_tick, b[1] & 2 != 0, b.len() as u64);
+            if let (Some(1 | 2), Some(tick)) = (b.first(), lasertag::protocol::compact::tick_of(b))
+            {
+                st.count(
+                    u64::from(tick),
+                    &mut last_tick,
+                    b[1] & 2 != 0,
+                    b.len() as u64,
+                );
             }
             continue;
         }

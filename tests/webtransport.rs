@@ -70,9 +70,7 @@ async fn a_spectator_gets_welcome_on_the_stream_and_snapshots_as_datagrams() {
             "a whole snapshot: {}",
             payload[0]
         );
-        ticks.push(u32::from_le_bytes([
-            payload[2], payload[3], payload[4], payload[5],
-        ]));
+        ticks.push(lasertag::protocol::compact::tick_of(&payload).expect("a tick"));
         assert!(payload.len() < 1024);
     }
     // Every tick's motion as a datagram, those with scans or a belief too large for one

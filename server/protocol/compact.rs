@@ -262,6 +262,11 @@ pub fn tick_of(message: &[u8]) -> Option<u32> {
         .map(|t| u32::from_le_bytes([t[0], t[1], t[2], t[3]]))
 }
 
+/// The tick of the baseline a delta is against.
+pub fn baseline_of(delta: &[u8]) -> Option<u32> {
+    tick_of(delta.get(4..)?)
+}
+
 /// Which snapshots a client holds, as it last said (over a carrier that may lose them): the
 /// newest tick, and bit `i` for tick `newest - 1 - i`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -374,15 +379,11 @@ pub enum DeltaError {
 /// The whole snapshot a delta stands for, given the whole snapshot it is against (what a
 /// client does; the page's copy is in `web/compact.js`).
 pub fn apply_delta(base: &[u8], delta: &[u8]) -> Result<Vec<u8>, DeltaError> {
-    let tick_at = |b: &[u8], i: usize| {
-        b.get(i..i + 4)
-            .map(|t| u32::from_le_bytes([t[0], t[1], t[2], t[3]]))
-    };
     if delta.first() != Some(&KIND_DELTA) || delta.len() < 10 {
         return Err(DeltaError::NotDelta);
     }
-    let wanted = tick_at(delta, 6).ok_or(DeltaError::NotDelta)?;
-    let held = tick_at(base, 2).ok_or(DeltaError::Overrun)?;
+    let wanted = baseline_of(delta).ok_or(DeltaError::NotDelta)?;
+    let held = tick_of(base).ok_or(DeltaError::Overrun)?;
     if wanted != held {
         return Err(DeltaError::WrongBaseline { wanted, held });
     }

@@ -61,7 +61,7 @@ impl Held {
         let whole = match bytes[0] {
             compact::KIND_MOTION => return Ok(None),
             compact::KIND_DELTA => {
-                let base = compact::tick_of(&bytes[4..]).ok_or("a delta without a base")?;
+                let base = compact::baseline_of(&bytes).ok_or("a delta without a base")?;
                 let b = self
                     .wholes
                     .get(&base)

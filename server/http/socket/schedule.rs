@@ -86,10 +86,10 @@ impl Schedule {
     /// parts), and gives what to send: a delta against a baseline the client holds (`acks`:
     /// what it last said it holds, on a lossy carrier), or `whole`.
     pub fn sent(&mut self, tick: u64, carried: Parts, whole: Bytes, acks: Option<Acks>) -> Bytes {
+        let t = compact::tick_of(&whole).unwrap_or(0);
         let base = match &mut self.bases {
             Bases::Last(last) => last.take(),
             Bases::Acked { sent, newest, from } => {
-                let t = compact::tick_of(&whole).unwrap_or(0);
                 if newest.is_some_and(|n| t <= n) {
                     sent.clear();
                     *from = newest.map_or(0, |n| n.saturating_add(1));
@@ -112,7 +112,6 @@ impl Schedule {
                 if sent.len() == ACKED_BASES {
                     sent.pop_front();
                 }
-                let t = compact::tick_of(&whole).unwrap_or(0);
                 sent.push_back((t, whole));
             }
         }
@@ -205,14 +204,14 @@ mod tests {
         assert_eq!(lossy.sent(2, none, whole(2, &[7; 40]), None)[0], KIND_WHOLE);
         let holds_1 = Some(Acks { newest: 1, bits: 0 });
         let d = lossy.sent(3, none, whole(3, &[7; 40]), holds_1);
-        assert_eq!((d[0], compact::tick_of(&d[4..])), (KIND_DELTA, Some(1)));
+        assert_eq!((d[0], compact::baseline_of(&d)), (KIND_DELTA, Some(1)));
         // 3 held, 2 lost: against 3.
         let holds_3 = Some(Acks {
             newest: 3,
             bits: 0b10,
         });
         let d = lossy.sent(4, none, whole(4, &[7; 40]), holds_3);
-        assert_eq!(compact::tick_of(&d[4..]), Some(3));
+        assert_eq!(compact::baseline_of(&d), Some(3));
         // Nothing held of what is kept: whole.
         let stale = Some(Acks {
             newest: 40,
