@@ -22,6 +22,7 @@ use rand_chacha::ChaCha8Rng;
 
 use crate::sim::arena::Arena;
 use crate::sim::{AgentId, TICK_HZ};
+use crate::tracker::features;
 use crate::world::{
     EventKind, FinishReason, MatchConfig, MatchStatus, RobotObservation, RobotOrder, SetupError,
     Side, World, WorldInput,
@@ -31,6 +32,8 @@ use crate::world::{
 pub const ACTION_SIZE: usize = 3;
 /// Ticks since a teammate's report are divided by this (and saturate at 1).
 const AGE_SCALE: f64 = 100.0;
+/// Values of one teammate's slot: present, x, y, cos, sin, age, goal present, goal x, goal y.
+pub const TEAMMATE_VALUES: usize = 9;
 
 /// A length rounded to the millimetre, as the API writes lengths.
 pub fn mm(v: f32) -> f64 {
@@ -43,7 +46,8 @@ pub fn rad(v: f32) -> f64 {
 }
 
 /// The observation vector's parts, in order: scan, pose, spread, status, time, detections,
-/// teammates (their meaning is python/lasertag_env/observation.py's table).
+/// teammates, belief grid, roles, untagged share (their meaning is
+/// python/lasertag_env/observation.py's table).
 #[derive(Debug, Clone)]
 pub struct Layout {
     beams: usize,
@@ -92,8 +96,15 @@ impl Layout {
         for _ in 1..robots {
             part(3, 0.0, 1.0); // present, x, y
             part(2, -1.0, 1.0); // cos, sin
-            part(1, 0.0, 1.0); // age
+            part(4, 0.0, 1.0); // age, goal present, goal x, goal y
         }
+        part(features::GRID_CELLS, 0.0, 1.0);
+        for _ in 0..features::ROLE_SLOTS {
+            part(2, 0.0, 1.0); // present, count share
+            part(2, -1.0, 1.0); // ahead, left
+            part(3, 0.0, 1.0); // spread, confidence, looked at in vain
+        }
+        part(1, 0.0, 1.0); // untagged share
         Layout {
             beams,
             laser_range,
@@ -171,7 +182,8 @@ impl Layout {
             }
         }
         let mates_at = self.beams + at;
-        let mates = &mut out[mates_at..];
+        let width = TEAMMATE_VALUES * self.robots.saturating_sub(1);
+        let (mates, belief) = out[mates_at..].split_at_mut(width);
         mates.fill(0.0);
         for m in &o.teammates {
             if m.robot == robot || m.robot >= self.robots {
@@ -183,6 +195,10 @@ impl Layout {
                 m.robot - 1
             };
             let th = rad(m.pose.theta);
+            let (has_goal, gx, gy) = match m.goal {
+                Some(g) => (1.0, mm(g.x) / self.width, mm(g.y) / self.height),
+                None => (0.0, 0.0, 0.0),
+            };
             let values = [
                 1.0,
                 mm(m.pose.pos.x) / self.width,
@@ -190,10 +206,17 @@ impl Layout {
                 th.cos(),
                 th.sin(),
                 m.age_ticks as f64 / AGE_SCALE,
+                has_goal,
+                gx,
+                gy,
             ];
-            for (v, x) in mates[6 * slot..6 * slot + 6].iter_mut().zip(values) {
+            let at = TEAMMATE_VALUES * slot;
+            for (v, x) in mates[at..at + TEAMMATE_VALUES].iter_mut().zip(values) {
                 *v = x as f32;
             }
+        }
+        for (v, x) in belief.iter_mut().zip(o.belief.values()) {
+            *v = x as f32;
         }
         // Estimates a little outside the arena, a spread past 1 m, ages past 100 ticks and
         // rounding at the edges land inside the bounds (NaN stays NaN, as numpy's).

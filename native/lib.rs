@@ -416,10 +416,23 @@ impl Engine {
                 let e = pose(t.pose)?;
                 e.set_item("id", AgentId::Robot(t.robot).to_string())?;
                 e.set_item("age_ticks", t.age_ticks)?;
+                e.set_item("goal", t.goal.map(|g| [mm(g.x), mm(g.y)]))?;
                 Ok(e)
             })
             .collect::<PyResult<Vec<_>>>()?;
         d.set_item("teammates", teammates)?;
+        let belief = PyDict::new(py);
+        belief.set_item("grid", o.belief.grid.to_vec())?;
+        belief.set_item(
+            "roles",
+            o.belief
+                .roles
+                .iter()
+                .map(|r| r.to_vec())
+                .collect::<Vec<_>>(),
+        )?;
+        belief.set_item("untagged", o.belief.untagged)?;
+        d.set_item("belief", belief)?;
         Ok(d)
     }
 }

@@ -66,8 +66,9 @@ fn trajectory(seed: u64, steps: usize) -> Vec<u64> {
 fn the_vector_has_every_part_and_stays_in_its_bounds() {
     let spec = spec(2, None);
     let layout = &spec.layout;
-    // 181 beams, pose 4, spread, 2 status, time, 3 per detection, 6 per teammate.
-    assert_eq!(layout.size(), 181 + 4 + 1 + 2 + 1 + 3 + 6);
+    // 181 beams, pose 4, spread, 2 status, time, 3 per detection, 9 per teammate, then the
+    // belief: a grid of 16, 2 roles of 7 and the untagged share.
+    assert_eq!(layout.size(), 181 + 4 + 1 + 2 + 1 + 3 + 9 + 16 + 14 + 1);
     let episode = Episode::new(room(), &spec, 3).unwrap();
     let mut obs = vec![f32::NAN; 2 * layout.size()];
     episode.observe_start(&spec, &mut obs);
@@ -79,6 +80,12 @@ fn the_vector_has_every_part_and_stays_in_its_bounds() {
         assert!(row[..181].iter().any(|r| *r > 0.0 && *r < 1.0));
         // The time part is 0 at the start.
         assert_eq!(row[181 + 7], 0.0);
+        // The belief: the grid holds the one opponent the tracker spreads over the map,
+        // the first role slot is filled and the second empty, the opponent is untagged.
+        let belief = &row[181 + 8 + 3 + 9..];
+        let mass: f32 = belief[..16].iter().sum();
+        assert!((mass - 1.0).abs() < 1e-3, "grid mass {mass}");
+        assert_eq!((belief[16], belief[23], belief[30]), (1.0, 0.0, 1.0));
     }
 }
 

@@ -213,6 +213,21 @@ impl Team {
         }
     }
 
+    /// Where robot `i` heard teammate `j` is going: with a perfect radio the teammate's
+    /// current goal (`goal`, shared memory); otherwise the goal in the last message `i`
+    /// heard from `j`.
+    pub fn teammate_goal(&self, i: usize, j: usize, goal: Option<Pose>) -> Option<Pose> {
+        match &self.channel {
+            None => goal,
+            Some(c) => c
+                .heard
+                .get(i)
+                .and_then(|row| row.get(j))
+                .and_then(|m| m.as_ref())
+                .and_then(|m| m.status.goal),
+        }
+    }
+
     /// Whether each robot keeps its own tracker (an imperfect radio).
     pub fn per_robot(&self) -> bool {
         self.channel.is_some()

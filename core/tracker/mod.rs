@@ -32,6 +32,7 @@
 //! The tracker itself never calls them.
 
 pub mod estimate;
+pub mod features;
 pub mod gospa;
 mod merge;
 mod motion;

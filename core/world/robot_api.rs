@@ -14,6 +14,7 @@
 
 use super::*;
 use crate::nav::{PathFollower, path_within, steer};
+use crate::tracker::features::BeliefFeatures;
 
 /// Waypoints one order may carry: each is a path search over the navigation grid.
 pub const MAX_ROBOT_WAYPOINTS: usize = 16;
@@ -75,6 +76,9 @@ pub struct Teammate {
     pub pose: Pose,
     /// Ticks since it was sent (0 with a perfect radio).
     pub age_ticks: u64,
+    /// Where it announced it is going, if its planner gives it a goal (robots driven by
+    /// actions announce none).
+    pub goal: Option<Point2<f32>>,
 }
 
 /// Everything one robot knows this tick (never ground truth).
@@ -92,6 +96,8 @@ pub struct RobotObservation<'a> {
     /// The device would fire on the next tick.
     pub tag_ready: bool,
     pub teammates: Vec<Teammate>,
+    /// The team belief as this robot holds it, seen from its own estimate.
+    pub belief: BeliefFeatures,
 }
 
 impl World {
@@ -276,10 +282,15 @@ impl World {
             .filter(|j| *j != index)
             .filter_map(|j| {
                 let (pose, sent) = self.team.teammate_report(index, j, &estimates, self.tick)?;
+                let goal = self
+                    .team
+                    .teammate_goal(index, j, self.robots[j].command.goal)
+                    .map(|g| g.pos);
                 Some(Teammate {
                     robot: j,
                     pose,
                     age_ticks: self.tick.saturating_sub(sent),
+                    goal,
                 })
             })
             .collect();
@@ -294,6 +305,11 @@ impl World {
             frozen,
             tag_ready: !frozen && self.tick + 1 >= r.cooldown_until,
             teammates,
+            belief: self
+                .team
+                .belief_of(index, self.robots.len())
+                .map(|t| BeliefFeatures::of(&t.roles, r.estimate, self.config.opponents))
+                .unwrap_or_default(),
         })
     }
 }

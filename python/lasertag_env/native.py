@@ -89,7 +89,7 @@ class _Setup:
         if placement is not None:
             settings["placement"] = placement
         if not team_tracker:
-            # As the HTTP backend: the tracker at its minimum (no observation reads it).
+            # As the HTTP backend: the tracker at its minimum (faster; coarser belief parts).
             settings["tracker"] = {"particles_per_role": 10}
         settings.update(match_settings or {})
         k = opponents if detections is None else detections
@@ -148,7 +148,7 @@ class NativeParallelEnv(TeamEnv):
         detections: int | None = None,
         rewards: dict | None = None,
         match_settings: dict | None = None,
-        team_tracker: bool = False,
+        team_tracker: bool = True,
         pixels_per_metre: float = 20.0,
         planner: str | list = "api",
     ):
@@ -333,7 +333,7 @@ class LasertagVectorEnv(VectorEnv):
         detections: int | None = None,
         rewards: dict | None = None,
         match_settings: dict | None = None,
-        team_tracker: bool = False,
+        team_tracker: bool = True,
         copy: bool = True,
         planner: str = "api",
     ):

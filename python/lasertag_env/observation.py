@@ -19,12 +19,29 @@ part             length       values
 ``detections``   3 × K        the K nearest anonymous sightings of opponents, nearest first:
                               present (1 or 0), range / 8 m, bearing / (π/2) in [-1, 1];
                               absent ones are all 0
-``teammates``    6 × (R - 1)  each other robot in id order: present (1 once the radio has
+``teammates``    9 × (R - 1)  each other robot in id order: present (1 once the radio has
                               delivered it), x / width, y / height, cos θ, sin θ,
-                              age / 100 ticks (saturated at 1)
+                              age / 100 ticks (saturated at 1), goal present (1 when the
+                              radio delivered where it is going; robots driven by actions
+                              announce no goal), goal x / width, goal y / height
+``belief_grid``  16           the team belief as this robot holds it: the expected share of
+                              the untagged opponents in each cell of an egocentric grid,
+                              8 sectors of 45° counter-clockwise from straight ahead nearer
+                              than 4 m, then the same 8 farther out (sums to 1 while any is
+                              believed untagged)
+``roles``        7 × 2        the 2 untagged roles with the nearest means, nearest first:
+                              present, count / opponents, ahead / 10 m, left / 10 m (clipped
+                              to [-1, 1]), spread / 5 m, confidence (decays with the time
+                              since a sighting confirmed it), ticks looked at in vain / 100
+``untagged``     1            the share of the opponents believed untagged
 ===============  ===========  =================================================================
 
+R robots and K detection slots give 189 + 3K + 9(R - 1) + 31 values with the default
+rules (2 robots, 1 slot: 232).
+
 Everything comes from what the robot knows (its observation), never from ground truth.
+The belief parts are the observation's ``belief`` object as the server computed it from the
+robot's own tracker (rounded to a ten-thousandth), copied as they are.
 Landmark sightings and odometry are not in the vector (the estimate already uses them);
 the raw observation is in each step's ``infos[agent]["observation"]``.
 
@@ -52,6 +69,10 @@ LASER_RANGE = float(SHIPPED["laser"]["range"])
 #: Beams of a scan, in the shipped rules (a layout takes its server's).
 BEAMS = int(SHIPPED["laser"]["beams"])
 _AGE_SCALE = 100.0
+#: Values of one teammate's slot.
+_MATE = 9
+#: Untagged roles summarised in the belief part.
+_ROLE_SLOTS = 2
 
 
 class ObservationLayout:
@@ -77,7 +98,10 @@ class ObservationLayout:
             ("status", 2, 0.0, 1.0),
             ("time", 1, 0.0, 1.0),
             ("detections", 3 * detections, -1.0, 1.0),
-            ("teammates", 6 * (robots - 1), -1.0, 1.0),
+            ("teammates", _MATE * (robots - 1), -1.0, 1.0),
+            ("belief_grid", 16, 0.0, 1.0),
+            ("roles", 7 * _ROLE_SLOTS, -1.0, 1.0),
+            ("untagged", 1, 0.0, 1.0),
         ]
         self.slices: dict[str, slice] = {}
         low, high = [], []
@@ -99,11 +123,15 @@ class ObservationLayout:
             self.low[d + 3 * i : d + 3 * i + 2] = 0.0
         t = self.slices["teammates"].start
         for i in range(robots - 1):
-            base = t + 6 * i
+            base = t + _MATE * i
             self.low[base : base + 3] = 0.0
-            self.low[base + 5] = 0.0
+            self.low[base + 5 : base + _MATE] = 0.0
+        r = self.slices["roles"].start
+        for i in range(_ROLE_SLOTS):
+            self.low[r + 7 * i : r + 7 * i + 2] = 0.0
+            self.low[r + 7 * i + 4 : r + 7 * i + 7] = 0.0
         self._no_detection = [0.0, 0.0, 0.0]
-        self._no_mates = [0.0] * (6 * (robots - 1))
+        self._no_mates = [0.0] * (_MATE * (robots - 1))
 
     def space(self) -> spaces.Box:
         return spaces.Box(self.low, self.high, dtype=np.float32)
@@ -186,11 +214,19 @@ class ObservationLayout:
                 slot = other if other < robot else other - 1
                 if 0 <= slot < self.robots - 1:
                     th = m["theta"]
-                    mates[6 * slot : 6 * slot + 6] = (
+                    goal = m.get("goal")
+                    mates[_MATE * slot : _MATE * slot + _MATE] = (
                         1.0, m["x"] / self.width, m["y"] / self.height, math.cos(th),
                         math.sin(th), m["age_ticks"] / _AGE_SCALE,
+                        *((1.0, goal[0] / self.width, goal[1] / self.height) if goal
+                          else (0.0, 0.0, 0.0)),
                     )
             tail += mates
+        belief = obs["belief"]
+        tail += belief["grid"]
+        for role in belief["roles"]:
+            tail += role
+        tail.append(belief["untagged"])
         return tail
 
     def decode(self, v: np.ndarray) -> dict[str, np.ndarray]:

@@ -48,7 +48,7 @@ class LasertagParallelEnv(TeamEnv):
         detections: int | None = None,
         rewards: dict | None = None,
         match_settings: dict | None = None,
-        team_tracker: bool = False,
+        team_tracker: bool = True,
         pixels_per_metre: float = 20.0,
         packed_scans: bool = True,
         planner: str | list = "api",
@@ -115,10 +115,8 @@ class LasertagParallelEnv(TeamEnv):
         if placement is not None:
             self._create["placement"] = placement
         if not team_tracker:
-            # The team's tracker runs on the server whoever drives the robots, but the API
-            # robots' observations never read it (only the belief endpoint and spectators
-            # do; the tests check the observations are the same): at its minimum a tick
-            # costs about a third less (docs/research.md, "Speed").
+            # At its minimum a tick costs about a third less (docs/research.md, "Speed"),
+            # but the belief parts of the observation are coarser than a served team's.
             self._create["tracker"] = {"particles_per_role": 10}
         self._create.update(match_settings or {})
 
@@ -399,8 +397,8 @@ def parallel_env(
       ``detections`` (slots in the observation, default ``opponents``), ``rewards``
       (weights, see ``DEFAULT_REWARDS``), ``match_settings`` (further fields of
       ``POST /api/matches``: ``localisation``, ``tracker``, ``radio``, …),
-      ``team_tracker`` (True: the team tracker at its default size rather than its
-      minimum; the observations are the same), ``planner`` (``"api"``: every robot is an
+      ``team_tracker`` (default True: the team tracker at its default size, as a match
+      people play; False: at its minimum, faster, with coarser belief parts), ``planner`` (``"api"``: every robot is an
       agent; one per robot, e.g. ``["coordinated", "api"]``: a mixed team, whose agents
       are the ``"api"`` robots, ``r1`` here, beside robots the team's planner drives and
       plans around), ``pixels_per_metre`` (rendering); over

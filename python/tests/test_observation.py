@@ -32,8 +32,12 @@ def observations(rng, robots):
             "spread": rng.uniform(0, 2), "tag_ready": True, "frozen": frozen,
             "detections": [{"range": rng.uniform(0, 8), "bearing": rng.uniform(-2, 2)}
                            for _ in range(int(rng.integers(0, 4)))],
-            "teammates": [{"id": f"r{j}", "x": 1.0, "y": 2.0, "theta": -0.5, "age_ticks": 250}
+            "teammates": [{"id": f"r{j}", "x": 1.0, "y": 2.0, "theta": -0.5, "age_ticks": 250,
+                           "goal": [3.0, 4.0] if j == 0 else None}
                           for j in range(robots) if j != i],
+            "belief": {"grid": rng.dirichlet(np.ones(16)).round(4).tolist(),
+                       "roles": rng.uniform(-1, 1, (2, 7)).round(4).tolist(),
+                       "untagged": 0.5},
         })
     return out
 

@@ -70,16 +70,24 @@ def test_same_seed_same_actions_identical_episodes(make_env):
     assert len(ta) == 301
 
 
-def test_team_tracker_does_not_change_observations(make_env):
-    # The environment runs the server's team tracker at its minimum by default, which is
-    # sound only while the robots' observations do not depend on it.
-    small = make_env(max_steps=400)
-    full = make_env(max_steps=400, team_tracker=True)
+def test_a_small_team_tracker_changes_only_the_belief_parts(make_env):
+    # The environment runs the team tracker at its default size (as a served team's) unless
+    # told otherwise; at its minimum only the belief parts of the observation change.
+    small = make_env(max_steps=400, team_tracker=False)
+    full = make_env(max_steps=400)
     assert "tracker" not in full._create and small._create["tracker"]["particles_per_role"] == 10
     # Seed 3: the robots search, see the opponent and tag it (the episode ends on the tag).
-    trace = run_episode(small, 3, hunter)
-    assert trace[-1][2] == (True, True)
-    assert trace == run_episode(full, 3, hunter)
+    a, b = run_episode(small, 3, hunter), run_episode(full, 3, hunter)
+    assert a[-1][2] == (True, True) and len(a) == len(b)
+    belief = slice(small.layout.slices["belief_grid"].start, small.layout.size)
+    differ = 0
+    for i, (x, y) in enumerate(zip(a, b)):
+        assert i == 0 or x[1:] == y[1:]  # rewards, ends, ticks
+        for bx, by in zip(x if i == 0 else x[0], y if i == 0 else y[0]):
+            ox, oy = np.frombuffer(bx, np.float32), np.frombuffer(by, np.float32)
+            assert ox[: belief.start].tobytes() == oy[: belief.start].tobytes()
+            differ += ox[belief].tobytes() != oy[belief].tobytes()
+    assert differ > 0
 
 
 def test_packed_scans_change_nothing(make_env):
@@ -157,14 +165,14 @@ def test_observations_fit_the_space_and_layout(make_env):
     assert env.possible_agents == ["r0", "r1", "r2"]
     obs, infos = env.reset(seed=4)
     space = env.observation_space("r1")
-    assert space.shape == (181 + 4 + 1 + 2 + 1 + 3 * 2 + 6 * 2,)
+    assert space.shape == (181 + 4 + 1 + 2 + 1 + 3 * 2 + 9 * 2 + 16 + 7 * 2 + 1,)
     assert env.observation_space("r1") is space
     parts = env.layout.decode(obs["r1"])
     raw = infos["r1"]["observation"]
     assert np.allclose(parts["scan"], np.asarray(raw["scan"]) / 8.0)
     assert parts["pose"][0] == pytest.approx(raw["estimate"]["x"] / 24.0)
     # r1's teammates are r0 and r2, both delivered by the perfect radio.
-    mates = parts["teammates"].reshape(2, 6)
+    mates = parts["teammates"].reshape(2, 9)
     assert mates[:, 0].tolist() == [1.0, 1.0]
     assert mates[0, 1] == pytest.approx(infos["r0"]["observation"]["estimate"]["x"] / 24.0, abs=1e-3)
     for _ in range(30):

@@ -88,6 +88,7 @@ use crate::protocol::*;
         robots::Observation,
         robots::LandmarkDto,
         robots::TeammateDto,
+        robots::BeliefFeaturesDto,
         replays::ReplayListed,
         replays::ReplayDetail,
         replays::PlayerTotals,

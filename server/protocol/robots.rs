@@ -176,6 +176,25 @@ pub struct Observation {
     pub tag_ready: bool,
     /// What the radio delivered of each teammate.
     pub teammates: Vec<TeammateDto>,
+    /// The team belief as this robot holds it (never the truth).
+    pub belief: BeliefFeaturesDto,
+}
+
+/// The team belief as one robot holds it, seen from its own estimate: the research
+/// environment's belief features (docs/research.md has the layout table). Values are rounded
+/// to a ten-thousandth.
+#[derive(Debug, Clone, Serialize, ToSchema)]
+pub struct BeliefFeaturesDto {
+    /// The expected share of the untagged opponents in each cell of a coarse egocentric
+    /// grid: 8 bearing sectors of 45° counter-clockwise from straight ahead, nearer than
+    /// 4 m, then the same 8 farther out. Sums to 1 while any opponent is believed untagged.
+    pub grid: Vec<f64>,
+    /// The 2 untagged roles whose means are nearest, nearest first, each `[present, count /
+    /// opponents, ahead / 10 m, left / 10 m, spread / 5 m, confidence, ticks looked at in
+    /// vain / 100]` (all 0 for an empty slot).
+    pub roles: Vec<Vec<f64>>,
+    /// The share of the opponents this robot believes are still untagged.
+    pub untagged: f64,
 }
 
 /// A scan on the wire.
@@ -249,6 +268,9 @@ pub struct TeammateDto {
     pub theta: f64,
     /// Ticks since the teammate sent this (0 with a perfect radio).
     pub age_ticks: u64,
+    /// Where the teammate announced it is going, `[x, y]`, or null (robots driven by
+    /// actions announce no goal).
+    pub goal: Option<[f64; 2]>,
 }
 
 fn pose(p: Pose) -> PoseDto {
@@ -295,8 +317,14 @@ pub fn observation(o: &RobotObservation) -> Observation {
                 y: mm(t.pose.pos.y),
                 theta: rad(t.pose.theta),
                 age_ticks: t.age_ticks,
+                goal: t.goal.map(|g| [mm(g.x), mm(g.y)]),
             })
             .collect(),
+        belief: BeliefFeaturesDto {
+            grid: o.belief.grid.to_vec(),
+            roles: o.belief.roles.iter().map(|r| r.to_vec()).collect(),
+            untagged: o.belief.untagged,
+        },
     }
 }
 
