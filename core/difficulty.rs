@@ -8,7 +8,8 @@ use crate::planner::PlannerKind;
 use crate::sim::{Physics, TICK_HZ};
 use crate::world::MatchConfig;
 
-/// A difficulty preset, from the easiest.
+/// A difficulty preset: the hand-made teams from the easiest, then the learned one (its
+/// place among them is its measured rating).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub enum Difficulty {
     /// One slow robot searching at random, slow to fire again: a newcomer's first matches.
@@ -18,6 +19,9 @@ pub enum Difficulty {
     /// Two robots at full speed that track what they cannot see and coordinate where to look
     /// over a perfect radio: the paper's team, as the showcase plays.
     Elite,
+    /// Two robots at full speed driven by the shipped trained policy (`policy:learned`,
+    /// `policy/shipped/learned.md`) from what each knows, the team belief included.
+    Learned,
 }
 
 /// What a preset sets (every other setting keeps its default).
@@ -25,6 +29,8 @@ pub enum Difficulty {
 pub struct Preset {
     pub robots: usize,
     pub planner: PlannerKind,
+    /// The shipped policy that drives the robots, for a learned team.
+    pub policy: Option<&'static str>,
     /// Metres per second (the game's default is 1).
     pub robot_speed: f32,
     /// Ticks between two tags of one robot (the game's default is one second).
@@ -53,7 +59,12 @@ pub struct FixedRating {
 }
 
 impl Difficulty {
-    pub const ALL: [Difficulty; 3] = [Difficulty::Recruit, Difficulty::Veteran, Difficulty::Elite];
+    pub const ALL: [Difficulty; 4] = [
+        Difficulty::Recruit,
+        Difficulty::Veteran,
+        Difficulty::Elite,
+        Difficulty::Learned,
+    ];
 
     /// The preset a person gets unless they choose: one a newcomer can win.
     pub const DEFAULT: Difficulty = Difficulty::Recruit;
@@ -64,6 +75,7 @@ impl Difficulty {
             Difficulty::Recruit => "recruit",
             Difficulty::Veteran => "veteran",
             Difficulty::Elite => "elite",
+            Difficulty::Learned => "learned",
         }
     }
 
@@ -77,6 +89,7 @@ impl Difficulty {
             Difficulty::Recruit => Preset {
                 robots: 1,
                 planner: PlannerKind::Baseline,
+                policy: None,
                 robot_speed: 0.8,
                 tag_cooldown_ticks: 2 * second,
                 time_limit_s: 120,
@@ -84,6 +97,7 @@ impl Difficulty {
             Difficulty::Veteran => Preset {
                 robots: 2,
                 planner: PlannerKind::Baseline,
+                policy: None,
                 robot_speed: 0.8,
                 tag_cooldown_ticks: 2 * second,
                 time_limit_s: 120,
@@ -91,6 +105,15 @@ impl Difficulty {
             Difficulty::Elite => Preset {
                 robots: 2,
                 planner: PlannerKind::Coordinated,
+                policy: None,
+                robot_speed: 1.0,
+                tag_cooldown_ticks: second,
+                time_limit_s: 120,
+            },
+            Difficulty::Learned => Preset {
+                robots: 2,
+                planner: PlannerKind::Api,
+                policy: Some("learned"),
                 robot_speed: 1.0,
                 tag_cooldown_ticks: second,
                 time_limit_s: 120,
@@ -103,6 +126,7 @@ impl Difficulty {
         let p = self.preset();
         config.robots = p.robots;
         config.planner = p.planner;
+        config.policy = p.policy.map(str::to_string);
         config.physics = self.physics(config.physics.clone());
         config.time_limit_ticks = p.time_limit_s * TICK_HZ as u64;
     }
@@ -125,6 +149,7 @@ impl Difficulty {
             Difficulty::Recruit => [m("wander", 200, 186, 32.03), m("evade", 200, 82, 65.53)],
             Difficulty::Veteran => [m("wander", 200, 198, 23.83), m("evade", 200, 113, 72.75)],
             Difficulty::Elite => [m("wander", 200, 200, 13.25), m("evade", 200, 199, 26.90)],
+            Difficulty::Learned => [m("wander", 200, 200, 13.25), m("evade", 200, 199, 26.90)],
         }
     }
 
@@ -168,7 +193,8 @@ mod tests {
             assert_eq!(Difficulty::parse(d.name()), Some(d));
         }
         assert_eq!(Difficulty::parse("Elite"), None);
-        let [r, v, e] = Difficulty::ALL.map(Difficulty::preset);
+        let [r, v, e, l] = Difficulty::ALL.map(Difficulty::preset);
+        assert_eq!((l.planner, l.policy), (PlannerKind::Api, Some("learned")));
         assert!(r.robots <= v.robots && v.robots <= e.robots);
         assert_eq!(e.planner, PlannerKind::Coordinated);
         assert!(r.robot_speed <= v.robot_speed && v.robot_speed <= e.robot_speed);
@@ -195,7 +221,7 @@ mod tests {
 
     #[test]
     fn ratings_follow_the_measured_win_rates() {
-        let [r, v, e] = Difficulty::ALL.map(Difficulty::rating);
+        let [r, v, e, _] = Difficulty::ALL.map(Difficulty::rating);
         // Recruit's robots win 41% against the evade bot: below 1500; veteran's 56.5%: above.
         assert!(r.rating < 1500.0 && v.rating > 1500.0 && e.rating > v.rating + 500.0);
         assert!((r.rating - 1437.0).abs() < 2.0, "{r:?}");

@@ -337,7 +337,20 @@ impl Episode {
         obs: &mut [f32],
         rewards: &mut [f64],
     ) -> Outcome {
-        let (outcome, time_fraction) = self.advance(spec, actions, rewards);
+        self.step_with(spec, actions, obs, rewards, &mut |_| {})
+    }
+
+    /// [`Episode::step`] with `before_tick` called on the world before each of the step's
+    /// ticks (see [`Episode::advance_with`]).
+    pub fn step_with(
+        &mut self,
+        spec: &EnvSpec,
+        actions: &[f32],
+        obs: &mut [f32],
+        rewards: &mut [f64],
+        before_tick: &mut dyn FnMut(&mut World),
+    ) -> Outcome {
+        let (outcome, time_fraction) = self.advance_with(spec, actions, rewards, before_tick);
         self.observe(spec, time_fraction, obs);
         outcome
     }
@@ -351,6 +364,21 @@ impl Episode {
         actions: &[f32],
         rewards: &mut [f64],
     ) -> (Outcome, f64) {
+        self.advance_with(spec, actions, rewards, &mut |_| {})
+    }
+
+    /// [`Episode::advance`] with `before_tick` called on the world before each of the
+    /// step's ticks, after the actions went in: where a shell gives the robots it drives
+    /// itself their orders as inputs (a trained policy's, `planner="policy:<name>"`, which
+    /// the core does not run). Such a shell passes no actions (an empty slice): a row would
+    /// replace the order its robot holds between two of the policy's decisions.
+    pub fn advance_with(
+        &mut self,
+        spec: &EnvSpec,
+        actions: &[f32],
+        rewards: &mut [f64],
+        before_tick: &mut dyn FnMut(&mut World),
+    ) -> (Outcome, f64) {
         let inputs: Vec<WorldInput> = actions
             .chunks_exact(ACTION_SIZE)
             .take(self.world.robots.len())
@@ -360,11 +388,7 @@ impl Episode {
             .filter(|(robot, _)| self.world.robot_outside(*robot))
             .map(|(robot, a)| WorldInput::Robot {
                 robot,
-                order: RobotOrder::Drive {
-                    forward: clip(a[0]),
-                    turn: clip(a[1]),
-                    tag: a[2] > 0.5,
-                },
+                order: drive_order(a),
             })
             .collect();
         // Drive orders within [-1, 1] to robots the match has are always taken.
@@ -372,6 +396,7 @@ impl Episode {
         let since = self.world.events().len() as u64;
         let start = self.world.tick;
         for _ in 0..spec.ticks_per_step {
+            before_tick(&mut self.world);
             self.world.step();
             if self.world.status == MatchStatus::Finished {
                 break;
@@ -416,6 +441,18 @@ impl Episode {
             reason,
         };
         (outcome, time_fraction)
+    }
+}
+
+/// The order one robot's action gives (`ACTION_SIZE` values: forward and turn as fractions,
+/// clipped to [-1, 1] with NaN as 0, and tag above 0.5): the environments' and a served
+/// policy's one reading of an action.
+pub fn drive_order(action: &[f32]) -> RobotOrder {
+    let at = |i: usize| action.get(i).copied().unwrap_or(0.0);
+    RobotOrder::Drive {
+        forward: clip(at(0)),
+        turn: clip(at(1)),
+        tag: at(2) > 0.5,
     }
 }
 

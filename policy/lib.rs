@@ -20,6 +20,11 @@
 
 mod onnx;
 mod proto;
+mod shipped;
+pub mod team;
+
+pub use shipped::{SHIPPED, shipped};
+pub use team::TeamPolicy;
 
 /// Why a model was refused, or could not run.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]

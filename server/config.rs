@@ -31,6 +31,10 @@ pub mod defaults {
     pub const MAX_MATCHES_PER_ADDRESS: usize = 8;
     pub const MAX_MAPS: usize = 200;
     pub const MAX_MAPS_PER_ADDRESS: usize = 10;
+    pub const MAX_POLICIES: usize = 32;
+    pub const MAX_POLICIES_PER_ADDRESS: usize = 4;
+    pub const MAX_POLICY_BYTES: usize = 16 << 20;
+    pub const MAX_POLICY_INFERENCE_US: u64 = 1000;
     pub const IDLE_MANUAL_AFTER: &str = "600";
     pub const MAX_CONNECTIONS: usize = 4096;
     pub const MAX_WEBTRANSPORT_SESSIONS: usize = 200;
@@ -201,6 +205,24 @@ pub struct Config {
     #[arg(long, env = "LASERTAG_MAX_MAPS_PER_ADDRESS", default_value_t = defaults::MAX_MAPS_PER_ADDRESS,
           value_parser = clap::value_parser!(u64).range(1..).map(|v| v as usize))]
     pub max_maps_per_address: usize,
+    /// Trained policies the server holds (`POST /api/policies`), shipped ones included.
+    #[arg(long, env = "LASERTAG_MAX_POLICIES", default_value_t = defaults::MAX_POLICIES,
+          value_parser = clap::value_parser!(u64).range(1..).map(|v| v as usize))]
+    pub max_policies: usize,
+    /// Uploaded policies one client may keep; more are refused with 429 until it deletes one.
+    #[arg(long, env = "LASERTAG_MAX_POLICIES_PER_ADDRESS", default_value_t = defaults::MAX_POLICIES_PER_ADDRESS,
+          value_parser = clap::value_parser!(u64).range(1..).map(|v| v as usize))]
+    pub max_policies_per_address: usize,
+    /// Bytes of one uploaded policy (an ONNX file); a larger upload is refused with 413.
+    #[arg(long, env = "LASERTAG_MAX_POLICY_BYTES", default_value_t = defaults::MAX_POLICY_BYTES,
+          value_parser = clap::value_parser!(u64).range(1..=(1 << 30)).map(|v| v as usize))]
+    pub max_policy_bytes: usize,
+    /// Microseconds one inference of an uploaded policy may take on this machine (timed
+    /// when it is loaded); a slower one is refused with 400. Its cost per tick is also
+    /// priced into every match it drives.
+    #[arg(long, env = "LASERTAG_MAX_POLICY_INFERENCE_US", default_value_t = defaults::MAX_POLICY_INFERENCE_US,
+          value_parser = clap::value_parser!(u64).range(1..))]
+    pub max_policy_inference_us: u64,
     /// Seconds a manual-clock match may go without a request that changes it (step, command)
     /// before it is ended and removed: manual matches never end on their own.
     #[arg(long = "idle-manual-after-s", value_name = "SECONDS", env = "LASERTAG_IDLE_MANUAL_AFTER_S",
@@ -401,6 +423,10 @@ impl Default for Config {
             max_matches_per_address: defaults::MAX_MATCHES_PER_ADDRESS,
             max_maps: defaults::MAX_MAPS,
             max_maps_per_address: defaults::MAX_MAPS_PER_ADDRESS,
+            max_policies: defaults::MAX_POLICIES,
+            max_policies_per_address: defaults::MAX_POLICIES_PER_ADDRESS,
+            max_policy_bytes: defaults::MAX_POLICY_BYTES,
+            max_policy_inference_us: defaults::MAX_POLICY_INFERENCE_US,
             idle_manual_after: secs(defaults::IDLE_MANUAL_AFTER),
             max_connections: defaults::MAX_CONNECTIONS,
             max_webtransport_sessions: defaults::MAX_WEBTRANSPORT_SESSIONS,

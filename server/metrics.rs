@@ -41,6 +41,8 @@ pub enum Refusal {
     ClientQuota,
     /// A map upload while the server holds its most maps (503).
     MapsFull,
+    /// A policy upload while the server holds its most policies (503).
+    PoliciesFull,
     /// A change without an owner or admin token (401).
     Unauthorized,
     /// A change with a token that is not the owner's (403).
@@ -54,7 +56,7 @@ pub enum Refusal {
 }
 
 impl Refusal {
-    pub const ALL: [Refusal; 19] = [
+    pub const ALL: [Refusal; 20] = [
         Refusal::RateLimited,
         Refusal::ConnectionsPerAddress,
         Refusal::MatchesFull,
@@ -69,6 +71,7 @@ impl Refusal {
         Refusal::MessageInvalid,
         Refusal::ClientQuota,
         Refusal::MapsFull,
+        Refusal::PoliciesFull,
         Refusal::Unauthorized,
         Refusal::Forbidden,
         Refusal::Budget,
@@ -92,6 +95,7 @@ impl Refusal {
             Refusal::MessageInvalid => "message_invalid",
             Refusal::ClientQuota => "client_quota",
             Refusal::MapsFull => "maps_full",
+            Refusal::PoliciesFull => "policies_full",
             Refusal::Unauthorized => "unauthorized",
             Refusal::Forbidden => "forbidden",
             Refusal::Budget => "budget",

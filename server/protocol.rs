@@ -112,6 +112,30 @@ pub struct MapCreated {
     pub owner_token: String,
 }
 
+/// A trained policy the server holds (`GET /api/policies`).
+#[derive(Debug, Clone, Serialize, ToSchema)]
+pub struct PolicyInfo {
+    pub name: String,
+    /// Floats of the robot observation it takes (docs/research.md, "Observations").
+    pub observation_size: usize,
+    /// Floats of the action it gives (forward, turn, tag).
+    pub action_size: usize,
+    /// Microseconds of one inference on this server, timed when it was loaded.
+    pub inference_us: f64,
+    /// Shipped with the server (listed from the start, never removed).
+    pub shipped: bool,
+}
+
+/// The reply to `POST /api/policies`: the policy and the secret that removes it (shown only
+/// here).
+#[derive(Debug, Serialize, ToSchema)]
+pub struct PolicyCreated {
+    #[serde(flatten)]
+    pub policy: PolicyInfo,
+    /// `Authorization: Bearer <owner_token>` deletes the policy.
+    pub owner_token: String,
+}
+
 /// The reply to `POST /api/matches`: the summary and the secret that changes the match
 /// (shown only here).
 #[derive(Debug, Serialize, ToSchema)]
@@ -306,6 +330,7 @@ impl CreateMatch {
             planner,
             robots: listed_robots,
             outside: outside_robots,
+            policy,
         } = planners::resolve(self.planner.as_ref(), given_robots)?;
         // A preset fills in what the request leaves out; what it gives wins (a planner per
         // robot gives the robots too).
@@ -391,6 +416,11 @@ impl CreateMatch {
                 (Some(kind), _) => kind,
                 (None, Some(p)) => p.planner,
                 (None, None) => PlannerKind::Coordinated,
+            },
+            policy: match (planner, preset) {
+                (Some(_), _) => policy,
+                (None, Some(p)) => p.policy.map(str::to_string),
+                (None, None) => None,
             },
             outside_robots,
             pursuer_slots,

@@ -33,6 +33,11 @@ pub struct MatchConfig {
     pub opponent_control: ControlKind,
     pub opponent_bot: BotKind,
     pub planner: PlannerKind,
+    /// The trained policy (`policy:<name>`) the shell drives the team by: its robots are
+    /// driven from outside (`planner` is [`PlannerKind::Api`]) and the shell gives them the
+    /// policy's orders as inputs every few ticks, so the match's record holds every action
+    /// and a replay never needs the model. The core only carries the name.
+    pub policy: Option<String>,
     /// Robots driven from outside (by an API client or a person) while the team's planner
     /// drives the rest: `outside_robots[i]` for robot `i`, none when shorter. With
     /// `planner` [`PlannerKind::Api`] every robot is driven from outside whatever this says.
@@ -66,6 +71,7 @@ impl Default for MatchConfig {
             opponent_control: ControlKind::Bot,
             opponent_bot: BotKind::Wander,
             planner: PlannerKind::Coordinated,
+            policy: None,
             outside_robots: Vec::new(),
             pursuer_slots: 0,
             seed: 0,

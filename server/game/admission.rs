@@ -304,6 +304,26 @@ pub fn match_on(def: &MapDef, config: &MatchConfig) -> Price {
     }
 }
 
+/// Microseconds of one robot's observation for a policy besides its belief features: the
+/// layout's encoding, the teammates, the detections (measured by `benches/policy.rs`).
+const POLICY_OBSERVATION_US: f64 = 4.0;
+/// Microseconds per particle of the robot's tracker that its belief features read.
+const POLICY_OBSERVATION_US_PER_PARTICLE: f64 = 0.012;
+
+/// What a trained policy adds to a match with `config` (see `game::policies`): every robot's
+/// observation and one inference (`inference_us`, timed on this machine when the policy was
+/// loaded) every `every` ticks.
+pub fn policy(config: &MatchConfig, inference_us: f64, every: u64) -> Price {
+    let robots = config.robots as f64;
+    let copies_particles = config.tracker.particles_per_role as f64 * config.opponents as f64;
+    let observation_us =
+        POLICY_OBSERVATION_US + copies_particles * POLICY_OBSERVATION_US_PER_PARTICLE;
+    Price {
+        tick_ms: robots * (observation_us + inference_us) / every.max(1) as f64 / 1000.0,
+        ..Price::default()
+    }
+}
+
 /// Views the `search` planner's look-ahead weighs in one choice: `SHORTLIST` at each node
 /// below the first level, whose `search_branching` best poses each lead `search_depth - 1`
 /// levels down, `search_branching` continuations a node (0 for any other planner).

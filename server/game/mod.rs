@@ -12,6 +12,7 @@ pub mod encoded;
 pub mod error;
 mod handle;
 pub mod hub;
+pub mod policies;
 pub mod record;
 pub mod replay;
 pub mod resume;
@@ -52,6 +53,8 @@ type Matches = RwLock<BTreeMap<String, MatchHandle>>;
 #[derive(Debug, Default)]
 pub struct Registry {
     pub maps: RwLock<MapStore>,
+    /// Trained robot teams (`policies`): the shipped ones, and those uploaded.
+    pub policies: RwLock<policies::PolicyStore>,
     pub config: Config,
     pub metrics: Metrics,
     /// Cancelled when the server starts shutting down.
@@ -106,6 +109,7 @@ impl Registry {
     pub fn with_history(maps: MapStore, config: Config, history: replay::History) -> Arc<Registry> {
         Arc::new(Registry {
             maps: RwLock::new(maps),
+            policies: RwLock::new(policies::PolicyStore::shipped()),
             config,
             history: Arc::new(history),
             ..Registry::default()
@@ -165,7 +169,12 @@ impl Registry {
             .maps
             .read()
             .unwrap_or_else(|e| e.into_inner())
-            .uploaded_memory(None);
+            .uploaded_memory(None)
+            + self
+                .policies
+                .read()
+                .unwrap_or_else(|e| e.into_inner())
+                .uploaded_memory(None);
         let memory = admitted.memory + maps + price.memory;
         if memory > cfg.memory_budget_mb * 1_000_000 {
             self.metrics.refuse(crate::metrics::Refusal::Budget);
@@ -198,7 +207,12 @@ impl Registry {
                 .maps
                 .read()
                 .unwrap_or_else(|e| e.into_inner())
-                .uploaded_memory(Some(client));
+                .uploaded_memory(Some(client))
+                + self
+                    .policies
+                    .read()
+                    .unwrap_or_else(|e| e.into_inner())
+                    .uploaded_memory(Some(client));
             let held: Price = matches
                 .values()
                 .filter(|h| h.owner.client == Some(client))
@@ -364,6 +378,10 @@ impl Registry {
             metrics: self.metrics.clone(),
             history: self.history.clone(),
             owner: owner.clone(),
+            policy: policies::policy_for(
+                &self.policies.read().unwrap_or_else(|e| e.into_inner()),
+                &world,
+            ),
             on_exit: Box::new(on_exit),
         };
         let (tx, hub) = match resumed {

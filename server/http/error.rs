@@ -16,6 +16,7 @@ use crate::service::maps::MapsError;
 use crate::service::matches::CreateError;
 use crate::service::names::NamesError;
 use crate::service::players::StatsError;
+use crate::service::policies::PoliciesError;
 use crate::service::replays::ReplaysError;
 use crate::service::{PoolError, ReplayBusy};
 use lasertag_core::world::{InputError, OrderError, RobotOrderError};
@@ -240,7 +241,33 @@ impl From<CreateError> for ApiError {
             | CreateError::TooManyParticles { .. }
             | CreateError::BadMap(_)
             | CreateError::NotAMap
+            | CreateError::NoPolicy(_)
+            | CreateError::PolicyMisfit { .. }
             | CreateError::Setup(_) => ApiError::bad_request(e.to_string()),
+        }
+    }
+}
+
+impl From<PoliciesError> for ApiError {
+    fn from(e: PoliciesError) -> ApiError {
+        match e {
+            PoliciesError::NoRoom(e) => e.into(),
+            PoliciesError::OverLimit(e) => e.into(),
+            PoliciesError::Pool(e) => e.into(),
+            PoliciesError::NotFound(_) => ApiError::not_found(e.to_string()),
+            PoliciesError::Invalid(_)
+            | PoliciesError::BadName(_)
+            | PoliciesError::TooSlow { .. }
+            | PoliciesError::Misfit(_) => ApiError::bad_request(e.to_string()),
+            PoliciesError::TooLarge { .. } => {
+                ApiError::new(StatusCode::PAYLOAD_TOO_LARGE, e.to_string())
+            }
+            PoliciesError::Taken(_) | PoliciesError::InUse(_) => ApiError::conflict(e.to_string()),
+            PoliciesError::Full(_) => ApiError::new(StatusCode::SERVICE_UNAVAILABLE, e.to_string()),
+            PoliciesError::Quota { .. } => {
+                ApiError::new(StatusCode::TOO_MANY_REQUESTS, e.to_string())
+            }
+            PoliciesError::Shipped(_) => ApiError::new(StatusCode::FORBIDDEN, e.to_string()),
         }
     }
 }

@@ -14,6 +14,7 @@ pub mod limits;
 mod names;
 mod openapi;
 mod players;
+mod policies;
 mod rate_limit;
 mod replay_ws;
 mod replays;
@@ -79,6 +80,7 @@ fn router(
     fleet: Option<Arc<Fleet>>,
 ) -> (Router, AppState) {
     let max_body = registry.config.max_body_bytes;
+    let max_policy = registry.config.max_policy_bytes.max(max_body);
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
     let in_fleet = fleet.is_some();
     let replays = ReplayPool::new(
@@ -100,6 +102,13 @@ fn router(
         .route("/transport", get(transport::transport))
         .route("/difficulties", get(rules::difficulties))
         .route("/maps", get(handlers::list_maps).post(handlers::add_map))
+        .route(
+            "/policies",
+            get(policies::list)
+                .post(policies::add)
+                .layer(DefaultBodyLimit::max(max_policy)),
+        )
+        .route("/policies/{name}", delete(policies::delete))
         .route(
             "/maps/{name}",
             get(handlers::get_map).delete(handlers::delete_map),

@@ -15,6 +15,9 @@ pub enum DifficultyName {
     Veteran,
     /// Two coordinated robots tracking the opponents, at full speed, 2 minutes.
     Elite,
+    /// Two robots driven by the shipped trained policy (`policy:learned`), from what each
+    /// knows, the team belief included; at full speed, 2 minutes.
+    Learned,
 }
 
 impl DifficultyName {
@@ -23,6 +26,7 @@ impl DifficultyName {
             DifficultyName::Recruit => Difficulty::Recruit,
             DifficultyName::Veteran => Difficulty::Veteran,
             DifficultyName::Elite => Difficulty::Elite,
+            DifficultyName::Learned => Difficulty::Learned,
         }
     }
 
@@ -31,6 +35,7 @@ impl DifficultyName {
             Difficulty::Recruit => DifficultyName::Recruit,
             Difficulty::Veteran => DifficultyName::Veteran,
             Difficulty::Elite => DifficultyName::Elite,
+            Difficulty::Learned => DifficultyName::Learned,
         }
     }
 }

@@ -22,19 +22,33 @@ pub enum Planner {
     Api,
 }
 
-/// `planner` in a request: one name for the team, or one per robot.
+/// `planner` in a request: one name for the team, a trained policy for the team
+/// (`"policy:<name>"`), or one per robot.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub enum PlannerChoice {
     Team(Planner),
+    Policy(String),
     PerRobot(Vec<Planner>),
 }
+
+/// What names a trained policy in `planner`.
+pub const POLICY_PREFIX: &str = "policy:";
 
 impl<'de> Deserialize<'de> for PlannerChoice {
     fn deserialize<D: Deserializer<'de>>(d: D) -> Result<PlannerChoice, D::Error> {
         // By hand rather than `untagged`, whose error names no variant: say what is wanted.
         let value = serde_json::Value::deserialize(d)?;
-        let wanted = "a planner (coordinated, search, baseline, idle, api) or an array of them, one per robot";
+        let wanted = "a planner (coordinated, search, baseline, idle, api, or policy:<name> for a trained policy from GET /api/policies) or an array of the built-in ones, one per robot";
         match value {
+            serde_json::Value::String(s) if s.starts_with(POLICY_PREFIX) => {
+                let name = &s[POLICY_PREFIX.len()..];
+                if name.is_empty() {
+                    return Err(D::Error::custom(
+                        "policy: names no policy; expected policy:<name> (GET /api/policies lists them)",
+                    ));
+                }
+                Ok(PlannerChoice::Policy(name.to_string()))
+            }
             serde_json::Value::String(_) => Planner::deserialize(value)
                 .map(PlannerChoice::Team)
                 .map_err(|e| D::Error::custom(format!("{e}; expected {wanted}"))),
@@ -52,13 +66,19 @@ pub(super) fn choice_schema() -> RefOr<Schema> {
     OneOfBuilder::new()
         .item(Ref::from_schema_name("Planner"))
         .item(
+            utoipa::openapi::schema::ObjectBuilder::new()
+                .schema_type(utoipa::openapi::schema::Type::String)
+                .pattern(Some("^policy:.+$"))
+                .description(Some("A trained policy the server holds (GET /api/policies) drives every robot")),
+        )
+        .item(
             ArrayBuilder::new()
                 .items(Ref::from_schema_name("Planner"))
                 .min_items(Some(1))
                 .max_items(Some(super::bounds::ROBOTS.max_integer() as usize)),
         )
         .description(Some(
-            "The team's planner, or one per robot: the built-in ones must be the same; `api` robots are driven from outside beside them (default coordinated).",
+            "The team's planner, a trained policy (`policy:<name>`) for the whole team, or one built-in planner per robot: the built-in ones must be the same; `api` robots are driven from outside beside them (default coordinated).",
         ))
         .into()
 }
@@ -72,6 +92,8 @@ pub struct Resolved {
     pub robots: Option<usize>,
     /// `MatchConfig::outside_robots`.
     pub outside: Vec<bool>,
+    /// `MatchConfig::policy`.
+    pub policy: Option<String>,
 }
 
 /// The team's planner and which robots are driven from outside, for `robots` robots (when
@@ -90,11 +112,19 @@ pub fn resolve(
             planner: None,
             robots,
             outside: Vec::new(),
+            policy: None,
         }),
         Some(PlannerChoice::Team(p)) => Ok(Resolved {
             planner: Some(planner_kind(*p)),
             robots,
             outside: Vec::new(),
+            policy: None,
+        }),
+        Some(PlannerChoice::Policy(name)) => Ok(Resolved {
+            planner: Some(PlannerKind::Api),
+            robots,
+            outside: Vec::new(),
+            policy: Some(name.clone()),
         }),
         Some(PlannerChoice::PerRobot(list)) => {
             if list.is_empty() {
@@ -132,6 +162,7 @@ pub fn resolve(
                 planner: Some(kind),
                 robots: Some(list.len()),
                 outside,
+                policy: None,
             })
         }
     }
@@ -172,6 +203,8 @@ pub enum Controller {
     Baseline,
     Idle,
     Api,
+    /// A trained policy (the match's `policy`).
+    Policy,
     Person,
 }
 
@@ -182,6 +215,8 @@ pub fn per_robot(config: &lasertag_core::world::MatchConfig) -> Vec<Controller> 
         .map(|i| {
             if i >= seats {
                 Controller::Person
+            } else if config.policy.is_some() && config.planner == PlannerKind::Api {
+                Controller::Policy
             } else if config.planner == PlannerKind::Api
                 || config.outside_robots.get(i) == Some(&true)
             {

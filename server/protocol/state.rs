@@ -27,8 +27,11 @@ pub struct MatchSummary {
     /// The planner asked for (the team's: robots driven from outside beside it are
     /// `robot_planners`' `api` ones).
     pub planner: Planner,
+    /// The trained policy that drives the team (`"planner": "policy:<name>"` asked for;
+    /// `planner` then reads `api`, as the policy's orders come from outside the team).
+    pub policy: Option<String>,
     /// Each robot's controller, `r0` first: the team's planner, `api` for one driven from
-    /// outside, or `person` for a pursuer slot.
+    /// outside, `policy` for one a trained policy drives, or `person` for a pursuer slot.
     pub robot_planners: Vec<Controller>,
     /// Deprecated: always equal to `planner` (no planner falls back to another); kept so
     /// that clients reading it do not break.
@@ -147,6 +150,7 @@ fn summary_showing(s: &view::Summary, seed: bool) -> MatchSummary {
             BotKind::Idle => OpponentBot::Idle,
         },
         planner: planner_dto(s.planner),
+        policy: c.policy.clone(),
         robot_planners: super::planners::per_robot(c),
         planner_active: planner_dto(s.planner),
         tracker: Echo(c.tracker.clone()),
@@ -270,6 +274,8 @@ pub struct MatchState {
     pub status: Status,
     pub winner: Option<Winner>,
     pub planner: Planner,
+    /// The trained policy that drives the team, as in the summary.
+    pub policy: Option<String>,
     /// Each robot's controller, as in the summary.
     pub robot_planners: Vec<Controller>,
     pub planner_active: Planner,
@@ -325,6 +331,7 @@ pub fn state(frame: &Frame, meta: &MatchMeta, config: &MatchConfig) -> MatchStat
         status: status(frame.status),
         winner: winner(frame.winner),
         planner: planner_dto(config.planner),
+        policy: config.policy.clone(),
         robot_planners: super::planners::per_robot(config),
         planner_active: planner_dto(config.planner),
         notes: notes(config),

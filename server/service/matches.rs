@@ -44,6 +44,10 @@ pub enum CreateError {
     /// `map` names no map the server holds.
     #[error("map: no map {0:?}")]
     NoMap(String),
+    #[error("planner: no policy {0:?} on this server (GET /api/policies lists them)")]
+    NoPolicy(String),
+    #[error("planner: policy {name:?} cannot drive this team: {why}")]
+    PolicyMisfit { name: String, why: String },
     /// The inline map breaks a rule (its path names the field as the request has it).
     #[error(transparent)]
     BadMap(MapError),
@@ -135,8 +139,10 @@ pub async fn create<R>(
             .map
             .as_str()
             .is_some_and(|m| lasertag_core::difficulty::Difficulty::MEASURED_ON.contains(&m));
+    let policy_price = policy_fits(service, &req.config)?;
     let source = map_source(service, req.map).await?;
-    let price = admission::held_back(&req.config, req.spectator_delay_ticks)
+    let price = policy_price
+        + admission::held_back(&req.config, req.spectator_delay_ticks)
         + match &source {
             MapSource::Stored(arena) => admission::match_on(&arena.def, &req.config),
             MapSource::Inline(def) => admission::map(def) + admission::match_on(def, &req.config),
@@ -188,6 +194,42 @@ pub async fn create<R>(
         summary,
         owner_token,
     })))
+}
+
+/// The price of the trained policy that drives the team, if any: refused when the server
+/// holds no policy of that name or its sizes do not fit the team.
+fn policy_fits(
+    service: Service<'_>,
+    config: &lasertag_core::world::MatchConfig,
+) -> Result<admission::Price, CreateError> {
+    let Some(name) = config.policy.as_deref() else {
+        return Ok(admission::Price::default());
+    };
+    let store = service
+        .registry
+        .policies
+        .read()
+        .unwrap_or_else(|e| e.into_inner());
+    let stored = store
+        .get(name)
+        .ok_or_else(|| CreateError::NoPolicy(name.to_string()))?;
+    let p = &stored.policy;
+    if p.output_len() != lasertag_policy::team::ACTION_SIZE {
+        return Err(CreateError::PolicyMisfit {
+            name: name.to_string(),
+            why: format!(
+                "it gives {} values; a robot's action is 3 (forward, turn, tag)",
+                p.output_len()
+            ),
+        });
+    }
+    lasertag_policy::team::detection_slots(p.input_len(), config.robots, &config.physics).map_err(
+        |e| CreateError::PolicyMisfit {
+            name: name.to_string(),
+            why: e.to_string(),
+        },
+    )?;
+    Ok(admission::policy(config, stored.inference_us, stored.every))
 }
 
 /// Refuses more agents, or more particles, than this server takes in one match.

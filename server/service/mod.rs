@@ -9,6 +9,7 @@ pub mod maps;
 pub mod matches;
 pub mod names;
 pub mod players;
+pub mod policies;
 pub mod replays;
 
 use std::collections::HashMap;

@@ -56,6 +56,10 @@ pub struct StoredSettings {
     opponent_control: StoredControl,
     opponent_bot: StoredBot,
     planner: StoredPlanner,
+    /// The trained policy that drove the robots (`MatchConfig::policy`): a replay needs only
+    /// its name (the actions are in the record), a resumed match its model.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    policy: Option<String>,
     /// Robots driven from outside beside planned ones (`MatchConfig::outside_robots`).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     outside_robots: Vec<bool>,
@@ -152,6 +156,7 @@ impl StoredSettings {
             opponent_control: StoredControl::of(config.opponent_control),
             opponent_bot: StoredBot::of(config.opponent_bot),
             planner: StoredPlanner::of(config.planner),
+            policy: config.policy.clone(),
             outside_robots: config.outside_robots.clone(),
             pursuer_slots: config.pursuer_slots,
             seed: config.seed,
@@ -205,6 +210,7 @@ impl StoredSettings {
             opponent_control: self.opponent_control.kind(),
             opponent_bot: self.opponent_bot.kind(),
             planner: self.planner.kind(),
+            policy: self.policy.clone(),
             outside_robots: self.outside_robots.clone(),
             pursuer_slots: self.pursuer_slots,
             seed: self.seed,

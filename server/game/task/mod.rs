@@ -331,6 +331,8 @@ pub struct TaskSettings {
     pub history: Arc<crate::game::replay::History>,
     /// Who owns the match (stored, hashed, to resume it).
     pub owner: Arc<Owner>,
+    /// The trained policy that drives the team (`MatchConfig::policy`), set up for it.
+    pub policy: Option<lasertag_policy::TeamPolicy>,
     /// Called once when the task ends by itself (cleaned up, abandoned): unregisters it.
     pub on_exit: Box<dyn FnOnce() + Send>,
 }
@@ -811,6 +813,18 @@ impl MatchTask {
         tracing::info!(tick = self.world.tick, "match resumed");
     }
 
+    /// The policy's orders of this tick, if a policy drives the team: applied and recorded
+    /// like any robot's command, so replays and resumes never need the model.
+    fn feed_policy(&mut self) {
+        let Some(policy) = self.settings.policy.as_mut() else {
+            return;
+        };
+        for (robot, order) in policy.orders(&self.world) {
+            // Drive orders in range for robots driven from outside are always taken.
+            let _ = self.apply(WorldInput::Robot { robot, order });
+        }
+    }
+
     /// Applies a change from outside to the world and records it (see `game::record`).
     fn apply(&mut self, input: WorldInput) -> Result<(), InputError> {
         self.world.apply(&input)?;
@@ -830,6 +844,7 @@ impl MatchTask {
     /// One tick of the world, its team's halves timed into the metrics.
     fn step(&mut self) {
         self.feed_inputs();
+        self.feed_policy();
         let seated = self.seated_poses();
         let mut started: Option<Instant> = None;
         let h = &self.histograms;

@@ -37,6 +37,7 @@ pub(super) enum StoredDifficulty {
     Recruit,
     Veteran,
     Elite,
+    Learned,
 }
 
 impl StoredDifficulty {
@@ -45,6 +46,7 @@ impl StoredDifficulty {
             Difficulty::Recruit => StoredDifficulty::Recruit,
             Difficulty::Veteran => StoredDifficulty::Veteran,
             Difficulty::Elite => StoredDifficulty::Elite,
+            Difficulty::Learned => StoredDifficulty::Learned,
         }
     }
 
@@ -53,6 +55,7 @@ impl StoredDifficulty {
             StoredDifficulty::Recruit => Difficulty::Recruit,
             StoredDifficulty::Veteran => Difficulty::Veteran,
             StoredDifficulty::Elite => Difficulty::Elite,
+            StoredDifficulty::Learned => Difficulty::Learned,
         }
     }
 }

@@ -1,0 +1,138 @@
+//! A policy driving a match's robots: each robot's observation vector (the research
+//! environment's one layout, `lasertag_core::env::Layout`) through the model, its action read
+//! as the environments read one (`lasertag_core::env::drive_order`), every `every` ticks.
+//!
+//! The shell (the server's match task, the native engine, the experiments) applies the orders
+//! as inputs, so they go into the match's record like any robot command: a replay or a
+//! resumed match never needs the model again to reproduce what happened.
+
+use std::sync::Arc;
+
+use lasertag_core::env::{Layout, drive_order};
+use lasertag_core::sim::Physics;
+use lasertag_core::sim::arena::Arena;
+use lasertag_core::world::{RobotOrder, World};
+
+use crate::{Policy, PolicyError};
+
+/// Ticks between two decisions of a policy unless its owner says otherwise: the research
+/// environment's default `ticks_per_step`, which the shipped team was trained with.
+pub const DEFAULT_EVERY: u64 = 4;
+
+/// Values of an action a policy must give (forward, turn, tag).
+pub const ACTION_SIZE: usize = lasertag_core::env::ACTION_SIZE;
+
+/// A policy set up for one match: its layout and the buffers one decision uses.
+#[derive(Debug, Clone)]
+pub struct TeamPolicy {
+    policy: Arc<Policy>,
+    layout: Layout,
+    every: u64,
+    observation: Vec<f32>,
+    action: Vec<f32>,
+    scratch: Vec<f32>,
+}
+
+/// The detection slots a model of `input_len` values has in a team of `robots` on a match
+/// with `physics`' sensors, or why it cannot drive such a team.
+pub fn detection_slots(
+    input_len: usize,
+    robots: usize,
+    physics: &Physics,
+) -> Result<usize, PolicyError> {
+    let base = layout(robots, 0, 1.0, 1.0, physics).size();
+    let per = 3;
+    if input_len < base || !(input_len - base).is_multiple_of(per) {
+        return Err(PolicyError::Shape(format!(
+            "the model takes {input_len} values; a robot of a team of {robots} observes {base} + 3 per detection slot (docs/research.md, \"Observations\"): it was trained for another team size"
+        )));
+    }
+    Ok((input_len - base) / per)
+}
+
+fn layout(robots: usize, detections: usize, width: f64, height: f64, physics: &Physics) -> Layout {
+    // The rules as `GET /api/rules` publishes them (to the micrometre), which the HTTP
+    // environment reads: the same divisors give the same vector.
+    let exact = |v: f32| ((v as f64) * 1e6).round() / 1e6;
+    Layout::new(
+        robots,
+        detections,
+        width,
+        height,
+        physics.laser_beams,
+        exact(physics.laser_range),
+        exact(physics.laser_fov.to_degrees()),
+    )
+}
+
+impl TeamPolicy {
+    /// `policy` for a team of `robots` on `arena` with `physics`' sensors, deciding every
+    /// `every` ticks (at least 1). Refused when the model's sizes do not fit the team.
+    pub fn new(
+        policy: Arc<Policy>,
+        arena: &Arena,
+        robots: usize,
+        physics: &Physics,
+        every: u64,
+    ) -> Result<TeamPolicy, PolicyError> {
+        if policy.output_len() != ACTION_SIZE {
+            return Err(PolicyError::Shape(format!(
+                "the model gives {} values; a robot's action is {ACTION_SIZE} (forward, turn, tag)",
+                policy.output_len()
+            )));
+        }
+        let detections = detection_slots(policy.input_len(), robots, physics)?;
+        // The map's size to the millimetre, as the API writes it.
+        let mm = |v: f32| ((v as f64) * 1000.0).round() / 1000.0;
+        let layout = layout(
+            robots,
+            detections,
+            mm(arena.width()),
+            mm(arena.height()),
+            physics,
+        );
+        Ok(TeamPolicy {
+            observation: vec![0.0; layout.size()],
+            layout,
+            policy,
+            every: every.max(1),
+            action: Vec::with_capacity(ACTION_SIZE),
+            scratch: Vec::new(),
+        })
+    }
+
+    /// Ticks between decisions.
+    pub fn every(&self) -> u64 {
+        self.every
+    }
+
+    /// The orders of this tick (none between decisions): one for every robot driven from
+    /// outside that no person holds, from what that robot knows now.
+    pub fn orders(&mut self, world: &World) -> Vec<(usize, RobotOrder)> {
+        if !world.tick.is_multiple_of(self.every) {
+            return Vec::new();
+        }
+        let limit = world.config.time_limit_ticks.max(1) as f64;
+        let time_fraction = (world.tick as f64 / limit).min(1.0);
+        let mut orders = Vec::new();
+        for i in 0..world.robots.len() {
+            if !world.robot_outside(i) || world.robots[i].seated {
+                continue;
+            }
+            let Some(o) = world.observation(i) else {
+                continue;
+            };
+            self.layout
+                .encode(&o, i, time_fraction, &mut self.observation);
+            // The sizes were checked when the team was set up: this cannot fail.
+            if self
+                .policy
+                .infer(&self.observation, &mut self.action, &mut self.scratch)
+                .is_ok()
+            {
+                orders.push((i, drive_order(&self.action)));
+            }
+        }
+        orders
+    }
+}

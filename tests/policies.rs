@@ -1,0 +1,232 @@
+//! Trained robot teams over HTTP (docs/api.md, "Trained robot teams"): the shipped policy is
+//! listed from the start and drives a match by `"planner": "policy:<name>"`; an uploaded one
+//! drives a match too; bad uploads are refused naming the problem and change nothing; a
+//! policy in use cannot be deleted; a replay plays back without the model.
+
+mod common;
+
+use common::{TestServer, test_config};
+use lasertag::config::Config;
+use lasertag_policy::testing::{DenseLayer, model};
+use serde_json::{Value, json};
+
+/// The observation of a robot of a team of 2 with 1 detection slot (docs/research.md).
+const OBSERVATION: usize = 232;
+
+fn layer(outputs: usize, inputs: usize, scale: f32, activation: &str) -> DenseLayer<'_> {
+    let weights = (0..outputs)
+        .map(|o| {
+            (0..inputs)
+                .map(|i| scale * (((o * 31 + i * 17) % 13) as f32 - 6.0) / 6.0)
+                .collect()
+        })
+        .collect();
+    (weights, vec![0.1; outputs], activation)
+}
+
+/// A small policy of the right sizes that drives forward and turns.
+fn small_policy() -> Vec<u8> {
+    model(
+        OBSERVATION,
+        &[layer(16, OBSERVATION, 0.05, "Tanh"), layer(3, 16, 0.5, "")],
+    )
+}
+
+async fn upload(s: &TestServer, name: &str, bytes: Vec<u8>) -> common::Reply {
+    s.post_raw(&format!("/api/policies?name={name}"), bytes)
+        .await
+}
+
+async fn names(s: &TestServer) -> Vec<String> {
+    let r = s.get("/api/policies").await;
+    assert_eq!(r.status, 200);
+    r.body
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|p| p["name"].as_str().unwrap().to_string())
+        .collect()
+}
+
+fn positions(state: &Value) -> Vec<(f64, f64)> {
+    state["robots"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|r| (r["x"].as_f64().unwrap(), r["y"].as_f64().unwrap()))
+        .collect()
+}
+
+#[tokio::test]
+async fn the_shipped_policy_is_listed_and_drives_a_match() {
+    let s = TestServer::start().await;
+    let r = s.get("/api/policies").await;
+    let learned = r.body.as_array().unwrap()[0].clone();
+    assert_eq!(learned["name"], "learned");
+    assert_eq!(learned["shipped"], true);
+    assert_eq!(learned["observation_size"], OBSERVATION);
+    assert_eq!(learned["action_size"], 3);
+    assert!(learned["inference_us"].as_f64().unwrap() > 0.0);
+    let run = |seed: u64| {
+        let s = &s;
+        async move {
+            let id = s
+                .create_match(json!({"map": "office", "planner": "policy:learned",
+                    "clock": "manual", "seed": seed}))
+                .await;
+            let start = positions(&s.get(&format!("/api/matches/{id}")).await.body);
+            let after = s.step(&id, 100).await;
+            assert_eq!(after["policy"], "learned");
+            assert_eq!(after["robot_planners"], json!(["policy", "policy"]));
+            (start, positions(&after))
+        }
+    };
+    let (start, after) = run(3).await;
+    assert_ne!(start, after, "the policy's robots moved");
+    // The match stays a function of its settings and seed.
+    assert_eq!(run(3).await.1, after);
+    // The lobby's preset plays the same team.
+    let r = s
+        .post(
+            "/api/matches",
+            &json!({"map": "office", "difficulty": "learned"}),
+        )
+        .await;
+    assert_eq!(r.status, 201, "{}", r.body);
+    assert_eq!(r.body["policy"], "learned");
+    assert_eq!(r.body["robots"], 2);
+}
+
+#[tokio::test]
+async fn an_uploaded_policy_drives_a_match_and_is_removed_only_when_unused() {
+    let s = TestServer::start().await;
+    let r = upload(&s, "mine", small_policy()).await;
+    assert_eq!(r.status, 201, "{}", r.body);
+    assert_eq!(r.body["name"], "mine");
+    assert_eq!(r.body["observation_size"], OBSERVATION);
+    assert_eq!(r.body["action_size"], 3);
+    let token = r.body["owner_token"].as_str().unwrap().to_string();
+    assert_eq!(names(&s).await, ["learned", "mine"]);
+    // Taken names are refused.
+    assert_eq!(upload(&s, "mine", small_policy()).await.status, 409);
+    let id = s
+        .create_match(
+            json!({"map": "office", "planner": "policy:mine", "clock": "manual",
+            "time_limit_s": 5}),
+        )
+        .await;
+    let start = positions(&s.get(&format!("/api/matches/{id}")).await.body);
+    let mid = s.step(&id, 40).await;
+    assert_ne!(positions(&mid), start);
+    // In use: neither the owner nor anyone else removes it; a stranger is refused first.
+    assert_eq!(
+        s.delete_as("/api/policies/mine", Some("wrong"))
+            .await
+            .status,
+        403
+    );
+    let r = s.delete_as("/api/policies/mine", Some(&token)).await;
+    assert_eq!(r.status, 409, "{}", r.body);
+    // Played to its end, the match no longer holds it, and its replay needs no model.
+    let end = s.step(&id, 200).await;
+    assert_eq!(end["status"], "finished");
+    let r = s.delete_as("/api/policies/mine", Some(&token)).await;
+    assert_eq!(r.status, 204, "{}", r.body);
+    assert_eq!(names(&s).await, ["learned"]);
+    let replayed = s.get(&format!("/api/replays/{id}/state?tick=40")).await;
+    assert_eq!(replayed.status, 200, "{}", replayed.body);
+    assert_eq!(positions(&replayed.body), positions(&mid));
+    // The shipped one stays.
+    assert_eq!(
+        s.delete_as("/api/policies/learned", Some(&token))
+            .await
+            .status,
+        403
+    );
+}
+
+#[tokio::test]
+async fn bad_uploads_are_refused_naming_the_problem_and_change_nothing() {
+    let s = TestServer::start_with(Config {
+        max_policy_bytes: 1 << 20,
+        ..test_config()
+    })
+    .await;
+    let before = names(&s).await;
+    let refused = |status: u16, needle: &'static str| {
+        move |r: common::Reply| {
+            assert_eq!(r.status, status, "{}", r.body);
+            let message = r.body["error"].as_str().unwrap().to_string();
+            assert!(message.contains(needle), "{message:?} names {needle:?}");
+        }
+    };
+    let random: Vec<u8> = (0..4096u32)
+        .map(|i| (i.wrapping_mul(2_654_435_761) >> 13) as u8)
+        .collect();
+    refused(400, "not a readable ONNX model")(upload(&s, "random", random).await);
+    refused(400, "no robot observation")(
+        upload(&s, "narrow", model(10, &[layer(3, 10, 0.1, "")])).await,
+    );
+    refused(400, "operator Softmax is not supported")(
+        upload(
+            &s,
+            "softmax",
+            model(OBSERVATION, &[layer(3, OBSERVATION, 0.1, "Softmax")]),
+        )
+        .await,
+    );
+    refused(400, "a robot's action is 3")(
+        upload(
+            &s,
+            "wide",
+            model(OBSERVATION, &[layer(5, OBSERVATION, 0.1, "")]),
+        )
+        .await,
+    );
+    refused(400, "name")(upload(&s, "no%20spaces", small_policy()).await);
+    refused(413, "limit")(upload(&s, "huge", vec![0u8; 64 << 20]).await);
+    assert_eq!(names(&s).await, before);
+    // A match naming a policy the server does not hold, or one for another team size.
+    let r = s
+        .post(
+            "/api/matches",
+            &json!({"map": "office", "planner": "policy:nope"}),
+        )
+        .await;
+    refused(400, "no policy \"nope\"")(r);
+    let r = s
+        .post(
+            "/api/matches",
+            &json!({"map": "office", "planner": "policy:learned", "robots": 3}),
+        )
+        .await;
+    refused(400, "another team size")(r);
+}
+
+#[tokio::test]
+async fn an_inference_over_the_servers_limit_is_refused() {
+    let s = TestServer::start_with(Config {
+        max_policy_inference_us: 1,
+        ..test_config()
+    })
+    .await;
+    let big = model(
+        OBSERVATION,
+        &[
+            layer(256, OBSERVATION, 0.01, "Relu"),
+            layer(256, 256, 0.01, "Relu"),
+            layer(3, 256, 0.01, ""),
+        ],
+    );
+    let r = upload(&s, "slow", big).await;
+    assert_eq!(r.status, 400, "{}", r.body);
+    assert!(
+        r.body["error"]
+            .as_str()
+            .unwrap()
+            .contains("over its limit of 1 µs"),
+        "{}",
+        r.body
+    );
+    assert_eq!(names(&s).await, ["learned"]);
+}
