@@ -56,7 +56,8 @@ pub enum Experiment {
         #[command(flatten)]
         shard: ShardArgs,
     },
-    /// Fig. 5: capture time of `coordinated` and `search` vs `baseline` on `office` and `warehouse`.
+    /// Fig. 5: capture time of `coordinated` and `search` vs `baseline` on `office` and
+    /// `warehouse`; `--planners` adds a shipped trained policy (`policy:learned`).
     Capture {
         /// Runs per map, opponent bot and planner.
         #[arg(long, default_value_t = 100)]
@@ -101,9 +102,16 @@ pub enum Experiment {
         /// can reach.
         #[arg(long, default_value_t = false, action = clap::ArgAction::Set)]
         oracle_belief: bool,
+        /// The teams compared, comma-separated: `coordinated`, `search`, `baseline` and
+        /// `policy:<name>`, a shipped trained policy (`policy:learned`) whose orders go in
+        /// before each tick every 4 ticks, as a served match gives them. `baseline` and
+        /// `coordinated` must be among them (the summary compares with both).
+        #[arg(long, default_value = crate::capture::planner::DEFAULT)]
+        planners: String,
     },
     /// How hard each difficulty preset is: its robots' win rate and median time to the tag
-    /// against the `wander` and `evade` bots, from the spawns, for the preset's match length.
+    /// against the `wander` and `evade` bots, from the spawns, for the preset's match length
+    /// (the `learned` preset's robots driven by its shipped policy, as a served match's).
     Difficulty {
         /// Runs per map, preset and bot.
         #[arg(long, default_value_t = 200)]
@@ -291,6 +299,7 @@ pub fn run(e: Experiment, load: LoadMaps) -> Result<(), LabError> {
             radio_latency,
             radio_loss,
             oracle_belief,
+            planners,
             shard: ShardArgs { shard },
         } => {
             if runs == 0 || time_limit == 0 {
@@ -303,6 +312,8 @@ pub fn run(e: Experiment, load: LoadMaps) -> Result<(), LabError> {
                     "--opponents {opponents}: must be in 1..=16"
                 )));
             }
+            let planners = crate::capture::Planner::parse_list(&planners)
+                .map_err(|e| LabError::Arguments(format!("--planners {e}")))?;
             let chosen = chosen_maps(load, &maps, &on)?;
             let mut coordination = lasertag_core::planner::coordinated::Settings::default();
             for kv in &set {
@@ -334,6 +345,7 @@ pub fn run(e: Experiment, load: LoadMaps) -> Result<(), LabError> {
                     localisation,
                     radio,
                     oracle_belief,
+                    planners,
                 },
                 maps: MapStamp::all(&arenas),
             };

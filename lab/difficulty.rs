@@ -6,6 +6,8 @@
 //! summary (the robots' win rate with its 95% Wilson interval, the median time to the tag
 //! when they win) and one plot per map and bot: the share of matches the robots have won by
 //! each time. The lobby shows the office figures next to the choice (docs/difficulty.md).
+//! The `learned` preset's robots are driven by its shipped trained policy ([`crate::policy`]),
+//! as a served match drives them.
 
 use std::path::Path;
 use std::sync::Arc;
@@ -76,8 +78,10 @@ impl DifficultyStudy {
         };
         s.difficulty.apply(&mut config);
         let mut world = World::new(arena.clone(), config)?;
+        // The learned preset's robots are driven by its shipped policy.
+        let mut team = crate::policy::for_world(&world)?;
         while world.status == MatchStatus::Running {
-            world.step();
+            crate::policy::step(team.as_mut(), &mut world);
         }
         Ok((world.winner == Some(Side::Robots)).then(|| world.time_s()))
     }
@@ -106,6 +110,8 @@ impl Study for DifficultyStudy {
         p.set("runs", self.runs);
         p.set("seed", self.seed);
         MapStamp::to_params(&self.maps, &mut p);
+        let policies = Difficulty::ALL.iter().filter_map(|d| d.preset().policy);
+        crate::policy::to_params(policies, &mut p);
         p
     }
 

@@ -27,6 +27,12 @@ pub enum LabError {
     Setup(#[from] SetupError),
     #[error(transparent)]
     Order(#[from] OrderError),
+    /// A shipped policy that does not load, or does not fit the team it should drive.
+    #[error("policy:{name}: {error}")]
+    Policy {
+        name: String,
+        error: lasertag_policy::PolicyError,
+    },
     #[error("{action} {}: {source}", path.display())]
     File {
         action: &'static str,

@@ -13,6 +13,8 @@
 //! - [`uncertainty`]: uncertainty-aware motion on and off, for robots that
 //!   localise from landmarks alone.
 //! - [`tracking`]: how close the belief is to the truth (GOSPA), for `filters` and `capture`.
+//! - [`policy`]: a shipped trained policy driving a team (`policy:<name>`), for `capture`
+//!   and `difficulty`.
 //!
 //! Each experiment is a [`study::Study`]: a fixed list of runs, a record of what each
 //! measured, and the files made from all the records. That lets a study be split over
@@ -30,6 +32,7 @@ pub mod localisation;
 pub mod merge;
 pub mod part;
 pub mod plot;
+pub mod policy;
 pub mod reacquire;
 pub mod record;
 pub mod report;

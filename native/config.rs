@@ -130,6 +130,46 @@ fn points<const N: usize>(value: &Bound<'_, PyAny>, field: &str) -> PyResult<Vec
         .collect()
 }
 
+/// The planner values of the shipped policies, `policy:<name>` each, comma-separated.
+fn shipped_policies() -> String {
+    let names: Vec<String> = lasertag_policy::SHIPPED
+        .iter()
+        .map(|(name, _)| format!("policy:{name}"))
+        .collect();
+    names.join(", ")
+}
+
+/// The shipped policy that `planner` (one name, or one per robot) names as `policy:<name>`,
+/// if any. Refused: an unknown name (only the policies built into the package run
+/// in-process; one uploaded to a server plays there), and a policy in a list, as a policy
+/// drives the whole team.
+fn policy_planner(names: &[String]) -> PyResult<Option<String>> {
+    let Some(named) = names.iter().find(|n| n.starts_with("policy:")) else {
+        return Ok(None);
+    };
+    if names.len() > 1 {
+        return Err(refuse(
+            "planner",
+            format!(
+                "{named:?} in a list: a policy drives the whole team (give planner={named:?} alone)"
+            ),
+        ));
+    }
+    let name = &named["policy:".len()..];
+    if lasertag_policy::shipped(name).is_none() {
+        return Err(refuse(
+            "planner",
+            format!(
+                "{named:?}: no shipped policy {name:?}; the in-process engine runs only the \
+                 policies built into the package ({}); a policy uploaded to a server plays \
+                 only on that server",
+                shipped_policies()
+            ),
+        ));
+    }
+    Ok(Some(name.to_string()))
+}
+
 /// The match of a research environment: robots driven by the policy (`planner: api`),
 /// opponents by bots, and the settings `settings` gives.
 pub fn match_config(settings: &Bound<'_, PyDict>) -> PyResult<MatchConfig> {
@@ -196,6 +236,15 @@ pub fn match_config(settings: &Bound<'_, PyDict>) -> PyResult<MatchConfig> {
                     Ok(name) => vec![name],
                     Err(_) => get(&value, &key)?,
                 };
+                // A shipped trained policy drives the whole team: its robots are driven from
+                // outside, the engine giving them the policy's orders (lib.rs).
+                if let Some(policy) = policy_planner(&names)? {
+                    config.planner = PlannerKind::Api;
+                    config.policy = Some(policy);
+                    config.outside_robots = Vec::new();
+                    planners = None;
+                    continue;
+                }
                 let kinds = names
                     .iter()
                     .map(|name| match name.as_str() {
@@ -206,7 +255,9 @@ pub fn match_config(settings: &Bound<'_, PyDict>) -> PyResult<MatchConfig> {
                         _ => Err(refuse(
                             &key,
                             format!(
-                                "{name:?}: the planners are api, coordinated, search, baseline"
+                                "{name:?}: the planners are api, coordinated, search, \
+                                 baseline and policy:<name> ({})",
+                                shipped_policies()
                             ),
                         )),
                     })

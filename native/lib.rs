@@ -14,9 +14,15 @@
 //! too (`lasertag_core::env::engine`, which says why it lives there: the fuzz target and
 //! `cargo test` reach it without Python). This shell adds what only numpy arrays have, their
 //! shapes, and turns a refusal into `ValueError` or `IndexError`.
+//!
+//! With `planner="policy:<name>"` a shipped trained policy (`lasertag_policy`) drives every
+//! world's team, as the server's match task drives it: before each tick the policy's orders
+//! go in as inputs (`Episode::advance_with`), and the actions are not read. The core runs
+//! no model; this shell does.
 
 mod config;
 
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use numpy::{
@@ -28,10 +34,13 @@ use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use rayon::prelude::*;
 
-use lasertag_core::env::engine::{self, EngineArgs, Refusal, check_shape};
-use lasertag_core::env::{ACTION_SIZE, Rewards, mm, rad};
+use lasertag_core::env::engine::{self, EngineArgs, Refusal, Slot, check_shape};
+use lasertag_core::env::{ACTION_SIZE, EnvSpec, Rewards, mm, rad};
+use lasertag_core::sim::arena::Arena;
 use lasertag_core::sim::{AgentId, Pose};
-use lasertag_core::world::{FinishReason, Side};
+use lasertag_core::world::{FinishReason, Side, World, WorldInput};
+use lasertag_policy::team::DEFAULT_EVERY;
+use lasertag_policy::{Limits, Policy, TeamPolicy};
 
 /// The shipped maps (`maps/*.json`), as text: the package's in-process maps.
 const SHIPPED_MAPS: [(&str, &str); 4] = [
@@ -47,6 +56,52 @@ const SHIPPED_MAPS: [(&str, &str); 4] = [
 #[pyclass(module = "lasertag_env._native")]
 struct Engine {
     inner: engine::Engine,
+    /// Each world's trained policy when one drives the team (`planner="policy:<name>"`),
+    /// else `None` for every world: one per world, as each decision writes its buffers.
+    teams: Vec<Option<TeamPolicy>>,
+}
+
+/// The policy's orders of this tick (none between its decisions) as inputs.
+fn drive(team: &mut TeamPolicy, world: &mut World) {
+    for (robot, order) in team.orders(world) {
+        // An action read as the environments read it (clipped) is always taken.
+        let _ = world.apply(&WorldInput::Robot { robot, order });
+    }
+}
+
+/// One step of a world in a vector ([`Slot::step_or_restart`]), its policy giving the
+/// orders when it has one (the actions are then not read).
+fn step_world(
+    slot: &mut Slot,
+    team: &mut Option<TeamPolicy>,
+    arena: &Arc<Arena>,
+    spec: &EnvSpec,
+    actions: &[f32],
+    obs: &mut [f32],
+    rewards: &mut [f64],
+) -> (bool, bool) {
+    match team {
+        None => slot.step_or_restart(arena, spec, actions, obs, rewards),
+        Some(team) => {
+            slot.step_or_restart_with(arena, spec, &[], obs, rewards, &mut |w| drive(team, w))
+        }
+    }
+}
+
+/// The policy `name` (shipped) set up for every world of `engine`, or why it cannot drive
+/// its teams (a model trained for another team size).
+fn policy_teams(engine: &mut engine::Engine, name: &str) -> PyResult<Vec<Option<TeamPolicy>>> {
+    let refuse = |e: &dyn std::fmt::Display| {
+        PyValueError::new_err(format!("planner: \"policy:{name}\": {e}"))
+    };
+    let bytes = lasertag_policy::shipped(name).ok_or_else(|| refuse(&"not a shipped policy"))?;
+    let policy = Arc::new(Policy::from_onnx(bytes, &Limits::default()).map_err(|e| refuse(&e))?);
+    let (robots, worlds) = (engine.robots(), engine.worlds());
+    let physics = engine.spec().config.physics.clone();
+    let (arena, ..) = engine.parts_mut();
+    let team =
+        TeamPolicy::new(policy, arena, robots, &physics, DEFAULT_EVERY).map_err(|e| refuse(&e))?;
+    Ok(vec![Some(team); worlds])
 }
 
 fn value_error(e: impl std::fmt::Display) -> PyErr {
@@ -65,7 +120,8 @@ fn refused(e: Refusal) -> PyErr {
 impl Engine {
     /// `map`: a map object (docs/map-format.md); `settings`: fields of `POST /api/matches`
     /// (robots, opponents, opponent_bot, time_limit_s, placement, robot_starts,
-    /// opponent_starts, localisation, tracker, coordination, radio, odometry, localiser);
+    /// opponent_starts, localisation, tracker, coordination, radio, odometry, localiser,
+    /// planner: a built-in planner, one per robot, or `policy:<name>`, a shipped policy);
     /// `rewards`: weights `tag`, `team_tag`, `tick`; the laser as the rules give it. Every
     /// count is checked against `BOUNDS` before anything is allocated for it.
     #[new]
@@ -104,10 +160,15 @@ impl Engine {
         };
         let checked = args.check().map_err(refused)?;
         // Building thousands of worlds takes seconds: other Python threads run meanwhile.
-        let inner = py
+        let policy = checked.spec().config.policy.clone();
+        let mut inner = py
             .detach(|| engine::Engine::build(checked))
             .map_err(refused)?;
-        Ok(Engine { inner })
+        let teams = match policy {
+            Some(name) => policy_teams(&mut inner, &name)?,
+            None => vec![None; inner.worlds()],
+        };
+        Ok(Engine { inner, teams })
     }
 
     /// Values in one robot's observation vector.
@@ -199,9 +260,24 @@ impl Engine {
         let obs = obs.as_slice_mut().map_err(value_error)?;
         let rewards = rewards.as_slice_mut().map_err(value_error)?;
         let inner = &mut self.inner;
-        let out = py
-            .detach(|| inner.step(world, actions, obs, rewards))
-            .map_err(refused)?;
+        let out = match self.teams.get_mut(world) {
+            Some(Some(team)) => {
+                inner
+                    .check_step(actions.len(), obs.len(), rewards.len())
+                    .map_err(refused)?;
+                let (_, spec, slots) = inner.parts_mut();
+                let slot = &mut slots[world];
+                let out = py.detach(|| {
+                    slot.episode
+                        .step_with(spec, &[], obs, rewards, &mut |w| drive(team, w))
+                });
+                slot.ended = out.terminated || out.truncated;
+                out
+            }
+            _ => py
+                .detach(|| inner.step(world, actions, obs, rewards))
+                .map_err(refused)?,
+        };
         Ok((
             out.tick,
             out.terminated,
@@ -260,17 +336,19 @@ impl Engine {
             .map_err(refused)?;
         let per_world = robots * size;
         let (arena, spec, slots) = self.inner.parts_mut();
+        let teams = &mut self.teams;
         // The core's `step_all` with the worlds spread over rayon's threads.
         py.detach(|| {
             slots
                 .par_iter_mut()
+                .zip(teams.par_iter_mut())
                 .zip(actions.par_chunks_exact(robots * ACTION_SIZE))
                 .zip(obs.par_chunks_exact_mut(per_world))
                 .zip(rewards.par_chunks_exact_mut(robots))
                 .zip(terminated.par_iter_mut())
                 .zip(truncated.par_iter_mut())
-                .for_each(|(((((slot, a), o), r), term), trunc)| {
-                    (*term, *trunc) = slot.step_or_restart(arena, spec, a, o, r);
+                .for_each(|((((((slot, team), a), o), r), term), trunc)| {
+                    (*term, *trunc) = step_world(slot, team, arena, spec, a, o, r);
                 });
         });
         Ok(())
@@ -302,18 +380,25 @@ impl Engine {
         self.inner.world(world).map_err(refused)?;
         let (arena, spec, slots) = self.inner.parts_mut();
         let slot = &mut slots[world];
+        let team = &mut self.teams[world];
         Ok(py.detach(|| {
             let (mut ticks, mut vectors) = (Duration::ZERO, Duration::ZERO);
             for a in actions.chunks_exact(per_step).cycle().take(steps) {
                 let t0 = Instant::now();
-                let (out, time_fraction) = slot.episode.advance(spec, a, &mut rewards);
+                let (out, time_fraction) = match team {
+                    None => slot.episode.advance(spec, a, &mut rewards),
+                    // The policy's inference counts with the ticks.
+                    Some(team) => slot
+                        .episode
+                        .advance_with(spec, &[], &mut rewards, &mut |w| drive(team, w)),
+                };
                 let t1 = Instant::now();
                 slot.episode.observe(spec, time_fraction, &mut obs);
                 vectors += t1.elapsed();
                 ticks += t1 - t0;
                 if out.terminated || out.truncated {
                     slot.ended = true;
-                    slot.step_or_restart(arena, spec, a, &mut obs, &mut rewards);
+                    step_world(slot, team, arena, spec, a, &mut obs, &mut rewards);
                 }
             }
             (ticks.as_secs_f64(), vectors.as_secs_f64())

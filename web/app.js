@@ -217,9 +217,10 @@ async function refreshLobby() {
     const where = m.node ? ` · ${m.node.id}${m.node.draining ? " (closing)" : ""}` : "";
     // The team: its preset (★ when the match is rated), or its planner; a mixed team names
     // each robot's controller.
-    const mixed = (m.robot_planners || []).some((p) => p !== m.planner && p !== "person");
+    const planner = m.policy ? `policy:${m.policy}` : m.planner;
+    const mixed = (m.robot_planners || []).some((p) => p !== (m.policy ? "policy" : m.planner) && p !== "person");
     const team = m.difficulty ? `${m.difficulty}${m.rated ? " ★ rated" : ""}`
-      : mixed ? m.robot_planners.join(" + ") : m.planner;
+      : mixed ? m.robot_planners.join(" + ") : planner;
     const people = m.pursuer_slots ? ` (${m.pursuer_slots} for people)` : "";
     const cells = [short + where, m.map, `${m.robots}${people} · ${team}`,
       `${m.opponents_left}/${m.opponents} ${m.opponent_control}`, m.players, m.spectators, left];
@@ -265,8 +266,27 @@ async function loadMaps() {
  * how often its robots beat the built-in bots. */
 let difficulties = [];
 
+/** Every trained policy the server holds (GET /api/policies) joins the form's planners as a
+ * robot team of its own ("policy:<name>"). */
+async function loadPolicies() {
+  const sel = $("create").elements.planner;
+  if (sel.dataset.policies) return;
+  let policies;
+  try {
+    policies = await api("GET", "/api/policies");
+  } catch { return; }
+  sel.dataset.policies = "1";
+  sel.append(...policies.map((p) => {
+    const o = document.createElement("option");
+    o.value = `policy:${p.name}`;
+    o.textContent = `policy:${p.name}${p.shipped ? "" : " (uploaded)"}`;
+    return o;
+  }));
+}
+
 async function loadDifficulties() {
   const sel = $("create").elements.difficulty;
+  await loadPolicies();
   if (difficulties.length) return;
   try {
     difficulties = await api("GET", "/api/difficulties");
@@ -335,15 +355,18 @@ function showDifficulty() {
     return;
   }
   form.elements.robots.value = d.robots;
-  form.elements.planner.value = d.planner;
+  form.elements.planner.value = d.policy ? `policy:${d.policy}` : d.planner;
   // A preset plays for a rating on the map it was measured on: offered first.
   const on = d.measured.length ? d.measured[0].map : null;
   if (on && [...form.elements.map.options].some((o) => o.value === on)) form.elements.map.value = on;
   form.elements.minutes.value = d.time_limit_s / 60;
   const by = Object.fromEntries(d.measured.map((m) => [m.bot, m]));
   const pct = (m) => `${Math.round(100 * m.robots_win_rate)}%`;
+  const plan = d.policy
+    ? `driven by a trained policy (${d.policy}) from what each robot knows, its team's belief included`
+    : TEAM_PLANS[d.planner] || d.planner;
   const team = `${d.robots} robot${d.robots > 1 ? "s" : ""} at ${d.robot_speed} m/s, ` +
-    `${TEAM_PLANS[d.planner] || d.planner}, ` +
+    `${plan}, ` +
     `${d.tag_cooldown_s} s between tags, ${d.time_limit_s / 60} minutes`;
   const measured = by.evade && by.wander
     ? ` Measured on ${by.evade.map}: the robots win ${pct(by.evade)} of matches against a bot that runs from them ` +
@@ -406,7 +429,7 @@ async function replay(g) {
     opponent_bot: m.opponent_bot, bots_joinable: m.bots_joinable,
     ...(m.pursuer_slots ? { pursuer_slots: m.pursuer_slots } : {}),
     ...(m.difficulty ? { difficulty: m.difficulty }
-      : { robots: m.robots, planner: m.planner, time_limit_s: m.time_limit_s }),
+      : { robots: m.robots, planner: m.policy ? `policy:${m.policy}` : m.planner, time_limit_s: m.time_limit_s }),
   });
   const hunt = g.team === "robots" ? "?team=robots" : "";
   location.hash = g.role === "player" || m.free_slots > 0 ? `#/play/${fresh.id}${hunt}` : `#/watch/${fresh.id}`;

@@ -24,7 +24,7 @@ use super::{ACTION_SIZE, EnvSpec, Episode, EpisodeSeeds, Layout, Outcome, Reward
 use crate::sim::TICK_HZ;
 use crate::sim::arena::{Arena, MapDef};
 use crate::sim::map_rules::{self, MapSpec};
-use crate::world::{MatchConfig, Placement, SetupError};
+use crate::world::{MatchConfig, Placement, SetupError, World};
 
 /// Robots on a world's team: the server's bound on `robots` of `POST /api/matches`
 /// (`server/protocol/bounds.rs`, whose tests keep these constants equal to its own).
@@ -352,6 +352,20 @@ impl Slot {
         obs: &mut [f32],
         rewards: &mut [f64],
     ) -> (bool, bool) {
+        self.step_or_restart_with(arena, spec, actions, obs, rewards, &mut |_| {})
+    }
+
+    /// [`Slot::step_or_restart`] with `before_tick` before each tick of an episode's step
+    /// ([`Episode::advance_with`]: a shell's own driver, such as a trained policy).
+    pub fn step_or_restart_with(
+        &mut self,
+        arena: &Arc<Arena>,
+        spec: &EnvSpec,
+        actions: &[f32],
+        obs: &mut [f32],
+        rewards: &mut [f64],
+        before_tick: &mut dyn FnMut(&mut World),
+    ) -> (bool, bool) {
         if self.ended {
             let seed = self.seeds.draw();
             // The settings built a world once already: the same ones on the same arena
@@ -363,7 +377,9 @@ impl Slot {
             rewards.fill(0.0);
             return (false, false);
         }
-        let out: Outcome = self.episode.step(spec, actions, obs, rewards);
+        let out: Outcome = self
+            .episode
+            .step_with(spec, actions, obs, rewards, before_tick);
         self.ended = out.terminated || out.truncated;
         (out.terminated, out.truncated)
     }

@@ -131,3 +131,37 @@ fn each_world_has_its_own_reproducible_seeds() {
     assert_ne!(draw(5, 0)[1..], draw(5, 1)[1..]);
     assert!(draw(u64::MAX, 3).iter().all(|s| *s < 1 << 63));
 }
+
+#[test]
+fn a_shells_driver_orders_the_robots_before_every_tick_of_a_step() {
+    let spec = spec(2, Some(50));
+    let size = spec.layout.size();
+    let (mut obs, mut rewards) = (vec![0.0; 2 * size], vec![0.0; 2]);
+    let drive = [1.0, 0.3, 0.0, 1.0, -0.3, 0.0];
+    // Orders given before each tick (none as actions) drive as the same actions do.
+    let mut by_actions = Episode::new(room(), &spec, 7).unwrap();
+    let mut by_shell = Episode::new(room(), &spec, 7).unwrap();
+    let mut ticks = Vec::new();
+    for _ in 0..5 {
+        by_actions.step(&spec, &drive, &mut obs, &mut rewards);
+        by_shell.step_with(&spec, &[], &mut obs, &mut rewards, &mut |w| {
+            ticks.push(w.tick);
+            for (robot, a) in drive.chunks_exact(ACTION_SIZE).enumerate() {
+                let order = drive_order(a);
+                w.apply(&WorldInput::Robot { robot, order }).unwrap();
+            }
+        });
+    }
+    assert_eq!(
+        ticks,
+        (0..10).collect::<Vec<u64>>(),
+        "once before each tick"
+    );
+    assert_eq!(by_actions.world().digest(), by_shell.world().digest());
+    // `advance` is `advance_with` doing nothing between the ticks.
+    let mut plain = Episode::new(room(), &spec, 7).unwrap();
+    let mut hooked = Episode::new(room(), &spec, 7).unwrap();
+    let a = plain.advance(&spec, &drive, &mut rewards);
+    let b = hooked.advance_with(&spec, &drive, &mut rewards, &mut |_| {});
+    assert_eq!((a, plain.world().digest()), (b, hooked.world().digest()));
+}

@@ -14,7 +14,11 @@
 //! map and bot). It notes when a robot first saw an opponent, which splits a capture into
 //! finding and chasing; with `oracle_belief` every tracker is handed the truth each tick,
 //! which bounds what a better search of the belief could gain.
+//!
+//! `--planners` adds teams to the three: a shipped trained policy (`policy:<name>`), whose
+//! orders go in before each tick ([`crate::policy`]), in every table, file and plot.
 
+pub mod planner;
 mod statistics;
 
 use crate::error::LabError;
@@ -29,11 +33,11 @@ use crate::record::{Fields, Line, Record};
 use crate::study::{MapStamp, Study, group_from_params, group_to_params};
 use crate::tracking::{self, Parts, Track};
 use lasertag_core::bots::BotKind;
-use lasertag_core::planner::PlannerKind;
 use lasertag_core::sim::TICK_HZ;
 use lasertag_core::sim::arena::Arena;
 use lasertag_core::world::{MatchConfig, Placement};
 use lasertag_core::world::{MatchStatus, Side, World};
+pub use planner::Planner;
 pub use statistics::{mann_whitney_p, wilcoxon_signed_rank_p};
 pub(crate) use statistics::{mean_ci, median, stats};
 
@@ -52,14 +56,16 @@ pub struct CaptureConfig {
     pub radio: lasertag_core::radio::Settings,
     /// Every tick, each tracker's clouds are put on the true opponents (`--oracle-belief`).
     pub oracle_belief: bool,
+    /// The teams compared, in order (`--planners`; `baseline` and `coordinated` among them).
+    pub planners: Vec<Planner>,
 }
 
 /// One setting of the experiment.
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone)]
 struct Setting {
     map: usize,
     bot: BotKind,
-    planner: PlannerKind,
+    planner: Planner,
 }
 
 pub(crate) fn bot_name(b: BotKind) -> &'static str {
@@ -68,10 +74,6 @@ pub(crate) fn bot_name(b: BotKind) -> &'static str {
         BotKind::Evade => "evade",
         BotKind::Idle => "idle",
     }
-}
-
-fn planner_name(p: PlannerKind) -> &'static str {
-    p.name()
 }
 
 /// When, in seconds from the start, a run's robots first saw an opponent and when they had
@@ -98,13 +100,17 @@ impl Record for Outcome {
 }
 
 /// The run's [`Outcome`] and the belief's GOSPA at every tick while the match ran.
-fn one_run(arena: Arc<Arena>, s: Setting, seed: u64, cfg: &CaptureConfig) -> Result<Run, LabError> {
+fn one_run(
+    arena: Arc<Arena>,
+    s: &Setting,
+    seed: u64,
+    cfg: &CaptureConfig,
+) -> Result<Run, LabError> {
     let limit_s = cfg.time_limit_s;
-    let config = MatchConfig {
+    let mut config = MatchConfig {
         robots: 2,
         opponents: cfg.opponents,
         opponent_bot: s.bot,
-        planner: s.planner,
         placement: Placement::Random,
         seed,
         time_limit_ticks: limit_s * TICK_HZ as u64,
@@ -113,14 +119,17 @@ fn one_run(arena: Arc<Arena>, s: Setting, seed: u64, cfg: &CaptureConfig) -> Res
         radio: cfg.radio.clone(),
         ..MatchConfig::default()
     };
+    s.planner.apply(&mut config);
     let mut world = World::new(arena, config)?;
+    let mut team = crate::policy::for_world(&world)?;
     let mut track = Track::default();
     let mut first_seen = None;
     while world.status == MatchStatus::Running {
         if cfg.oracle_belief {
             reveal_opponents(&mut world);
         }
-        world.step();
+        // A policy decides from the belief as it is now (the oracle's, with one).
+        crate::policy::step(team.as_mut(), &mut world);
         // A detection by any robot's own laser (anonymous: which opponent does not matter).
         if first_seen.is_none() && world.robots.iter().any(|r| !r.scan.seen.is_empty()) {
             first_seen = Some(world.time_s());
@@ -191,11 +200,6 @@ fn gospa_curve(tracks: &[Track]) -> Vec<(Parts, usize)> {
 }
 
 const BOTS: [BotKind; 2] = [BotKind::Wander, BotKind::Evade];
-const PLANNERS: [PlannerKind; 3] = [
-    PlannerKind::Coordinated,
-    PlannerKind::Search,
-    PlannerKind::Baseline,
-];
 
 /// The study: the configuration and the maps it runs on, in order. Run `j` is setting
 /// `j / runs` (map, then bot, then planner) with seed `seed + j % runs`.
@@ -214,8 +218,12 @@ impl Capture {
         let mut settings = Vec::new();
         for map in 0..self.maps.len() {
             for bot in BOTS {
-                for planner in PLANNERS {
-                    settings.push(Setting { map, bot, planner });
+                for planner in &self.cfg.planners {
+                    settings.push(Setting {
+                        map,
+                        bot,
+                        planner: planner.clone(),
+                    });
                 }
             }
         }
@@ -225,7 +233,10 @@ impl Capture {
     /// Run `j` of the study; `arenas` are the study's maps, in its order.
     pub fn run_one(&self, arenas: &[Arc<Arena>], j: usize) -> Result<Run, LabError> {
         let cfg = &self.cfg;
-        let s = self.settings()[j / cfg.runs];
+        let settings = self.settings();
+        let s = settings
+            .get(j / cfg.runs)
+            .ok_or_else(|| LabError::Scenario(format!("no run {j} in the study")))?;
         let arena = arenas.get(s.map).ok_or_else(|| {
             LabError::Scenario(format!("run {j} is on map {}, which is not loaded", s.map))
         })?;
@@ -252,6 +263,12 @@ impl Study for Capture {
         group_to_params(&c.coordination, "coordination", &mut p);
         group_to_params(&c.radio, "radio", &mut p);
         MapStamp::to_params(&self.maps, &mut p);
+        p.set("planners", planner::list_name(&c.planners));
+        let policies = c.planners.iter().filter_map(|p| match p {
+            Planner::Policy(name) => Some(name.as_str()),
+            Planner::BuiltIn(_) => None,
+        });
+        crate::policy::to_params(policies, &mut p);
         p
     }
 
@@ -266,6 +283,9 @@ impl Study for Capture {
                 oracle_belief: p.parse("oracle_belief")?,
                 coordination: group_from_params(p, "coordination")?,
                 radio: group_from_params(p, "radio")?,
+                // Parts written before the list was a parameter compared the default three.
+                planners: Planner::parse_list(p.get("planners").unwrap_or(planner::DEFAULT))
+                    .map_err(|e| format!("parameter `planners`: {e}"))?,
             },
             maps: MapStamp::from_params(p)?,
         })
@@ -284,7 +304,8 @@ impl Study for Capture {
 fn write(study: &Capture, runs: Vec<Run>, out: &Path) -> Result<String, LabError> {
     let cfg = &study.cfg;
     let settings = study.settings();
-    let (bots, planners) = (BOTS, PLANNERS);
+    let (bots, planners) = (BOTS, &cfg.planners);
+    let names: Vec<String> = planners.iter().map(Planner::name).collect();
     let (outcomes, tracks): (Vec<Outcome>, Vec<Track>) = runs.into_iter().unzip();
     let results: Vec<Option<f64>> = outcomes.iter().map(|o| o.tagged).collect();
     let limit = cfg.time_limit_s as f64;
@@ -294,7 +315,7 @@ fn write(study: &Capture, runs: Vec<Run>, out: &Path) -> Result<String, LabError
         tracking::csv_header("mean_")
     );
     let mut table = format!(
-        "{:<10} {:<7} {:<12} {:>8} {:>8} {:>8} {:>16} {:>6} {:>9} {:>7}\n",
+        "{:<10} {:<7} {:<14} {:>8} {:>8} {:>8} {:>16} {:>6} {:>9} {:>7}\n",
         "map",
         "bot",
         "planner",
@@ -321,7 +342,7 @@ fn write(study: &Capture, runs: Vec<Run>, out: &Path) -> Result<String, LabError
                 "{},{},{},{},{},{},{}\n",
                 study.maps[s.map].name,
                 bot_name(s.bot),
-                planner_name(s.planner),
+                s.planner.name(),
                 cfg.seed + i as u64,
                 o.tagged.is_some(),
                 seconds(o.tagged),
@@ -333,7 +354,7 @@ fn write(study: &Capture, runs: Vec<Run>, out: &Path) -> Result<String, LabError
                 "{},{},{},{},{}\n",
                 study.maps[s.map].name,
                 bot_name(s.bot),
-                planner_name(s.planner),
+                s.planner.name(),
                 cfg.seed + i as u64,
                 t.mean.csv()
             ));
@@ -341,34 +362,34 @@ fn write(study: &Capture, runs: Vec<Run>, out: &Path) -> Result<String, LabError
     }
     for (map, MapStamp { name: map_name, .. }) in study.maps.iter().enumerate() {
         for &bot in &bots {
-            let idx = |p: PlannerKind| {
+            let idx = |p: &Planner| {
                 settings
                     .iter()
-                    .position(|s| s.map == map && s.bot == bot && s.planner == p)
+                    .position(|s| s.map == map && s.bot == bot && s.planner == *p)
                     .unwrap_or(0)
             };
-            let times_of = |p: PlannerKind| {
+            let times_of = |p: &Planner| {
                 let k = idx(p);
                 results[k * cfg.runs..(k + 1) * cfg.runs].to_vec()
             };
-            let outcomes_of = |p: PlannerKind| {
+            let outcomes_of = |p: &Planner| {
                 let k = idx(p);
                 outcomes[k * cfg.runs..(k + 1) * cfg.runs].to_vec()
             };
-            let tracks_of = |p: PlannerKind| {
+            let tracks_of = |p: &Planner| {
                 let k = idx(p);
                 &tracks[k * cfg.runs..(k + 1) * cfg.runs]
             };
-            let base = times_of(PlannerKind::Baseline);
+            let base = times_of(&Planner::BASELINE);
             let (base_median, ..) = stats(&base, limit);
             // The look-ahead is measured against the greedy choice it refines.
-            let greedy = times_of(PlannerKind::Coordinated);
+            let greedy = times_of(&Planner::COORDINATED);
             let (greedy_median, ..) = stats(&greedy, limit);
             let as_values =
                 |t: &[Option<f64>]| t.iter().map(|v| v.unwrap_or(limit)).collect::<Vec<_>>();
             let mut series = Vec::new();
             let mut gospa_series = Vec::new();
-            for &p in &planners {
+            for (p, name) in planners.iter().zip(&names) {
                 let run_means: Vec<f64> = tracks_of(p).iter().map(|t| t.mean.gospa).collect();
                 let (_, gospa_ci) = mean_ci(&run_means);
                 let gospa = Parts::mean(tracks_of(p).iter().map(|t| t.mean));
@@ -386,15 +407,15 @@ fn write(study: &Capture, runs: Vec<Run>, out: &Path) -> Result<String, LabError
                     "{},{},{},{},{captured},{median:.2},{mean:.2},{lo:.2},{hi:.2},{ratio:.3},{pv:.3e},{},{gospa_ci:.4},{greedy_ratio:.3},{greedy_pv:.3e},{first_seen:.2},{chase:.2},{paired_pv:.3e}\n",
                     map_name,
                     bot_name(bot),
-                    planner_name(p),
+                    name,
                     cfg.runs,
                     gospa.csv()
                 ));
                 table.push_str(&format!(
-                    "{:<10} {:<7} {:<12} {:>4}/{:<3} {:>7.1}s {:>7.1}s {:>16} {:>6.2} {:>9.2e} {:>6.2}m\n",
+                    "{:<10} {:<7} {:<14} {:>4}/{:<3} {:>7.1}s {:>7.1}s {:>16} {:>6.2} {:>9.2e} {:>6.2}m\n",
                     map_name,
                     bot_name(bot),
-                    planner_name(p),
+                    name,
                     captured,
                     cfg.runs,
                     median,
@@ -410,7 +431,7 @@ fn write(study: &Capture, runs: Vec<Run>, out: &Path) -> Result<String, LabError
                         "{},{},{},{t},{n},{}\n",
                         map_name,
                         bot_name(bot),
-                        planner_name(p),
+                        name,
                         parts.csv()
                     ));
                 }
@@ -419,7 +440,7 @@ fn write(study: &Capture, runs: Vec<Run>, out: &Path) -> Result<String, LabError
                     .enumerate()
                     .map(|(t, (parts, _))| (t as f64, parts.gospa))
                     .collect();
-                gospa_series.push((planner_name(p), points));
+                gospa_series.push((name.as_str(), points));
                 // Fraction of runs that have tagged the opponent by each second.
                 let mut done: Vec<f64> = times.iter().flatten().copied().collect();
                 done.sort_by(f64::total_cmp);
@@ -429,7 +450,7 @@ fn write(study: &Capture, runs: Vec<Run>, out: &Path) -> Result<String, LabError
                         (t as f64, n as f64 / cfg.runs as f64)
                     })
                     .collect();
-                series.push((planner_name(p), points));
+                series.push((name.as_str(), points));
             }
             let series: Vec<Series> = series
                 .into_iter()

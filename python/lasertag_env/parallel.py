@@ -401,7 +401,9 @@ def parallel_env(
       people play; False: at its minimum, faster, with coarser belief parts), ``planner`` (``"api"``: every robot is an
       agent; one per robot, e.g. ``["coordinated", "api"]``: a mixed team, whose agents
       are the ``"api"`` robots, ``r1`` here, beside robots the team's planner drives and
-      plans around), ``pixels_per_metre`` (rendering); over
+      plans around; a team wholly the built-in planner's, ``"coordinated"``, or a trained
+      policy's, ``"policy:<name>"``, has no agents: measure it with ``vector_env``),
+      ``pixels_per_metre`` (rendering); over
       HTTP also ``admin_token`` and ``packed_scans`` (False: the server writes the scans as
       JSON numbers rather than hex; the observations are the same, bit for bit, and
       slower to get).

@@ -15,10 +15,18 @@ from .args import check_seed, unpack
 from .observation import ObservationLayout
 from .rules import SHIPPED
 
-__all__ = ["TeamEnv", "action_space", "agent_robots"]
+__all__ = ["TeamEnv", "action_space", "agent_robots", "is_policy"]
 
 
 PLANNERS = ("api", "coordinated", "baseline")
+#: ``planner="policy:<name>"``: a trained policy drives the whole team (in-process, the
+#: shipped ones; over HTTP, any the server holds, which judges the name).
+POLICY_PREFIX = "policy:"
+
+
+def is_policy(planner) -> bool:
+    """Whether ``planner`` names a trained policy (``"policy:<name>"``)."""
+    return isinstance(planner, str) and planner.startswith(POLICY_PREFIX)
 
 
 def agent_robots(robots: int, planner) -> list[int]:
@@ -26,6 +34,12 @@ def agent_robots(robots: int, planner) -> list[int]:
     planner per robot, those listed ``"api"`` (the others are the team's built-in planner's,
     which must be the same one). A ValueError names what is wrong."""
     if isinstance(planner, str):
+        if is_policy(planner):
+            raise ValueError(
+                f"planner {planner!r}: a team the trained policy drives has no agents; "
+                "measure it with vector_env(planner=...), whose episodes, rewards and ends "
+                "it reports"
+            )
         if planner != "api":
             raise ValueError(
                 f"planner {planner!r}: a team the built-in planner drives has no agents; give "
@@ -34,6 +48,12 @@ def agent_robots(robots: int, planner) -> list[int]:
             )
         return list(range(robots))
     names = list(planner)
+    policy = next((n for n in names if is_policy(n)), None)
+    if policy is not None:
+        raise ValueError(
+            f"planner {planner!r}: a trained policy drives the whole team; give "
+            f"planner={policy!r} alone (to vector_env)"
+        )
     if len(names) != robots or any(n not in PLANNERS for n in names):
         raise ValueError(
             f"planner {planner!r}: give one of {PLANNERS} for each of the {robots} robots"

@@ -18,6 +18,9 @@ pub struct DifficultyDto {
     pub default: bool,
     pub robots: usize,
     pub planner: Planner,
+    /// The trained policy that drives the robots (`planner` then reads `api`), for a learned
+    /// team (GET /api/policies).
+    pub policy: Option<&'static str>,
     /// The robots' speed, metres per second.
     pub robot_speed: f64,
     /// Seconds between two tags of one robot.
@@ -54,6 +57,7 @@ pub fn all() -> Vec<DifficultyDto> {
                 default: d == Difficulty::DEFAULT,
                 robots: p.robots,
                 planner: planner_dto(p.planner),
+                policy: p.policy,
                 robot_speed: (p.robot_speed as f64 * 1e6).round() / 1e6,
                 tag_cooldown_s: p.tag_cooldown_ticks as f64 / TICK_HZ as f64,
                 time_limit_s: p.time_limit_s as f64,
