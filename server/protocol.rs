@@ -17,6 +17,7 @@ mod difficulty_name;
 pub mod fleet;
 mod join;
 mod planners;
+mod policies;
 mod refusal;
 pub mod replay_ws;
 pub mod replays;
@@ -58,6 +59,7 @@ pub use join::{
 };
 pub(crate) use planners::planner_dto;
 pub use planners::{Controller, Planner, PlannerChoice, planner_name};
+pub use policies::{PolicyCreated, PolicyInfo};
 pub use refusal::{Invalid, invalid};
 
 /// Deserialises with serde, naming the JSON path of whatever is wrong (`root` when it is
@@ -109,30 +111,6 @@ pub struct MapCreated {
     #[serde(flatten)]
     pub map: MapInfo,
     /// `Authorization: Bearer <owner_token>` deletes the map.
-    pub owner_token: String,
-}
-
-/// A trained policy the server holds (`GET /api/policies`).
-#[derive(Debug, Clone, Serialize, ToSchema)]
-pub struct PolicyInfo {
-    pub name: String,
-    /// Floats of the robot observation it takes (docs/research.md, "Observations").
-    pub observation_size: usize,
-    /// Floats of the action it gives (forward, turn, tag).
-    pub action_size: usize,
-    /// Microseconds of one inference on this server, timed when it was loaded.
-    pub inference_us: f64,
-    /// Shipped with the server (listed from the start, never removed).
-    pub shipped: bool,
-}
-
-/// The reply to `POST /api/policies`: the policy and the secret that removes it (shown only
-/// here).
-#[derive(Debug, Serialize, ToSchema)]
-pub struct PolicyCreated {
-    #[serde(flatten)]
-    pub policy: PolicyInfo,
-    /// `Authorization: Bearer <owner_token>` deletes the policy.
     pub owner_token: String,
 }
 

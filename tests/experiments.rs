@@ -112,17 +112,17 @@ fn difficulty_writes_every_run_and_a_summary_per_preset_and_bot() {
     assert!(o.status.success(), "{o:?}");
     let (header, rows) = csv(&out.join("difficulty.csv"));
     assert_eq!(header, "map,difficulty,bot,seed,robots_won,time_s");
-    assert_eq!(rows, 3 * 2, "3 presets × 2 bots × 1 run");
+    assert_eq!(rows, 4 * 2, "4 presets × 2 bots × 1 run");
     let (header, rows) = csv(&out.join("difficulty_summary.csv"));
     assert!(
         header.starts_with("map,difficulty,bot,runs,robots_won,win_rate"),
         "{header}"
     );
-    assert_eq!(rows, 6);
+    assert_eq!(rows, 8);
     svg(&out.join("difficulty_office_evade.svg"));
     let stdout = String::from_utf8_lossy(&o.stdout);
     assert!(
-        stdout.contains("recruit") && stdout.contains("elite"),
+        stdout.contains("recruit") && stdout.contains("elite") && stdout.contains("learned"),
         "{stdout}"
     );
     let _ = std::fs::remove_dir_all(&out);

@@ -1,6 +1,5 @@
-//! A match as the API shows it: its summary in listings, the ground-truth state, the
-//! robot team's belief and the event log, converted from the core's types with coordinates rounded to the
-//! millimetre.
+//! A match as the API shows it: its summary in listings, the ground-truth state, the robot
+//! team's belief and the event log, from the core's types, coordinates to the millimetre.
 
 use super::*;
 use crate::game::delay::HeldBelief;
@@ -27,8 +26,7 @@ pub struct MatchSummary {
     /// The planner asked for (the team's: robots driven from outside beside it are
     /// `robot_planners`' `api` ones).
     pub planner: Planner,
-    /// The trained policy that drives the team (`"planner": "policy:<name>"` asked for;
-    /// `planner` then reads `api`, as the policy's orders come from outside the team).
+    /// The trained policy driving the team (`policy:<name>`; `planner` then reads `api`).
     pub policy: Option<String>,
     /// Each robot's controller, `r0` first: the team's planner, `api` for one driven from
     /// outside, `policy` for one a trained policy drives, or `person` for a pursuer slot.
