@@ -260,7 +260,10 @@ export class Game {
     this.missed.saw(s.tick);
     this.snaps.push(s);
     if (this.snaps.length > 12) this.snaps.shift();
-    if (s.belief) this.belief = s.belief;
+    if (s.belief) {
+      this.belief = s.belief;
+      debug.beliefRoles = s.belief.roles.length;
+    }
     if (this.predictor && s.view === "player" && s.ack !== undefined) {
       const me = this.mine(s);
       const others = [...s.robots, ...s.opponents].filter((a) => a !== me && !a.tagged).map((a) => [a.x, a.y]);
