@@ -448,7 +448,8 @@ async fn a_difficulty_preset_sets_the_team_unless_the_request_does() {
         .iter()
         .map(|d| d["name"].as_str().unwrap())
         .collect();
-    assert_eq!(names, ["recruit", "veteran", "elite"]);
+    assert_eq!(names, ["recruit", "veteran", "elite", "learned"]);
+    assert_eq!(listed.body[3]["policy"], "learned");
     assert_eq!(listed.body[0]["default"], true);
     assert!(
         listed.body[2]["measured"][1]["robots_win_rate"]
