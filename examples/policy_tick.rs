@@ -56,8 +56,8 @@ fn main() {
         policy.multiply_adds()
     );
     println!(
-        "{:<10} {:<7} {:>6} {:>9} {:>9} {:>9} {:>11} {:>9}",
-        "map", "bot", "ticks", "p50 ms", "p99 ms", "max ms", "policy µs", "price ms"
+        "{:<10} {:<7} {:>6} {:>9} {:>9} {:>9} {:>9} {:>11} {:>9}",
+        "map", "bot", "ticks", "mean ms", "p50 ms", "p99 ms", "max ms", "policy µs", "price ms"
     );
     for name in ["office", "warehouse", "hallway", "maze"] {
         let Some(map) = store.get(name) else { continue };
@@ -91,12 +91,14 @@ fn main() {
                 ticks.push(start.elapsed().as_secs_f64() * 1e3);
             }
             let n = ticks.len();
+            let mean = ticks.iter().sum::<f64>() / n as f64;
             ticks.sort_by(f64::total_cmp);
             println!(
-                "{:<10} {:<7} {:>6} {:>9.3} {:>9.3} {:>9.3} {:>11.2} {:>9.3}",
+                "{:<10} {:<7} {:>6} {:>9.3} {:>9.3} {:>9.3} {:>9.3} {:>11.2} {:>9.3}",
                 name,
                 format!("{bot:?}").to_lowercase(),
                 n,
+                mean,
                 percentile(&ticks, 0.5),
                 percentile(&ticks, 0.99),
                 ticks[n - 1],

@@ -104,11 +104,11 @@ fn router(
         .route("/maps", get(handlers::list_maps).post(handlers::add_map))
         .route(
             "/policies",
-            get(policies::list)
-                .post(policies::add)
+            get(policies::list_policies)
+                .post(policies::add_policy)
                 .layer(DefaultBodyLimit::max(max_policy)),
         )
-        .route("/policies/{name}", delete(policies::delete))
+        .route("/policies/{name}", delete(policies::delete_policy))
         .route(
             "/maps/{name}",
             get(handlers::get_map).delete(handlers::delete_map),

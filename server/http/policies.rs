@@ -19,7 +19,7 @@ use crate::protocol::{ErrorBody, PolicyCreated, PolicyInfo};
 use crate::service::policies::{self, PoliciesError};
 
 #[utoipa::path(get, path = "/api/policies", responses((status = 200, body = [PolicyInfo])))]
-pub async fn list(State(state): State<AppState>) -> Json<Vec<PolicyInfo>> {
+pub async fn list_policies(State(state): State<AppState>) -> Json<Vec<PolicyInfo>> {
     Json(policies::list(state.service()))
 }
 
@@ -31,7 +31,7 @@ pub async fn list(State(state): State<AppState>) -> Json<Vec<PolicyInfo>> {
                   ("DeletePolicy" = (operation_id = "delete_policy", parameters(("name" = "$response.body#/name")))))),
               (status = 400, body = ErrorBody), (status = 409, body = ErrorBody),
               (status = 413, body = ErrorBody), (status = 429, body = ErrorBody), (status = 503, body = ErrorBody)))]
-pub async fn add(
+pub async fn add_policy(
     State(state): State<AppState>,
     ClientIp(ip): ClientIp,
     Query(query): Query<HashMap<String, String>>,
@@ -54,7 +54,7 @@ pub async fn add(
     security(("owner_token" = [])),
     responses((status = 204), (status = 401, body = ErrorBody), (status = 403, body = ErrorBody),
               (status = 404, body = ErrorBody), (status = 409, body = ErrorBody)))]
-pub async fn delete(
+pub async fn delete_policy(
     State(state): State<AppState>,
     bearer: Bearer,
     Path(name): Path<String>,
