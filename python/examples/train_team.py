@@ -13,18 +13,29 @@ minibatch, gradient clipping and a linearly annealed learning rate. Adapted to a
 - **One policy shared by the robots.** Entry ``w * robots + r`` of a vector environment is
   robot ``r`` of world ``w``; every robot is its own sample (its own observation, action,
   reward, value and GAE chain), and all of them train the one actor and one critic.
-- **Several maps.** One vector environment per training map, stepped one after the other
-  every step; a rollout holds the same number of worlds of each. One map is held out of
-  training entirely and only evaluated.
+- **Several maps.** Vector environments per training map, stepped one after the other
+  every step; a rollout holds the same number of worlds of each map, and of those
+  ``--random-starts`` (half) start every episode from random free positions (placement
+  ``random``) rather than the map's spawns, so that the policy meets more situations than
+  a few spawn pairs. One map is held out of training entirely and only evaluated (from its
+  spawns, as every evaluation).
 - **Auto-reset on the next step.** The step after an episode's end ignores the actions and
   returns the next episode's first observation: that sample is left out of the loss, and
   the episode's last observation (which that step's sample holds) bootstraps the value of a
   truncated episode; a capture (termination) has value 0 after it.
 - **No normalisation.** Every observation value is already in [-1, 1] and the exported model
   takes the raw vector, so there is no running mean or scale, of observations or of rewards.
-  Observation parts named by ``--mask`` (default ``time``: in training it counts the steps
-  of a 90 s episode, in a served match the match's time over a longer limit) are zeroed
-  before the first layer; the export folds that into the first layer's weights.
+  Observation parts named by ``--mask`` are zeroed before the first layer (the export
+  folds that into the first layer's weights, so the model still reads the whole vector).
+  By default ``time`` (in training it counts the steps of a 90 s episode, in a served
+  match the match's time over a longer limit), ``pose`` and ``teammates`` (positions and
+  headings in the map's frame, scaled by its size: what they mean changes from map to
+  map). What is left is egocentric: the scan, the sightings, the estimate's spread, the
+  tag device, and the belief grid and roles, which the core computes relative to the
+  robot. Pilots of 400,000 steps (one seed each, 20 held-out seeds on the held-out map):
+  masking ``time`` only, 90% captured (median 51.6 s); random starts too, 75% (62.2 s);
+  the default mask without random starts, 60% (65.7 s); both, as the defaults, 100%
+  (12.1 s).
 
 The action is forward, turn and tag (fires above 0.5): a Gaussian around the actor's
 output in training, the output itself (the mean) in every evaluation, as the server runs it.
@@ -54,8 +65,8 @@ Outputs in ``--out``:
 ::
 
     pip install ./python torch onnx matplotlib
-    python python/examples/train_team.py --out results/train_team          # about 45 min on 2 cores
-    python python/examples/train_team.py --smoke --out /tmp/smoke          # about a minute
+    python python/examples/train_team.py --out results/train_team          # 35-45 min on 2 cores
+    python python/examples/train_team.py --smoke --out /tmp/smoke          # under a minute
 
 docs/research.md ("A team that learns from the belief") shows the figures of one run.
 """
@@ -303,7 +314,7 @@ def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--out", default="results/train_team")
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--total-steps", type=int, default=2_500_000,
+    p.add_argument("--total-steps", type=int, default=4_000_000,
                    help="environment steps (one world, every robot acting) over all training maps")
     p.add_argument("--num-envs", type=int, default=16, help="worlds per training map")
     p.add_argument("--num-steps", type=int, default=128, help="rollout length (steps per world)")
