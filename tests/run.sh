@@ -61,6 +61,26 @@ else
   LASERTAG_BIN=target/debug/lasertag PYTHONPATH="$PWD/$PY_DIR/pkgs" python3 -m pytest python/tests
 fi
 
+# The training example cannot rot: a few hundred PPO steps on the in-process engine, the
+# evaluation and the ONNX export, in a venv of its own (PyTorch, pinned, is installed for
+# this and for training only; a CPU build is not on PyPI, so it comes with its CUDA
+# libraries, unused).
+TRAIN_DIR=target/train-env
+if ! "$TRAIN_DIR/venv/bin/python" -c 'import torch, onnx, matplotlib' 2>/dev/null; then
+  rm -rf "$TRAIN_DIR"
+  python3 -m venv "$TRAIN_DIR/venv"
+  "$TRAIN_DIR/venv/bin/python" -m pip install -q --disable-pip-version-check -r python/examples/requirements-train.txt
+fi
+"$TRAIN_DIR/venv/bin/python" -m pip install -q --disable-pip-version-check -c python/constraints.txt ./python
+"$TRAIN_DIR/venv/bin/python" -m pip install -q --disable-pip-version-check --no-deps --force-reinstall ./python
+SMOKE_OUT=$(mktemp -d)
+"$TRAIN_DIR/venv/bin/python" python/examples/train_team.py --smoke --out "$SMOKE_OUT"
+for f in policy.onnx learning_curve.png capture_times.csv; do
+  [ -s "$SMOKE_OUT/$f" ] || { echo "tests/run.sh: the training smoke run wrote no $f"; exit 1; }
+done
+rm -rf "$SMOKE_OUT"
+echo "tests/run.sh: the training example ran"
+
 # API conformance: schemathesis (from PyPI, pinned) against the real server's OpenAPI
 # document, every operation, every check but one (exceptions and reasons in
 # tests/schemathesis.toml).
