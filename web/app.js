@@ -326,7 +326,9 @@ async function playRated() {
 /** The co-op door: the chosen team plus one robot for the person, against bots that run. */
 async function huntWithRobots() {
   const d = difficulties.find((x) => x.name === $("door-difficulty").value);
-  const robots = Math.min(rules.bounds.robots.maximum, (d ? d.robots : 2) + 1);
+  // A trained team was trained for its own team size: the person takes one of its robots
+  // (the policy drives the others) rather than joining as one more.
+  const robots = d && d.policy ? d.robots : Math.min(rules.bounds.robots.maximum, (d ? d.robots : 2) + 1);
   const map = d && d.measured.length ? d.measured[0].map : $("create").elements.map.value;
   const m = await createMatch({
     map, opponents: 2, opponent_control: "bot", opponent_bot: "evade", pursuer_slots: 1, robots,
@@ -398,7 +400,8 @@ async function create(e) {
     // The hunter's robot joins the team: one robot more than the preset or the form says.
     if (hunter) {
       const robots = preset ? preset.robots : Number(f.get("robots"));
-      team.robots = Math.min(rules.bounds.robots.maximum, robots + 1);
+      const trained = (preset && preset.policy) || String(f.get("planner")).startsWith("policy:");
+      team.robots = trained ? robots : Math.min(rules.bounds.robots.maximum, robots + 1);
     }
     const m = await createMatch({
       map: f.get("map"),
