@@ -19,8 +19,9 @@ use cdp::Browser;
 use common::TestServer;
 use serde_json::json;
 
-/// o0 (the page) stands 2 m behind a searching robot in a corridor, which turns and tags
-/// it; o1, in a far room, keeps the match going. The page then shows the teammates' view,
+/// o0 (the page) stands 2 m in front of a searching robot in a corridor, which tags it (a
+/// match people play has a secret random seed, so the robot must not have to happen to
+/// turn round); o1, in a far room, keeps the match going. The page then shows the teammates' view,
 /// live, and its input counter stops. The match runs on a manual clock, stepped by the test
 /// once the page has its seat, so that the robot cannot tag o0 before the page takes it.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -30,7 +31,7 @@ async fn after_the_tag_the_clock_never_goes_back_and_no_key_is_sent() {
         .create_match(json!({"map": "office", "robots": 1, "opponents": 2,
             "opponent_control": "human", "planner": "baseline", "time_limit_s": 120,
             "clock": "manual",
-            "robot_starts": [[5.0, 8.0, 0.0]],
+            "robot_starts": [[5.0, 8.0, 3.14159]],
             "opponent_starts": [[3.0, 8.0], [22.0, 14.0]]}))
         .await;
     let mut b = Browser::launch().await;
