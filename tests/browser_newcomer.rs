@@ -31,7 +31,7 @@ async fn after_the_tag_the_clock_never_goes_back_and_no_key_is_sent() {
         .create_match(json!({"map": "office", "robots": 1, "opponents": 2,
             "opponent_control": "human", "planner": "baseline", "time_limit_s": 120,
             "clock": "manual",
-            "robot_starts": [[5.0, 8.0, 3.14159]],
+            "robot_starts": [[5.0, 8.0, std::f64::consts::PI]],
             "opponent_starts": [[3.0, 8.0], [22.0, 14.0]]}))
         .await;
     let mut b = Browser::launch().await;
