@@ -50,6 +50,24 @@ pub fn detection_slots(
     Ok((input_len - base) / per)
 }
 
+/// Whether `policy` can drive a team of `robots` on a match with `physics`' sensors: its
+/// action is a robot's and its input a robot's observation. Its detection slots if so.
+pub fn fits(policy: &Policy, robots: usize, physics: &Physics) -> Result<usize, PolicyError> {
+    check_action(policy)?;
+    detection_slots(policy.input_len(), robots, physics)
+}
+
+/// Whether `policy` gives a robot's action (forward, turn, tag).
+pub fn check_action(policy: &Policy) -> Result<(), PolicyError> {
+    if policy.output_len() != ACTION_SIZE {
+        return Err(PolicyError::Shape(format!(
+            "the model gives {} values; a robot's action is {ACTION_SIZE} (forward, turn, tag)",
+            policy.output_len()
+        )));
+    }
+    Ok(())
+}
+
 fn layout(robots: usize, detections: usize, width: f64, height: f64, physics: &Physics) -> Layout {
     // The rules as `GET /api/rules` publishes them (to the micrometre), which the HTTP
     // environment reads: the same divisors give the same vector.
@@ -75,13 +93,7 @@ impl TeamPolicy {
         physics: &Physics,
         every: u64,
     ) -> Result<TeamPolicy, PolicyError> {
-        if policy.output_len() != ACTION_SIZE {
-            return Err(PolicyError::Shape(format!(
-                "the model gives {} values; a robot's action is {ACTION_SIZE} (forward, turn, tag)",
-                policy.output_len()
-            )));
-        }
-        let detections = detection_slots(policy.input_len(), robots, physics)?;
+        let detections = fits(&policy, robots, physics)?;
         // The map's size to the millimetre, as the API writes it.
         let mm = |v: f32| ((v as f64) * 1000.0).round() / 1000.0;
         let layout = layout(

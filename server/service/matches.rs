@@ -213,22 +213,12 @@ fn policy_fits(
     let stored = store
         .get(name)
         .ok_or_else(|| CreateError::NoPolicy(name.to_string()))?;
-    let p = &stored.policy;
-    if p.output_len() != lasertag_policy::team::ACTION_SIZE {
-        return Err(CreateError::PolicyMisfit {
-            name: name.to_string(),
-            why: format!(
-                "it gives {} values; a robot's action is 3 (forward, turn, tag)",
-                p.output_len()
-            ),
-        });
-    }
-    lasertag_policy::team::detection_slots(p.input_len(), config.robots, &config.physics).map_err(
-        |e| CreateError::PolicyMisfit {
+    lasertag_policy::team::fits(&stored.policy, config.robots, &config.physics).map_err(|e| {
+        CreateError::PolicyMisfit {
             name: name.to_string(),
             why: e.to_string(),
-        },
-    )?;
+        }
+    })?;
     Ok(admission::policy(config, stored.inference_us, stored.every))
 }
 

@@ -121,12 +121,8 @@ pub async fn add(
             Ok::<_, PolicyError>((policy, took))
         })
         .await??;
-    if policy.output_len() != lasertag_policy::team::ACTION_SIZE {
-        return Err(PoliciesError::Misfit(format!(
-            "it gives {} values; a robot's action is 3 (forward, turn, tag)",
-            policy.output_len()
-        )));
-    }
+    lasertag_policy::team::check_action(&policy)
+        .map_err(|e| PoliciesError::Misfit(e.to_string()))?;
     // A model must fit some team: its input is a robot's observation for 1 to 8 robots.
     let physics = lasertag_core::sim::Physics::default();
     if !(1..=8).any(|robots| {
