@@ -46,7 +46,7 @@ pub fn rad(v: f32) -> f64 {
 }
 
 /// The observation vector's parts, in order: scan, pose, spread, status, time, detections,
-/// teammates, belief grid, roles, untagged share (their meaning is
+/// teammates, belief grid, belief paths, roles, untagged share (their meaning is
 /// python/lasertag_env/observation.py's table).
 #[derive(Debug, Clone)]
 pub struct Layout {
@@ -99,6 +99,7 @@ impl Layout {
             part(4, 0.0, 1.0); // age, goal present, goal x, goal y
         }
         part(features::GRID_CELLS, 0.0, 1.0);
+        part(features::SECTORS, 0.0, 1.0); // the way to the belief
         for _ in 0..features::ROLE_SLOTS {
             part(2, 0.0, 1.0); // present, count share
             part(2, -1.0, 1.0); // ahead, left

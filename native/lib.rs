@@ -508,6 +508,7 @@ impl Engine {
         d.set_item("teammates", teammates)?;
         let belief = PyDict::new(py);
         belief.set_item("grid", o.belief.grid.to_vec())?;
+        belief.set_item("paths", o.belief.paths.to_vec())?;
         belief.set_item(
             "roles",
             o.belief

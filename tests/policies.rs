@@ -11,7 +11,7 @@ use lasertag_policy::testing::{DenseLayer, model};
 use serde_json::{Value, json};
 
 /// The observation of a robot of a team of 2 with 1 detection slot (docs/research.md).
-const OBSERVATION: usize = 232;
+const OBSERVATION: usize = 240;
 
 fn layer(outputs: usize, inputs: usize, scale: f32, activation: &str) -> DenseLayer<'_> {
     let weights = (0..outputs)

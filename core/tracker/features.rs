@@ -5,6 +5,10 @@
 //! - a coarse egocentric grid of belief mass: the expected share of the opponents still in
 //!   the arena in each of [`SECTORS`] bearing sectors (ahead first, counter-clockwise) times
 //!   [`RINGS`] distance rings around the robot, summing to 1 while any is untagged;
+//! - the same mass by the way to walk to it: for the belief within [`PATH_REACH_M`] of
+//!   travel, the share in each bearing sector of the point [`PATH_AHEAD_M`] along the
+//!   shortest path to it (through doors, around walls: what the straight-line grid cannot
+//!   say in a building);
 //! - the [`ROLE_SLOTS`] untagged roles whose clouds' means are nearest, nearest first: how
 //!   many opponents each stands for, where its mean lies ahead and to the left, how wide the
 //!   cloud is, how much the team trusts it and how long robots have looked at it in vain;
@@ -17,7 +21,9 @@
 
 use nalgebra::{Point2, Vector2};
 
+use crate::nav::DistanceField;
 use crate::sim::Pose;
+use crate::sim::arena::ClearanceGrid;
 use crate::tracker::Role;
 
 /// Bearing sectors of the grid, 45° each.
@@ -28,6 +34,11 @@ pub const RINGS: usize = 2;
 pub const GRID_CELLS: usize = SECTORS * RINGS;
 /// Metres: the inner ring's radius (about where a robot's tag device reaches well).
 pub const NEAR_RING_M: f64 = 4.0;
+/// Metres of travel within which belief mass is sorted by the way to walk to it (the search
+/// stops there: a robot's few metres cost a fraction of a whole map's field).
+pub const PATH_REACH_M: f32 = 6.0;
+/// Metres along a shortest path to the point whose bearing sorts the mass at its end.
+pub const PATH_AHEAD_M: f32 = 1.0;
 /// Untagged roles summarised, nearest first.
 pub const ROLE_SLOTS: usize = 2;
 /// Values of one role's summary: present, count share, ahead, left, spread, confidence,
@@ -39,14 +50,18 @@ pub const POSITION_SCALE_M: f64 = 10.0;
 pub const SPREAD_SCALE_M: f64 = 5.0;
 /// Ticks: a role's run of looks in vain is divided by this (and saturates at 1).
 pub const UNSEEN_SCALE_TICKS: f64 = 100.0;
-/// Every value of the features: the grid, the role slots, the untagged share.
-pub const VALUES: usize = GRID_CELLS + ROLE_SLOTS * ROLE_VALUES + 1;
+/// Every value of the features: the grid, the path sectors, the role slots, the untagged
+/// share.
+pub const VALUES: usize = GRID_CELLS + SECTORS + ROLE_SLOTS * ROLE_VALUES + 1;
 
 /// One robot's belief features (see the module's documentation), each already rounded to a
 /// ten-thousandth.
 #[derive(Debug, Clone, PartialEq)]
 pub struct BeliefFeatures {
     pub grid: [f64; GRID_CELLS],
+    /// The share of the untagged opponents within [`PATH_REACH_M`] of travel, by the sector
+    /// one sets off in to reach them (sums to at most 1).
+    pub paths: [f64; SECTORS],
     pub roles: [[f64; ROLE_VALUES]; ROLE_SLOTS],
     pub untagged: f64,
 }
@@ -55,6 +70,7 @@ impl Default for BeliefFeatures {
     fn default() -> Self {
         BeliefFeatures {
             grid: [0.0; GRID_CELLS],
+            paths: [0.0; SECTORS],
             roles: [[0.0; ROLE_VALUES]; ROLE_SLOTS],
             untagged: 0.0,
         }
@@ -63,8 +79,8 @@ impl Default for BeliefFeatures {
 
 impl BeliefFeatures {
     /// The features of `roles` seen from `pose` (the robot's own estimate), in a match of
-    /// `opponents` opponents.
-    pub fn of(roles: &[Role], pose: Pose, opponents: usize) -> BeliefFeatures {
+    /// `opponents` opponents on the arena whose clearance grid is `nav`.
+    pub fn of(roles: &[Role], pose: Pose, opponents: usize, nav: &ClearanceGrid) -> BeliefFeatures {
         let mut out = BeliefFeatures::default();
         let (sin, cos) = (pose.theta as f64).sin_cos();
         let origin = Vector2::new(pose.pos.x as f64, pose.pos.y as f64);
@@ -78,6 +94,8 @@ impl BeliefFeatures {
         // "-0.0" and a JSON reader may read as 0: the two environments would differ).
         let total = untagged.iter().fold(0.0f64, |t, r| t + r.count as f64);
         let mut grid = [0.0f64; GRID_CELLS];
+        let mut paths = [0.0f64; SECTORS];
+        let mut ways = Ways::new(nav, pose.pos);
         let mut summaries: Vec<(f64, [f64; ROLE_VALUES])> = Vec::with_capacity(untagged.len());
         for role in &untagged {
             let (particles, weights) = (role.particles(), role.weights());
@@ -91,6 +109,9 @@ impl BeliefFeatures {
                 let l = local(*p);
                 let w = *w as f64 / sum_w;
                 grid[cell(l)] += share * w;
+                if let Some(way) = ways.toward(*p) {
+                    paths[sector(local(way))] += share * w;
+                }
                 mean += l * w;
             }
             let mut var = 0.0;
@@ -118,17 +139,54 @@ impl BeliefFeatures {
         for (v, x) in out.grid.iter_mut().zip(grid) {
             *v = round4(x);
         }
+        for (v, x) in out.paths.iter_mut().zip(paths) {
+            *v = round4(x);
+        }
         out.untagged = round4((total / opponents.max(1) as f64).min(1.0));
         out
     }
 
-    /// Every value in the layout's order: the grid, the role slots, the untagged share.
+    /// Every value in the layout's order: the grid, the path sectors, the role slots, the
+    /// untagged share.
     pub fn values(&self) -> impl Iterator<Item = f64> + '_ {
         self.grid
             .iter()
+            .chain(&self.paths)
             .chain(self.roles.iter().flatten())
             .chain(std::iter::once(&self.untagged))
             .copied()
+    }
+}
+
+/// Where to set off toward points near the robot: a distance field out to
+/// [`PATH_REACH_M`] from its estimate, and the waypoints found so far.
+struct Ways<'a> {
+    nav: &'a ClearanceGrid,
+    field: Option<DistanceField>,
+    memo: Vec<u32>,
+}
+
+impl<'a> Ways<'a> {
+    fn new(nav: &'a ClearanceGrid, from: Point2<f32>) -> Ways<'a> {
+        let field = DistanceField::from_point_within(nav, from, PATH_REACH_M);
+        let memo = if field.is_some() {
+            vec![u32::MAX; nav.len()]
+        } else {
+            Vec::new()
+        };
+        Ways { nav, field, memo }
+    }
+
+    /// The point [`PATH_AHEAD_M`] along the shortest path to `p` (or `p`'s cell when
+    /// nearer); `None` when `p` is beyond the reach or where no robot fits.
+    fn toward(&mut self, p: Point2<f32>) -> Option<Point2<f32>> {
+        let field = self.field.as_ref()?;
+        let cell = self.nav.cell_of(p)?;
+        if field.dist[cell] > PATH_REACH_M {
+            return None;
+        }
+        let way = field.waypoint_ahead(cell, PATH_AHEAD_M, &mut self.memo);
+        Some(self.nav.centre(way))
     }
 }
 
@@ -137,12 +195,23 @@ fn round4(v: f64) -> f64 {
     (v * 10_000.0).round() / 10_000.0
 }
 
-/// The grid cell of a point in the robot's frame: its 45° sector counted counter-clockwise
-/// from straight ahead (sector 0 spans 0°..45° to the left), then its ring.
+/// The grid cell of a point in the robot's frame: its sector (see [`sector`]), then its
+/// ring.
 fn cell(l: Vector2<f64>) -> usize {
+    let ring = if l.x * l.x + l.y * l.y < NEAR_RING_M * NEAR_RING_M {
+        0
+    } else {
+        1
+    };
+    ring * SECTORS + sector(l)
+}
+
+/// The 45° sector of a point in the robot's frame, counted counter-clockwise from straight
+/// ahead (sector 0 spans 0°..45° to the left).
+fn sector(l: Vector2<f64>) -> usize {
     let (x, y) = (l.x, l.y);
     // Octants by comparisons: which half-plane, which quadrant, which side of the diagonal.
-    let sector = if y >= 0.0 {
+    if y >= 0.0 {
         if x > 0.0 {
             if y < x { 0 } else { 1 }
         } else if y > -x {
@@ -156,13 +225,7 @@ fn cell(l: Vector2<f64>) -> usize {
         6
     } else {
         7
-    };
-    let ring = if x * x + y * y < NEAR_RING_M * NEAR_RING_M {
-        0
-    } else {
-        1
-    };
-    ring * SECTORS + sector
+    }
 }
 
 #[cfg(test)]
@@ -192,6 +255,7 @@ mod tests {
                 theta: 0.0,
             },
             2,
+            &room().grid,
         );
         assert_eq!(f.grid[8], 1.0, "{:?}", f.grid);
         assert_eq!(f.grid.iter().sum::<f64>(), 1.0);
@@ -206,6 +270,7 @@ mod tests {
                 theta: 0.0,
             },
             2,
+            &room().grid,
         );
         assert_eq!(g.grid[8 + 4], 1.0, "{:?}", g.grid);
         // A turn of the robot turns the grid: facing -x, the cloud is ahead.
@@ -216,6 +281,7 @@ mod tests {
                 theta: std::f32::consts::PI,
             },
             2,
+            &room().grid,
         );
         assert_eq!(h.grid[8], 1.0, "{:?}", h.grid);
     }
@@ -233,6 +299,7 @@ mod tests {
                 theta: 0.0,
             },
             3,
+            &room().grid,
         );
         assert_eq!(f.roles[0][2], 0.2);
         assert_eq!(f.roles[1][2], 0.8);
@@ -240,6 +307,64 @@ mod tests {
         assert_eq!(f.grid[0], 0.5);
         assert_eq!(f.grid[8], 0.5);
         assert_eq!(f.values().count(), VALUES);
+    }
+
+    #[test]
+    fn paths_sort_the_mass_by_the_way_to_walk_to_it() {
+        // Beyond the wall at x = 5 and a little ahead, to the robot's right as the crow
+        // flies; the way there sets off straight ahead, to the door at its north end.
+        let a = two_rooms();
+        let facing_north = Pose {
+            pos: Point2::new(4.2, 2.0),
+            theta: std::f32::consts::FRAC_PI_2,
+        };
+        let f = BeliefFeatures::of(
+            &[role(vec![Point2::new(6.0, 2.5); 10])],
+            facing_north,
+            1,
+            &a.grid,
+        );
+        assert_eq!(f.grid[6], 1.0, "{:?}", f.grid);
+        assert_eq!(f.paths[0] + f.paths[7], 1.0, "{:?}", f.paths);
+        // Mass farther than the reach in travel is left out of the paths (not of the grid).
+        let far = BeliefFeatures::of(
+            &[role(vec![Point2::new(9.5, 0.5); 10])],
+            Pose {
+                pos: Point2::new(0.5, 0.5),
+                theta: 0.0,
+            },
+            1,
+            &a.grid,
+        );
+        assert_eq!(far.paths, [0.0; SECTORS]);
+        assert_eq!(far.grid.iter().sum::<f64>(), 1.0);
+        assert_eq!(far.values().count(), VALUES);
+    }
+
+    /// An empty room 12 m × 6 m.
+    fn room() -> crate::sim::arena::Arena {
+        crate::sim::arena::open_room([1.0, 1.0, 0.0])
+    }
+
+    /// Two rooms 10 m × 6 m in all, joined by a door (y 4.0–5.2) in a wall at x = 5.
+    fn two_rooms() -> crate::sim::arena::Arena {
+        let slab = |y0: f32, y1: f32| {
+            vec![
+                Point2::new(4.9, y0),
+                Point2::new(5.1, y0),
+                Point2::new(5.1, y1),
+                Point2::new(4.9, y1),
+            ]
+        };
+        crate::sim::arena::Arena::new(crate::sim::arena::MapDef {
+            name: "two".into(),
+            width: 10.0,
+            height: 6.0,
+            obstacles: vec![slab(0.0, 4.0), slab(5.2, 6.0)],
+            robot_spawns: vec![[1.0, 1.0, 0.0]],
+            opponent_spawns: vec![Point2::new(9.0, 1.0)],
+            landmarks: vec![],
+        })
     }
 
     fn role(particles: Vec<Point2<f32>>) -> Role {

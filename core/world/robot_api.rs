@@ -308,7 +308,14 @@ impl World {
             belief: self
                 .team
                 .belief_of(index, self.robots.len())
-                .map(|t| BeliefFeatures::of(&t.roles, r.estimate, self.config.opponents))
+                .map(|t| {
+                    BeliefFeatures::of(
+                        &t.roles,
+                        r.estimate,
+                        self.config.opponents,
+                        &self.arena.grid,
+                    )
+                })
                 .unwrap_or_default(),
         })
     }

@@ -41,8 +41,9 @@ The action is forward, turn and tag (fires above 0.5): a Gaussian around the act
 output in training, the output itself (the mean) in every evaluation, as the server runs it.
 The environment clips forward and turn to [-1, 1].
 
-Matches: 2 robots against 1 ``wander`` bot (``--bot``), a decision every 4 ticks (5 a
-second), 90 s at most. Reward per robot and step: the environment's (1 for the robot whose
+Matches: 2 robots against 1 bot, a decision every 4 ticks (5 a second), 90 s at most;
+``--bots`` (``wander`` and ``evade``: the one that strolls and the one that runs from the
+robots) share each map's worlds equally, and every evaluation plays each. Reward per robot and step: the environment's (1 for the robot whose
 shot tags, ``--team-tag`` to each robot for any robot's tag, -0.001 a tick) plus the
 shaping ``--see-bonus`` a step in which the robot sees an opponent (less than the 0.004 a
 step costs in ticks, so watching never pays more than capturing).
@@ -50,22 +51,23 @@ step costs in ticks, so watching never pays more than capturing).
 Outputs in ``--out``:
 
 - ``curve.csv`` and ``learning_curve.png``: the deterministic policy's mean return (the
-  environment's reward, no shaping, summed over robots) and capture rate on fixed seeds of
-  the held-out map and of the training maps, against the environment steps spent;
-- ``capture_times.csv``: per map and seed, the learned policy's, the ``baseline`` and the
+  environment's reward, no shaping, summed over robots), capture rate and median capture
+  time on fixed seeds of the held-out map and of the training maps, per bot, against the
+  environment steps spent;
+- ``capture_times.csv``: per map, bot and seed, the learned policy's, the ``baseline`` and the
   ``coordinated`` planners' capture times (empty: not captured in 90 s) on the same matches;
 - ``policy.pt`` (the actor, critic and settings) and ``policy.onnx`` (the actor's mean only:
-  Gemm and Tanh, input ``obs`` [1, 232], output ``action`` [1, 3]; checked with
+  Gemm and Tanh, input ``obs`` [1, 240], output ``action`` [1, 3]; checked with
   ``onnx.checker``, its operators against the server's allow-list, and its outputs against
   torch's);
-- a table on stdout: per map, captures and median capture times, the ratios learned /
+- a table on stdout: per map and bot, captures and median capture times, the ratios learned /
   baseline and learned / coordinated, and Wilcoxon signed-rank tests on the per-seed times
   (a capture not made counts as the 90 s limit).
 
 ::
 
     pip install ./python torch onnx matplotlib
-    python python/examples/train_team.py --out results/train_team          # 35-45 min on 2 cores
+    python python/examples/train_team.py --out results/train_team          # about 55 min on 2 cores
     python python/examples/train_team.py --smoke --out /tmp/smoke          # under a minute
 
 docs/research.md ("A team that learns from the belief") shows the figures of one run.
@@ -314,16 +316,17 @@ def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--out", default="results/train_team")
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--total-steps", type=int, default=4_000_000,
+    p.add_argument("--total-steps", type=int, default=5_000_000,
                    help="environment steps (one world, every robot acting) over all training maps")
     p.add_argument("--num-envs", type=int, default=16, help="worlds per training map")
     p.add_argument("--num-steps", type=int, default=128, help="rollout length (steps per world)")
     p.add_argument("--maps", default="office,hallway,maze", help="training maps")
     p.add_argument("--held-out", default="warehouse", help="the map never trained on")
-    p.add_argument("--bot", default="wander", help="opponent bot: wander or evade")
+    p.add_argument("--bots", default="wander,evade",
+                   help="opponent bots, each on an equal share of every map's worlds")
     p.add_argument("--eval-seeds", type=int, default=100, help="fixed seeds per map, final comparison")
     p.add_argument("--curve-seeds", type=int, default=16, help="fixed seeds per map, learning curve")
-    p.add_argument("--eval-every", type=int, default=20, help="updates between curve points")
+    p.add_argument("--eval-every", type=int, default=30, help="updates between curve points")
     p.add_argument("--threads", type=int, default=1, help="torch threads")
     p.add_argument("--hidden", type=int, default=64)
     p.add_argument("--lr", type=float, default=3e-4)
@@ -359,7 +362,8 @@ def main() -> None:
     all_maps = maps + [args.held_out]
     rewards = {"tag": 1.0, "team_tag": args.team_tag, "tick": -0.001}
 
-    probe_env = lasertag_env.parallel_env(map=maps[0], opponent_bot=args.bot, **ENV)
+    bots = [b for b in args.bots.split(",") if b]
+    probe_env = lasertag_env.parallel_env(map=maps[0], opponent_bot=bots[0], **ENV)
     layout = probe_env.layout
     obs_dim = layout.size
     det = layout.slices["detections"].start  # present flag of the nearest sighting
@@ -369,16 +373,19 @@ def main() -> None:
     agent = Agent(obs_dim, args.hidden, mask, args.log_std)
     opt = torch.optim.Adam(agent.parameters(), lr=args.lr, eps=1e-5)
 
-    # Per training map, a vector of worlds starting from the map's spawns and, with
+    # Per training map and bot, a vector of worlds starting from the map's spawns and, with
     # --random-starts, one starting from random free positions (placement "random").
-    n_random = int(round(args.random_starts * args.num_envs))
+    per_bot = max(1, args.num_envs // len(bots))
+    n_random = int(round(args.random_starts * per_bot))
     envs = []
     for i, m in enumerate(maps):
-        for k, (n, placement) in enumerate([(args.num_envs - n_random, None), (n_random, "random")]):
-            if n > 0:
-                envs.append(lasertag_env.vector_env(
-                    n, map=m, opponent_bot=args.bot, placement=placement, rewards=rewards,
-                    seed=args.seed * 1_000_000 + 100_000 * (i + 1) + 50_000 * k, **ENV))
+        for j, b in enumerate(bots):
+            for k, (n, placement) in enumerate([(per_bot - n_random, None), (n_random, "random")]):
+                if n > 0:
+                    envs.append(lasertag_env.vector_env(
+                        n, map=m, opponent_bot=b, placement=placement, rewards=rewards,
+                        seed=args.seed * 1_000_000 + 100_000 * (i + 1) + 20_000 * j + 10_000 * k,
+                        **ENV))
     n_entries = sum(e.num_envs for e in envs)
     worlds = sum(e.num_worlds for e in envs)
     bounds = np.cumsum([0] + [e.num_envs for e in envs])
@@ -407,10 +414,13 @@ def main() -> None:
         row = {"update": update, "env_steps": env_steps,
                "wall_s": round(time.perf_counter() - t0, 1)}
         for m in all_maps:
-            r = play(m, curve_seeds, args.bot, actor)
-            row[f"{m}_return"] = round(float(r["return"].mean()), 4)
-            row[f"{m}_captured"] = round(float(np.isfinite(r["time"]).mean()), 4)
-            row[f"{m}_median_s"] = round(float(np.median(np.minimum(r["time"], LIMIT_S))), 1)
+            for b in bots:
+                r = play(m, curve_seeds, b, actor)
+                row[f"{m}_{b}_return"] = round(float(r["return"].mean()), 4)
+                row[f"{m}_{b}_captured"] = round(float(np.isfinite(r["time"]).mean()), 4)
+                row[f"{m}_{b}_median_s"] = round(float(np.median(np.minimum(r["time"], LIMIT_S))), 1)
+            for k in ("return", "captured"):
+                row[f"{m}_{k}"] = round(float(np.mean([row[f"{m}_{b}_{k}"] for b in bots])), 4)
         train_ret = np.mean([row[f"{m}_return"] for m in maps])
         train_cap = np.mean([row[f"{m}_captured"] for m in maps])
         row["train_return"], row["train_captured"] = round(float(train_ret), 4), round(float(train_cap), 4)
@@ -421,7 +431,8 @@ def main() -> None:
         print(f"update {update:4d}/{updates}  {env_steps:10,d} steps  {row['wall_s']:6.0f} s  "
               f"train maps: return {train_ret:6.3f} captured {train_cap:4.0%}  "
               f"{h}: return {row[f'{h}_return']:6.3f} captured {row[f'{h}_captured']:4.0%} "
-              f"median {row[f'{h}_median_s']:4.1f} s  std {row['std']}", flush=True)
+              f"median " + " ".join(f"{b} {row[f'{h}_{b}_median_s']:4.1f} s" for b in bots)
+              + f"  std {row['std']}", flush=True)
 
     print(f"PPO: {updates} updates of {worlds} worlds x {ENV['robots']} robots x {T} steps "
           f"({n_entries * T:,} samples) on {', '.join(maps)}; held out: {args.held_out}; "
@@ -537,14 +548,18 @@ def main() -> None:
     ax.set_xlabel("environment steps (one world, both robots acting, 4 ticks)")
     ax.set_ylabel("mean return, held-out seeds")
     ax.legend(fontsize=8)
-    ax2.plot(x, [100 * c[f"{h}_captured"] for c in curve], marker="o", label=f"{h} (held-out map)")
+    for b in bots:
+        ax2.plot(x, [c[f"{h}_{b}_median_s"] for c in curve], marker="o",
+                 label=f"{h} (held-out map), {b}")
     for m in maps:
-        ax2.plot(x, [100 * c[f"{m}_captured"] for c in curve], marker=".", alpha=0.7, label=m)
+        for b in bots:
+            ax2.plot(x, [c[f"{m}_{b}_median_s"] for c in curve], marker=".", alpha=0.6,
+                     label=f"{m}, {b}")
     ax2.set_xlabel("environment steps")
-    ax2.set_ylabel(f"captured within {LIMIT_S:.0f} s (%)")
-    ax2.set_ylim(-2, 102)
-    ax2.legend(fontsize=8)
-    fig.suptitle(f"PPO, shared 2x{args.hidden} tanh policy: 2 robots v 1 {args.bot} bot; "
+    ax2.set_ylabel(f"median capture time, s (a miss counts {LIMIT_S:.0f} s)")
+    ax2.set_ylim(0, LIMIT_S + 2)
+    ax2.legend(fontsize=7, ncol=2)
+    fig.suptitle(f"PPO, shared 2x{args.hidden} tanh policy: 2 robots v 1 bot ({', '.join(bots)}); "
                  f"trained on {', '.join(maps)}", fontsize=10)
     fig.tight_layout()
     fig.savefig(os.path.join(args.out, "learning_curve.png"))
@@ -555,37 +570,40 @@ def main() -> None:
     names = ["learned", "baseline", "coordinated"]
     times = {}
     for m in all_maps:
-        times[m] = {"learned": play(m, eval_seeds, args.bot, actor)["time"],
-                    "baseline": play(m, eval_seeds, args.bot, planner="baseline")["time"],
-                    "coordinated": play(m, eval_seeds, args.bot, planner="coordinated")["time"]}
+        for b in bots:
+            times[m, b] = {
+                "learned": play(m, eval_seeds, b, actor)["time"],
+                "baseline": play(m, eval_seeds, b, planner="baseline")["time"],
+                "coordinated": play(m, eval_seeds, b, planner="coordinated")["time"]}
     with open(os.path.join(args.out, "capture_times.csv"), "w", newline="") as f:
         w = csv.writer(f)
-        w.writerow(["map", "held_out", "seed", *names])
-        for m in all_maps:
+        w.writerow(["map", "bot", "held_out", "seed", *names])
+        for (m, b), t in times.items():
             for i, s in enumerate(eval_seeds):
-                w.writerow([m, int(m == h), s, *(f"{times[m][k][i]:.1f}"
-                                                 if np.isfinite(times[m][k][i]) else "" for k in names)])
+                w.writerow([m, b, int(m == h), s, *(f"{t[k][i]:.1f}" if np.isfinite(t[k][i])
+                                                    else "" for k in names)])
     summary = {}
-    print(f"\ncapture times on {len(eval_seeds)} fixed seeds per map ({EVAL_SEED}-"
+    print(f"\ncapture times on {len(eval_seeds)} fixed seeds per map and bot ({EVAL_SEED}-"
           f"{EVAL_SEED + len(eval_seeds) - 1}), {LIMIT_S:.0f} s limit; medians count a capture not "
           f"made as the limit; p: two-sided Wilcoxon signed-rank, learned v planner, per seed")
-    print(f"{'map':18} {'learned':>16} {'baseline':>16} {'coordinated':>16} {'L/B':>5} "
+    print(f"{'map':18} {'bot':7} {'learned':>16} {'baseline':>16} {'coordinated':>16} {'L/B':>5} "
           f"{'p':>8} {'L/C':>5} {'p':>8}")
-    for m in all_maps:
-        capped = {k: np.minimum(times[m][k], LIMIT_S) for k in names}
+    for (m, b), t in times.items():
+        capped = {k: np.minimum(t[k], LIMIT_S) for k in names}
         med = {k: float(np.median(capped[k])) for k in names}
-        cap = {k: float(np.isfinite(times[m][k]).mean()) for k in names}
+        cap = {k: float(np.isfinite(t[k]).mean()) for k in names}
         pb, _ = wilcoxon(capped["learned"], capped["baseline"])
         pc, _ = wilcoxon(capped["learned"], capped["coordinated"])
-        summary[m] = {"held_out": m == h, "median_s": med, "captured": cap,
-                      "ratio_baseline": med["learned"] / med["baseline"],
-                      "ratio_coordinated": med["learned"] / med["coordinated"],
-                      "p_baseline": pb, "p_coordinated": pc}
+        summary[f"{m}/{b}"] = {"held_out": m == h, "median_s": med, "captured": cap,
+                               "ratio_baseline": med["learned"] / med["baseline"],
+                               "ratio_coordinated": med["learned"] / med["coordinated"],
+                               "p_baseline": pb, "p_coordinated": pc}
         cell = {k: f"{cap[k]:4.0%} {med[k]:5.1f} s" for k in names}
         label = m + (" (held out)" if m == h else "")
-        print(f"{label:18} {cell['learned']:>16} {cell['baseline']:>16} {cell['coordinated']:>16} "
-              f"{summary[m]['ratio_baseline']:5.2f} {pb:8.2g} {summary[m]['ratio_coordinated']:5.2f} "
-              f"{pc:8.2g}")
+        r = summary[f"{m}/{b}"]
+        print(f"{label:18} {b:7} {cell['learned']:>16} {cell['baseline']:>16} "
+              f"{cell['coordinated']:>16} {r['ratio_baseline']:5.2f} {pb:8.2g} "
+              f"{r['ratio_coordinated']:5.2f} {pc:8.2g}")
     try:
         rev = subprocess.run(["git", "log", "-1", "--format=%H", "--", __file__],
                              capture_output=True, text=True, cwd=os.path.dirname(os.path.abspath(__file__))).stdout.strip()

@@ -29,6 +29,10 @@ part             length       values
                               8 sectors of 45° counter-clockwise from straight ahead nearer
                               than 4 m, then the same 8 farther out (sums to 1 while any is
                               believed untagged)
+``belief_paths`` 8            the same mass by the way to walk to it: of the belief within
+                              6 m of travel, the expected share of the untagged opponents
+                              in each of the 8 sectors of the point 1 m along the shortest
+                              path to it (through doors, around walls; sums to at most 1)
 ``roles``        7 × 2        the 2 untagged roles with the nearest means, nearest first:
                               present, count / opponents, ahead / 10 m, left / 10 m (clipped
                               to [-1, 1]), spread / 5 m, confidence (decays with the time
@@ -36,8 +40,8 @@ part             length       values
 ``untagged``     1            the share of the opponents believed untagged
 ===============  ===========  =================================================================
 
-R robots and K detection slots give 189 + 3K + 9(R - 1) + 31 values with the default
-rules (2 robots, 1 slot: 232).
+R robots and K detection slots give 189 + 3K + 9(R - 1) + 39 values with the default
+rules (2 robots, 1 slot: 240).
 
 Everything comes from what the robot knows (its observation), never from ground truth.
 The belief parts are the observation's ``belief`` object as the server computed it from the
@@ -100,6 +104,7 @@ class ObservationLayout:
             ("detections", 3 * detections, -1.0, 1.0),
             ("teammates", _MATE * (robots - 1), -1.0, 1.0),
             ("belief_grid", 16, 0.0, 1.0),
+            ("belief_paths", 8, 0.0, 1.0),
             ("roles", 7 * _ROLE_SLOTS, -1.0, 1.0),
             ("untagged", 1, 0.0, 1.0),
         ]
@@ -224,6 +229,7 @@ class ObservationLayout:
             tail += mates
         belief = obs["belief"]
         tail += belief["grid"]
+        tail += belief["paths"]
         for role in belief["roles"]:
             tail += role
         tail.append(belief["untagged"])

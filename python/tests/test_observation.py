@@ -36,6 +36,7 @@ def observations(rng, robots):
                            "goal": [3.0, 4.0] if j == 0 else None}
                           for j in range(robots) if j != i],
             "belief": {"grid": rng.dirichlet(np.ones(16)).round(4).tolist(),
+                       "paths": (0.5 * rng.dirichlet(np.ones(8))).round(4).tolist(),
                        "roles": rng.uniform(-1, 1, (2, 7)).round(4).tolist(),
                        "untagged": 0.5},
         })

@@ -165,7 +165,7 @@ def test_observations_fit_the_space_and_layout(make_env):
     assert env.possible_agents == ["r0", "r1", "r2"]
     obs, infos = env.reset(seed=4)
     space = env.observation_space("r1")
-    assert space.shape == (181 + 4 + 1 + 2 + 1 + 3 * 2 + 9 * 2 + 16 + 7 * 2 + 1,)
+    assert space.shape == (181 + 4 + 1 + 2 + 1 + 3 * 2 + 9 * 2 + 16 + 8 + 7 * 2 + 1,)
     assert env.observation_space("r1") is space
     parts = env.layout.decode(obs["r1"])
     raw = infos["r1"]["observation"]
@@ -175,6 +175,10 @@ def test_observations_fit_the_space_and_layout(make_env):
     mates = parts["teammates"].reshape(2, 9)
     assert mates[:, 0].tolist() == [1.0, 1.0]
     assert mates[0, 1] == pytest.approx(infos["r0"]["observation"]["estimate"]["x"] / 24.0, abs=1e-3)
+    # The belief's parts are the server's, copied as they are.
+    belief = raw["belief"]
+    assert parts["belief_paths"].tolist() == pytest.approx(belief["paths"], abs=1e-6)
+    assert sum(belief["paths"]) <= sum(belief["grid"]) + 1e-3
     for _ in range(30):
         obs, *_ = env.step({a: env.action_space(a).sample() for a in env.agents})
         for a in obs:

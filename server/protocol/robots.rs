@@ -189,6 +189,10 @@ pub struct BeliefFeaturesDto {
     /// grid: 8 bearing sectors of 45° counter-clockwise from straight ahead, nearer than
     /// 4 m, then the same 8 farther out. Sums to 1 while any opponent is believed untagged.
     pub grid: Vec<f64>,
+    /// The same mass by the way to walk to it: of the belief within 6 m of travel, the
+    /// expected share of the untagged opponents in each of the 8 sectors (as the grid's) of
+    /// the point 1 m along the shortest path to it. Sums to at most 1.
+    pub paths: Vec<f64>,
     /// The 2 untagged roles whose means are nearest, nearest first, each `[present, count /
     /// opponents, ahead / 10 m, left / 10 m, spread / 5 m, confidence, ticks looked at in
     /// vain / 100]` (all 0 for an empty slot).
@@ -322,6 +326,7 @@ pub fn observation(o: &RobotObservation) -> Observation {
             .collect(),
         belief: BeliefFeaturesDto {
             grid: o.belief.grid.to_vec(),
+            paths: o.belief.paths.to_vec(),
             roles: o.belief.roles.iter().map(|r| r.to_vec()).collect(),
             untagged: o.belief.untagged,
         },
