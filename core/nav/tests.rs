@@ -1,3 +1,6 @@
+//! Shortest paths on small arenas: through doors, in straight legs, within a reach, around
+//! discs, and the waypoint where a path sets off.
+
 use super::*;
 use crate::sim::arena::{Arena, MapDef};
 
@@ -216,4 +219,25 @@ fn a_bounded_search_finds_the_full_searchs_path_or_gives_up() {
         path_within(g, Point2::new(1.0, 1.0), goal, &mut work),
         Err(OverBudget)
     );
+}
+
+#[test]
+fn a_waypoint_ahead_is_where_the_path_sets_off() {
+    let a = two_rooms();
+    let g = &a.grid;
+    let from = Point2::new(1.0, 1.0);
+    let f = DistanceField::from_point(g, from).unwrap();
+    let mut memo = vec![u32::MAX; g.len()];
+    // Beyond the wall: the first metre of the way leads toward the door, on that way.
+    let far = g.cell_of(Point2::new(9.0, 1.0)).unwrap();
+    let way = f.waypoint_ahead(far, 1.0, &mut memo);
+    assert!(f.dist[way] > 1.0 && f.dist[f.prev[way] as usize] <= 1.0);
+    assert!(f.cells_to(far).unwrap().contains(&way));
+    // Asked again (from the memo) and for a cell on the same way: the same answer.
+    assert_eq!(f.waypoint_ahead(far, 1.0, &mut memo), way);
+    let on_the_way = f.cells_to(far).unwrap()[30];
+    assert_eq!(f.waypoint_ahead(on_the_way, 1.0, &mut memo), way);
+    // A cell nearer than the metre is its own waypoint.
+    let near = g.cell_of(Point2::new(1.5, 1.0)).unwrap();
+    assert_eq!(f.waypoint_ahead(near, 1.0, &mut memo), near);
 }
