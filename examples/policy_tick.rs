@@ -70,7 +70,7 @@ fn main() {
             Difficulty::Learned.apply(&mut config);
             config.time_limit_ticks = args.seconds * 20;
             let price = admission::match_on(&map.arena.def, &config)
-                + admission::policy(&config, inference_us, DEFAULT_EVERY);
+                + admission::policy(&map.arena.def, &config, inference_us, DEFAULT_EVERY);
             let mut world = World::new(map.arena.clone(), config).expect("the match starts");
             let mut team = TeamPolicy::new(
                 policy.clone(),

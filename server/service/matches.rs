@@ -139,13 +139,20 @@ pub async fn create<R>(
             .map
             .as_str()
             .is_some_and(|m| lasertag_core::difficulty::Difficulty::MEASURED_ON.contains(&m));
-    let policy_price = policy_fits(service, &req.config)?;
+    let policy = policy_fits(service, &req.config)?;
     let source = map_source(service, req.map).await?;
-    let price = policy_price
-        + admission::held_back(&req.config, req.spectator_delay_ticks)
+    let def = match &source {
+        MapSource::Stored(arena) => &arena.def,
+        MapSource::Inline(def) => def,
+    };
+    let price = admission::held_back(&req.config, req.spectator_delay_ticks)
+        + admission::match_on(def, &req.config)
+        + policy.map_or_else(admission::Price::default, |(inference_us, every)| {
+            admission::policy(def, &req.config, inference_us, every)
+        })
         + match &source {
-            MapSource::Stored(arena) => admission::match_on(&arena.def, &req.config),
-            MapSource::Inline(def) => admission::map(def) + admission::match_on(def, &req.config),
+            MapSource::Stored(_) => admission::Price::default(),
+            MapSource::Inline(def) => admission::map(def),
         };
     within_request_limits(registry, "the match", price)?;
     registry.has_budget(price, client)?;
@@ -196,14 +203,15 @@ pub async fn create<R>(
     })))
 }
 
-/// The price of the trained policy that drives the team, if any: refused when the server
-/// holds no policy of that name or its sizes do not fit the team.
+/// What the price of the trained policy that drives the team, if any, depends on: its
+/// inference's microseconds and ticks between decisions. Refused when the server holds no
+/// policy of that name or its sizes do not fit the team.
 fn policy_fits(
     service: Service<'_>,
     config: &lasertag_core::world::MatchConfig,
-) -> Result<admission::Price, CreateError> {
+) -> Result<Option<(f64, u64)>, CreateError> {
     let Some(name) = config.policy.as_deref() else {
-        return Ok(admission::Price::default());
+        return Ok(None);
     };
     let store = service
         .registry
@@ -219,7 +227,7 @@ fn policy_fits(
             why: e.to_string(),
         }
     })?;
-    Ok(admission::policy(config, stored.inference_us, stored.every))
+    Ok(Some((stored.inference_us, stored.every)))
 }
 
 /// Refuses more agents, or more particles, than this server takes in one match.
