@@ -53,16 +53,7 @@ impl DistanceField {
         reach: f32,
     ) -> Option<DistanceField> {
         let start = start_cell(grid, from)?;
-        let scale = grid.cell / STRAIGHT as f32;
-        // The most travel units whose distance in metres is within `reach` (the distances
-        // are `units × scale` in f32, which grows with the units: one unit more is past it).
-        let mut limit = (reach / scale).max(0.0).floor().min(u32::MAX as f32 / 2.0) as u32;
-        while limit > 0 && limit as f32 * scale > reach {
-            limit -= 1;
-        }
-        while ((limit + 1) as f32 * scale) <= reach {
-            limit += 1;
-        }
+        let limit = units_within(reach, grid.cell / STRAIGHT as f32);
         Some(DistanceField::search(
             grid,
             start,
@@ -133,8 +124,7 @@ impl DistanceField {
         limit: u32,
         watch: &mut impl Watch,
     ) -> DistanceField {
-        let (units, prev) = match dial(grid, start, open, None, limit, &mut u64::MAX.clone(), watch)
-        {
+        let (units, prev) = match dial(start, open, None, limit, &mut u64::MAX.clone(), watch) {
             Ok(search) | Err(Exhausted(search)) => search,
         };
         let scale = grid.cell / STRAIGHT as f32;
@@ -204,34 +194,6 @@ impl DistanceField {
         out
     }
 
-    /// The cell where the shortest path from the start to `cell` first runs more than
-    /// `ahead` metres from the start (`cell` itself when it is no farther): the way to set
-    /// off toward `cell`. `memo` (one entry per grid cell, `u32::MAX` for unknown) keeps
-    /// the answers, so asking for many cells costs about one pass over the tree.
-    pub fn waypoint_ahead(&self, cell: usize, ahead: f32, memo: &mut [u32]) -> usize {
-        let mut stack = Vec::new();
-        let mut at = cell;
-        let key = loop {
-            if memo[at] != u32::MAX {
-                break memo[at] as usize;
-            }
-            if at == self.start || self.dist[at] <= ahead {
-                break at;
-            }
-            let before = self.prev[at] as usize;
-            if self.dist[before] <= ahead {
-                break at;
-            }
-            stack.push(at);
-            at = before;
-        };
-        memo[at] = key as u32;
-        for c in stack {
-            memo[c] = key as u32;
-        }
-        key
-    }
-
     /// A smoothed path of waypoints from `from` to the centre of `goal`.
     pub fn path_to(
         &self,
@@ -245,6 +207,137 @@ impl DistanceField {
         pts.extend(cells.iter().map(|&c| grid.centre(c)));
         Some(smooth(grid, &pts))
     }
+}
+
+/// The travel distances from a point out to a reach, as [`DistanceField::from_point_within`]
+/// gives them, searched over only the window of the grid that the reach can touch: its
+/// tables are the window's (a few thousand cells), not the map's, so many small searches on
+/// a large map cost what they settle. Every cell within the reach has the whole field's
+/// distance and predecessor: the window holds every path that short, and the search visits
+/// its cells in the whole field's order.
+#[derive(Debug, Clone)]
+pub struct ReachField {
+    /// The window's first column and row in the grid, and its columns.
+    col0: usize,
+    row0: usize,
+    cols: usize,
+    /// The grid's columns.
+    grid_cols: usize,
+    /// The start, as a window cell.
+    start: usize,
+    /// Travel units and predecessors of the window's cells.
+    units: Vec<u32>,
+    prev: Vec<u32>,
+    /// The most units within the reach, and metres a unit.
+    limit: u32,
+    scale: f32,
+}
+
+impl ReachField {
+    /// The field from the passable cell nearest to `from` out to `reach` metres; `None` when
+    /// no passable cell is near.
+    pub fn new(grid: &ClearanceGrid, from: Point2<f32>, reach: f32) -> Option<ReachField> {
+        let start = start_cell(grid, from)?;
+        let scale = grid.cell / STRAIGHT as f32;
+        let limit = units_within(reach, scale);
+        // A step moves one row or column at most and costs at least STRAIGHT units: no cell
+        // farther than this many rows or columns is within the limit.
+        let span = (limit / STRAIGHT) as usize;
+        let (sc, sr) = (start % grid.cols, start / grid.cols);
+        let (col0, row0) = (sc.saturating_sub(span), sr.saturating_sub(span));
+        let cols = (sc + span).min(grid.cols - 1) - col0 + 1;
+        let rows = (sr + span).min(grid.rows - 1) - row0 + 1;
+        let open = OpenCells::window(grid, col0, row0, cols, rows);
+        let local = (sr - row0) * cols + (sc - col0);
+        let (units, prev) = match dial(
+            local,
+            &open,
+            None,
+            limit,
+            &mut u64::MAX.clone(),
+            &mut Unwatched,
+        ) {
+            Ok(search) | Err(Exhausted(search)) => search,
+        };
+        Some(ReachField {
+            col0,
+            row0,
+            cols,
+            grid_cols: grid.cols,
+            start: local,
+            units,
+            prev,
+            limit,
+            scale,
+        })
+    }
+
+    /// Cells of the window: the length a [`ReachField::waypoint_ahead`] memo needs.
+    pub fn window_len(&self) -> usize {
+        self.units.len()
+    }
+
+    /// The window cell of grid cell `cell`, if the window holds it.
+    fn local(&self, cell: usize) -> Option<usize> {
+        let (c, r) = (cell % self.grid_cols, cell / self.grid_cols);
+        let (c, r) = (c.checked_sub(self.col0)?, r.checked_sub(self.row0)?);
+        (c < self.cols && r * self.cols + c < self.units.len()).then_some(r * self.cols + c)
+    }
+
+    /// The grid cell of window cell `local`.
+    fn global(&self, local: usize) -> usize {
+        (self.row0 + local / self.cols) * self.grid_cols + self.col0 + local % self.cols
+    }
+
+    /// Metres of travel to grid cell `cell`, when it is within the reach.
+    pub fn metres(&self, cell: usize) -> Option<f32> {
+        let u = self.units[self.local(cell)?];
+        (u <= self.limit).then_some(u as f32 * self.scale)
+    }
+
+    /// For grid cell `cell` within the reach, the grid cell where its shortest path from the
+    /// start first runs more than `ahead` metres from the start (`cell` itself when it is no
+    /// farther): the way to set off toward `cell`. `memo` ([`ReachField::window_len`]
+    /// entries, `u32::MAX` for unknown) keeps the answers, so asking for many cells costs
+    /// about one pass over the tree.
+    pub fn waypoint_ahead(&self, cell: usize, ahead: f32, memo: &mut [u32]) -> Option<usize> {
+        self.metres(cell)?;
+        let metres = |c: usize| self.units[c] as f32 * self.scale;
+        let mut stack = Vec::new();
+        let mut at = self.local(cell)?;
+        let key = loop {
+            if memo[at] != u32::MAX {
+                break memo[at] as usize;
+            }
+            if at == self.start || metres(at) <= ahead {
+                break at;
+            }
+            let before = self.prev[at] as usize;
+            if metres(before) <= ahead {
+                break at;
+            }
+            stack.push(at);
+            at = before;
+        };
+        memo[at] = key as u32;
+        for c in stack {
+            memo[c] = key as u32;
+        }
+        Some(self.global(key))
+    }
+}
+
+/// The most travel units whose distance in metres (`units × scale` in f32) is within
+/// `reach`: one unit more is past it.
+fn units_within(reach: f32, scale: f32) -> u32 {
+    let mut limit = (reach / scale).max(0.0).floor().min(u32::MAX as f32 / 2.0) as u32;
+    while limit > 0 && limit as f32 * scale > reach {
+        limit -= 1;
+    }
+    while ((limit + 1) as f32 * scale) <= reach {
+        limit += 1;
+    }
+    limit
 }
 
 /// Units of [`path_within`]'s work that setting a search up over a grid of `cells` takes
@@ -281,16 +374,8 @@ pub fn path_within(
     };
     charge(work, search_setup_work(grid.len()))?;
     let open = OpenCells::new(grid, &[]);
-    let (units, prev) = dial(
-        grid,
-        start,
-        &open,
-        Some(goal),
-        u32::MAX,
-        work,
-        &mut Unwatched,
-    )
-    .map_err(|_| OverBudget)?;
+    let (units, prev) =
+        dial(start, &open, Some(goal), u32::MAX, work, &mut Unwatched).map_err(|_| OverBudget)?;
     if units.get(goal).is_none_or(|&u| u == u32::MAX) {
         return Ok(None);
     }

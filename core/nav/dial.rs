@@ -41,6 +41,35 @@ impl OpenCells {
         cells
     }
 
+    /// The passable cells of a window of `grid`, `cols` × `rows` cells from column `col0`
+    /// and row `row0`, with a closed border around the window: a search in it indexes
+    /// cells by the window's rows and columns and never leaves it.
+    pub(super) fn window(
+        grid: &ClearanceGrid,
+        col0: usize,
+        row0: usize,
+        cols: usize,
+        rows: usize,
+    ) -> OpenCells {
+        let stride = cols + 2;
+        let whole = grid.passable_bordered();
+        let whole_stride = grid.cols + 2;
+        let mut open = vec![false; stride * (rows + 2)];
+        for r in 0..rows {
+            let from = (row0 + r + 1) * whole_stride + col0 + 1;
+            let to = (r + 1) * stride + 1;
+            open[to..to + cols].copy_from_slice(&whole[from..from + cols]);
+        }
+        OpenCells { stride, open }
+    }
+
+    /// Columns and cells of the grid (or window) the table covers.
+    fn shape(&self) -> (usize, usize) {
+        let cols = self.stride - 2;
+        let rows = self.open.len() / self.stride - 2;
+        (cols, cols * rows)
+    }
+
     /// Closes the cells whose centre lies inside the disc: those of its bounding box (a cell
     /// wider on each side, against rounding) that fail `|centre − p|² ≥ radius²`. Only the
     /// box is tested: no centre outside it can pass.
@@ -96,14 +125,13 @@ impl Watch for Unwatched {
     }
 }
 
-/// Dial's algorithm from `start` over the `open` cells. With a `goal` it stops once the goal
+/// Dial's algorithm from `start` over the `open` cells (of the grid, or of a window of it). With a `goal` it stops once the goal
 /// is settled: every cell on the goal's shortest path was settled before it, and a cell's
 /// predecessor changes only on a strictly shorter way, so the path is the one a full search
 /// finds. Each settled cell takes one unit of `work`; none left, it gives up. It also stops
 /// once every cell within `limit` units is settled: those have their final units, and every
 /// other cell holds `u32::MAX` or more than `limit`; and where `watch` says so.
 pub(super) fn dial<W: Watch>(
-    grid: &ClearanceGrid,
     start: usize,
     open: &OpenCells,
     goal: Option<usize>,
@@ -112,8 +140,7 @@ pub(super) fn dial<W: Watch>(
     watch: &mut W,
 ) -> Result<Search, Exhausted> {
     const RING: usize = DIAGONAL as usize + 1;
-    let n = grid.len();
-    let cols = grid.cols;
+    let (cols, n) = open.shape();
     let stride = open.stride;
     let open = &open.open[..];
     let mut units = vec![u32::MAX; n];

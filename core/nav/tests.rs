@@ -221,23 +221,75 @@ fn a_bounded_search_finds_the_full_searchs_path_or_gives_up() {
     );
 }
 
+/// Where the shortest path to `cell` in `f` first runs more than `ahead` metres from the
+/// start, by walking its predecessors (what [`ReachField::waypoint_ahead`] answers).
+fn waypoint_by_walking(f: &DistanceField, cell: usize, ahead: f32) -> usize {
+    let mut at = cell;
+    while at != f.start && f.dist[f.prev[at] as usize] > ahead {
+        at = f.prev[at] as usize;
+    }
+    at
+}
+
+#[test]
+fn a_reach_field_is_the_whole_fields_inside_its_reach() {
+    let rooms = two_rooms();
+    // Smaller than the reach every way: the window is the grid.
+    let tight = Arena::new(MapDef {
+        name: "small".into(),
+        width: 7.0,
+        height: 3.0,
+        obstacles: vec![],
+        robot_spawns: vec![[1.0, 1.0, 0.0]],
+        opponent_spawns: vec![Point2::new(6.0, 2.0)],
+        landmarks: vec![],
+    });
+    for (a, from, reach) in [
+        (&rooms, Point2::new(1.0, 1.0), 6.0),
+        (&rooms, Point2::new(4.2, 2.0), 6.0),
+        (&rooms, Point2::new(5.6, 4.6), 3.5),
+        (&rooms, Point2::new(9.7, 5.7), 20.0),
+        (&tight, Point2::new(3.5, 1.5), 6.0),
+    ] {
+        let g = &a.grid;
+        let whole = DistanceField::from_point_within(g, from, reach).unwrap();
+        let near = ReachField::new(g, from, reach).unwrap();
+        let mut memo = vec![u32::MAX; near.window_len()];
+        let mut within = 0;
+        for cell in 0..g.len() {
+            let d = whole.dist[cell];
+            let expected = (d <= reach).then_some(d);
+            assert_eq!(near.metres(cell), expected, "cell {cell} from {from:?}");
+            let way = near.waypoint_ahead(cell, 1.0, &mut memo);
+            if expected.is_some() {
+                within += 1;
+                assert_eq!(way, Some(waypoint_by_walking(&whole, cell, 1.0)));
+            } else {
+                assert_eq!(way, None);
+            }
+        }
+        assert!(within > 100, "{within} cells within {reach} m of {from:?}");
+    }
+}
+
 #[test]
 fn a_waypoint_ahead_is_where_the_path_sets_off() {
     let a = two_rooms();
     let g = &a.grid;
     let from = Point2::new(1.0, 1.0);
-    let f = DistanceField::from_point(g, from).unwrap();
-    let mut memo = vec![u32::MAX; g.len()];
+    let f = ReachField::new(g, from, 20.0).unwrap();
+    let whole = DistanceField::from_point(g, from).unwrap();
+    let mut memo = vec![u32::MAX; f.window_len()];
     // Beyond the wall: the first metre of the way leads toward the door, on that way.
     let far = g.cell_of(Point2::new(9.0, 1.0)).unwrap();
-    let way = f.waypoint_ahead(far, 1.0, &mut memo);
-    assert!(f.dist[way] > 1.0 && f.dist[f.prev[way] as usize] <= 1.0);
-    assert!(f.cells_to(far).unwrap().contains(&way));
+    let way = f.waypoint_ahead(far, 1.0, &mut memo).unwrap();
+    assert!(whole.dist[way] > 1.0 && whole.dist[whole.prev[way] as usize] <= 1.0);
+    assert!(whole.cells_to(far).unwrap().contains(&way));
     // Asked again (from the memo) and for a cell on the same way: the same answer.
-    assert_eq!(f.waypoint_ahead(far, 1.0, &mut memo), way);
-    let on_the_way = f.cells_to(far).unwrap()[30];
-    assert_eq!(f.waypoint_ahead(on_the_way, 1.0, &mut memo), way);
+    assert_eq!(f.waypoint_ahead(far, 1.0, &mut memo), Some(way));
+    let on_the_way = whole.cells_to(far).unwrap()[30];
+    assert_eq!(f.waypoint_ahead(on_the_way, 1.0, &mut memo), Some(way));
     // A cell nearer than the metre is its own waypoint.
     let near = g.cell_of(Point2::new(1.5, 1.0)).unwrap();
-    assert_eq!(f.waypoint_ahead(near, 1.0, &mut memo), near);
+    assert_eq!(f.waypoint_ahead(near, 1.0, &mut memo), Some(near));
 }

@@ -21,7 +21,7 @@
 
 use nalgebra::{Point2, Vector2};
 
-use crate::nav::DistanceField;
+use crate::nav::ReachField;
 use crate::sim::Pose;
 use crate::sim::arena::ClearanceGrid;
 use crate::tracker::Role;
@@ -162,18 +162,14 @@ impl BeliefFeatures {
 /// [`PATH_REACH_M`] from its estimate, and the waypoints found so far.
 struct Ways<'a> {
     nav: &'a ClearanceGrid,
-    field: Option<DistanceField>,
+    field: Option<ReachField>,
     memo: Vec<u32>,
 }
 
 impl<'a> Ways<'a> {
     fn new(nav: &'a ClearanceGrid, from: Point2<f32>) -> Ways<'a> {
-        let field = DistanceField::from_point_within(nav, from, PATH_REACH_M);
-        let memo = if field.is_some() {
-            vec![u32::MAX; nav.len()]
-        } else {
-            Vec::new()
-        };
+        let field = ReachField::new(nav, from, PATH_REACH_M);
+        let memo = vec![u32::MAX; field.as_ref().map_or(0, ReachField::window_len)];
         Ways { nav, field, memo }
     }
 
@@ -182,10 +178,7 @@ impl<'a> Ways<'a> {
     fn toward(&mut self, p: Point2<f32>) -> Option<Point2<f32>> {
         let field = self.field.as_ref()?;
         let cell = self.nav.cell_of(p)?;
-        if field.dist[cell] > PATH_REACH_M {
-            return None;
-        }
-        let way = field.waypoint_ahead(cell, PATH_AHEAD_M, &mut self.memo);
+        let way = field.waypoint_ahead(cell, PATH_AHEAD_M, &mut self.memo)?;
         Some(self.nav.centre(way))
     }
 }

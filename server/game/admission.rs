@@ -309,13 +309,13 @@ pub fn match_on(def: &MapDef, config: &MatchConfig) -> Price {
 const POLICY_OBSERVATION_US: f64 = 4.0;
 /// Microseconds per particle of the robot's tracker that its belief features read.
 const POLICY_OBSERVATION_US_PER_PARTICLE: f64 = 0.012;
-/// Microseconds per grid cell of the map for the belief's sorting by the way to it: the
-/// search's tables and the waypoints' memo span the whole grid, though it settles only the
-/// cells within reach (those cost `S_PER_FIELD_CELL` each). A conservative fit of
-/// `examples/policy_tick.rs` (docs/performance.md, "Trained policies"): the whole observation
-/// took 218 µs on `office` (38,400 cells) and 346 µs on `warehouse` (60,000), where this
-/// prices 340 and 426.
-const POLICY_OBSERVATION_US_PER_GRID_CELL: f64 = 0.004;
+/// Microseconds per cell of the window the belief's sorting by the way to it searches in
+/// (the grid's cells within its reach in rows and columns: the search's tables and the
+/// waypoints' memo), besides the cells it settles within the reach (`S_PER_FIELD_CELL`
+/// each). A conservative fit of `examples/policy_tick.rs` (docs/performance.md, "Trained
+/// policies"): the whole observation took 124 µs on `office` and 140 µs on `warehouse`,
+/// where this prices 201 µs on each.
+const POLICY_OBSERVATION_US_PER_WINDOW_CELL: f64 = 0.001;
 
 /// What a trained policy adds to a match with `config` on a map of `def`'s size (see
 /// `game::policies`): every robot's observation and one inference (`inference_us`, timed
@@ -324,12 +324,14 @@ pub fn policy(def: &MapDef, config: &MatchConfig, inference_us: f64, every: u64)
     use lasertag_core::tracker::features::PATH_REACH_M;
     let (cell, cols, rows) = ClearanceGrid::shape(def.width, def.height);
     let cells = (cols * rows) as f64;
+    let span = 2 * (PATH_REACH_M / cell).floor() as usize + 1;
+    let window = (cols.min(span) * rows.min(span)) as f64;
     let within_reach = (std::f64::consts::PI * (PATH_REACH_M / cell).powi(2) as f64).min(cells);
     let robots = config.robots as f64;
     let copies_particles = config.tracker.particles_per_role as f64 * config.opponents as f64;
     let observation_us = POLICY_OBSERVATION_US
         + copies_particles * POLICY_OBSERVATION_US_PER_PARTICLE
-        + cells * POLICY_OBSERVATION_US_PER_GRID_CELL
+        + window * POLICY_OBSERVATION_US_PER_WINDOW_CELL
         + within_reach * S_PER_FIELD_CELL * 1e6;
     Price {
         tick_ms: robots * (observation_us + inference_us) / every.max(1) as f64 / 1000.0,
