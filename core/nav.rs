@@ -303,8 +303,8 @@ impl ReachField {
     pub fn waypoint_ahead(&self, cell: usize, ahead: f32, memo: &mut [u32]) -> Option<usize> {
         self.metres(cell)?;
         let metres = |c: usize| self.units[c] as f32 * self.scale;
-        let mut stack = Vec::new();
-        let mut at = self.local(cell)?;
+        let first = self.local(cell)?;
+        let mut at = first;
         let key = loop {
             if memo[at] != u32::MAX {
                 break memo[at] as usize;
@@ -316,13 +316,16 @@ impl ReachField {
             if metres(before) <= ahead {
                 break at;
             }
-            stack.push(at);
             at = before;
         };
-        memo[at] = key as u32;
-        for c in stack {
+        // The same walk again, to note the answer on every cell it passed (no list of them
+        // to allocate: this runs for each particle of the belief).
+        let mut c = first;
+        while c != at {
             memo[c] = key as u32;
+            c = self.prev[c] as usize;
         }
+        memo[at] = key as u32;
         Some(self.global(key))
     }
 }
