@@ -289,6 +289,18 @@ pub async fn serve(
     limits: ConnectionLimits,
     shutdown: impl Future<Output = ()> + Send + 'static,
 ) -> std::io::Result<()> {
+    serve_until(listener, app, limits, Box::pin(shutdown)).await
+}
+
+/// [`serve`] with its signal boxed: not generic, so the accept loop and hyper's connection
+/// machinery under it (for plain and TLS streams) are compiled once, in this library, and
+/// not again in every crate that serves (the binary's last step of a clean build).
+async fn serve_until(
+    listener: TcpListener,
+    app: Router,
+    limits: ConnectionLimits,
+    mut shutdown: Pin<Box<dyn Future<Output = ()> + Send>>,
+) -> std::io::Result<()> {
     let permits = Arc::new(Semaphore::new(limits.max_connections));
     let per_address = Arc::<PerAddress>::default();
     // Dropped to tell connections to shut down gracefully; `closed_rx` counts them.
@@ -298,7 +310,6 @@ pub async fn serve(
     builder
         .timer(TokioTimer::new())
         .header_read_timeout(limits.header_read_timeout);
-    tokio::pin!(shutdown);
     loop {
         let permit = tokio::select! {
             permit = permits.clone().acquire_owned() => match permit {
