@@ -311,7 +311,7 @@ fn write(study: &Capture, runs: Vec<Run>, out: &Path) -> Result<String, LabError
     let limit = cfg.time_limit_s as f64;
     let mut csv = String::from("map,bot,planner,seed,captured,time_s,first_seen_s\n");
     let mut summary = format!(
-        "map,bot,planner,runs,captured,median_s,mean_s,mean_ci95_low_s,mean_ci95_high_s,median_ratio_vs_baseline,mann_whitney_p,{},mean_gospa_ci95_m,median_ratio_vs_coordinated,mann_whitney_p_vs_coordinated,median_first_seen_s,median_chase_s,wilcoxon_p_vs_coordinated\n",
+        "map,bot,planner,runs,captured,median_s,mean_s,mean_ci95_low_s,mean_ci95_high_s,median_ratio_vs_baseline,mann_whitney_p,{},mean_gospa_ci95_m,median_ratio_vs_coordinated,mann_whitney_p_vs_coordinated,median_first_seen_s,median_chase_s,wilcoxon_p_vs_coordinated,wilcoxon_p_vs_baseline\n",
         tracking::csv_header("mean_")
     );
     let mut table = format!(
@@ -402,9 +402,10 @@ fn write(study: &Capture, runs: Vec<Run>, out: &Path) -> Result<String, LabError
                 let greedy_pv = mann_whitney_p(&as_values(&times), &as_values(&greedy));
                 // Run i of every planner has the same seed and starts: paired.
                 let paired_pv = wilcoxon_signed_rank_p(&as_values(&times), &as_values(&greedy));
+                let paired_base_pv = wilcoxon_signed_rank_p(&as_values(&times), &as_values(&base));
                 let (first_seen, chase) = find_and_chase(&outcomes_of(p), limit);
                 summary.push_str(&format!(
-                    "{},{},{},{},{captured},{median:.2},{mean:.2},{lo:.2},{hi:.2},{ratio:.3},{pv:.3e},{},{gospa_ci:.4},{greedy_ratio:.3},{greedy_pv:.3e},{first_seen:.2},{chase:.2},{paired_pv:.3e}\n",
+                    "{},{},{},{},{captured},{median:.2},{mean:.2},{lo:.2},{hi:.2},{ratio:.3},{pv:.3e},{},{gospa_ci:.4},{greedy_ratio:.3},{greedy_pv:.3e},{first_seen:.2},{chase:.2},{paired_pv:.3e},{paired_base_pv:.3e}\n",
                     map_name,
                     bot_name(bot),
                     name,
