@@ -149,7 +149,7 @@ impl Difficulty {
             Difficulty::Recruit => [m("wander", 200, 186, 32.03), m("evade", 200, 82, 65.53)],
             Difficulty::Veteran => [m("wander", 200, 198, 23.83), m("evade", 200, 113, 72.75)],
             Difficulty::Elite => [m("wander", 200, 200, 13.25), m("evade", 200, 199, 26.90)],
-            Difficulty::Learned => [m("wander", 200, 198, 13.05), m("evade", 200, 195, 13.25)],
+            Difficulty::Learned => [m("wander", 200, 200, 13.35), m("evade", 200, 199, 13.45)],
         }
     }
 

@@ -104,7 +104,7 @@ pub enum Experiment {
         oracle_belief: bool,
         /// The teams compared, comma-separated: `coordinated`, `search`, `baseline` and
         /// `policy:<name>`, a shipped trained policy (`policy:learned`) whose orders go in
-        /// before each tick every 4 ticks, as a served match gives them. `baseline` and
+        /// before each tick every 2 ticks, as a served match gives them. `baseline` and
         /// `coordinated` must be among them (the summary compares with both).
         #[arg(long, default_value = crate::capture::planner::DEFAULT)]
         planners: String,

@@ -312,7 +312,7 @@ class LasertagVectorEnv(VectorEnv):
     drive the robots instead of the actions (which are then ignored): their episodes,
     rewards and capture times in the same harness as a learned policy's.
     ``planner="policy:<name>"`` has a shipped trained policy drive them the same way (its
-    orders every 4 ticks, as a server's match gives them, whatever ``ticks_per_step``); only
+    orders every 2 ticks, as a server's match gives them, whatever ``ticks_per_step``); only
     the policies built into the package run in-process (``"policy:learned"``), and a name
     that is not one is refused with a ValueError naming them.
     """
