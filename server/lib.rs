@@ -15,6 +15,7 @@
 //! - [`fleet`] (the directory of servers in Redis, with `--fleet`), `agones` (with the
 //!   `agones` feature: the Agones SDK lifecycle);
 //! - [`service`] (the use cases the handlers call), [`http`] (the axum router);
+//! - [`process`] (the server process: its settings, serving, the drain and shutdown);
 //! - `main.rs` (CLI; its `experiment` command runs `lasertag-lab`).
 //!
 //! Invariants: a match is a pure function of (map, settings, seed, inputs by tick); robots'
@@ -31,6 +32,7 @@ pub mod http;
 pub mod maps;
 pub mod metrics;
 pub mod names;
+pub mod process;
 pub mod protocol;
 pub mod schema;
 pub mod service;

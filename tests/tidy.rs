@@ -44,7 +44,7 @@ const SIM_FLOORS: &[&str] = &[
 /// The server library's modules from the ground floor up.
 const SERVER_FLOORS: &[&str] = &[
     "config", "access", "names", "metrics", "schema", "maps", "store", "game", "protocol", "fleet",
-    "agones", "service", "http",
+    "agones", "service", "http", "process",
 ];
 
 /// The only crates the core may depend on: geometry, seeded randomness and typed errors.
