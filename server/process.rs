@@ -11,10 +11,40 @@ use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::Duration;
 
-use crate::fleet::Fleet;
+use crate::fleet::{Fleet, FleetError};
 use crate::game::Registry;
-use crate::http::transport::Source;
-use crate::maps::MapStore;
+use crate::http::TooFewFiles;
+use crate::http::tls::TlsError;
+use crate::http::transport::{Source, TransportError};
+use crate::maps::{LoadError, MapStore};
+use crate::store::StoreError;
+
+/// Why the server could not start, or stopped serving before a stop signal: printed by the
+/// binary, which exits non-zero.
+#[derive(Debug, thiserror::Error)]
+pub enum ServeError {
+    #[error("cannot start the async runtime: {0}")]
+    Runtime(std::io::Error),
+    #[error(transparent)]
+    TooFewFiles(#[from] TooFewFiles),
+    #[error("loading maps: {0}")]
+    Maps(#[from] LoadError),
+    #[error("opening the history: {0}")]
+    History(#[from] StoreError),
+    #[error("cannot listen on {addr}: {source}")]
+    Listen {
+        addr: SocketAddr,
+        source: std::io::Error,
+    },
+    #[error(transparent)]
+    Fleet(#[from] FleetError),
+    #[error(transparent)]
+    Tls(#[from] TlsError),
+    #[error(transparent)]
+    WebTransport(#[from] TransportError),
+    #[error("server error: {0}")]
+    Serve(std::io::Error),
+}
 
 /// `lasertag serve`'s settings (the binary's default command): where to listen, what to
 /// serve, and the limits, history and fleet of [`crate::config`], [`crate::store`] and
@@ -71,9 +101,8 @@ pub fn init_logging() {
 
 /// Serves until a stop signal, on a runtime of its own; the error says why it could not
 /// start or went wrong.
-pub fn run(args: ServeArgs) -> Result<(), String> {
-    let runtime = tokio::runtime::Runtime::new()
-        .map_err(|e| format!("cannot start the async runtime: {e}"))?;
+pub fn run(args: ServeArgs) -> Result<(), ServeError> {
+    let runtime = tokio::runtime::Runtime::new().map_err(ServeError::Runtime)?;
     let result = runtime.block_on(serve(args));
     // Whatever is still running (a blocking map build, a client that never closed) must not
     // hold the exit past the shutdown budget.
@@ -85,7 +114,7 @@ pub fn run(args: ServeArgs) -> Result<(), String> {
 /// The process must exit within 5 s of SIGTERM; this leaves room for the rest.
 const SHUTDOWN_BUDGET: Duration = Duration::from_millis(4000);
 
-async fn serve(args: ServeArgs) -> Result<(), String> {
+async fn serve(args: ServeArgs) -> Result<(), ServeError> {
     // Before anything opens a file: every connection holds a descriptor.
     let open_files = crate::http::raise_open_files_limit();
     tracing::info!(?open_files, "open files limit");
@@ -95,14 +124,12 @@ async fn serve(args: ServeArgs) -> Result<(), String> {
         open_files,
         config.max_connections,
         config.max_tcp_per_address,
-    )
-    .map_err(|e| e.to_string())?;
+    )?;
     crate::http::trim_memory_periodically();
-    let maps = MapStore::load_dir(&args.maps).map_err(|e| format!("loading maps: {e}"))?;
+    let maps = MapStore::load_dir(&args.maps)?;
     tracing::info!(maps = maps.len(), dir = %args.maps.display(), "maps loaded");
     tracing::info!(config = ?args.config, "settings");
-    let store = crate::store::Store::from_args(&args.history)
-        .map_err(|e| format!("opening the history: {e}"))?;
+    let store = crate::store::Store::from_args(&args.history)?;
     tracing::info!(at = %crate::store::Store::describe(&args.history), "history opened");
     let history = crate::game::replay::History::with_store(store);
     let registry = Registry::with_history(maps, args.config, history);
@@ -122,14 +149,19 @@ async fn serve(args: ServeArgs) -> Result<(), String> {
     }
     let listener = tokio::net::TcpListener::bind(args.addr)
         .await
-        .map_err(|e| format!("cannot listen on {}: {e}", args.addr))?;
-    let local = listener.local_addr().map_err(|e| e.to_string())?;
+        .map_err(|source| ServeError::Listen {
+            addr: args.addr,
+            source,
+        })?;
+    let local = listener.local_addr().map_err(|source| ServeError::Listen {
+        addr: args.addr,
+        source,
+    })?;
     // In a fleet, the directory task starts before the first request: it connects by
     // itself, and a Redis that is down only leaves this node alone in its listing.
     let fleet = args
         .fleet
-        .settings(local)
-        .map_err(|e| e.to_string())?
+        .settings(local)?
         .map(|(settings, client)| Fleet::start(settings, client, registry.clone()));
     if fleet.is_some() {
         // A fleet node's own store is not where another node would resume its matches: a
@@ -141,9 +173,7 @@ async fn serve(args: ServeArgs) -> Result<(), String> {
     // The operator's certificate: HTTPS on the TCP port (read before anything is served, so
     // a bad file stops the start with its name).
     let tls = match (&args.tls_cert, &args.tls_key) {
-        (Some(cert), Some(key)) => {
-            Some(crate::http::tls::acceptor(cert, key).map_err(|e| e.to_string())?)
-        }
+        (Some(cert), Some(key)) => Some(crate::http::tls::acceptor(cert, key)?),
         _ => None,
     };
     let scheme = if tls.is_some() { "https" } else { "http" };
@@ -155,11 +185,9 @@ async fn serve(args: ServeArgs) -> Result<(), String> {
             _ => Source::SelfSigned,
         };
         // Beside the TCP listener, on the same address and port in UDP.
-        crate::http::transport::start(state, local, source)
-            .await
-            .map_err(|e| e.to_string())?;
+        crate::http::transport::start(state, local, source).await?;
     }
-    let mut limits = crate::http::ConnectionLimits::of(&registry).map_err(|e| e.to_string())?;
+    let mut limits = crate::http::ConnectionLimits::of(&registry)?;
     limits.tls = tls;
     // Under Agones, Ready once listening; Health, the matches counter and Allocated after.
     #[cfg(feature = "agones")]
@@ -184,9 +212,7 @@ async fn serve(args: ServeArgs) -> Result<(), String> {
         _ = registry.shutdown.cancelled() => None,
     };
     if !registry.shutdown.is_cancelled() {
-        return served_early
-            .unwrap_or(Ok(()))
-            .map_err(|e| format!("server error: {e}"));
+        return served_early.unwrap_or(Ok(())).map_err(ServeError::Serve);
     }
     let deadline = tokio::time::Instant::now() + SHUTDOWN_BUDGET;
     // Every match has been told to end: leave the fleet's directory now, beside the rest
@@ -230,7 +256,7 @@ async fn serve(args: ServeArgs) -> Result<(), String> {
     match drained {
         Ok(r) => {
             tracing::info!("shut down cleanly");
-            r.map_err(|e| format!("server error: {e}"))
+            r.map_err(ServeError::Serve)
         }
         Err(_) => {
             tracing::warn!(
