@@ -136,6 +136,16 @@ async fn serve(args: ServeArgs) -> Result<(), ServeError> {
     // The matches the last process left running come back first (requests for them get
     // 503 meanwhile; everything else is served at once), then the showcase, which carries
     // on with a resumed one.
+    // The policies uploaded to this store, before the matches they drive come back.
+    let restored = {
+        let registry = registry.clone();
+        tokio::task::spawn_blocking(move || crate::game::resume::restore_policies(&registry))
+            .await
+            .unwrap_or(0)
+    };
+    if restored > 0 {
+        tracing::info!(policies = restored, "uploaded policies loaded");
+    }
     {
         let left = crate::game::resume::left_running(&registry);
         let registry = registry.clone();

@@ -2,7 +2,11 @@
 //! binary is killed with SIGKILL in the middle of play and started again on the same store;
 //! every match comes back under its id and tokens, from its last stored tick, and goes on as
 //! the same match would have gone on had nothing happened (its twin, started afresh with
-//! the same seed and inputs, is the witness).
+//! the same seed and inputs, is the witness). An uploaded policy outlives its server too,
+//! and drives its match on.
+//!
+//! Long file: every test here kills and starts the real binary on one store, and they share
+//! the helpers that read a match and compare it with its twin.
 
 #![cfg(unix)]
 
@@ -517,4 +521,122 @@ async fn a_full_disk_stops_the_record_not_the_play_and_the_record_keeps_no_gap()
         .query_row("PRAGMA integrity_check", [], |r| r.get(0))
         .expect("integrity_check");
     assert_eq!(check, "ok");
+}
+
+/// A small model of a robot observation for 2 robots and 1 detection slot (240 values,
+/// docs/research.md) that drives and turns.
+fn small_policy() -> Vec<u8> {
+    use lasertag_policy::testing::model;
+    let layer = |outputs: usize, inputs: usize, scale: f32| {
+        let weights = (0..outputs)
+            .map(|o| {
+                (0..inputs)
+                    .map(|i| scale * (((o * 31 + i * 17) % 13) as f32 - 6.0) / 6.0)
+                    .collect()
+            })
+            .collect();
+        (weights, vec![0.1; outputs])
+    };
+    let (hidden, hidden_bias) = layer(16, 240, 0.05);
+    let (out, out_bias) = layer(3, 16, 0.5);
+    model(240, &[(hidden, hidden_bias, "Tanh"), (out, out_bias, "")])
+}
+
+async fn upload_policy(client: &reqwest::Client, s: &Server, name: &str) -> (u16, Value) {
+    let r = client
+        .post(s.url(&format!("/api/policies?name={name}")))
+        .header("content-type", "application/onnx")
+        .body(small_policy())
+        .send()
+        .await
+        .unwrap();
+    (r.status().as_u16(), r.json().await.unwrap_or(Value::Null))
+}
+
+async fn policy_names(client: &reqwest::Client, s: &Server) -> Vec<(String, bool)> {
+    let (status, list, _) =
+        send(client, reqwest::Method::GET, s, "/api/policies", None, None).await;
+    assert_eq!(status, 200, "{list}");
+    list.as_array()
+        .unwrap()
+        .iter()
+        .map(|p| {
+            (
+                p["name"].as_str().unwrap().to_string(),
+                p["shipped"].as_bool().unwrap(),
+            )
+        })
+        .collect()
+}
+
+#[tokio::test]
+async fn an_uploaded_policy_outlives_its_server_and_drives_its_match_on() {
+    let dir = common::temp_dir("resume-policy");
+    let client = reqwest::Client::new();
+    let body = json!({"map": "office", "clock": "manual", "seed": 23,
+        "planner": "policy:kept", "time_limit_s": 60});
+    let mut a = serve(&dir);
+    let (status, created) = upload_policy(&client, &a, "kept").await;
+    assert_eq!(status, 201, "{created}");
+    let owner = created["owner_token"].as_str().unwrap().to_string();
+    let (id, token) = create(&client, &a, body.clone()).await;
+    step(&client, &a, &id, &token, 101).await;
+    let before = reading(&client, &a, &id, &token).await;
+    stored().await;
+    kill(&mut a);
+
+    let mut b = serve(&dir);
+    when_back(&client, &b, &format!("/api/matches/{id}"), None).await;
+    assert_eq!(
+        policy_names(&client, &b).await,
+        [("kept".to_string(), false), ("learned".to_string(), true)]
+    );
+    assert_eq!(reading(&client, &b, &id, &token).await, before);
+    // The name stays taken, and the owner token (kept as a hash) still owns it: a stranger
+    // is refused, the owner is told it is in use.
+    assert_eq!(upload_policy(&client, &b, "kept").await.0, 409);
+    let delete = |token: String| {
+        let (client, b) = (&client, &b);
+        async move {
+            send(
+                client,
+                reqwest::Method::DELETE,
+                b,
+                "/api/policies/kept",
+                Some(&token),
+                None,
+            )
+            .await
+            .0
+        }
+    };
+    assert_eq!(delete("0123456789abcdef0123456789abcdef".into()).await, 403);
+    assert_eq!(delete(owner.clone()).await, 409);
+    // The policy drives the match on as it would have had nothing happened: its twin,
+    // started afresh on this server, is the witness.
+    let (twin, twin_token) = create(&client, &b, body).await;
+    step(&client, &b, &twin, &twin_token, 101).await;
+    for ticks in [1, 60] {
+        let one = step(&client, &b, &id, &token, ticks).await;
+        let other = step(&client, &b, &twin, &twin_token, ticks).await;
+        assert_eq!(one["robots"], other["robots"], "after {ticks} more ticks");
+    }
+    assert_ne!(
+        reading(&client, &b, &id, &token).await["state"]["robots"],
+        before["state"]["robots"],
+        "its robots moved by the policy"
+    );
+    // Played to their ends, the matches let it go; removed, it stays gone after a restart.
+    for (id, token) in [(&id, &token), (&twin, &twin_token)] {
+        let end = step(&client, &b, id, token, 1200).await;
+        assert_eq!(end["status"], "finished");
+    }
+    assert_eq!(delete(owner).await, 204);
+    stored().await;
+    kill(&mut b);
+    let c = serve(&dir);
+    assert_eq!(
+        policy_names(&client, &c).await,
+        [("learned".to_string(), true)]
+    );
 }

@@ -446,6 +446,58 @@ fn claims_of_names_answer_alike_in_both_databases() {
     );
 }
 
+/// A script of kept policies (a name kept twice, one forgotten), and what the backend
+/// answered.
+fn kept_policies(db: &mut dyn Backend) -> Vec<String> {
+    use lasertag::store::KeptPolicy;
+    let policy = |name: &str, added_at: i64| KeptPolicy {
+        name: name.into(),
+        model: vec![added_at as u8, 0, 255, 7],
+        token: format!("hash-of-{name}"),
+        client: "10.0.0.1".into(),
+        added_at,
+    };
+    let names = |db: &mut dyn Backend| {
+        let kept = db.kept_policies().expect("read");
+        format!("{:?}", kept.iter().map(|k| &k.name).collect::<Vec<_>>())
+    };
+    let mut said = vec![
+        format!("{:?}", db.keep_policy(&policy("b", 2))),
+        format!("{:?}", db.keep_policy(&policy("a", 3))),
+        format!("{:?}", db.keep_policy(&policy("b", 4))),
+        names(db),
+    ];
+    let b = db.kept_policy("b").expect("read").expect("kept");
+    said.push(format!("{:?}", b == policy("b", 2)));
+    said.push(format!("{:?}", db.drop_policy("b")));
+    said.push(format!("{:?}", db.kept_policy("b")));
+    said.push(names(db));
+    said
+}
+
+#[test]
+fn kept_policies_answer_alike_in_both_databases() {
+    let database = pg::database("policies");
+    let mut postgres = Postgres::open(&database.url, KEEP_ALL).expect("open");
+    let dir = common::temp_dir("sqlite-policies");
+    let mut sqlite = Sqlite::open(&dir, KEEP_ALL).expect("open");
+    let said = kept_policies(&mut postgres);
+    assert_eq!(said, kept_policies(&mut sqlite));
+    assert_eq!(
+        said,
+        [
+            "Ok(true)",
+            "Ok(true)",
+            "Ok(false)",
+            "[\"b\", \"a\"]",
+            "true",
+            "Ok(())",
+            "Ok(None)",
+            "[\"a\"]",
+        ]
+    );
+}
+
 #[test]
 fn migrations_run_once_even_at_once_and_a_newer_schema_is_refused() {
     let database = pg::database("migrations");

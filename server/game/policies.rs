@@ -1,8 +1,10 @@
 //! Trained robot teams the server holds (`POST /api/policies`, docs/api.md "Trained robot
 //! teams"): each a checked model (`lasertag_policy::Policy`), who owns it, what one inference
 //! costs here, and how often it decides. The shipped ones are built into the binary and
-//! listed from the start; uploaded ones live as long as the server (a resumed match whose
-//! uploaded policy is gone keeps its robots where their last orders left them).
+//! listed from the start. Uploaded ones are kept in the store (`store::KeptPolicy`) and
+//! loaded again by every server that starts on it, or that resumes a match one drives
+//! (`resume::restore_policies`, `resume::held_or_kept`); a resumed match whose policy is gone
+//! from both keeps its robots where their last orders left them.
 //!
 //! A match driven by a policy holds its own [`TeamPolicy`] (the model shared, the buffers
 //! its own), made when its task starts (`policy_for`): new, resumed and the showcase alike.
@@ -15,7 +17,8 @@ use lasertag_core::world::World;
 use lasertag_policy::team::DEFAULT_EVERY;
 use lasertag_policy::{Limits, Policy, PolicyError, TeamPolicy};
 
-use crate::access::{ClientKey, Owner};
+use crate::access::{ClientKey, Owner, SecretHash};
+use crate::store::KeptPolicy;
 
 /// One policy the server holds.
 #[derive(Debug, Clone)]
@@ -175,4 +178,21 @@ pub fn team_for(stored: &StoredPolicy, world: &World) -> Result<TeamPolicy, Poli
         &world.config.physics,
         stored.every,
     )
+}
+
+/// `kept` as the server holds it: read and checked again, one inference timed on this
+/// machine, owned as when it was uploaded.
+pub fn from_kept(kept: &KeptPolicy) -> Result<StoredPolicy, PolicyError> {
+    let policy = Policy::from_onnx(&kept.model, &Limits::default())?;
+    Ok(StoredPolicy {
+        inference_us: time_inference(&policy),
+        memory: memory_of(&policy),
+        policy: Arc::new(policy),
+        owner: Owner {
+            token: SecretHash::from_hex(&kept.token),
+            client: ClientKey::parse(&kept.client),
+            reads_live: true,
+        },
+        every: DEFAULT_EVERY,
+    })
 }

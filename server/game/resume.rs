@@ -16,6 +16,10 @@
 //! A record that cannot be rebuilt (a damaged or foreign store) ends that match alone with
 //! reason `lost`: the store keeps it as an incomplete replay, the log says why, and
 //! `lasertag_matches_resumed_total{outcome="lost"}` counts it.
+//!
+//! Uploaded policies come back with them: the store keeps each one's model, and a server
+//! loads them all before it resumes a match ([`restore_policies`]), and a policy it lacks
+//! when it adopts a match another server of a fleet ran ([`held_or_kept`]).
 
 use std::collections::VecDeque;
 use std::sync::{Arc, Mutex};
@@ -28,9 +32,9 @@ use crate::access::{ClientKey, Owner, SecretHash};
 use crate::game::admission::{self, Price};
 use crate::game::record::Recording;
 use crate::game::view::MatchMeta;
-use crate::game::{Registry, Resumed, ResumedSeat};
+use crate::game::{Registry, Resumed, ResumedSeat, policies};
 use crate::store::codec::{StoredLive, StoredSettings, decode_checkpoint, decode_inputs};
-use crate::store::{Store, StoredCheckpoint, Unfinished, Write};
+use crate::store::{KeptPolicy, Store, StoredCheckpoint, Unfinished, Write};
 
 /// Why a stored match could not be brought back.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -380,5 +384,81 @@ fn rebuild_one(registry: &Registry, id: &str) -> Result<Rebuilt, ResumeError> {
         .unwrap_or_else(|e| e.into_inner())
         .get(&left.stored.listed.map)
         .map(|m| m.arena.clone());
-    rebuild(left, ours, true)
+    let rebuilt = rebuild(left, ours, true)?;
+    // Its task sets the policy up when it starts: held by then, if the store keeps it.
+    if let Some(name) = rebuilt.world.config.policy.as_deref() {
+        held_or_kept(registry, name);
+    }
+    Ok(rebuilt)
+}
+
+/// Holds `kept` as `name` unless a policy by that name is held already (a shipped one
+/// wins over an uploaded one of the same name); false when it was not taken.
+fn hold(registry: &Registry, kept: &KeptPolicy) -> bool {
+    let stored = match policies::from_kept(kept) {
+        Ok(stored) => stored,
+        Err(e) => {
+            tracing::error!(policy = kept.name, error = %e, "a kept policy does not load");
+            return false;
+        }
+    };
+    let max_us = registry.config.max_policy_inference_us as f64;
+    if stored.inference_us > max_us {
+        tracing::warn!(
+            policy = kept.name,
+            inference_us = stored.inference_us,
+            "a kept policy is slower here than this server takes uploads; it is held, and priced as timed"
+        );
+    }
+    let mut policies = registry.policies.write().unwrap_or_else(|e| e.into_inner());
+    if !policies.insert(kept.name.clone(), stored) {
+        tracing::warn!(
+            policy = kept.name,
+            "a kept policy has the name of one held here; it is not loaded"
+        );
+        return false;
+    }
+    true
+}
+
+/// Loads every policy the registry's store keeps (blocking: a read and each model checked):
+/// the server calls it before it resumes matches or serves its first request.
+pub fn restore_policies(registry: &Registry) -> usize {
+    let Some(store) = registry.history.store() else {
+        return 0;
+    };
+    let kept = match store.read(|b| b.kept_policies()) {
+        Ok(kept) => kept,
+        Err(e) => {
+            tracing::error!("cannot read the kept policies: {e}");
+            return 0;
+        }
+    };
+    kept.iter().filter(|k| hold(registry, k)).count()
+}
+
+/// Whether the registry holds the policy `name`, loading it from the store first when it
+/// keeps one (blocking): a match adopted from another server of a fleet may be driven by
+/// a policy uploaded there after this server started.
+pub fn held_or_kept(registry: &Registry, name: &str) -> bool {
+    let held = registry
+        .policies
+        .read()
+        .unwrap_or_else(|e| e.into_inner())
+        .contains(name);
+    if held {
+        return true;
+    }
+    match registry
+        .history
+        .store()
+        .map(|s: &Store| s.read(|b| b.kept_policy(name)))
+    {
+        Some(Ok(Some(kept))) => hold(registry, &kept),
+        Some(Err(e)) => {
+            tracing::warn!(policy = name, "cannot read a kept policy: {e}");
+            false
+        }
+        _ => false,
+    }
 }

@@ -268,6 +268,10 @@ impl From<PoliciesError> for ApiError {
                 ApiError::new(StatusCode::TOO_MANY_REQUESTS, e.to_string())
             }
             PoliciesError::Shipped(_) => ApiError::new(StatusCode::FORBIDDEN, e.to_string()),
+            PoliciesError::Store(_) => {
+                tracing::error!("policies: {e}");
+                ApiError::new(StatusCode::SERVICE_UNAVAILABLE, e.to_string())
+            }
         }
     }
 }

@@ -13,7 +13,11 @@ use crate::metrics::Refusal;
 use crate::protocol::{PolicyCreated, PolicyInfo};
 use crate::service::admit::{OverLimit, within_request_limits};
 use crate::service::{PoolError, Service};
+use crate::store::{KeptPolicy, StoreError, Write, unix_ms};
 use lasertag_core::world::MatchStatus;
+
+/// How long an upload waits for the store's writer to keep it.
+const WRITER_WAIT: std::time::Duration = std::time::Duration::from_secs(10);
 
 /// Characters a policy's name may have (it travels in `planner` and in paths).
 pub const MAX_NAME_LEN: usize = 64;
@@ -56,6 +60,8 @@ pub enum PoliciesError {
     NoRoom(#[from] NoRoom),
     #[error(transparent)]
     Pool(#[from] PoolError),
+    #[error("the store cannot keep the policy now: {0}")]
+    Store(#[from] StoreError),
 }
 
 fn info(name: &str, p: &StoredPolicy) -> PolicyInfo {
@@ -113,12 +119,12 @@ pub async fn add(
         ..Price::default()
     };
     within_request_limits(registry, "the policy", read)?;
-    let (policy, took_us) = service
+    let (policy, took_us, bytes) = service
         .pool
         .run("reading the policy", move || {
             let policy = Policy::from_onnx(&bytes, &Limits::default())?;
             let took = time_inference(&policy);
-            Ok::<_, PolicyError>((policy, took))
+            Ok::<_, PolicyError>((policy, took, bytes))
         })
         .await??;
     lasertag_policy::team::check_action(&policy)
@@ -151,6 +157,28 @@ pub async fn add(
     // Checked again: others may have uploaded while this one was read.
     room(service, &name, client)?;
     let (owner, owner_token) = Owner::new(Some(client));
+    // Kept before it is held: a 201 means it outlives this server, and on a store servers
+    // share, the store is where two uploads of one name meet.
+    if registry.history.store().is_some() {
+        let history = registry.history.clone();
+        let kept = KeptPolicy {
+            name: name.clone(),
+            model: bytes,
+            token: owner.token.map(|t| t.to_hex()).unwrap_or_default(),
+            client: client.to_string(),
+            added_at: unix_ms(std::time::SystemTime::now()),
+        };
+        let added = service
+            .pool
+            .run("keeping the policy", move || {
+                let store = history.store().ok_or(StoreError::Closed)?;
+                store.keep_policy(kept, WRITER_WAIT)
+            })
+            .await??;
+        if !added {
+            return Err(PoliciesError::Taken(name));
+        }
+    }
     let stored = StoredPolicy {
         policy: Arc::new(policy),
         owner,
@@ -161,6 +189,11 @@ pub async fn add(
     let created = info(&name, &stored);
     let mut store = registry.policies.write().unwrap_or_else(|e| e.into_inner());
     if !store.insert(name.clone(), stored) {
+        // Held here but not kept in the store (uploaded before it had one): this one's row
+        // goes, as the upload does.
+        if let Some(history) = registry.history.store() {
+            let _ = history.send(Write::DropPolicy { name: name.clone() });
+        }
         return Err(PoliciesError::Taken(name));
     }
     Ok(PolicyCreated {
@@ -227,5 +260,17 @@ pub fn delete(service: Service<'_>, name: &str, stored: StoredPolicy) -> Result<
         .write()
         .unwrap_or_else(|e| e.into_inner())
         .remove_if(name, &stored.policy);
+    if let Some(store) = service.registry.history.store()
+        && store
+            .send(Write::DropPolicy {
+                name: name.to_string(),
+            })
+            .is_err()
+    {
+        tracing::error!(
+            policy = name,
+            "the history's queue is full: the policy stays kept, and comes back at the next start"
+        );
+    }
     Ok(())
 }

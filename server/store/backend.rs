@@ -126,6 +126,40 @@ pub enum Write {
         token: String,
         reply: std::sync::mpsc::Sender<Result<ReleaseOutcome, StoreError>>,
     },
+    /// Keeps an uploaded policy (`Backend::keep_policy`); answers false when the store
+    /// keeps one by that name already (another server of a fleet took it).
+    KeepPolicy {
+        policy: Box<KeptPolicy>,
+        reply: std::sync::mpsc::Sender<Result<bool, StoreError>>,
+    },
+    /// Forgets an uploaded policy (`Backend::drop_policy`).
+    DropPolicy { name: String },
+}
+
+/// An uploaded policy as the store keeps it (`POST /api/policies`), so that it outlives the
+/// server that took it: the model's bytes as uploaded, checked again when a server loads it.
+#[derive(Clone, PartialEq)]
+pub struct KeptPolicy {
+    pub name: String,
+    /// The ONNX file.
+    pub model: Vec<u8>,
+    /// The owner token's hash (hex): a copied database lets nobody remove it.
+    pub token: String,
+    /// The client that uploaded it, as an address: its quota follows it.
+    pub client: String,
+    /// Unix milliseconds.
+    pub added_at: i64,
+}
+
+impl std::fmt::Debug for KeptPolicy {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("KeptPolicy")
+            .field("name", &self.name)
+            .field("model_bytes", &self.model.len())
+            .field("client", &self.client)
+            .field("added_at", &self.added_at)
+            .finish_non_exhaustive()
+    }
 }
 
 /// A name somebody keeps (`POST /api/names`).
@@ -179,6 +213,8 @@ impl Write {
                 | Write::HandOver { .. }
                 | Write::Claim { .. }
                 | Write::Release { .. }
+                | Write::KeepPolicy { .. }
+                | Write::DropPolicy { .. }
         )
     }
 }
@@ -355,6 +391,13 @@ pub trait Backend: Send {
     fn release(&mut self, key: &str, token: &str) -> Result<ReleaseOutcome, StoreError>;
     /// The claim on `key`, if any.
     fn claimed(&mut self, key: &str) -> Result<Option<NameClaim>, StoreError>;
+    /// See [`Write::KeepPolicy`]: false, keeping nothing, when the name is kept already.
+    fn keep_policy(&mut self, policy: &KeptPolicy) -> Result<bool, StoreError>;
+    fn drop_policy(&mut self, name: &str) -> Result<(), StoreError>;
+    /// Every kept policy, oldest first.
+    fn kept_policies(&mut self) -> Result<Vec<KeptPolicy>, StoreError>;
+    /// The kept policy `name`, if any.
+    fn kept_policy(&mut self, name: &str) -> Result<Option<KeptPolicy>, StoreError>;
     fn player(&mut self, name: &str) -> Result<Option<PlayerStats>, StoreError>;
     fn played(&mut self, name: &str, limit: usize) -> Result<Vec<Played>, StoreError>;
     fn leaders(&mut self, order: LeaderOrder, limit: usize)

@@ -19,9 +19,9 @@ pub mod results;
 pub mod sqlite;
 
 pub use backend::{
-    Backend, ClaimLimits, ClaimOutcome, Ended, HEARTBEAT, LeaderOrder, Listed, NameClaim, Played,
-    PlayerStats, Rated, ReleaseOutcome, Retention, StoreError, Stored, StoredCheckpoint,
-    Unfinished, Write, unix_ms,
+    Backend, ClaimLimits, ClaimOutcome, Ended, HEARTBEAT, KeptPolicy, LeaderOrder, Listed,
+    NameClaim, Played, PlayerStats, Rated, ReleaseOutcome, Retention, StoreError, Stored,
+    StoredCheckpoint, Unfinished, Write, unix_ms,
 };
 pub use results::PlayerResult;
 
@@ -268,6 +268,19 @@ impl Store {
         rx.recv_timeout(timeout).map_err(|_| StoreError::Closed)?
     }
 
+    /// Keeps `policy` (blocking, at most `timeout`): false when a policy by its name is kept
+    /// already.
+    pub fn keep_policy(&self, policy: KeptPolicy, timeout: Duration) -> Result<bool, StoreError> {
+        let (reply, rx) = std::sync::mpsc::channel();
+        self.writes
+            .try_send(Write::KeepPolicy {
+                policy: Box::new(policy),
+                reply,
+            })
+            .map_err(|_| StoreError::Closed)?;
+        rx.recv_timeout(timeout).map_err(|_| StoreError::Closed)?
+    }
+
     /// Queues `w` for the writer; refuses (giving it back) when the queue is full.
     pub fn send(&self, w: Write) -> Result<(), Box<Write>> {
         self.writes.try_send(w).map_err(|e| match e {
@@ -445,6 +458,14 @@ fn answer(backend: &mut dyn Backend, w: Write) {
         }
         Write::Release { key, token, reply } => {
             let _ = reply.send(backend.release(&key, &token));
+        }
+        Write::KeepPolicy { policy, reply } => {
+            let _ = reply.send(backend.keep_policy(&policy));
+        }
+        Write::DropPolicy { name } => {
+            if let Err(e) = backend.drop_policy(&name) {
+                tracing::error!(policy = name, "history: forgetting a policy: {e}");
+            }
         }
         _ => {}
     }

@@ -24,7 +24,6 @@
 
 use std::time::Duration;
 
-use ::postgres::config::{Host, SslMode};
 use ::postgres::{Client, Config, NoTls};
 
 use crate::store::backend::{
@@ -34,12 +33,15 @@ use crate::store::backend::{
 
 mod convert;
 mod names;
+mod policies;
 mod schema;
+mod url;
 mod write;
 
 use convert::{big, db, describe, listed, stats};
 use schema::Statements;
 pub use schema::{SCHEMA_VERSION, migrate};
+pub use url::parse;
 use write::{Change, apply, evict};
 
 /// How long a writer may be silent before its running matches are closed: six heartbeats,
@@ -57,9 +59,6 @@ pub const BEAT_EVERY: Duration = Duration::from_secs(2);
 /// The longest pause between the writer's tries to reach a database that went away.
 const RETRY_AT_MOST: Duration = Duration::from_secs(5);
 
-/// How long connecting may take when the URL does not say (`connect_timeout`).
-const CONNECT_TIMEOUT: Duration = Duration::from_secs(5);
-
 /// Whether `e` may have cost the connection: a closed socket, an I/O error, or the server's
 /// FATAL (a terminated backend). The client may not know yet that its connection is gone
 /// (it reads the socket only during a request), so the caller connects again.
@@ -67,58 +66,6 @@ fn lost(e: &::postgres::Error) -> bool {
     e.is_closed()
         || e.as_db_error()
             .is_none_or(|d| matches!(d.severity(), "FATAL" | "PANIC"))
-}
-
-/// Checks `url` (a `postgres://` URL or a `key=value` string) and answers its settings and
-/// where it points, for messages (never the password).
-pub fn parse(url: &str) -> Result<(Config, String), StoreError> {
-    if let Some((scheme, _)) = url.split_once("://")
-        && scheme != "postgres"
-        && scheme != "postgresql"
-    {
-        return Err(StoreError::DatabaseUrl(format!(
-            "{scheme}:// is not a PostgreSQL URL (postgres://user@host/database)"
-        )));
-    }
-    let mut config: Config = url
-        .parse()
-        .map_err(|e| StoreError::DatabaseUrl(describe(&e)))?;
-    if config.get_ssl_mode() == SslMode::Require {
-        return Err(StoreError::DatabaseUrl(
-            "sslmode=require: this server speaks to PostgreSQL without TLS".into(),
-        ));
-    }
-    if config.get_connect_timeout().is_none() {
-        config.connect_timeout(CONNECT_TIMEOUT);
-    }
-    if config.get_application_name().is_none() {
-        config.application_name("lasertag");
-    }
-    // Notices ("relation already exists, skipping") are the migrations' business only.
-    config.notice_callback(|n| tracing::debug!("PostgreSQL: {}", n.message()));
-    let ports = config.get_ports();
-    let hosts: Vec<String> = config
-        .get_hosts()
-        .iter()
-        .enumerate()
-        .map(|(i, h)| match h {
-            Host::Tcp(name) => {
-                let port = ports.get(i).or(ports.first()).copied().unwrap_or(5432);
-                format!("{name}:{port}")
-            }
-            Host::Unix(path) => path.display().to_string(),
-        })
-        .collect();
-    let target = format!(
-        "{}/{}",
-        if hosts.is_empty() {
-            "the default host".to_string()
-        } else {
-            hosts.join(",")
-        },
-        config.get_dbname().or(config.get_user()).unwrap_or("")
-    );
-    Ok((config, target))
 }
 
 /// Runs `f` where the client may block: on this thread when it is off any tokio runtime,
@@ -533,6 +480,22 @@ impl Backend for Postgres {
 
     fn claimed(&mut self, key: &str) -> Result<Option<backend::NameClaim>, StoreError> {
         self.read(|c, _| names::claimed(c, key))
+    }
+
+    fn keep_policy(&mut self, policy: &backend::KeptPolicy) -> Result<bool, StoreError> {
+        self.read(|c, _| policies::keep(c, policy))
+    }
+
+    fn drop_policy(&mut self, name: &str) -> Result<(), StoreError> {
+        self.read(|c, _| policies::drop(c, name))
+    }
+
+    fn kept_policies(&mut self) -> Result<Vec<backend::KeptPolicy>, StoreError> {
+        self.read(|c, _| policies::kept(c, None))
+    }
+
+    fn kept_policy(&mut self, name: &str) -> Result<Option<backend::KeptPolicy>, StoreError> {
+        self.read(|c, _| Ok(policies::kept(c, Some(name))?.pop()))
     }
 
     fn player(&mut self, name: &str) -> Result<Option<PlayerStats>, StoreError> {

@@ -2,7 +2,7 @@
 //!
 //! One file, `lasertag.db`, in WAL mode: the writer thread commits while readers read, and a
 //! killed process loses nothing it committed. `PRAGMA user_version` is the schema's version;
-//! [`migrate`] brings an older file up to date in one transaction per step. The statements
+//! `schema::migrate` brings an older file up to date in one transaction per step. The statements
 //! are plain SQL of the common kind, so that a server database can stand in behind the same
 //! [`Backend`](super::Backend) for a fleet.
 
@@ -14,80 +14,6 @@ use crate::store::backend::{
     self, Ended, LeaderOrder, Listed, Played, PlayerStats, Retention, StoreError, Stored,
     Unfinished,
 };
-
-/// The schema, one migration a step: step i takes `user_version` i to i + 1.
-const MIGRATIONS: &[&str] = &[
-    // 1: matches, their inputs in chunks, their maps (deduplicated), who played them.
-    "CREATE TABLE maps (
-        hash TEXT PRIMARY KEY,
-        name TEXT NOT NULL,
-        document TEXT NOT NULL
-    );
-    CREATE TABLE matches (
-        seq INTEGER PRIMARY KEY AUTOINCREMENT,
-        id TEXT NOT NULL UNIQUE,
-        map TEXT NOT NULL,
-        map_hash TEXT NOT NULL REFERENCES maps(hash),
-        settings TEXT NOT NULL,
-        started_at INTEGER NOT NULL,
-        updated_at INTEGER NOT NULL,
-        ended_at INTEGER,
-        ticks INTEGER NOT NULL DEFAULT 0,
-        winner TEXT,
-        reason TEXT,
-        complete INTEGER NOT NULL DEFAULT 0,
-        names TEXT NOT NULL DEFAULT '[]',
-        bytes INTEGER NOT NULL DEFAULT 0
-    );
-    CREATE INDEX matches_ended ON matches(ended_at);
-    CREATE TABLE inputs (
-        seq INTEGER NOT NULL REFERENCES matches(seq) ON DELETE CASCADE,
-        chunk BLOB NOT NULL
-    );
-    CREATE INDEX inputs_by_match ON inputs(seq);
-    CREATE TABLE players (
-        seq INTEGER NOT NULL REFERENCES matches(seq) ON DELETE CASCADE,
-        name TEXT NOT NULL,
-        tags INTEGER NOT NULL,
-        survived_ticks INTEGER NOT NULL,
-        won INTEGER NOT NULL
-    );
-    CREATE INDEX players_by_name ON players(name);",
-    // 2: ratings (docs/ratings.md): each name's, and what each rated match did to it.
-    "CREATE TABLE ratings (
-        name TEXT PRIMARY KEY,
-        rating REAL NOT NULL,
-        deviation REAL NOT NULL,
-        volatility REAL NOT NULL,
-        matches INTEGER NOT NULL,
-        updated_at INTEGER NOT NULL
-    );
-    CREATE INDEX ratings_by_age ON ratings(updated_at);
-    ALTER TABLE players ADD COLUMN rating_before REAL;
-    ALTER TABLE players ADD COLUMN rating_after REAL;",
-    // 3: what resumes a running match (`codec::StoredLive`: owner, seats, token hashes).
-    "ALTER TABLE matches ADD COLUMN live TEXT;",
-    // 4: running matches' checkpoints (`backend::Write::Checkpoint`), the newest few each.
-    "CREATE TABLE checkpoints (
-        seq INTEGER NOT NULL REFERENCES matches(seq) ON DELETE CASCADE,
-        tick INTEGER NOT NULL,
-        applied INTEGER NOT NULL,
-        state BLOB NOT NULL,
-        PRIMARY KEY (seq, tick)
-    );",
-    // 5: names people keep (`backend::NameClaim`), by their look-alikes' key.
-    "CREATE TABLE names (
-        key TEXT PRIMARY KEY,
-        name TEXT NOT NULL,
-        token TEXT NOT NULL,
-        client TEXT NOT NULL,
-        claimed_at INTEGER NOT NULL
-    );
-    CREATE INDEX names_by_client ON names(client);",
-];
-
-/// The schema version this build writes.
-pub const SCHEMA_VERSION: usize = MIGRATIONS.len();
 
 /// Opens (creating) the database in `dir` and brings its schema up to date.
 pub fn open(dir: &Path) -> Result<Connection, StoreError> {
@@ -118,26 +44,6 @@ pub fn open_reader(dir: &Path) -> Result<Connection, StoreError> {
     conn.execute_batch("PRAGMA foreign_keys = ON; PRAGMA busy_timeout = 5000;")
         .map_err(db)?;
     Ok(conn)
-}
-
-fn migrate(conn: &mut Connection) -> Result<(), StoreError> {
-    let version: usize = conn
-        .query_row("PRAGMA user_version", [], |r| r.get(0))
-        .map_err(db)?;
-    if version > SCHEMA_VERSION {
-        return Err(StoreError::NewerSchema {
-            found: version,
-            known: SCHEMA_VERSION,
-        });
-    }
-    for (step, sql) in MIGRATIONS.iter().enumerate().skip(version) {
-        let tx = conn.transaction().map_err(db)?;
-        tx.execute_batch(sql).map_err(db)?;
-        tx.pragma_update(None, "user_version", step + 1)
-            .map_err(db)?;
-        tx.commit().map_err(db)?;
-    }
-    Ok(())
 }
 
 /// A match's start as the database stores it.
@@ -477,7 +383,9 @@ impl backend::Backend for Sqlite {
                 | Write::Adopt { .. }
                 | Write::HandOver { .. }
                 | Write::Claim { .. }
-                | Write::Release { .. } => Ok(()),
+                | Write::Release { .. }
+                | Write::KeepPolicy { .. }
+                | Write::DropPolicy { .. } => Ok(()),
             };
             match done {
                 // The disk, not this write: the whole batch is undone, to be tried again.
@@ -545,6 +453,22 @@ impl backend::Backend for Sqlite {
         names::claimed(&self.conn, key)
     }
 
+    fn keep_policy(&mut self, policy: &backend::KeptPolicy) -> Result<bool, StoreError> {
+        policies::keep(&self.conn, policy)
+    }
+
+    fn drop_policy(&mut self, name: &str) -> Result<(), StoreError> {
+        policies::drop(&self.conn, name)
+    }
+
+    fn kept_policies(&mut self) -> Result<Vec<backend::KeptPolicy>, StoreError> {
+        policies::kept(&self.conn, None)
+    }
+
+    fn kept_policy(&mut self, name: &str) -> Result<Option<backend::KeptPolicy>, StoreError> {
+        Ok(policies::kept(&self.conn, Some(name))?.pop())
+    }
+
     fn player(&mut self, name: &str) -> Result<Option<PlayerStats>, StoreError> {
         player(&self.conn, name)
     }
@@ -568,13 +492,17 @@ impl backend::Backend for Sqlite {
 
 mod names;
 mod players;
+mod policies;
 mod rows;
 mod running;
+mod schema;
 use players::rate;
 pub use players::{leaders, played, player};
 use rows::{LISTED, db, listed, load_where};
 use running::forget_checkpoints;
 pub use running::{checkpoint, load_unfinished, lose, unfinished};
+pub use schema::SCHEMA_VERSION;
+use schema::migrate;
 
 #[cfg(test)]
 mod tests;

@@ -89,6 +89,14 @@ const MIGRATIONS: &[&str] = &[
         claimed_at BIGINT NOT NULL
     );
     CREATE INDEX names_by_client ON names(client);",
+    // 7: uploaded policies (`backend::KeptPolicy`): every server of a fleet can load them.
+    "CREATE TABLE policies (
+        name TEXT PRIMARY KEY,
+        model BYTEA NOT NULL,
+        token TEXT NOT NULL,
+        client TEXT NOT NULL,
+        added_at BIGINT NOT NULL
+    );",
 ];
 
 /// The schema version this build writes.

@@ -106,7 +106,9 @@ impl<'a> Change<'a> {
             | Write::Adopt { .. }
             | Write::HandOver { .. }
             | Write::Claim { .. }
-            | Write::Release { .. } => return None,
+            | Write::Release { .. }
+            | Write::KeepPolicy { .. }
+            | Write::DropPolicy { .. } => return None,
         })
     }
 }
