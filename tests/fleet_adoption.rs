@@ -3,7 +3,8 @@
 //! PostgreSQL and `lasertag` processes on loopback.
 //!
 //! - A node killed with SIGKILL: once its lease has run out another node adopts its running
-//!   matches (same ids and tokens, from their last stored tick), and the lobby points there.
+//!   matches (same ids and tokens, from their last stored tick), and the lobby points there;
+//!   a match driven by a policy uploaded to the dead node plays on by it.
 //! - A node that stops (SIGTERM) hands its matches to a node with room: its clients get
 //!   `moved` with that node's URL before the close, and the match goes on there.
 //! - A node paused with SIGSTOP past its lease loses its match to another and, woken with
@@ -113,6 +114,18 @@ async fn a_dead_nodes_matches_are_adopted_and_a_stopping_node_hands_its_over() {
         .json()
         .await
         .unwrap();
+    // A policy uploaded to a after b started, and a match it drives.
+    let r = http
+        .post(a.url("/api/policies?name=uploaded-on-a"))
+        .header("content-type", "application/onnx")
+        .body(common::small_policy())
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 201);
+    let driven_body = json!({"map": "office", "clock": "manual", "seed": 9,
+        "planner": "policy:uploaded-on-a"});
+    let (driven, driven_token) = made_on(&http, &a, driven_body.clone()).await;
     tokio::time::sleep(Duration::from_millis(1600)).await; // the store has it
     a.child.kill().expect("SIGKILL");
     a.child.wait().expect("a dies");
@@ -128,6 +141,26 @@ async fn a_dead_nodes_matches_are_adopted_and_a_stopping_node_hands_its_over() {
     );
     let running = until_hosted(&http, &b, &live, None, 10).await;
     assert_eq!(running["status"], "running", "{running}");
+    // b loaded the policy it lacked with the match it drives, which plays on by it as its
+    // twin started on b does.
+    until_hosted(&http, &b, &driven, Some(&driven_token), 10).await;
+    let (twin, twin_token) = made_on(&http, &b, driven_body).await;
+    let mut states = Vec::new();
+    for (id, token) in [(&driven, &driven_token), (&twin, &twin_token)] {
+        let state: Value = http
+            .post(b.url(&format!("/api/matches/{id}/step")))
+            .bearer_auth(token)
+            .json(&json!({"ticks": 60}))
+            .send()
+            .await
+            .unwrap()
+            .json()
+            .await
+            .unwrap();
+        assert_eq!(state["policy"], "uploaded-on-a", "{state}");
+        states.push(state["robots"].clone());
+    }
+    assert_eq!(states[0], states[1], "the adopted match plays as its twin");
     // The owner token still changes it, on b.
     let r = http
         .post(b.url(&format!("/api/matches/{manual}/step")))

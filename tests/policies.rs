@@ -5,32 +5,12 @@
 
 mod common;
 
-use common::{TestServer, test_config};
+use common::{
+    POLICY_OBSERVATION as OBSERVATION, TestServer, policy_layer as layer, small_policy, test_config,
+};
 use lasertag::config::Config;
-use lasertag_policy::testing::{DenseLayer, model};
+use lasertag_policy::testing::model;
 use serde_json::{Value, json};
-
-/// The observation of a robot of a team of 2 with 1 detection slot (docs/research.md).
-const OBSERVATION: usize = 240;
-
-fn layer(outputs: usize, inputs: usize, scale: f32, activation: &str) -> DenseLayer<'_> {
-    let weights = (0..outputs)
-        .map(|o| {
-            (0..inputs)
-                .map(|i| scale * (((o * 31 + i * 17) % 13) as f32 - 6.0) / 6.0)
-                .collect()
-        })
-        .collect();
-    (weights, vec![0.1; outputs], activation)
-}
-
-/// A small policy of the right sizes that drives forward and turns.
-fn small_policy() -> Vec<u8> {
-    model(
-        OBSERVATION,
-        &[layer(16, OBSERVATION, 0.05, "Tanh"), layer(3, 16, 0.5, "")],
-    )
-}
 
 async fn upload(s: &TestServer, name: &str, bytes: Vec<u8>) -> common::Reply {
     s.post_raw(&format!("/api/policies?name={name}"), bytes)

@@ -523,30 +523,11 @@ async fn a_full_disk_stops_the_record_not_the_play_and_the_record_keeps_no_gap()
     assert_eq!(check, "ok");
 }
 
-/// A small model of a robot observation for 2 robots and 1 detection slot (240 values,
-/// docs/research.md) that drives and turns.
-fn small_policy() -> Vec<u8> {
-    use lasertag_policy::testing::model;
-    let layer = |outputs: usize, inputs: usize, scale: f32| {
-        let weights = (0..outputs)
-            .map(|o| {
-                (0..inputs)
-                    .map(|i| scale * (((o * 31 + i * 17) % 13) as f32 - 6.0) / 6.0)
-                    .collect()
-            })
-            .collect();
-        (weights, vec![0.1; outputs])
-    };
-    let (hidden, hidden_bias) = layer(16, 240, 0.05);
-    let (out, out_bias) = layer(3, 16, 0.5);
-    model(240, &[(hidden, hidden_bias, "Tanh"), (out, out_bias, "")])
-}
-
 async fn upload_policy(client: &reqwest::Client, s: &Server, name: &str) -> (u16, Value) {
     let r = client
         .post(s.url(&format!("/api/policies?name={name}")))
         .header("content-type", "application/onnx")
-        .body(small_policy())
+        .body(common::small_policy())
         .send()
         .await
         .unwrap();

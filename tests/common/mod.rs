@@ -12,6 +12,39 @@ use lasertag::game::Registry;
 use lasertag::maps::MapStore;
 use serde_json::{Value, json};
 
+/// The robot observation of a team of 2 with 1 detection slot (docs/research.md).
+pub const POLICY_OBSERVATION: usize = 240;
+
+/// A dense layer of a test policy: `outputs` x `inputs` weights of at most `scale`, in a
+/// fixed pattern, then `activation` ("" for none).
+pub fn policy_layer(
+    outputs: usize,
+    inputs: usize,
+    scale: f32,
+    activation: &str,
+) -> lasertag_policy::testing::DenseLayer<'_> {
+    let weights = (0..outputs)
+        .map(|o| {
+            (0..inputs)
+                .map(|i| scale * (((o * 31 + i * 17) % 13) as f32 - 6.0) / 6.0)
+                .collect()
+        })
+        .collect();
+    (weights, vec![0.1; outputs], activation)
+}
+
+/// A small ONNX policy of the right sizes (a robot observation of [`POLICY_OBSERVATION`]
+/// values to the 3 action values) that drives forward and turns.
+pub fn small_policy() -> Vec<u8> {
+    lasertag_policy::testing::model(
+        POLICY_OBSERVATION,
+        &[
+            policy_layer(16, POLICY_OBSERVATION, 0.05, "Tanh"),
+            policy_layer(3, 16, 0.5, ""),
+        ],
+    )
+}
+
 /// The `id`s of a list of agents in a snapshot or a state.
 pub fn ids(list: &Value) -> std::collections::BTreeSet<String> {
     list.as_array()
