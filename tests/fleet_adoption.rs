@@ -104,16 +104,7 @@ async fn a_dead_nodes_matches_are_adopted_and_a_stopping_node_hands_its_over() {
         json!({"map": "office", "clock": "manual", "seed": 8, "opponent_bot": "evade"}),
     )
     .await;
-    let stepped: Value = http
-        .post(a.url(&format!("/api/matches/{manual}/step")))
-        .bearer_auth(&token)
-        .json(&json!({"ticks": 200}))
-        .send()
-        .await
-        .unwrap()
-        .json()
-        .await
-        .unwrap();
+    let stepped = process::step(&http, &a, &manual, &token, 200).await;
     // A policy uploaded to a after b started, and a match it drives.
     let r = http
         .post(a.url("/api/policies?name=uploaded-on-a"))
@@ -147,16 +138,7 @@ async fn a_dead_nodes_matches_are_adopted_and_a_stopping_node_hands_its_over() {
     let (twin, twin_token) = made_on(&http, &b, driven_body).await;
     let mut states = Vec::new();
     for (id, token) in [(&driven, &driven_token), (&twin, &twin_token)] {
-        let state: Value = http
-            .post(b.url(&format!("/api/matches/{id}/step")))
-            .bearer_auth(token)
-            .json(&json!({"ticks": 60}))
-            .send()
-            .await
-            .unwrap()
-            .json()
-            .await
-            .unwrap();
+        let state = process::step(&http, &b, id, token, 60).await;
         assert_eq!(state["policy"], "uploaded-on-a", "{state}");
         states.push(state["robots"].clone());
     }
