@@ -21,6 +21,11 @@ use crate::{Policy, PolicyError};
 /// sooner (docs/research.md, "Measured with the capture experiment").
 pub const DEFAULT_EVERY: u64 = 2;
 
+/// The most ticks between two decisions an uploaded policy may ask for (`?decide_every=`):
+/// one a second. A policy trained at the environment's `ticks_per_step` k plays as trained
+/// served every k ticks.
+pub const MAX_EVERY: u64 = 20;
+
 /// Values of an action a policy must give (forward, turn, tag).
 pub const ACTION_SIZE: usize = lasertag_core::env::ACTION_SIZE;
 

@@ -85,8 +85,44 @@ async fn an_uploaded_policy_drives_a_match_and_is_removed_only_when_unused() {
     assert_eq!(r.body["name"], "mine");
     assert_eq!(r.body["observation_size"], OBSERVATION);
     assert_eq!(r.body["action_size"], 3);
+    assert_eq!(r.body["decide_every"], 2, "the default");
     let token = r.body["owner_token"].as_str().unwrap().to_string();
     assert_eq!(names(&s).await, ["learned", "mine"]);
+    // A policy trained at another step decides at it.
+    let r = upload(&s, "at-four&decide_every=4", small_policy()).await;
+    assert_eq!(r.status, 201, "{}", r.body);
+    assert_eq!(r.body["decide_every"], 4);
+    let listed = s.get("/api/policies").await.body;
+    let every: Vec<_> = listed
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|p| {
+            (
+                p["name"].as_str().unwrap(),
+                p["decide_every"].as_u64().unwrap(),
+            )
+        })
+        .collect();
+    assert_eq!(every, [("at-four", 4), ("learned", 2), ("mine", 2)]);
+    // The same model deciding half as often drives the same match elsewhere.
+    let mut after = Vec::new();
+    for name in ["mine", "at-four"] {
+        let id = s
+            .create_match(json!({"map": "office", "planner": format!("policy:{name}"),
+                "clock": "manual", "seed": 5}))
+            .await;
+        after.push(positions(&s.step(&id, 41).await));
+        assert_eq!(s.delete(&format!("/api/matches/{id}")).await.status, 204);
+    }
+    assert_ne!(after[0], after[1]);
+    let r = s
+        .delete_as(
+            "/api/policies/at-four",
+            Some(r.body["owner_token"].as_str().unwrap()),
+        )
+        .await;
+    assert_eq!(r.status, 204, "{}", r.body);
     // Taken names are refused.
     assert_eq!(upload(&s, "mine", small_policy()).await.status, 409);
     let id = s
@@ -164,6 +200,16 @@ async fn bad_uploads_are_refused_naming_the_problem_and_change_nothing() {
         .await,
     );
     refused(400, "name")(upload(&s, "no%20spaces", small_policy()).await);
+    for every in ["0", "21", "x", "-1"] {
+        refused(400, "decide_every")(
+            upload(
+                &s,
+                &format!("every{every}&decide_every={every}"),
+                small_policy(),
+            )
+            .await,
+        );
+    }
     refused(413, "limit")(upload(&s, "huge", vec![0u8; 64 << 20]).await);
     assert_eq!(names(&s).await, before);
     // A match naming a policy the server does not hold, or one for another team size.

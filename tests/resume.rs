@@ -525,7 +525,7 @@ async fn a_full_disk_stops_the_record_not_the_play_and_the_record_keeps_no_gap()
 
 async fn upload_policy(client: &reqwest::Client, s: &Server, name: &str) -> (u16, Value) {
     let r = client
-        .post(s.url(&format!("/api/policies?name={name}")))
+        .post(s.url(&format!("/api/policies?name={name}&decide_every=4")))
         .header("content-type", "application/onnx")
         .body(common::small_policy())
         .send()
@@ -534,7 +534,8 @@ async fn upload_policy(client: &reqwest::Client, s: &Server, name: &str) -> (u16
     (r.status().as_u16(), r.json().await.unwrap_or(Value::Null))
 }
 
-async fn policy_names(client: &reqwest::Client, s: &Server) -> Vec<(String, bool)> {
+/// (name, shipped, decide_every) of every policy `s` holds.
+async fn policy_names(client: &reqwest::Client, s: &Server) -> Vec<(String, bool, u64)> {
     let (status, list, _) =
         send(client, reqwest::Method::GET, s, "/api/policies", None, None).await;
     assert_eq!(status, 200, "{list}");
@@ -545,6 +546,7 @@ async fn policy_names(client: &reqwest::Client, s: &Server) -> Vec<(String, bool
             (
                 p["name"].as_str().unwrap().to_string(),
                 p["shipped"].as_bool().unwrap(),
+                p["decide_every"].as_u64().unwrap(),
             )
         })
         .collect()
@@ -570,7 +572,10 @@ async fn an_uploaded_policy_outlives_its_server_and_drives_its_match_on() {
     when_back(&client, &b, &format!("/api/matches/{id}"), None).await;
     assert_eq!(
         policy_names(&client, &b).await,
-        [("kept".to_string(), false), ("learned".to_string(), true)]
+        [
+            ("kept".to_string(), false, 4),
+            ("learned".to_string(), true, 2)
+        ]
     );
     assert_eq!(reading(&client, &b, &id, &token).await, before);
     // The name stays taken, and the owner token (kept as a hash) still owns it: a stranger
@@ -618,6 +623,6 @@ async fn an_uploaded_policy_outlives_its_server_and_drives_its_match_on() {
     let c = serve(&dir);
     assert_eq!(
         policy_names(&client, &c).await,
-        [("learned".to_string(), true)]
+        [("learned".to_string(), true, 2)]
     );
 }

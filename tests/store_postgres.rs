@@ -455,6 +455,7 @@ fn kept_policies(db: &mut dyn Backend) -> Vec<String> {
         model: vec![added_at as u8, 0, 255, 7],
         token: format!("hash-of-{name}"),
         client: "10.0.0.1".into(),
+        every: 4,
         added_at,
     };
     let names = |db: &mut dyn Backend| {

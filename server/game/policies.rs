@@ -14,7 +14,7 @@ use std::sync::Arc;
 use std::time::Instant;
 
 use lasertag_core::world::World;
-use lasertag_policy::team::DEFAULT_EVERY;
+use lasertag_policy::team::{DEFAULT_EVERY, MAX_EVERY};
 use lasertag_policy::{Limits, Policy, PolicyError, TeamPolicy};
 
 use crate::access::{ClientKey, Owner, SecretHash};
@@ -193,6 +193,6 @@ pub fn from_kept(kept: &KeptPolicy) -> Result<StoredPolicy, PolicyError> {
             client: ClientKey::parse(&kept.client),
             reads_live: true,
         },
-        every: DEFAULT_EVERY,
+        every: kept.every.clamp(1, MAX_EVERY),
     })
 }

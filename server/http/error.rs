@@ -257,6 +257,7 @@ impl From<PoliciesError> for ApiError {
             PoliciesError::NotFound(_) => ApiError::not_found(e.to_string()),
             PoliciesError::Invalid(_)
             | PoliciesError::BadName(_)
+            | PoliciesError::BadEvery(_)
             | PoliciesError::TooSlow { .. }
             | PoliciesError::Misfit(_) => ApiError::bad_request(e.to_string()),
             PoliciesError::TooLarge { .. } => {

@@ -24,7 +24,8 @@ pub async fn list_policies(State(state): State<AppState>) -> Json<Vec<PolicyInfo
 }
 
 #[utoipa::path(post, path = "/api/policies",
-    params(("name" = String, Query, description = "the policy's name: 1 to 64 letters, digits, '-' and '_'; matches name it as `\"planner\": \"policy:<name>\"`")),
+    params(("name" = String, Query, description = "the policy's name: 1 to 64 letters, digits, '-' and '_'; matches name it as `\"planner\": \"policy:<name>\"`"),
+        ("decide_every" = Option<u64>, Query, minimum = 1, maximum = 20, description = "ticks between its decisions (2 when not given): a policy trained at the environment's `ticks_per_step` k plays as trained at k")),
     request_body(content = Vec<u8>, content_type = "application/onnx",
         description = "An ONNX model: a chain of Gemm (or MatMul and Add), Relu, Tanh, Sigmoid, Identity and Flatten on 32-bit floats, from a robot observation of the research environment to its action (forward, turn, tag)"),
     responses((status = 201, body = PolicyCreated, links(
@@ -39,6 +40,7 @@ pub async fn add_policy(
 ) -> Result<impl IntoResponse, ApiError> {
     let name = query.get("name").cloned().unwrap_or_default();
     policies::check_name(&name)?;
+    let every = policies::check_every(query.get("decide_every").map(String::as_str))?;
     let max = state.registry.config.max_policy_bytes;
     let bytes = axum::body::to_bytes(req.into_body(), max)
         .await
@@ -46,7 +48,14 @@ pub async fn add_policy(
             state.registry.metrics.refuse(Refusal::BodyTooLarge);
             PoliciesError::TooLarge { got: max + 1, max }
         })?;
-    let created = policies::add(state.service(), ClientKey::of(ip), name, bytes.to_vec()).await?;
+    let created = policies::add(
+        state.service(),
+        ClientKey::of(ip),
+        name,
+        every,
+        bytes.to_vec(),
+    )
+    .await?;
     Ok((StatusCode::CREATED, Json(created)))
 }
 

@@ -13,6 +13,8 @@ pub struct PolicyInfo {
     pub action_size: usize,
     /// Microseconds of one inference on this server, timed when it was loaded.
     pub inference_us: f64,
+    /// Ticks between its decisions (`?decide_every=` at upload; 2 for the shipped team).
+    pub decide_every: u64,
     /// Shipped with the server (listed from the start, never removed).
     pub shipped: bool,
 }

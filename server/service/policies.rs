@@ -29,6 +29,11 @@ pub enum PoliciesError {
     NotFound(String),
     #[error("name: {0}")]
     BadName(String),
+    #[error(
+        "decide_every: {0:?} is not a whole number of ticks in 1..={max} (ticks between a policy's decisions; 2 when not given)",
+        max = lasertag_policy::team::MAX_EVERY
+    )]
+    BadEvery(String),
     /// The model is not one this server runs (the error names what).
     #[error("the model: {0}")]
     Invalid(#[from] PolicyError),
@@ -70,6 +75,7 @@ fn info(name: &str, p: &StoredPolicy) -> PolicyInfo {
         observation_size: p.policy.input_len(),
         action_size: p.policy.output_len(),
         inference_us: (p.inference_us * 10.0).round() / 10.0,
+        decide_every: p.every,
         shipped: p.shipped(),
     }
 }
@@ -102,14 +108,32 @@ pub fn check_name(name: &str) -> Result<(), PoliciesError> {
     Ok(())
 }
 
-/// Adds the model `bytes` as `name`, uploaded by `client`, who owns it.
+/// The ticks between a policy's decisions `sent` as `?decide_every=` (the default when
+/// not given).
+pub fn check_every(sent: Option<&str>) -> Result<u64, PoliciesError> {
+    use lasertag_policy::team::{DEFAULT_EVERY, MAX_EVERY};
+    let Some(sent) = sent else {
+        return Ok(DEFAULT_EVERY);
+    };
+    sent.parse::<u64>()
+        .ok()
+        .filter(|every| (1..=MAX_EVERY).contains(every))
+        .ok_or_else(|| PoliciesError::BadEvery(sent.to_string()))
+}
+
+/// Adds the model `bytes` as `name`, deciding every `every` ticks ([`check_every`]),
+/// uploaded by `client`, who owns it.
 pub async fn add(
     service: Service<'_>,
     client: ClientKey,
     name: String,
+    every: u64,
     bytes: Vec<u8>,
 ) -> Result<PolicyCreated, PoliciesError> {
     check_name(&name)?;
+    if !(1..=lasertag_policy::team::MAX_EVERY).contains(&every) {
+        return Err(PoliciesError::BadEvery(every.to_string()));
+    }
     room(service, &name, client)?;
     let registry = service.registry;
     // Reading allocates at most the file's size (the reader's guarantee), which the body
@@ -166,6 +190,7 @@ pub async fn add(
             model: bytes,
             token: owner.token.map(|t| t.to_hex()).unwrap_or_default(),
             client: client.to_string(),
+            every,
             added_at: unix_ms(std::time::SystemTime::now()),
         };
         let added = service
@@ -184,7 +209,7 @@ pub async fn add(
         owner,
         inference_us: took_us,
         memory,
-        every: lasertag_policy::team::DEFAULT_EVERY,
+        every,
     };
     let created = info(&name, &stored);
     let mut store = registry.policies.write().unwrap_or_else(|e| e.into_inner());

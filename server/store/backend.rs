@@ -147,6 +147,8 @@ pub struct KeptPolicy {
     pub token: String,
     /// The client that uploaded it, as an address: its quota follows it.
     pub client: String,
+    /// Ticks between its decisions.
+    pub every: u64,
     /// Unix milliseconds.
     pub added_at: i64,
 }
@@ -157,6 +159,7 @@ impl std::fmt::Debug for KeptPolicy {
             .field("name", &self.name)
             .field("model_bytes", &self.model.len())
             .field("client", &self.client)
+            .field("every", &self.every)
             .field("added_at", &self.added_at)
             .finish_non_exhaustive()
     }

@@ -3,18 +3,20 @@
 
 use ::postgres::Client;
 
+use super::convert::big;
 use crate::store::backend::KeptPolicy;
 
 /// Keeps `policy`; false, keeping nothing, when its name is kept already.
 pub(super) fn keep(c: &mut Client, policy: &KeptPolicy) -> Result<bool, ::postgres::Error> {
     let added = c.execute(
-        "INSERT INTO policies (name, model, token, client, added_at)
-         VALUES ($1, $2, $3, $4, $5) ON CONFLICT (name) DO NOTHING",
+        "INSERT INTO policies (name, model, token, client, decide_every, added_at)
+         VALUES ($1, $2, $3, $4, $5, $6) ON CONFLICT (name) DO NOTHING",
         &[
             &policy.name,
             &policy.model,
             &policy.token,
             &policy.client,
+            &big(policy.every),
             &policy.added_at,
         ],
     )?;
@@ -32,7 +34,7 @@ pub(super) fn kept(
     name: Option<&str>,
 ) -> Result<Vec<KeptPolicy>, ::postgres::Error> {
     c.query(
-        "SELECT name, model, token, client, added_at FROM policies
+        "SELECT name, model, token, client, decide_every, added_at FROM policies
          WHERE $1::TEXT IS NULL OR name = $1 ORDER BY added_at, name",
         &[&name],
     )?
@@ -43,7 +45,8 @@ pub(super) fn kept(
             model: r.try_get(1)?,
             token: r.try_get(2)?,
             client: r.try_get(3)?,
-            added_at: r.try_get(4)?,
+            every: r.try_get::<_, i64>(4)?.max(0) as u64,
+            added_at: r.try_get(5)?,
         })
     })
     .collect()

@@ -95,6 +95,7 @@ const MIGRATIONS: &[&str] = &[
         model BYTEA NOT NULL,
         token TEXT NOT NULL,
         client TEXT NOT NULL,
+        decide_every BIGINT NOT NULL,
         added_at BIGINT NOT NULL
     );",
 ];

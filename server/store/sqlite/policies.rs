@@ -9,13 +9,14 @@ use crate::store::backend::{KeptPolicy, StoreError};
 pub fn keep(conn: &Connection, policy: &KeptPolicy) -> Result<bool, StoreError> {
     let added = conn
         .execute(
-            "INSERT OR IGNORE INTO policies (name, model, token, client, added_at)
-             VALUES (?1, ?2, ?3, ?4, ?5)",
+            "INSERT OR IGNORE INTO policies (name, model, token, client, decide_every, added_at)
+             VALUES (?1, ?2, ?3, ?4, ?5, ?6)",
             params![
                 policy.name,
                 policy.model,
                 policy.token,
                 policy.client,
+                policy.every.min(i64::MAX as u64) as i64,
                 policy.added_at
             ],
         )
@@ -33,7 +34,7 @@ pub fn drop(conn: &Connection, name: &str) -> Result<(), StoreError> {
 pub fn kept(conn: &Connection, name: Option<&str>) -> Result<Vec<KeptPolicy>, StoreError> {
     let mut st = conn
         .prepare(
-            "SELECT name, model, token, client, added_at FROM policies
+            "SELECT name, model, token, client, decide_every, added_at FROM policies
              WHERE ?1 IS NULL OR name = ?1 ORDER BY added_at, name",
         )
         .map_err(db)?;
@@ -44,7 +45,8 @@ pub fn kept(conn: &Connection, name: Option<&str>) -> Result<Vec<KeptPolicy>, St
                 model: r.get(1)?,
                 token: r.get(2)?,
                 client: r.get(3)?,
-                added_at: r.get(4)?,
+                every: r.get::<_, i64>(4)?.max(0) as u64,
+                added_at: r.get(5)?,
             })
         })
         .map_err(db)?;

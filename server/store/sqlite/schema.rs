@@ -80,6 +80,7 @@ const MIGRATIONS: &[&str] = &[
         model BLOB NOT NULL,
         token TEXT NOT NULL,
         client TEXT NOT NULL,
+        decide_every INTEGER NOT NULL,
         added_at INTEGER NOT NULL
     );",
 ];
