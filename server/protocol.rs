@@ -365,6 +365,24 @@ impl CreateMatch {
             "opponent_starts",
             &opponent_starts.iter().map(|p| &p[..]).collect::<Vec<_>>(),
         )?;
+        // Fewer starts than agents is the core's to refuse (it names the first without one);
+        // more would be silently left over.
+        for (field, given, agents, what) in [
+            ("robot_starts", robot_starts.len(), robots, "robots"),
+            (
+                "opponent_starts",
+                opponent_starts.len(),
+                opponents,
+                "opponents",
+            ),
+        ] {
+            if given > agents {
+                return Err(refused(
+                    field,
+                    format!("{given} starts for {agents} {what}: give one per agent"),
+                ));
+            }
+        }
         let placement = if !robot_starts.is_empty() || !opponent_starts.is_empty() {
             Placement::Given {
                 robots: robot_starts

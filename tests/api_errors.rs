@@ -226,6 +226,29 @@ async fn every_error_class_is_answered_and_nothing_running_is_disturbed() {
         400,
         "opponent_starts[0]",
     );
+    // More starts than agents would be left over: refused, naming the field.
+    assert_error(
+        &server
+            .post(
+                "/api/matches",
+                &json!({"map": "office", "robots": 1,
+                    "robot_starts": [[2.0, 8.0, 0.0], [3.0, 8.0, 0.0]]}),
+            )
+            .await,
+        400,
+        "robot_starts: 2 starts for 1 robots",
+    );
+    assert_error(
+        &server
+            .post(
+                "/api/matches",
+                &json!({"map": "office", "opponents": 1,
+                    "opponent_starts": [[2.0, 8.0], [3.0, 8.0]]}),
+            )
+            .await,
+        400,
+        "opponent_starts: 2 starts for 1 opponents",
+    );
 
     // A bad map, each rule, inline and through POST /api/maps.
     let bad_maps: Vec<(Value, &str)> = vec![
