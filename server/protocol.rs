@@ -25,6 +25,7 @@ pub mod robots;
 pub mod rules;
 pub mod settings;
 pub mod socket;
+mod starts;
 pub mod state;
 pub mod ws;
 
@@ -50,7 +51,7 @@ use utoipa::ToSchema;
 use lasertag_core::bots::BotKind;
 use lasertag_core::planner::PlannerKind;
 use lasertag_core::sim::{AgentId, TICK_HZ};
-use lasertag_core::world::{ControlKind, FinishReason, MatchConfig, Placement};
+use lasertag_core::world::{ControlKind, FinishReason, MatchConfig};
 use lasertag_core::world::{EventKind, MatchStatus, Side, World};
 
 pub use difficulty_name::DifficultyName;
@@ -341,64 +342,12 @@ impl CreateMatch {
             (None, Some(p)) => p.time_limit_s as f64,
             _ => bounds::TIME_LIMIT_S.number(self.time_limit_s)?,
         };
-        let check_points = |field: &str, pts: &[&[f64]]| -> Result<(), FieldError> {
-            for (i, p) in pts.iter().enumerate() {
-                if let Some(v) = p
-                    .iter()
-                    .find(|v| !v.is_finite() || v.abs() > schema::MAX_COORDINATE)
-                {
-                    return Err(refused(
-                        &format!("{field}[{i}]"),
-                        format!("{v} is not a finite coordinate"),
-                    ));
-                }
-            }
-            Ok(())
-        };
-        let robot_starts = self.robot_starts.unwrap_or_default();
-        let opponent_starts = self.opponent_starts.unwrap_or_default();
-        check_points(
-            "robot_starts",
-            &robot_starts.iter().map(|p| &p[..]).collect::<Vec<_>>(),
+        let placement = starts::placement(
+            &self.robot_starts.unwrap_or_default(),
+            &self.opponent_starts.unwrap_or_default(),
+            (robots, opponents),
+            self.placement == Some(StartPlacement::Random),
         )?;
-        check_points(
-            "opponent_starts",
-            &opponent_starts.iter().map(|p| &p[..]).collect::<Vec<_>>(),
-        )?;
-        // Fewer starts than agents is the core's to refuse (it names the first without one);
-        // more would be silently left over.
-        for (field, given, agents, what) in [
-            ("robot_starts", robot_starts.len(), robots, "robots"),
-            (
-                "opponent_starts",
-                opponent_starts.len(),
-                opponents,
-                "opponents",
-            ),
-        ] {
-            if given > agents {
-                return Err(refused(
-                    field,
-                    format!("{given} starts for {agents} {what}: give one per agent"),
-                ));
-            }
-        }
-        let placement = if !robot_starts.is_empty() || !opponent_starts.is_empty() {
-            Placement::Given {
-                robots: robot_starts
-                    .iter()
-                    .map(|p| [p[0] as f32, p[1] as f32, p[2] as f32])
-                    .collect(),
-                opponents: opponent_starts
-                    .iter()
-                    .map(|p| [p[0] as f32, p[1] as f32])
-                    .collect(),
-            }
-        } else if self.placement == Some(StartPlacement::Random) {
-            Placement::Random
-        } else {
-            Placement::Spawns
-        };
         let config = MatchConfig {
             robots,
             opponents,

@@ -392,8 +392,8 @@ fn rebuild_one(registry: &Registry, id: &str) -> Result<Rebuilt, ResumeError> {
     Ok(rebuilt)
 }
 
-/// Holds `kept` as `name` unless a policy by that name is held already (a shipped one
-/// wins over an uploaded one of the same name); false when it was not taken.
+/// Holds `kept` unless a policy by its name is held already (a shipped one wins over an
+/// uploaded one of the same name); whether the server now holds it as uploaded.
 fn hold(registry: &Registry, kept: &KeptPolicy) -> bool {
     let stored = match policies::from_kept(kept) {
         Ok(stored) => stored,
@@ -411,14 +411,17 @@ fn hold(registry: &Registry, kept: &KeptPolicy) -> bool {
         );
     }
     let mut policies = registry.policies.write().unwrap_or_else(|e| e.into_inner());
-    if !policies.insert(kept.name.clone(), stored) {
-        tracing::warn!(
-            policy = kept.name,
-            "a kept policy has the name of one held here; it is not loaded"
-        );
-        return false;
+    if let Some(held) = policies.get(&kept.name) {
+        // Two matches it drives, resumed side by side, both load it: the first one holds it.
+        if held.shipped() {
+            tracing::warn!(
+                policy = kept.name,
+                "a kept policy has the name of a shipped one; the shipped one is served"
+            );
+        }
+        return !held.shipped();
     }
-    true
+    policies.insert(kept.name.clone(), stored)
 }
 
 /// Loads every policy the registry's store keeps (blocking: a read and each model checked):
