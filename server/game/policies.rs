@@ -3,7 +3,7 @@
 //! costs here, and how often it decides. The shipped ones are built into the binary and
 //! listed from the start. Uploaded ones are kept in the store (`store::KeptPolicy`) and
 //! loaded again by every server that starts on it, or that resumes a match one drives
-//! (`resume::restore_policies`, `resume::held_or_kept`); a resumed match whose policy is gone
+//! (`resume::restore_policies`, `resume::hold_if_kept`); a resumed match whose policy is gone
 //! from both keeps its robots where their last orders left them.
 //!
 //! A match driven by a policy holds its own [`TeamPolicy`] (the model shared, the buffers

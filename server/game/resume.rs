@@ -19,7 +19,7 @@
 //!
 //! Uploaded policies come back with them: the store keeps each one's model, and a server
 //! loads them all before it resumes a match ([`restore_policies`]), and a policy it lacks
-//! when it adopts a match another server of a fleet ran ([`held_or_kept`]).
+//! when it adopts a match another server of a fleet ran ([`hold_if_kept`]).
 
 use std::collections::VecDeque;
 use std::sync::{Arc, Mutex};
@@ -387,7 +387,7 @@ fn rebuild_one(registry: &Registry, id: &str) -> Result<Rebuilt, ResumeError> {
     let rebuilt = rebuild(left, ours, true)?;
     // Its task sets the policy up when it starts: held by then, if the store keeps it.
     if let Some(name) = rebuilt.world.config.policy.as_deref() {
-        held_or_kept(registry, name);
+        hold_if_kept(registry, name);
     }
     Ok(rebuilt)
 }
@@ -440,28 +440,27 @@ pub fn restore_policies(registry: &Registry) -> usize {
     kept.iter().filter(|k| hold(registry, k)).count()
 }
 
-/// Whether the registry holds the policy `name`, loading it from the store first when it
-/// keeps one (blocking): a match adopted from another server of a fleet may be driven by
-/// a policy uploaded there after this server started.
-pub fn held_or_kept(registry: &Registry, name: &str) -> bool {
+/// Loads the policy `name` from the store when the registry does not hold it and the store
+/// keeps it (blocking): a match adopted from another server of a fleet may be driven by a
+/// policy uploaded there after this server started.
+pub fn hold_if_kept(registry: &Registry, name: &str) {
     let held = registry
         .policies
         .read()
         .unwrap_or_else(|e| e.into_inner())
         .contains(name);
     if held {
-        return true;
+        return;
     }
     match registry
         .history
         .store()
         .map(|s: &Store| s.read(|b| b.kept_policy(name)))
     {
-        Some(Ok(Some(kept))) => hold(registry, &kept),
-        Some(Err(e)) => {
-            tracing::warn!(policy = name, "cannot read a kept policy: {e}");
-            false
+        Some(Ok(Some(kept))) => {
+            hold(registry, &kept);
         }
-        _ => false,
+        Some(Err(e)) => tracing::warn!(policy = name, "cannot read a kept policy: {e}"),
+        _ => {}
     }
 }

@@ -7,10 +7,6 @@ use lasertag_core::world::Placement;
 
 use crate::schema;
 
-fn refused(field: String, message: String) -> FieldError {
-    FieldError { field, message }
-}
-
 /// Refuses a coordinate that is not finite or lies far outside any map.
 fn check_points<const N: usize>(field: &str, points: &[[f64; N]]) -> Result<(), FieldError> {
     for (i, p) in points.iter().enumerate() {
@@ -18,10 +14,10 @@ fn check_points<const N: usize>(field: &str, points: &[[f64; N]]) -> Result<(), 
             .iter()
             .find(|v| !v.is_finite() || v.abs() > schema::MAX_COORDINATE)
         {
-            return Err(refused(
-                format!("{field}[{i}]"),
-                format!("{v} is not a finite coordinate"),
-            ));
+            return Err(FieldError {
+                field: format!("{field}[{i}]"),
+                message: format!("{v} is not a finite coordinate"),
+            });
         }
     }
     Ok(())
@@ -48,10 +44,10 @@ pub fn placement(
         ),
     ] {
         if given > agents {
-            return Err(refused(
-                field.to_string(),
-                format!("{given} starts for {agents} {what}: give one per agent"),
-            ));
+            return Err(FieldError {
+                field: field.to_string(),
+                message: format!("{given} starts for {agents} {what}: give one per agent"),
+            });
         }
     }
     Ok(if !robot_starts.is_empty() || !opponent_starts.is_empty() {

@@ -214,8 +214,9 @@ pub async fn add(
     let created = info(&name, &stored);
     let mut store = registry.policies.write().unwrap_or_else(|e| e.into_inner());
     if !store.insert(name.clone(), stored) {
-        // Held here but not kept in the store (uploaded before it had one): this one's row
-        // goes, as the upload does.
+        // The store kept it, yet a policy of this name is held here (loaded before another
+        // server of the fleet removed it from the store): the row just kept is this refused
+        // upload's, and goes with it.
         if let Some(history) = registry.history.store() {
             let _ = history.send(Write::DropPolicy { name: name.clone() });
         }
