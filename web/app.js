@@ -1,18 +1,21 @@
 // The page: a lobby (#/), and a match to watch (#/watch/<id>) or play (#/play/<id>); past
 // matches (#/history), a replay (#/replay/<id>; `?pov=o0&t=83.5&belief=1`: a player's view, a
-// moment, the belief) and the
-// leaderboard (#/leaderboard, #/player/<name>).
+// moment, the belief), the leaderboard (#/leaderboard, #/player/<name>), a party's room
+// (#/party/<code>) and the queue (#/queue).
 // Plain ES modules, no build step, nothing fetched from anywhere but this server and, when it
 // runs in a fleet, the other nodes its listing names (a match is played on its own node).
 
 import { Game, debug } from "./game.js";
 import { Replay } from "./replay.js";
 import { showHistory, showLeaderboard, showPlayer } from "./pages.js";
+import { PartyRoom, QueueView, createParty, normalCode, parties } from "./party.js";
 import { rules } from "./rules.js";
 import { Thumbnail } from "./thumbnail.js";
 
 const $ = (id) => document.getElementById(id);
 let game = null;
+/** The party room or the queue's view, while one shows. */
+let together = null;
 let lobbyTimer = null;
 /** Match id → the URL of the node that hosts it ("" for this page's own server), from the
  * listings (in a fleet every node lists every node's matches, each with its `node`). */
@@ -438,14 +441,18 @@ async function replay(g) {
   location.hash = g.role === "player" || m.free_slots > 0 ? `#/play/${fresh.id}${hunt}` : `#/watch/${fresh.id}`;
 }
 
+/** What the party and queue pages take from the lobby: its name and the name's token. */
+const deps = { playerName, nameToken };
+
 async function route() {
   if (game) { game.stop(); game = null; }
+  if (together) { together.stop(); together = null; }
   clearInterval(lobbyTimer);
   thumbnail.stop();
   const [hashPath, hashQuery] = location.hash.split("?");
   const params = new URLSearchParams(hashQuery || "");
   const [, page, id] = hashPath.split("/");
-  for (const p of ["history", "leaderboard"]) $(p).hidden = true;
+  for (const p of ["history", "leaderboard", "party", "queue"]) $(p).hidden = true;
   // The arena page serves both live matches and replays: each shows its own controls.
   const replaying = page === "replay" && Boolean(id);
   $("game").classList.toggle("replaying", replaying);
@@ -483,6 +490,13 @@ async function route() {
     }
     return;
   }
+  if ((page === "party" && id) || page === "queue") {
+    $("lobby").hidden = true;
+    $("game").hidden = true;
+    $(page).hidden = false;
+    together = page === "party" ? new PartyRoom({ code: normalCode(id), deps }) : new QueueView({ deps });
+    return;
+  }
   if ((page === "watch" || page === "play") && id) {
     $("lobby").hidden = true;
     $("game").hidden = false;
@@ -498,8 +512,11 @@ async function route() {
         return;
       }
     }
+    // A party's match: its end card's Again goes back to the room.
+    const party = token ? parties.ofMatch(decodeURIComponent(id)) : null;
     game = new Game({
       matchId: decodeURIComponent(id), token, base,
+      onAgain: party ? () => (location.hash = `#/party/${party}`) : null,
       onLobby: () => (location.hash = "#/"),
       onReplay: (g) => replay(g).catch((e) => { $("end-text").textContent = e.message; }),
       onStaleToken: token ? () => {
@@ -540,6 +557,8 @@ $("name").addEventListener("input", () => {
 const lobbyError = (e) => ($("lobby-error").textContent = e.message);
 $("door-play").onclick = () => playRated().catch(lobbyError);
 $("door-hunt").onclick = () => huntWithRobots().catch(lobbyError);
+$("door-party").onclick = () => createParty(deps).catch(lobbyError);
+$("door-queue").onclick = () => (location.hash = "#/queue");
 // Co-op and versus decide who the opponents are.
 $("create").elements.mode.addEventListener("change", (e) => {
   const mode = e.target.value;

@@ -9,6 +9,7 @@ import { Predictor } from "./predict.js";
 import { PageSocket, socketUrl } from "./socket.js";
 import { Sound } from "./sound.js";
 import { TouchPad, touchScreen } from "./touch.js";
+import { KINDS, LiveMarks } from "./marks.js";
 
 const $ = (id) => document.getElementById(id);
 const TICK_MS = 50;
@@ -49,7 +50,8 @@ class Missed {
 }
 
 export class Game {
-  constructor({ matchId, token, base = "", onLobby, onReplay, onStaleToken }) {
+  /** `onAgain`: the end card's *Again* for a party's match (back to its room). */
+  constructor({ matchId, token, base = "", onLobby, onReplay, onStaleToken, onAgain = null }) {
     this.matchId = matchId;
     this.token = token;
     // The node that hosts the match, in a fleet ("" for this page's own server).
@@ -57,6 +59,7 @@ export class Game {
     this.onLobby = onLobby;
     this.onReplay = onReplay;
     this.onStaleToken = onStaleToken;
+    this.onAgain = onAgain;
     this.welcomed = false;
     this.canvas = $("arena");
     this.ctx = this.canvas.getContext("2d");
@@ -86,6 +89,7 @@ export class Game {
     $("end").hidden = true;
     $("hud-sound").hidden = false;
     this.sound = new Sound($("hud-sound"));
+    this.marks = new LiveMarks(this);
     this.inSight = 0;
     $("hud-status").textContent = "connecting…";
     // Closing the tab of a rated match one still plays counts as a loss: the browser asks
@@ -104,6 +108,10 @@ export class Game {
     window.addEventListener("blur", this.onBlur);
     $("end-lobby").onclick = () => this.onLobby();
     $("end-replay").onclick = () => this.onReplay(this);
+    // A party's match goes back to its room instead: the same people, the same sides.
+    $("end-replay").hidden = Boolean(onAgain);
+    $("end-again").hidden = !onAgain;
+    $("end-again").onclick = () => this.onAgain();
     $("end-watch").hidden = true;
     // Snapshots in the compact binary form (see compact.js); the rest stays JSON text.
     const q = `?format=compact${token ? `&token=${encodeURIComponent(token)}` : ""}`;
@@ -127,6 +135,7 @@ export class Game {
     window.removeEventListener("blur", this.onBlur);
     window.removeEventListener("beforeunload", this.onLeave);
     if (this.touch) this.touch.stop();
+    this.marks.stop();
     this.socket.close(1000, "left");
   }
 
@@ -214,8 +223,10 @@ export class Game {
     // The sounds are a player's (what happens to you); a spectator has no use for the switch.
     $("hud-sound").hidden = w.role !== "player";
     $("controls").hidden = Boolean(this.touch);
+    // Marks are a player's, for their own side; spectators see them as late as the rest.
+    this.marks.enable(w.role === "player");
     $("controls").innerHTML = w.role === "player"
-      ? `<kbd>W</kbd><kbd>A</kbd><kbd>S</kbd><kbd>D</kbd> / arrows move and turn · <kbd>Space</kbd> tag · <kbd>B</kbd> ${this.team === "robots" ? "your team's" : "robots'"} belief · <kbd>M</kbd> sound`
+      ? `<kbd>W</kbd><kbd>A</kbd><kbd>S</kbd><kbd>D</kbd> / arrows move and turn · <kbd>Space</kbd> tag · <kbd>Q</kbd> mark · <kbd>Shift</kbd>+<kbd>Q</kbd> danger · <kbd>B</kbd> ${this.team === "robots" ? "your team's" : "robots'"} belief · <kbd>M</kbd> sound`
       : `spectating${this.delay ? ` (${this.delay}: a match people can play is shown late)` : ""}: true positions, scans, goals and belief · <kbd>B</kbd> belief on/off`;
   }
 
@@ -295,6 +306,12 @@ export class Game {
     this.legend();
   }
 
+  /** Where marks are made from: the player's own agent as drawn, and the other side's agents
+   * drawn now. */
+  spot() {
+    return { me: this.me || null, others: this.others || [] };
+  }
+
   /** This player's own agent in snapshot `s`: a robot or an opponent. */
   mine(s) {
     return (this.team === "robots" ? s.robots : s.opponents).find((a) => a.id === this.you);
@@ -329,6 +346,12 @@ export class Game {
         break;
       }
       case "player_left": text = `${e.name} left`; break;
+      case "mark": {
+        this.marks.received(e);
+        const k = KINDS[e.mark];
+        text = `${e.by === this.name ? "you" : e.by} marked ${k ? k.label : e.mark}`;
+        break;
+      }
       case "finished":
         text = e.winner ? `match over: ${e.winner} win` : `match over: ${e.reason.replace("_", " ")}`;
         break;
@@ -366,6 +389,11 @@ export class Game {
       seconds: f.time_s, pov: this.role === "player" ? this.you : "full", belief: this.beliefOn,
     }), share);
     $("end-title").textContent = won + you;
+    // Keyboard users land on the card's first button rather than behind the overlay.
+    requestAnimationFrame(() => {
+      const first = [...$("end").querySelectorAll("button")].find((b) => !b.hidden);
+      if (first && !this.stopped) first.focus();
+    });
     $("end-text").textContent = why[0].toUpperCase() + why.slice(1) + ".";
     $("end-rating").textContent = "";
     if (this.role === "player" && this.rated && this.name) this.showRating(["all_tagged", "time_limit"].includes(f.reason));
@@ -413,6 +441,7 @@ export class Game {
   }
 
   key(e) {
+    if (this.marks.key(e)) return;
     const codes = ["KeyW", "KeyA", "KeyS", "KeyD", "ArrowUp", "ArrowDown", "ArrowLeft", "ArrowRight", "Space"];
     if (e.code === "KeyM" && e.type === "keydown" && !e.repeat) {
       this.sound.toggle();
@@ -427,6 +456,8 @@ export class Game {
       return;
     }
     if (!codes.includes(e.code)) return;
+    // A focused button (the HUD's) is not pressed again by Space: Space is the tag.
+    if (e.target && e.target.tagName === "BUTTON" && e.code === "Space") e.target.blur();
     e.preventDefault();
     if (e.type === "keydown") this.keys.add(e.code); else this.keys.delete(e.code);
     if (e.code === "Space" && e.type === "keydown") this.fireTag();
@@ -539,6 +570,8 @@ export class Game {
       // A robot sees what its laser sees; an opponent, what is in its line of sight.
       const laser = this.team === "robots" ? { range: rules.laser.range, fov: laserFov } : null;
       if (me) visible = sight(this.segs, me, laser);
+      this.me = me;
+      this.others = this.team === "robots" ? opponents : robots;
     }
     this.countdown(now);
     this.beams = this.beams.filter((b) => now - b.t0 < 450);
@@ -547,6 +580,8 @@ export class Game {
       belief: this.beliefOn ? this.belief : null, beams: this.beams, now,
     });
     debug.drawn = counts;
+    this.view = v;
+    this.marks.draw(v, now);
     debug.fit = { rot: v.rot, s: v.s };
     debug.drawnAgents = [...robotsDrawn, ...opponents].map((a) => [a.id, +a.x.toFixed(2), +a.y.toFixed(2)]);
     debug.frames = (debug.frames || 0) + 1;

@@ -9,6 +9,7 @@ import { laserFov, rules } from "./rules.js";
 import { draw, fit } from "./render.js";
 import { addBeam, between, copyLink, feedLine, fmtTime, legend, replayLink } from "./hud.js";
 import { PageSocket, socketUrl } from "./socket.js";
+import { KINDS, ReplayMarks } from "./marks.js";
 
 const $ = (id) => document.getElementById(id);
 const debug = (window.__lasertag = window.__lasertag || {});
@@ -23,6 +24,7 @@ const MARKED = {
   robot_tagged: (e) => `${e.by} froze ${e.target}`,
   role_split: (e) => `belief: role ${e.role} split from ${e.from}`,
   role_merge: (e) => `belief: role ${e.from} merged into ${e.role}`,
+  mark: (e) => `${e.by} marked ${KINDS[e.mark] ? KINDS[e.mark].label : e.mark}`,
 };
 
 const sleep = (ms) => new Promise((r) => setTimeout(r, ms));
@@ -89,6 +91,7 @@ export class Replay {
     this.stopped = true;
     clearTimeout(this.seekTimer);
     window.removeEventListener("keydown", this.onKey);
+    if (this.marks) this.marks.stop();
     this.socket.close(1000, "left");
   }
 
@@ -115,9 +118,18 @@ export class Replay {
       await sleep(500);
       if (this.stopped) return;
     }
+    // Each person's side, by name: a player's view shows its own side's marks only.
+    const sides = {};
     for (const p of this.detail.events || []) {
-      if (p.kind === "player_joined") this.names[p.robot || p.opponent] = p.name;
+      if (p.kind === "player_joined") {
+        this.names[p.robot || p.opponent] = p.name;
+        sides[p.name] = p.robot ? "robots" : "opponents";
+      }
     }
+    this.marks = new ReplayMarks(this.detail.events, (m) => {
+      if (!this.fogged || !sides[m.by]) return true;
+      return sides[m.by] === (String(this.as).startsWith("r") ? "robots" : "opponents");
+    });
     this.markers();
     this.connect(this.from);
   }
@@ -241,6 +253,7 @@ export class Replay {
       role_merge: () => `belief: role ${e.from} merged into ${e.role} (${e.count})`,
       player_joined: () => `${e.name} joined as ${e.robot || e.opponent}`,
       player_left: () => `${e.name} left`,
+      mark: () => MARKED.mark(e),
       finished: () => (e.winner ? `match over: ${e.winner} win` : `match over: ${e.reason.replace("_", " ")}`),
     }[e.kind];
     if (!text) return;
@@ -407,5 +420,6 @@ export class Replay {
       robots, opponents, visible, belief: this.beliefOn ? this.belief : null, beams: this.beams, now,
     });
     debug.drawn = counts;
+    if (this.marks) this.marks.draw(v, this.latest.tick, this.tickHz || 20);
   }
 }

@@ -1,7 +1,7 @@
 // Sounds of a match, made in the page with Web Audio (no files): your tag landing, being
-// tagged, a robot coming into view. Off by default; M (or the HUD's button) switches them,
-// and the choice is remembered. The audio context starts on the first switch-on, a user
-// gesture, as browsers require.
+// tagged, a robot coming into view, a teammate's mark. Off by default; M (or the HUD's
+// button) switches them, and the choice is remembered. The audio context starts on the
+// first switch-on, a user gesture, as browsers require.
 
 const KEY = "lasertag.sound";
 
@@ -10,6 +10,11 @@ const SOUNDS = {
   tag: ["square", 520, 1040, 0.16, 0.12],
   tagged: ["sawtooth", 220, 70, 0.45, 0.16],
   seen: ["sine", 1320, 1320, 0.07, 0.08],
+  // A teammate's mark: a rising chirp for a robot seen, a bright blip for a way to go, a
+  // low falling tone for a danger.
+  mark_robot: ["triangle", 700, 1400, 0.14, 0.12],
+  mark_go: ["sine", 990, 990, 0.1, 0.1],
+  mark_danger: ["square", 440, 260, 0.22, 0.09],
 };
 
 export class Sound {
