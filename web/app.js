@@ -447,6 +447,7 @@ const deps = { playerName, nameToken };
 async function route() {
   if (game) { game.stop(); game = null; }
   if (together) { together.stop(); together = null; }
+  document.title = "lasertag";
   clearInterval(lobbyTimer);
   thumbnail.stop();
   const [hashPath, hashQuery] = location.hash.split("?");

@@ -81,12 +81,15 @@ export class MarkLayer {
         el.style.transform = `translate(${sx}px, ${sy}px)`;
         el.style.removeProperty("--angle");
       } else {
-        // Where the line from the centre to the spot leaves the box: the arrow points on.
+        // Where the line from the centre to the spot leaves the box, kept in by the pin's
+        // own size and its arrow's: the arrow points on.
+        const mx = el.offsetWidth / 2 + 30, my = 50;
+        const inner = { left: box.left + mx, right: box.right - mx, top: box.top + my, bottom: box.bottom - my };
         const cx = (box.left + box.right) / 2, cy = (box.top + box.bottom) / 2;
         const dx = sx - cx, dy = sy - cy;
         const t = Math.min(
-          dx ? Math.abs(((dx > 0 ? box.right : box.left) - cx) / dx) : Infinity,
-          dy ? Math.abs(((dy > 0 ? box.bottom : box.top) - cy) / dy) : Infinity);
+          dx ? Math.abs(((dx > 0 ? inner.right : inner.left) - cx) / dx) : Infinity,
+          dy ? Math.abs(((dy > 0 ? inner.bottom : inner.top) - cy) / dy) : Infinity);
         el.style.transform = `translate(${cx + dx * t}px, ${cy + dy * t}px)`;
         el.style.setProperty("--angle", `${Math.atan2(dy, dx)}rad`);
       }

@@ -152,6 +152,7 @@ export class PartyRoom {
     this.party = null;
     this.entry = parties.get(this.code);
     Object.assign(debug, { page: "party", partyCode: this.code, party: null, countdown: null });
+    document.title = `Party ${this.code} · lasertag`;
     $("party-error").textContent = "";
     $("party-announce").textContent = "";
     $("party-copy-status").textContent = "";
@@ -223,8 +224,12 @@ export class PartyRoom {
   enter() {
     $("party-room").hidden = false;
     const link = `${location.origin}${location.pathname}#/party/${this.code}`;
-    $("party-code").textContent = this.code;
-    $("party-code").setAttribute("aria-label", `code ${this.code.split("").join(" ")}`);
+    // Read out letter by letter; shown as one spaced word.
+    const shown = Object.assign(document.createElement("span"), { textContent: this.code });
+    shown.setAttribute("aria-hidden", "true");
+    const spelled = Object.assign(document.createElement("span"), { className: "visually-hidden", textContent: this.code.split("").join(" ") });
+    $("party-code").replaceChildren(shown, spelled);
+    $("party-code").dataset.code = this.code;
     $("party-link").value = link;
     const qr = $("party-qr");
     qr.src = `/api/parties/${this.code}/invite.svg`;
@@ -551,6 +556,7 @@ export class QueueView {
   constructor({ deps }) {
     this.deps = deps;
     Object.assign(debug, { page: "queue", queue: null });
+    document.title = "Finding players · lasertag";
     $("queue-error").textContent = "";
     $("queue-status").textContent = "";
     $("queue-seconds").textContent = "0 s";
