@@ -9,7 +9,7 @@ import { Predictor } from "./predict.js";
 import { PageSocket, socketUrl } from "./socket.js";
 import { Sound } from "./sound.js";
 import { TouchPad, touchScreen } from "./touch.js";
-import { KINDS, LiveMarks } from "./marks.js";
+import { KINDS, LiveMarks, markerName } from "./marks.js";
 
 const $ = (id) => document.getElementById(id);
 const TICK_MS = 50;
@@ -349,7 +349,8 @@ export class Game {
       case "mark": {
         this.marks.received(e);
         const k = KINDS[e.mark];
-        text = `${e.by === this.name ? "you" : e.by} marked ${k ? k.label : e.mark}`;
+        const by = markerName(e);
+        text = `${by === this.name ? "you" : by} marked ${k ? k.label : e.mark}`;
         break;
       }
       case "finished":

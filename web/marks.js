@@ -29,6 +29,12 @@ export const KINDS = {
   danger: { label: "danger", glyph: "⚠", sound: "mark_danger" },
 };
 
+/** Who made mark event `e`: its `name` where the event carries the marker's agent as `by`
+ * as well, else `by`. */
+export function markerName(e) {
+  return e.name || e.by;
+}
+
 /** World point (x, y) in CSS pixels of the canvas for frame `v` (render.js `fit`): a
  * turned frame (`v.rot`) runs its x down the screen and its y from right to left. */
 export function toScreen(v, x, y) {
@@ -234,11 +240,12 @@ export class LiveMarks {
 
   /** A teammate's mark (`event` kind `mark`), or the echo of the player's own. */
   received(e) {
-    const own = this.list.find((m) => m.own && m.by === e.by && m.kind === e.mark &&
+    const by = markerName(e);
+    const own = this.list.find((m) => m.own && m.by === by && m.kind === e.mark &&
       Math.hypot(m.x - e.x, m.y - e.y) < 0.05 && performance.now() - m.at < 3000);
     if (own) { own.own = false; return; }
     debug.marksReceived = (debug.marksReceived || 0) + 1;
-    this.add({ by: e.by, kind: e.mark, x: e.x, y: e.y });
+    this.add({ by, kind: e.mark, x: e.x, y: e.y });
   }
 
   add(m) {
@@ -319,7 +326,7 @@ export class ReplayMarks {
     this.layer = new MarkLayer();
     this.visible = visible;
     this.marks = (events || []).filter((e) => e.kind === "mark")
-      .map((e, i) => ({ id: i + 1, by: e.by, kind: e.mark, x: e.x, y: e.y, tick: e.tick }));
+      .map((e, i) => ({ id: i + 1, by: markerName(e), agent: e.by, kind: e.mark, x: e.x, y: e.y, tick: e.tick }));
   }
 
   /** Places the marks showing at `tick` (ticks at `hz`) over frame `v`. */

@@ -9,7 +9,7 @@ import { laserFov, rules } from "./rules.js";
 import { draw, fit } from "./render.js";
 import { addBeam, between, copyLink, feedLine, fmtTime, legend, replayLink } from "./hud.js";
 import { PageSocket, socketUrl } from "./socket.js";
-import { KINDS, ReplayMarks } from "./marks.js";
+import { KINDS, ReplayMarks, markerName } from "./marks.js";
 
 const $ = (id) => document.getElementById(id);
 const debug = (window.__lasertag = window.__lasertag || {});
@@ -24,7 +24,7 @@ const MARKED = {
   robot_tagged: (e) => `${e.by} froze ${e.target}`,
   role_split: (e) => `belief: role ${e.role} split from ${e.from}`,
   role_merge: (e) => `belief: role ${e.from} merged into ${e.role}`,
-  mark: (e) => `${e.by} marked ${KINDS[e.mark] ? KINDS[e.mark].label : e.mark}`,
+  mark: (e) => `${markerName(e)} marked ${KINDS[e.mark] ? KINDS[e.mark].label : e.mark}`,
 };
 
 const sleep = (ms) => new Promise((r) => setTimeout(r, ms));
@@ -127,8 +127,10 @@ export class Replay {
       }
     }
     this.marks = new ReplayMarks(this.detail.events, (m) => {
-      if (!this.fogged || !sides[m.by]) return true;
-      return sides[m.by] === (String(this.as).startsWith("r") ? "robots" : "opponents");
+      const agent = /^[or]\d+$/.test(m.agent) ? (m.agent[0] === "r" ? "robots" : "opponents") : null;
+      const side = agent || sides[m.by];
+      if (!this.fogged || !side) return true;
+      return side === (String(this.as).startsWith("r") ? "robots" : "opponents");
     });
     this.markers();
     this.connect(this.from);
