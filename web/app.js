@@ -8,7 +8,8 @@
 import { Game, debug } from "./game.js";
 import { Replay } from "./replay.js";
 import { showHistory, showLeaderboard, showPlayer } from "./pages.js";
-import { PartyRoom, QueueView, createParty, normalCode, parties } from "./party.js";
+import { PartyRoom, createParty, normalCode, parties } from "./party.js";
+import { QueueView } from "./queue.js";
 import { rules } from "./rules.js";
 import { Thumbnail } from "./thumbnail.js";
 

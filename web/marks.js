@@ -59,6 +59,10 @@ export class MarkLayer {
    * at the spot, or as an arrow at the edge of the area clear of the HUD when the spot is
    * outside it. */
   render(v, marks) {
+    if (!marks.length && !this.shown.size) {
+      if (debug.marks && debug.marks.length) debug.marks = [];
+      return;
+    }
     const w = this.el.clientWidth, h = this.el.clientHeight;
     // The top HUD line and the bottom controls cover the canvas's edges.
     const box = { left: 12, top: 48, right: w - 12, bottom: h - 40 };

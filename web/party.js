@@ -1,21 +1,19 @@
-// Playing together (docs/api.md, "Playing together"): a party's waiting room (#/party/<code>)
-// and the queue's waiting view (#/queue). Both hold a socket that the server pushes the room
-// or the wait on, reconnected by itself with a growing wait (a restarted server keeps its
-// parties, their tokens and the queue's tickets), and both end by taking a seat the way the
-// lobby's doors do: the seat token in sessionStorage, then #/play/<id>.
+// A party's waiting room (#/party/<code>; docs/api.md, "Playing together"), and what it shares
+// with the queue's view (queue.js): a socket the server pushes on, reconnected by itself with a
+// growing wait (a restarted server keeps its parties, their tokens and the queue's tickets),
+// and the seat a match gives, taken the way the lobby's doors take one: the seat token in
+// sessionStorage, then #/play/<id>.
 
 const $ = (id) => document.getElementById(id);
 const debug = (window.__lasertag = window.__lasertag || {});
 
 /** This browser's memberships, by code: {code, member_id, member_token, match_id?, team?}. */
 const PARTIES = "lasertag.parties";
-/** The queue ticket this tab waits on: {ticket, token}. */
-const QUEUE = "lasertag.queue";
 const RETRY_FIRST_MS = 250;
 const RETRY_MAX_MS = 5000;
 const COUNTDOWN_S = 3;
 /** Close codes the server gives a party's socket: the party is gone, or the member removed. */
-const GONE = 4404;
+export const GONE = 4404;
 const REMOVED = 4403;
 const SIDES = { opponents: "opponents", robots: "robots" };
 
@@ -43,7 +41,7 @@ export const parties = {
 };
 
 /** `path`'s JSON answer; an Error with the server's message and `status` otherwise. */
-async function call(method, path, body, token) {
+export async function call(method, path, body, token) {
   const headers = {};
   if (body) headers["content-type"] = "application/json";
   if (token) headers.authorization = `Bearer ${token}`;
@@ -66,7 +64,7 @@ export function normalCode(code) {
 
 /** The seat a `start` or `matched` message gives: kept where the play page looks for it
  * (app.js `tokenFor`), and the play page's address. */
-function seat(msg) {
+export function seat(msg) {
   const robots = msg.team === "robots";
   sessionStorage.setItem(`lasertag.token.${msg.match_id}${robots ? ".robots" : ""}`, msg.token);
   return `#/play/${encodeURIComponent(msg.match_id)}${robots ? "?team=robots" : ""}`;
@@ -74,7 +72,7 @@ function seat(msg) {
 
 /** A socket to `url()` that comes back by itself after a close the page did not ask for
  * (waits doubling up to 5 s); `onClose(code)` is true when there is no coming back. */
-class LiveSocket {
+export class LiveSocket {
   constructor({ url, onMessage, onOpen, onClose, onRetry }) {
     Object.assign(this, { url, onMessage, onOpen, onClose, onRetry });
     this.tries = 0;
@@ -108,7 +106,7 @@ class LiveSocket {
   }
 }
 
-function wsUrl(path) {
+export function wsUrl(path) {
   return `${location.protocol === "https:" ? "wss" : "ws"}://${location.host}${path}`;
 }
 
@@ -549,107 +547,4 @@ export async function createParty({ playerName, nameToken }) {
   const p = await call("POST", "/api/parties", body);
   parties.put({ code: p.code, member_id: p.member_id, member_token: p.member_token });
   location.hash = `#/party/${p.code}`;
-}
-
-/** The queue's waiting view: seconds waited, people looking, Cancel; a match found plays. */
-export class QueueView {
-  constructor({ deps }) {
-    this.deps = deps;
-    Object.assign(debug, { page: "queue", queue: null });
-    document.title = "Finding players · lasertag";
-    $("queue-error").textContent = "";
-    $("queue-status").textContent = "";
-    $("queue-seconds").textContent = "0 s";
-    $("queue-people").textContent = "1";
-    $("queue-cancel").hidden = false;
-    $("queue-again").hidden = true;
-    $("queue-cancel").onclick = () => this.cancel();
-    $("queue-again").onclick = () => { $("queue-again").hidden = true; $("queue-cancel").hidden = false; this.enter(); };
-    $("queue-cancel").focus();
-    this.enter();
-  }
-
-  /** A ticket this tab holds (a reload waits on), or a new one. */
-  async enter() {
-    let held = null;
-    try { held = JSON.parse(sessionStorage.getItem(QUEUE) || "null"); } catch { /* a new one */ }
-    if (!held) {
-      $("queue-status").textContent = "Joining the queue…";
-      try {
-        const body = { name: this.deps.playerName() };
-        const tok = await this.deps.nameToken(body.name, "");
-        if (tok) body.name_token = tok;
-        held = await call("POST", "/api/queue", body);
-      } catch (e) {
-        if (this.stopped) return;
-        $("queue-error").textContent = e.status === 429 ? "Too many tries in a short time: wait a moment and try again." : e.message;
-        $("queue-status").textContent = "";
-        $("queue-again").hidden = false;
-        return;
-      }
-      if (this.stopped) { this.leave(held); return; }
-      sessionStorage.setItem(QUEUE, JSON.stringify(held));
-    }
-    this.held = held;
-    debug.queue = { ticket: held.ticket, seconds: 0, people: null };
-    $("queue-status").textContent = "Looking for players…";
-    this.socket = new LiveSocket({
-      url: () => wsUrl(`/ws/queue/${encodeURIComponent(held.ticket)}?token=${encodeURIComponent(held.token)}`),
-      onOpen: () => { $("queue-status").textContent = "Looking for players…"; },
-      onMessage: (msg) => this.message(msg),
-      onRetry: () => { $("queue-status").textContent = "reconnecting…"; },
-      onClose: (code) => {
-        if (code !== GONE) return false;
-        this.lapsed();
-        return true;
-      },
-    });
-  }
-
-  message(msg) {
-    if (msg.type === "waiting") {
-      $("queue-seconds").textContent = `${Math.floor(msg.seconds)} s`;
-      $("queue-people").textContent = String(msg.people);
-      Object.assign(debug.queue, { seconds: msg.seconds, people: msg.people });
-    } else if (msg.type === "matched") {
-      this.matched = true;
-      sessionStorage.removeItem(QUEUE);
-      this.socket.close();
-      debug.queue.matched = msg.match_id;
-      $("queue-status").textContent = "Found a match: starting…";
-      location.hash = seat(msg);
-    } else if (msg.type === "error") {
-      $("queue-error").textContent = msg.error;
-    }
-  }
-
-  lapsed() {
-    sessionStorage.removeItem(QUEUE);
-    this.held = null;
-    $("queue-status").textContent = "";
-    $("queue-error").textContent = "Your place in the queue lapsed.";
-    $("queue-cancel").hidden = true;
-    $("queue-again").hidden = false;
-    $("queue-again").focus();
-  }
-
-  leave(held) {
-    sessionStorage.removeItem(QUEUE);
-    return call("DELETE", `/api/queue/${encodeURIComponent(held.ticket)}`, null, held.token).catch(() => {});
-  }
-
-  async cancel() {
-    this.stopped = true;
-    if (this.socket) this.socket.close();
-    if (this.held) await this.leave(this.held);
-    this.held = null;
-    location.hash = "#/";
-  }
-
-  /** Leaving the page leaves the queue (a reload keeps the ticket: no `stop` runs). */
-  stop() {
-    this.stopped = true;
-    if (this.socket) this.socket.close();
-    if (this.held && !this.matched) this.leave(this.held);
-  }
 }

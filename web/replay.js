@@ -269,12 +269,16 @@ export class Replay {
     legend($("legend"), this.beliefOn ? this.belief : null, false);
   }
 
-  /** The timeline's marks: tags, frozen robots, and the belief's splits and merges. */
+  /** The timeline's marks: tags, frozen robots, the belief's splits and merges, players'
+   * marks. A click goes to one; the keyboard steps through them with [ and ] (as buttons,
+   * dozens of 3 px targets side by side would be too small to hit and a long way to tab). */
   markers() {
     const el = $("replay-markers");
     const ticks = this.detail.ticks || 1;
-    const marks = (this.detail.events || []).filter((e) => MARKED[e.kind]).map((e) => {
-      const m = document.createElement("button");
+    const events = (this.detail.events || []).filter((e) => MARKED[e.kind]);
+    this.marked = events.map((e) => e.tick).sort((a, b) => a - b);
+    const marks = events.map((e) => {
+      const m = document.createElement("span");
       m.className = `marker ${e.kind}`;
       m.style.left = `${(100 * e.tick) / ticks}%`;
       m.title = `${fmtTime(e.tick / 20)} ${MARKED[e.kind](e)}`;
@@ -390,6 +394,14 @@ export class Replay {
       case "Space": this.toggle(); break;
       case "ArrowLeft": this.seek(Math.max(0, tick - (e.shiftKey ? 20 : 1))); break;
       case "ArrowRight": this.seek(Math.min(this.ticks, tick + (e.shiftKey ? 20 : 1))); break;
+      case "BracketLeft": case "BracketRight": {
+        // The previous or next marked event (a tick aside, so repeated presses move on).
+        const next = e.code === "BracketRight"
+          ? (this.marked || []).find((t) => t > tick + 1)
+          : [...(this.marked || [])].reverse().find((t) => t < tick - 1);
+        if (next !== undefined) this.seek(next, true);
+        break;
+      }
       default: return;
     }
     e.preventDefault();
