@@ -417,7 +417,7 @@ export class PartyRoom {
       if (!was) { said.push(`${m.name} joined`); continue; }
       if (was.ready !== m.ready) said.push(`${m.name} is ${m.ready ? "ready" : "not ready"}`);
       if (was.side !== m.side) said.push(`${m.name} plays on the ${m.side} side`);
-      if (was.connected !== m.connected) said.push(`${m.name} ${m.connected ? "is back" : "lost the connection"}`);
+      if (was.connected !== m.connected) said.push(`${m.name} ${m.connected ? "is connected" : "lost the connection"}`);
     }
     for (const m of old.members) if (!p.members.some((x) => x.id === m.id)) said.push(`${m.name} left`);
     const s0 = old.settings, s1 = p.settings;
@@ -434,7 +434,7 @@ export class PartyRoom {
     const said = again ? "" : this.changes(this.party, p);
     this.party = p;
     debug.party = p;
-    if (said) $("party-announce").textContent = said[0].toUpperCase() + said.slice(1) + ".";
+    if (said) $("party-announce").textContent = `${said}.`;
     const me = this.me();
     const host = this.isHost();
     if (!me) return;
@@ -472,6 +472,7 @@ export class PartyRoom {
       const li = document.createElement("li");
       li.className = "member";
       li.dataset.memberId = m.id;
+      Object.assign(li.dataset, { name: m.name, side: m.side, ready: String(m.ready), connected: String(m.connected) });
       const dot = document.createElement("span");
       dot.className = `dot ${m.connected ? "on" : "off"}`;
       dot.title = m.connected ? "connected" : "not connected";
