@@ -67,6 +67,11 @@ pub mod defaults {
     pub const NAME_CLAIMS_PER_MINUTE: f64 = 60.0;
     pub const BELIEF_MB_PER_S: f64 = 4.0;
     pub const BELIEF_MB_PER_S_ALL: f64 = 32.0;
+    pub const MAX_PARTIES: usize = 1_000;
+    pub const MAX_PARTIES_PER_ADDRESS: usize = 3;
+    pub const PARTY_MISSES_PER_MINUTE: f64 = 10.0;
+    pub const MAX_QUEUED: usize = 2_000;
+    pub const MAX_QUEUED_PER_ADDRESS: usize = 2;
 
     /// Tick milliseconds all matches together may be priced at: twice every core's 50 ms at
     /// 20 Hz. A match is priced at its p99 tick, and the heavy ticks of different matches
@@ -397,6 +402,28 @@ pub struct Config {
     #[arg(long, env = "LASERTAG_BELIEF_MB_PER_S_ALL", default_value_t = defaults::BELIEF_MB_PER_S_ALL,
           value_parser = positive)]
     pub belief_mb_per_s_all: f64,
+    /// Parties (waiting rooms, `POST /api/parties`) everyone together may hold (each at
+    /// most 8 people, a few kilobytes with its row in the store); past it 503.
+    #[arg(long, env = "LASERTAG_MAX_PARTIES", default_value_t = defaults::MAX_PARTIES,
+          value_parser = clap::value_parser!(u64).range(1..).map(|v| v as usize))]
+    pub max_parties: usize,
+    /// Parties one client (an IPv4 address, or an IPv6 /64) may host at once; past it 429.
+    #[arg(long, env = "LASERTAG_MAX_PARTIES_PER_ADDRESS", default_value_t = defaults::MAX_PARTIES_PER_ADDRESS,
+          value_parser = clap::value_parser!(u64).range(1..).map(|v| v as usize))]
+    pub max_parties_per_address: usize,
+    /// Party codes one client may name a minute that name no party (bursts of as many):
+    /// past it 429, so that guessing a code takes months, not minutes.
+    #[arg(long, env = "LASERTAG_PARTY_MISSES_PER_MINUTE", default_value_t = defaults::PARTY_MISSES_PER_MINUTE,
+          value_parser = positive)]
+    pub party_misses_per_minute: f64,
+    /// People the queue (`POST /api/queue`) holds at once, all clients together; past it 503.
+    #[arg(long, env = "LASERTAG_MAX_QUEUED", default_value_t = defaults::MAX_QUEUED,
+          value_parser = clap::value_parser!(u64).range(1..).map(|v| v as usize))]
+    pub max_queued: usize,
+    /// Tickets one client may hold in the queue at once; past it 429.
+    #[arg(long, env = "LASERTAG_MAX_QUEUED_PER_ADDRESS", default_value_t = defaults::MAX_QUEUED_PER_ADDRESS,
+          value_parser = clap::value_parser!(u64).range(1..).map(|v| v as usize))]
+    pub max_queued_per_address: usize,
 }
 
 impl Default for Config {
@@ -457,6 +484,11 @@ impl Default for Config {
             name_claims_per_minute: defaults::NAME_CLAIMS_PER_MINUTE,
             belief_mb_per_s: defaults::BELIEF_MB_PER_S,
             belief_mb_per_s_all: defaults::BELIEF_MB_PER_S_ALL,
+            max_parties: defaults::MAX_PARTIES,
+            max_parties_per_address: defaults::MAX_PARTIES_PER_ADDRESS,
+            party_misses_per_minute: defaults::PARTY_MISSES_PER_MINUTE,
+            max_queued: defaults::MAX_QUEUED,
+            max_queued_per_address: defaults::MAX_QUEUED_PER_ADDRESS,
         }
     }
 }

@@ -146,6 +146,15 @@ async fn serve(args: ServeArgs) -> Result<(), ServeError> {
     if restored > 0 {
         tracing::info!(policies = restored, "uploaded policies loaded");
     }
+    let rooms = {
+        let registry = registry.clone();
+        tokio::task::spawn_blocking(move || crate::game::resume::restore_parties(&registry))
+            .await
+            .unwrap_or(0)
+    };
+    if rooms > 0 {
+        tracing::info!(parties = rooms, "parties' rooms taken back");
+    }
     {
         let left = crate::game::resume::left_running(&registry);
         let registry = registry.clone();

@@ -16,6 +16,7 @@ pub mod difficulties;
 mod difficulty_name;
 pub mod fleet;
 mod join;
+pub mod parties;
 mod planners;
 mod policies;
 mod refusal;

@@ -128,6 +128,54 @@ pub enum EventKind {
         winner: Option<Side>,
         reason: FinishReason,
     },
+    /// A person pointed at `at` for their side (`kind`: what they mean). It changes
+    /// nothing in the world: the log carries it so that their teammates see it, spectators
+    /// as late as the rest, and replays draw it.
+    Mark {
+        by: AgentId,
+        name: String,
+        at: Point2<f32>,
+        kind: MarkKind,
+    },
+}
+
+/// What a person's mark says about the point it names.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum MarkKind {
+    /// A robot was seen there.
+    Robot,
+    /// Go there.
+    Go,
+    /// Keep away.
+    Danger,
+}
+
+impl MarkKind {
+    pub const ALL: [MarkKind; 3] = [MarkKind::Robot, MarkKind::Go, MarkKind::Danger];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            MarkKind::Robot => "robot",
+            MarkKind::Go => "go",
+            MarkKind::Danger => "danger",
+        }
+    }
+
+    pub fn parse(name: &str) -> Option<MarkKind> {
+        MarkKind::ALL.into_iter().find(|k| k.name() == name)
+    }
+}
+
+impl Plain for MarkKind {
+    fn save(&self, w: &mut crate::checkpoint::Writer) {
+        (*self as u8).save(w);
+    }
+    fn load(r: &mut crate::checkpoint::Reader) -> Result<Self, CheckpointError> {
+        MarkKind::ALL
+            .get(u8::load(r)? as usize)
+            .copied()
+            .ok_or(CheckpointError::BadValue("a mark kind"))
+    }
 }
 
 #[derive(Debug, Clone, PartialEq)]
@@ -221,6 +269,14 @@ impl Plain for EventKind {
                 winner.save(w);
                 reason.save(w);
             }
+            EventKind::Mark { by, name, at, kind } => {
+                8u8.save(w);
+                by.save(w);
+                name.save(w);
+                at.x.save(w);
+                at.y.save(w);
+                kind.save(w);
+            }
         }
     }
     fn load(r: &mut crate::checkpoint::Reader) -> Result<Self, CheckpointError> {
@@ -257,6 +313,12 @@ impl Plain for EventKind {
             7 => EventKind::Finished {
                 winner: Plain::load(r)?,
                 reason: Plain::load(r)?,
+            },
+            8 => EventKind::Mark {
+                by: Plain::load(r)?,
+                name: Plain::load(r)?,
+                at: Point2::new(Plain::load(r)?, Plain::load(r)?),
+                kind: Plain::load(r)?,
             },
             _ => return Err(CheckpointError::BadValue("an event")),
         })

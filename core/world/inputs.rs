@@ -29,6 +29,14 @@ pub enum WorldInput {
     RobotKeys { robot: usize, input: HumanInput },
     /// The person leaves robot `robot`'s seat: the team's planner drives it again.
     UnseatRobot { robot: usize, name: String },
+    /// The person in `by`'s seat, named `name`, marks `at` for their side (nothing in the
+    /// world changes; the log carries an [`EventKind::Mark`]).
+    Mark {
+        by: AgentId,
+        name: String,
+        at: Point2<f32>,
+        kind: MarkKind,
+    },
     /// The match ends from outside.
     End(FinishReason),
 }
@@ -49,6 +57,10 @@ pub enum InputError {
     /// Only robots' orders apply all or none (`World::apply_all`).
     #[error("only robots' orders apply all or none")]
     NotAllOrNone,
+    #[error("a mark must name a point inside the arena")]
+    MarkOutside,
+    #[error("no agent {0} in this match")]
+    NoAgent(AgentId),
 }
 
 impl World {
@@ -112,6 +124,29 @@ impl World {
                 self.order_robot(*robot, RobotOrder::Stop)?;
                 self.robots[*robot].seated = false;
                 self.log_player(AgentId::Robot(*robot), name.clone(), false);
+                Ok(())
+            }
+            WorldInput::Mark { by, name, at, kind } => {
+                let exists = match *by {
+                    AgentId::Robot(i) => i < self.robots.len(),
+                    AgentId::Opponent(i) => i < self.opponents.len(),
+                };
+                if !exists {
+                    return Err(InputError::NoAgent(*by));
+                }
+                let inside = at.x.is_finite()
+                    && at.y.is_finite()
+                    && (0.0..=self.arena.width()).contains(&at.x)
+                    && (0.0..=self.arena.height()).contains(&at.y);
+                if !inside {
+                    return Err(InputError::MarkOutside);
+                }
+                self.push(EventKind::Mark {
+                    by: *by,
+                    name: name.clone(),
+                    at: *at,
+                    kind: *kind,
+                });
                 Ok(())
             }
             WorldInput::End(reason) => {

@@ -12,6 +12,7 @@ pub mod encoded;
 pub mod error;
 mod handle;
 pub mod hub;
+pub mod party;
 pub mod policies;
 pub mod record;
 pub mod replay;
@@ -84,6 +85,8 @@ pub struct Registry {
     /// Held while a showcase starts, so that visitors who all find the showcases full start
     /// one more between them, not one each (`showcase::join_or_create`).
     pub showcase_starting: tokio::sync::Mutex<()>,
+    /// Parties' waiting rooms (`party`).
+    pub parties: party::Parties,
 }
 
 /// Counts an open WebSocket connection until dropped.
@@ -107,11 +110,13 @@ impl Registry {
 
     /// A registry whose finished matches go to `history` (a store on disk, or memory).
     pub fn with_history(maps: MapStore, config: Config, history: replay::History) -> Arc<Registry> {
+        let history = Arc::new(history);
         Arc::new(Registry {
             maps: RwLock::new(maps),
             policies: RwLock::new(policies::PolicyStore::shipped()),
+            parties: party::Parties::new(&config, Some(history.clone())),
             config,
-            history: Arc::new(history),
+            history,
             ..Registry::default()
         })
     }

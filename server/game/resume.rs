@@ -440,6 +440,22 @@ pub fn restore_policies(registry: &Registry) -> usize {
     kept.iter().filter(|k| hold(registry, k)).count()
 }
 
+/// Takes back the parties' rooms the registry's store keeps (blocking: one read): the server
+/// calls it before it serves its first request, so that a page that reconnects finds its
+/// room and its member token.
+pub fn restore_parties(registry: &Registry) -> usize {
+    let Some(store) = registry.history.store() else {
+        return 0;
+    };
+    match store.read(|b| b.kept_parties()) {
+        Ok(kept) => registry.parties.restore(kept),
+        Err(e) => {
+            tracing::error!("cannot read the kept parties: {e}");
+            0
+        }
+    }
+}
+
 /// Loads the policy `name` from the store when the registry does not hold it and the store
 /// keeps it (blocking): a match adopted from another server of a fleet may be driven by a
 /// policy uploaded there after this server started.

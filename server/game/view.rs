@@ -530,6 +530,8 @@ impl Visible {
 /// tags, a robot of it hit or frozen, its belief splitting or merging); an opponent's shot
 /// that hit no robot only when that opponent is in their robot's view.
 ///
+/// A mark goes live to the marker's side only.
+///
 /// Seats and the end are public and go live. Everything else reaches the player as late as
 /// spectators get it.
 pub fn event_seen(event: &Event, visible: &Visible, you: AgentId) -> bool {
@@ -556,6 +558,8 @@ pub fn event_seen(event: &Event, visible: &Visible, you: AgentId) -> bool {
         },
         (EventKind::Tag { by, target }, AgentId::Opponent(_)) => *target == you || seen(&[*by]),
         (EventKind::RobotTagged { by, target }, AgentId::Opponent(_)) => seen(&[*by, *target]),
+        // A mark is for the marker's side alone: the other side never learns of it live.
+        (EventKind::Mark { by, .. }, _) => robot(by) == robot(&you),
     }
 }
 

@@ -7,6 +7,7 @@ use axum::response::{IntoResponse, Response};
 use crate::game::MatchError;
 use crate::game::admission::NoRoom;
 use crate::game::hub::SpectatorsRefused;
+use crate::game::party::PartyError;
 use crate::game::replay::HistoryError;
 use crate::game::showcase::{NoSeat, NoShowcase};
 use crate::http::limits::BeliefRefused;
@@ -15,6 +16,7 @@ use crate::service::admit::OverLimit;
 use crate::service::maps::MapsError;
 use crate::service::matches::CreateError;
 use crate::service::names::NamesError;
+use crate::service::parties::PartiesError;
 use crate::service::players::StatsError;
 use crate::service::policies::PoliciesError;
 use crate::service::replays::ReplaysError;
@@ -98,15 +100,17 @@ fn input_status(e: &InputError) -> StatusCode {
     match e {
         InputError::Opponent(OrderError::UnknownOpponent(_))
         | InputError::Robot(RobotOrderError::UnknownRobot(_))
-        | InputError::NoSlot(_) => StatusCode::NOT_FOUND,
+        | InputError::NoSlot(_)
+        | InputError::NoAgent(_) => StatusCode::NOT_FOUND,
         InputError::NoRobotSeat(_) => StatusCode::CONFLICT,
         InputError::Opponent(OrderError::OutsideArena { .. }) => StatusCode::BAD_REQUEST,
         InputError::Opponent(_) | InputError::Robot(RobotOrderError::NotApiDriven) => {
             StatusCode::CONFLICT
         }
-        InputError::Robot(_) | InputError::NotHuman(_) | InputError::NotAllOrNone => {
-            StatusCode::BAD_REQUEST
-        }
+        InputError::Robot(_)
+        | InputError::NotHuman(_)
+        | InputError::NotAllOrNone
+        | InputError::MarkOutside => StatusCode::BAD_REQUEST,
     }
 }
 
@@ -343,6 +347,41 @@ impl From<NamesError> for ApiError {
             NamesError::NoHistory | NamesError::ServerFull(_) => StatusCode::SERVICE_UNAVAILABLE,
             NamesError::NotClaimed(_) => StatusCode::NOT_FOUND,
             NamesError::NeedsToken(_) | NamesError::WrongToken(_) => StatusCode::FORBIDDEN,
+        };
+        ApiError::new(status, e.to_string())
+    }
+}
+
+impl From<PartiesError> for ApiError {
+    fn from(e: PartiesError) -> ApiError {
+        let status = match &e {
+            PartiesError::Name(_) | PartiesError::Create(_) => {
+                return match e {
+                    PartiesError::Name(e) => e.into(),
+                    PartiesError::Create(e) => e.into(),
+                    _ => ApiError::new(StatusCode::INTERNAL_SERVER_ERROR, e.to_string()),
+                };
+            }
+            PartiesError::Seat { error, .. } => ApiError::from(error.clone()).status,
+            PartiesError::NoMap(_) => StatusCode::BAD_REQUEST,
+            PartiesError::Party(p) => match p {
+                PartyError::NoParty(_) | PartyError::NoMember(..) => StatusCode::NOT_FOUND,
+                PartyError::Full(_)
+                | PartyError::NotReady(_)
+                | PartyError::Playing(_)
+                | PartyError::HostLeaves => StatusCode::CONFLICT,
+                PartyError::NotMember(_) | PartyError::NotHost(_) | PartyError::NotYours(_) => {
+                    StatusCode::FORBIDDEN
+                }
+                PartyError::TooManyMisses(wait) => {
+                    let mut error = ApiError::new(StatusCode::TOO_MANY_REQUESTS, e.to_string());
+                    error.retry_after = Some((*wait).clamp(1, u64::from(u32::MAX)) as u32);
+                    return error;
+                }
+                PartyError::TooManyHosted(_) => StatusCode::TOO_MANY_REQUESTS,
+                PartyError::ServerFull(_) => StatusCode::SERVICE_UNAVAILABLE,
+                PartyError::Invalid(_) => StatusCode::BAD_REQUEST,
+            },
         };
         ApiError::new(status, e.to_string())
     }

@@ -13,6 +13,7 @@ mod handlers;
 pub mod limits;
 mod names;
 mod openapi;
+pub(crate) mod parties;
 mod players;
 mod policies;
 mod rate_limit;
@@ -34,7 +35,7 @@ use axum::Router;
 use axum::extract::{DefaultBodyLimit, OriginalUri};
 use axum::handler::HandlerWithoutStateExt;
 use axum::http::StatusCode;
-use axum::routing::{delete, get, post};
+use axum::routing::{delete, get, patch, post};
 use tower_http::compression::CompressionLayer;
 use tower_http::services::{ServeDir, ServeFile};
 use tower_http::trace::TraceLayer;
@@ -87,6 +88,11 @@ fn router(
         registry.config.replay_jobs,
         registry.config.client_budget_share,
     );
+    // Rooms whose match ended wait again, and forgotten ones lapse, for as long as the
+    // server runs (a router built outside a runtime, in a unit test, has no rooms to keep).
+    if let Ok(runtime) = tokio::runtime::Handle::try_current() {
+        runtime.spawn(crate::service::parties::keep(registry.clone()));
+    }
     let state = AppState {
         registry,
         limits: Arc::default(),
@@ -144,6 +150,15 @@ fn router(
         .route("/names", post(names::claim))
         .route("/names/{name}", delete(names::release))
         .route("/leaderboard", get(players::leaderboard))
+        .route("/parties", post(parties::create))
+        .route("/parties/{code}", get(parties::get))
+        .route("/parties/{code}/members", post(parties::join))
+        .route(
+            "/parties/{code}/members/{member_id}",
+            patch(parties::change).delete(parties::remove),
+        )
+        .route("/parties/{code}/start", post(parties::start))
+        .route("/parties/{code}/invite.svg", get(parties::invite))
         .route("/matches/{id}/stats", get(handlers::stats))
         .fallback(not_found)
         .method_not_allowed_fallback(method_not_allowed);
@@ -172,6 +187,7 @@ fn router(
         .nest("/api", api)
         .route("/ws/matches/{id}", get(ws::upgrade))
         .route("/ws/replays/{id}", get(replay_ws::upgrade))
+        .route("/ws/parties/{code}", get(parties::upgrade))
         .route("/metrics", get(handlers::metrics))
         .route_service("/favicon.ico", favicon)
         .fallback_service(static_files)

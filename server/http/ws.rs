@@ -17,10 +17,11 @@
 //! connection's [`Schedule`].
 
 mod events;
+mod marks;
 
 use std::collections::VecDeque;
 use std::sync::Arc;
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use axum::extract::State;
 use axum::extract::ws::Message;
@@ -30,7 +31,7 @@ use crate::access::ClientKey;
 use crate::config::Config;
 use crate::game::hub::SpectatorsRefused;
 use crate::game::view::{BELIEF_EVERY, Frame, Visible, visible_to};
-use crate::game::{MatchHandle, Seat, SpectatorSeat};
+use crate::game::{MatchError, MatchHandle, Seat, SpectatorSeat};
 use crate::http::error::ApiError;
 use crate::http::socket::schedule::Schedule;
 use crate::http::socket::{self, Asked, End, Manner, Socket};
@@ -39,8 +40,9 @@ use crate::metrics::Refusal;
 use crate::protocol::socket::{self as common, Limits};
 use crate::protocol::ws::{self as wire, ClientMessage, Welcome};
 use lasertag_core::sim::AgentId;
-use lasertag_core::world::HumanInput;
 use lasertag_core::world::MatchStatus;
+use lasertag_core::world::{HumanInput, WorldInput};
+use nalgebra::Point2;
 
 /// How long a closing connection waits for the client's close reply.
 const CLOSE_DRAIN: Duration = Duration::from_secs(3);
@@ -142,6 +144,8 @@ struct Connection {
     finished_sent: bool,
     /// A spectator's place in the count, and what the hub knows of its sending.
     spectator: Option<SpectatorSeat>,
+    /// A player's recent marks (at most [`marks::MAX_MARKS`] in [`marks::MARK_WINDOW`]).
+    marks: marks::MarkRate,
 }
 
 impl Connection {
@@ -171,6 +175,7 @@ impl Connection {
             held_belief: None,
             finished_sent: false,
             spectator,
+            marks: marks::MarkRate::default(),
         }
     }
 
@@ -495,6 +500,35 @@ impl Connection {
             ClientMessage::Belief { on } => {
                 self.belief = on;
                 Ok(())
+            }
+            ClientMessage::Mark { x, y, kind } => {
+                let Some(seat) = &self.seat else {
+                    return self
+                        .sock
+                        .strike(Refusal::MessageInvalid, "mark: spectators mark nothing")
+                        .await;
+                };
+                if !self.marks.admit(Instant::now()) {
+                    let why = format!(
+                        "mark: at most {} marks in {} s",
+                        marks::MAX_MARKS,
+                        marks::MARK_WINDOW.as_secs()
+                    );
+                    return self.sock.error(&why).await;
+                }
+                let input = WorldInput::Mark {
+                    by: seat.body,
+                    name: seat.name.clone(),
+                    at: Point2::new(x as f32, y as f32),
+                    kind,
+                };
+                match self.handle.apply(input).await {
+                    Ok(()) => Ok(()),
+                    Err(MatchError::Finished(_) | MatchError::Gone(_)) => {
+                        Err(End::normal("the match has ended"))
+                    }
+                    Err(e) => self.sock.error(&format!("mark: {e}")).await,
+                }
             }
             ClientMessage::Input {
                 forward,

@@ -1,5 +1,8 @@
 //! A match as the API shows it: its summary in listings, the ground-truth state, the robot
 //! team's belief and the event log, from the core's types, coordinates to the millimetre.
+//!
+//! Long file: the four views of one match read alike (the same roundings, the same names of
+//! agents and sides), and a reader checks one against another in one place.
 
 use super::*;
 use crate::game::delay::HeldBelief;
@@ -449,7 +452,7 @@ pub struct EventDto {
     pub seq: u64,
     pub tick: u64,
     /// `shot`, `tag`, `robot_tagged`, `role_split`, `role_merge`, `player_joined`,
-    /// `player_left`, `finished`.
+    /// `player_left`, `mark`, `finished`.
     pub kind: &'static str,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub by: Option<String>,
@@ -483,6 +486,14 @@ pub struct EventDto {
     /// For `role_merge`: the opponents the merged role stands for.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub count: Option<u32>,
+    /// For `mark`: the point marked, in metres.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub x: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub y: Option<f64>,
+    /// For `mark`: `robot` (a robot seen there), `go` or `danger`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub mark: Option<&'static str>,
 }
 
 pub fn event(e: &lasertag_core::world::Event) -> EventDto {
@@ -502,6 +513,9 @@ pub fn event(e: &lasertag_core::world::Event) -> EventDto {
         role: None,
         from: None,
         count: None,
+        x: None,
+        y: None,
+        mark: None,
     };
     match &e.kind {
         EventKind::Shot { by, hit } => {
@@ -541,6 +555,19 @@ pub fn event(e: &lasertag_core::world::Event) -> EventDto {
                 AgentId::Robot(_) => dto.robot = Some(agent.to_string()),
             }
             dto.name = Some(name.clone());
+        }
+        EventKind::Mark { by, name, at, kind } => {
+            // `by` is the marker's name, as their teammates call them; the agent is in
+            // `opponent` or `robot`, as for seats.
+            dto.kind = "mark";
+            dto.by = Some(name.clone());
+            match by {
+                AgentId::Opponent(_) => dto.opponent = Some(by.to_string()),
+                AgentId::Robot(_) => dto.robot = Some(by.to_string()),
+            }
+            dto.x = Some(lasertag_core::env::mm(at.x));
+            dto.y = Some(lasertag_core::env::mm(at.y));
+            dto.mark = Some(kind.name());
         }
         EventKind::Finished { winner: w, reason } => {
             dto.kind = "finished";

@@ -20,7 +20,7 @@ use crate::protocol::socket::{self, Limits, to_json};
 use crate::protocol::{EventDto, OpponentControl, PoseDto, Status, Winner, status, winner};
 use crate::protocol::{Invalid, invalid};
 use lasertag_core::sim::{AgentId, Pose};
-use lasertag_core::world::Event;
+use lasertag_core::world::{Event, MarkKind};
 
 /// Serialised forms of one frame, built by the first connection that needs them and shared
 /// by all the others (so 500 spectators cost one serialisation per tick, not 500).
@@ -52,6 +52,16 @@ pub enum ClientMessage {
     Belief { on: bool },
     /// Answered at once with a `pong` carrying the same `t` (for the ping display).
     Ping { t: f64 },
+    /// A player points at `(x, y)` (metres) for their side.
+    Mark { x: f64, y: f64, kind: MarkKind },
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct MarkMsg {
+    x: f64,
+    y: f64,
+    kind: String,
 }
 
 #[derive(Deserialize)]
@@ -67,7 +77,7 @@ struct InputMsg {
     view_tick: Option<u64>,
 }
 
-const TYPES: &str = "input, belief or ping";
+const TYPES: &str = "input, mark, belief or ping";
 
 impl ClientMessage {
     /// Parses and range-checks a client's text message, naming what is wrong.
@@ -87,6 +97,22 @@ impl ClientMessage {
                     tag: m.tag,
                     seq: m.seq,
                     view_tick: m.view_tick,
+                })
+            }
+            "mark" => {
+                let m: MarkMsg = socket::fields(v)?;
+                for (field, v) in [("x", m.x), ("y", m.y)] {
+                    if !v.is_finite() {
+                        return Err(invalid(field, format!("{v} must be a finite number")));
+                    }
+                }
+                let kind = MarkKind::parse(&m.kind).ok_or_else(|| {
+                    invalid("kind", format!("{:?} is not robot, go or danger", m.kind))
+                })?;
+                Ok(ClientMessage::Mark {
+                    x: m.x,
+                    y: m.y,
+                    kind,
                 })
             }
             "belief" => socket::belief(v).map(|on| ClientMessage::Belief { on }),

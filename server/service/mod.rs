@@ -8,6 +8,7 @@ pub mod admit;
 pub mod maps;
 pub mod matches;
 pub mod names;
+pub mod parties;
 pub mod players;
 pub mod policies;
 pub mod replays;

@@ -132,8 +132,22 @@ pub enum Write {
         policy: Box<KeptPolicy>,
         reply: std::sync::mpsc::Sender<Result<bool, StoreError>>,
     },
+    /// Keeps a party's room as it is now, replacing what was kept of it
+    /// (`Backend::keep_party`).
+    KeepParty(Box<KeptParty>),
+    /// Forgets a party that lapsed (`Backend::drop_party`).
+    DropParty { code: String },
     /// Forgets an uploaded policy (`Backend::drop_policy`).
     DropPolicy { name: String },
+}
+
+/// A party's room as the store keeps it, so that it outlives its server: its code, and the
+/// room as one document (`store::codec::party`: members with their tokens as hashes, sides,
+/// the host's settings).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct KeptParty {
+    pub code: String,
+    pub doc: String,
 }
 
 /// An uploaded policy as the store keeps it (`POST /api/policies`), so that it outlives the
@@ -218,6 +232,8 @@ impl Write {
                 | Write::Release { .. }
                 | Write::KeepPolicy { .. }
                 | Write::DropPolicy { .. }
+                | Write::KeepParty(_)
+                | Write::DropParty { .. }
         )
     }
 }
@@ -401,6 +417,11 @@ pub trait Backend: Send {
     fn kept_policies(&mut self) -> Result<Vec<KeptPolicy>, StoreError>;
     /// The kept policy `name`, if any.
     fn kept_policy(&mut self, name: &str) -> Result<Option<KeptPolicy>, StoreError>;
+    /// Keeps `party`, replacing what was kept under its code.
+    fn keep_party(&mut self, party: &KeptParty) -> Result<(), StoreError>;
+    fn drop_party(&mut self, code: &str) -> Result<(), StoreError>;
+    /// Every kept party.
+    fn kept_parties(&mut self) -> Result<Vec<KeptParty>, StoreError>;
     fn player(&mut self, name: &str) -> Result<Option<PlayerStats>, StoreError>;
     fn played(&mut self, name: &str, limit: usize) -> Result<Vec<Played>, StoreError>;
     fn leaders(&mut self, order: LeaderOrder, limit: usize)

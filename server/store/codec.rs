@@ -14,9 +14,10 @@ use flate2::read::DeflateDecoder;
 use flate2::write::DeflateEncoder;
 use lasertag_core::difficulty::Difficulty;
 use lasertag_core::settings::{Group, Value};
-use lasertag_core::sim::Odometry;
+use lasertag_core::sim::{AgentId, Odometry};
 use lasertag_core::world::{
-    FinishReason, HumanInput, MatchConfig, OpponentOrder, Placement, RobotOrder, World, WorldInput,
+    FinishReason, HumanInput, MarkKind, MatchConfig, OpponentOrder, Placement, RobotOrder, World,
+    WorldInput,
 };
 use lasertag_core::{localise, planner, radio, tracker};
 use nalgebra::Point2;
@@ -25,9 +26,11 @@ use serde_json::{Map, Value as Json};
 
 mod live;
 mod names;
+mod party;
 pub use live::{StoredLive, StoredPerson, StoredSeat};
 pub use names::StoredClock;
 use names::{StoredBot, StoredControl, StoredDifficulty, StoredPlanner};
+pub use party::{MemberRecord, PartyRecord};
 
 /// A stored match that cannot be read back.
 #[derive(Debug, thiserror::Error)]
@@ -291,6 +294,15 @@ enum StoredInput {
         r: usize,
         name: String,
     },
+    /// A person's mark: the agent (`o0`, `r1`) and its name, the point, the kind's name.
+    Mark {
+        t: u64,
+        a: String,
+        name: String,
+        x: f32,
+        y: f32,
+        m: String,
+    },
     End {
         t: u64,
         reason: String,
@@ -313,6 +325,17 @@ fn points(p: &[Point2<f32>]) -> Vec<[f32; 2]> {
 
 fn unpoints(p: &[[f32; 2]]) -> Vec<Point2<f32>> {
     p.iter().map(|p| Point2::new(p[0], p[1])).collect()
+}
+
+/// The agent a stored name (`o0`, `r1`) stands for.
+fn agent_of(name: &str) -> Option<AgentId> {
+    let (kind, n) = name.split_at_checked(1)?;
+    let n = n.parse().ok()?;
+    match kind {
+        "o" => Some(AgentId::Opponent(n)),
+        "r" => Some(AgentId::Robot(n)),
+        _ => None,
+    }
 }
 
 /// The reason a stored name stands for.
@@ -382,6 +405,14 @@ impl StoredInput {
                 r: *robot,
                 name: name.clone(),
             },
+            WorldInput::Mark { by, name, at, kind } => StoredInput::Mark {
+                t,
+                a: by.to_string(),
+                name: name.clone(),
+                x: at.x,
+                y: at.y,
+                m: kind.name().to_string(),
+            },
             WorldInput::End(reason) => StoredInput::End {
                 t,
                 reason: reason.name().to_string(),
@@ -443,6 +474,22 @@ impl StoredInput {
             StoredInput::UnseatRobot { t, r, name } => {
                 (t, WorldInput::UnseatRobot { robot: r, name })
             }
+            StoredInput::Mark {
+                t,
+                a,
+                name,
+                x,
+                y,
+                m,
+            } => (
+                t,
+                WorldInput::Mark {
+                    by: agent_of(&a).ok_or_else(|| format!("no agent {a:?}"))?,
+                    name,
+                    at: Point2::new(x, y),
+                    kind: MarkKind::parse(&m).ok_or_else(|| format!("no mark kind {m:?}"))?,
+                },
+            ),
             StoredInput::End { t, reason } => (
                 t,
                 WorldInput::End(

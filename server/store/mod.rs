@@ -19,8 +19,8 @@ pub mod results;
 pub mod sqlite;
 
 pub use backend::{
-    Backend, ClaimLimits, ClaimOutcome, Ended, HEARTBEAT, KeptPolicy, LeaderOrder, Listed,
-    NameClaim, Played, PlayerStats, Rated, ReleaseOutcome, Retention, StoreError, Stored,
+    Backend, ClaimLimits, ClaimOutcome, Ended, HEARTBEAT, KeptParty, KeptPolicy, LeaderOrder,
+    Listed, NameClaim, Played, PlayerStats, Rated, ReleaseOutcome, Retention, StoreError, Stored,
     StoredCheckpoint, Unfinished, Write, unix_ms,
 };
 pub use results::PlayerResult;
@@ -465,6 +465,16 @@ fn answer(backend: &mut dyn Backend, w: Write) {
         Write::DropPolicy { name } => {
             if let Err(e) = backend.drop_policy(&name) {
                 tracing::error!(policy = name, "history: forgetting a policy: {e}");
+            }
+        }
+        Write::KeepParty(party) => {
+            if let Err(e) = backend.keep_party(&party) {
+                tracing::error!(party = party.code, "history: keeping a party: {e}");
+            }
+        }
+        Write::DropParty { code } => {
+            if let Err(e) = backend.drop_party(&code) {
+                tracing::error!(party = code, "history: forgetting a party: {e}");
             }
         }
         _ => {}

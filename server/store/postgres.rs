@@ -33,6 +33,7 @@ use crate::store::backend::{
 
 mod convert;
 mod names;
+mod parties;
 mod policies;
 mod schema;
 mod url;
@@ -496,6 +497,18 @@ impl Backend for Postgres {
 
     fn kept_policy(&mut self, name: &str) -> Result<Option<backend::KeptPolicy>, StoreError> {
         self.read(|c, _| Ok(policies::kept(c, Some(name))?.pop()))
+    }
+
+    fn keep_party(&mut self, party: &backend::KeptParty) -> Result<(), StoreError> {
+        self.read(|c, _| parties::keep(c, party))
+    }
+
+    fn drop_party(&mut self, code: &str) -> Result<(), StoreError> {
+        self.read(|c, _| parties::drop(c, code))
+    }
+
+    fn kept_parties(&mut self) -> Result<Vec<backend::KeptParty>, StoreError> {
+        self.read(|c, _| parties::kept(c))
     }
 
     fn player(&mut self, name: &str) -> Result<Option<PlayerStats>, StoreError> {

@@ -385,7 +385,9 @@ impl backend::Backend for Sqlite {
                 | Write::Claim { .. }
                 | Write::Release { .. }
                 | Write::KeepPolicy { .. }
-                | Write::DropPolicy { .. } => Ok(()),
+                | Write::DropPolicy { .. }
+                | Write::KeepParty(_)
+                | Write::DropParty { .. } => Ok(()),
             };
             match done {
                 // The disk, not this write: the whole batch is undone, to be tried again.
@@ -469,6 +471,18 @@ impl backend::Backend for Sqlite {
         Ok(policies::kept(&self.conn, Some(name))?.pop())
     }
 
+    fn keep_party(&mut self, party: &backend::KeptParty) -> Result<(), StoreError> {
+        parties::keep(&self.conn, party)
+    }
+
+    fn drop_party(&mut self, code: &str) -> Result<(), StoreError> {
+        parties::drop(&self.conn, code)
+    }
+
+    fn kept_parties(&mut self) -> Result<Vec<backend::KeptParty>, StoreError> {
+        parties::kept(&self.conn)
+    }
+
     fn player(&mut self, name: &str) -> Result<Option<PlayerStats>, StoreError> {
         player(&self.conn, name)
     }
@@ -491,6 +505,7 @@ impl backend::Backend for Sqlite {
 }
 
 mod names;
+mod parties;
 mod players;
 mod policies;
 mod rows;

@@ -98,6 +98,12 @@ const MIGRATIONS: &[&str] = &[
         decide_every BIGINT NOT NULL,
         added_at BIGINT NOT NULL
     );",
+    // 8: parties' rooms (`backend::KeptParty`), so that a room and its tokens outlive the
+    // server.
+    "CREATE TABLE parties (
+        code TEXT PRIMARY KEY,
+        doc TEXT NOT NULL
+    );",
 ];
 
 /// The schema version this build writes.

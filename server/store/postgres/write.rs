@@ -108,7 +108,9 @@ impl<'a> Change<'a> {
             | Write::Claim { .. }
             | Write::Release { .. }
             | Write::KeepPolicy { .. }
-            | Write::DropPolicy { .. } => return None,
+            | Write::DropPolicy { .. }
+            | Write::KeepParty(_)
+            | Write::DropParty { .. } => return None,
         })
     }
 }

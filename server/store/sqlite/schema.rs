@@ -83,6 +83,12 @@ const MIGRATIONS: &[&str] = &[
         decide_every INTEGER NOT NULL,
         added_at INTEGER NOT NULL
     );",
+    // 7: parties' rooms (`backend::KeptParty`), so that a room and its tokens outlive the
+    // server.
+    "CREATE TABLE parties (
+        code TEXT PRIMARY KEY,
+        doc TEXT NOT NULL
+    );",
 ];
 
 /// The schema version this build writes.
