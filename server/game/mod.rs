@@ -12,6 +12,7 @@ pub mod encoded;
 pub mod error;
 mod handle;
 pub mod hub;
+pub mod matchmaking;
 pub mod party;
 pub mod policies;
 pub mod record;
