@@ -15,6 +15,7 @@ pub mod hub;
 pub mod matchmaking;
 pub mod party;
 pub mod policies;
+pub mod queue;
 pub mod record;
 pub mod replay;
 pub mod resume;
@@ -88,6 +89,8 @@ pub struct Registry {
     pub showcase_starting: tokio::sync::Mutex<()>,
     /// Parties' waiting rooms (`party`).
     pub parties: party::Parties,
+    /// People waiting to be matched with others (`queue`).
+    pub queue: queue::Queue,
 }
 
 /// Counts an open WebSocket connection until dropped.
@@ -116,6 +119,7 @@ impl Registry {
             maps: RwLock::new(maps),
             policies: RwLock::new(policies::PolicyStore::shipped()),
             parties: party::Parties::new(&config, Some(history.clone())),
+            queue: queue::Queue::new(&config),
             config,
             history,
             ..Registry::default()

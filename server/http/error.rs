@@ -8,6 +8,7 @@ use crate::game::MatchError;
 use crate::game::admission::NoRoom;
 use crate::game::hub::SpectatorsRefused;
 use crate::game::party::PartyError;
+use crate::game::queue::QueueError;
 use crate::game::replay::HistoryError;
 use crate::game::showcase::{NoSeat, NoShowcase};
 use crate::http::limits::BeliefRefused;
@@ -19,6 +20,7 @@ use crate::service::names::NamesError;
 use crate::service::parties::PartiesError;
 use crate::service::players::StatsError;
 use crate::service::policies::PoliciesError;
+use crate::service::queue::QueueRefused;
 use crate::service::replays::ReplaysError;
 use crate::service::{PoolError, ReplayBusy};
 use lasertag_core::world::{InputError, OrderError, RobotOrderError};
@@ -381,6 +383,28 @@ impl From<PartiesError> for ApiError {
                 PartyError::TooManyHosted(_) => StatusCode::TOO_MANY_REQUESTS,
                 PartyError::ServerFull(_) => StatusCode::SERVICE_UNAVAILABLE,
                 PartyError::Invalid(_) => StatusCode::BAD_REQUEST,
+            },
+        };
+        ApiError::new(status, e.to_string())
+    }
+}
+
+impl From<QueueRefused> for ApiError {
+    fn from(e: QueueRefused) -> ApiError {
+        let status = match &e {
+            QueueRefused::Name(_) => {
+                return match e {
+                    QueueRefused::Name(e) => e.into(),
+                    QueueRefused::Queue(_) => {
+                        ApiError::new(StatusCode::INTERNAL_SERVER_ERROR, e.to_string())
+                    }
+                };
+            }
+            QueueRefused::Queue(q) => match q {
+                QueueError::NoTicket(_) => StatusCode::NOT_FOUND,
+                QueueError::WrongToken(_) => StatusCode::FORBIDDEN,
+                QueueError::ClientFull(_) => StatusCode::TOO_MANY_REQUESTS,
+                QueueError::Full(_) => StatusCode::SERVICE_UNAVAILABLE,
             },
         };
         ApiError::new(status, e.to_string())

@@ -16,6 +16,7 @@ mod openapi;
 pub(crate) mod parties;
 mod players;
 mod policies;
+pub(crate) mod queue;
 mod rate_limit;
 mod replay_ws;
 mod replays;
@@ -90,7 +91,8 @@ fn router(
     );
     // Rooms whose match ended wait again, and forgotten ones lapse, for as long as the
     // server runs (a router built outside a runtime, in a unit test, has no rooms to keep).
-    if let Ok(runtime) = tokio::runtime::Handle::try_current() {
+    let keeps = tokio::runtime::Handle::try_current().ok();
+    if let Some(runtime) = &keeps {
         runtime.spawn(crate::service::parties::keep(registry.clone()));
     }
     let state = AppState {
@@ -101,6 +103,14 @@ fn router(
         fleet,
         transport: Arc::default(),
     };
+    // The queue's groups seated once a second, on the same pools as every match.
+    if let Some(runtime) = &keeps {
+        runtime.spawn(crate::service::queue::keep(
+            state.registry.clone(),
+            state.pool.clone(),
+            state.replays.clone(),
+        ));
+    }
     let api = Router::new()
         .route("/health", get(handlers::health))
         .route("/openapi.json", get(openapi::document))
@@ -159,6 +169,8 @@ fn router(
         )
         .route("/parties/{code}/start", post(parties::start))
         .route("/parties/{code}/invite.svg", get(parties::invite))
+        .route("/queue", post(queue::enter))
+        .route("/queue/{ticket}", delete(queue::leave))
         .route("/matches/{id}/stats", get(handlers::stats))
         .fallback(not_found)
         .method_not_allowed_fallback(method_not_allowed);
@@ -188,6 +200,7 @@ fn router(
         .route("/ws/matches/{id}", get(ws::upgrade))
         .route("/ws/replays/{id}", get(replay_ws::upgrade))
         .route("/ws/parties/{code}", get(parties::upgrade))
+        .route("/ws/queue/{ticket}", get(queue::upgrade))
         .route("/metrics", get(handlers::metrics))
         .route_service("/favicon.ico", favicon)
         .fallback_service(static_files)

@@ -53,6 +53,8 @@ use crate::protocol::*;
         crate::http::parties::remove,
         crate::http::parties::start,
         crate::http::parties::invite,
+        crate::http::queue::enter,
+        crate::http::queue::leave,
         handlers::join,
         handlers::join_showcase,
         handlers::stats,

@@ -274,3 +274,39 @@ pub fn party_match(
     }
     crate::protocol::deserialize_at(body, "party")
 }
+
+/// The map queue matches are played on: one the presets were measured on, so that the robot
+/// team of the group's level is the team its rating says.
+const QUEUE_MAP: &str = "office";
+
+/// A queue group's match: `seats` opponents, bots that run from the robots until people take
+/// them (the queue seats its people at once; a seat nobody takes stays a bot), against
+/// `difficulty` for the preset's length.
+pub fn queue_match(
+    difficulty: lasertag_core::difficulty::Difficulty,
+    seats: usize,
+) -> Result<crate::protocol::CreateMatch, crate::protocol::Invalid> {
+    let body = serde_json::json!({
+        "map": lasertag_core::difficulty::Difficulty::MEASURED_ON.first().copied().unwrap_or(QUEUE_MAP),
+        "difficulty": DifficultyName::of(difficulty),
+        "opponents": seats,
+        "opponent_control": "bot",
+        "opponent_bot": "evade",
+        "bots_joinable": true,
+    });
+    crate::protocol::deserialize_at(body, "queue")
+}
+
+/// The queue's socket's `gone` message: the ticket left or could not be seated.
+pub fn gone_message(why: &str) -> String {
+    #[derive(Serialize)]
+    struct Gone<'a> {
+        #[serde(rename = "type")]
+        kind: &'static str,
+        error: &'a str,
+    }
+    to_json(&Gone {
+        kind: "error",
+        error: why,
+    })
+}

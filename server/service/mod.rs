@@ -11,6 +11,7 @@ pub mod names;
 pub mod parties;
 pub mod players;
 pub mod policies;
+pub mod queue;
 pub mod replays;
 
 use std::collections::HashMap;
