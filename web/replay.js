@@ -25,6 +25,9 @@ const MARKED = {
   role_merge: (e) => `belief: role ${e.from} merged into ${e.role}`,
 };
 
+/** The least width of a timeline mark's button, in CSS pixels (WCAG 2.5.8's 24). */
+const MARK_PX = 24;
+
 const sleep = (ms) => new Promise((r) => setTimeout(r, ms));
 
 export class Replay {
@@ -254,16 +257,34 @@ export class Replay {
     legend($("legend"), this.beliefOn ? this.belief : null, false);
   }
 
-  /** The timeline's marks: tags, frozen robots, and the belief's splits and merges. */
+  /** The timeline's marks: tags, frozen robots, and the belief's splits and merges. Each
+   * is a line on a button at least MARK_PX wide, so that a finger or a shaky hand hits it
+   * (WCAG's target size); marks closer than that on the timeline as wide as it is now share
+   * one button, which goes to the first of them and names them all. */
   markers() {
     const el = $("replay-markers");
     const ticks = this.detail.ticks || 1;
-    const marks = (this.detail.events || []).filter((e) => MARKED[e.kind]).map((e) => {
+    const px = (el.clientWidth || 600) / ticks;
+    const groups = [];
+    for (const e of (this.detail.events || []).filter((x) => MARKED[x.kind])) {
+      const last = groups[groups.length - 1];
+      if (last && (e.tick - last[last.length - 1].tick) * px < MARK_PX) last.push(e);
+      else groups.push([e]);
+    }
+    const pct = (tick) => (100 * tick) / ticks;
+    const marks = groups.map((g) => {
+      const first = g[0].tick, span = g[g.length - 1].tick - first;
       const m = document.createElement("button");
-      m.className = `marker ${e.kind}`;
-      m.style.left = `${(100 * e.tick) / ticks}%`;
-      m.title = `${fmtTime(e.tick / 20)} ${MARKED[e.kind](e)}`;
-      m.onclick = () => this.seek(e.tick, true);
+      m.className = "marker";
+      m.style.left = `calc(${pct(first)}% - ${MARK_PX / 2}px)`;
+      m.style.width = `calc(${pct(span)}% + ${MARK_PX}px)`;
+      m.title = g.map((e) => `${fmtTime(e.tick / 20)} ${MARKED[e.kind](e)}`).join("\n");
+      m.onclick = () => this.seek(first, true);
+      const lines = Object.assign(document.createElement("span"), { className: "lines" });
+      lines.append(...g.map((e) => Object.assign(document.createElement("i"), {
+        className: e.kind, style: `left: ${span ? (100 * (e.tick - first)) / span : 0}%`,
+      })));
+      m.append(lines);
       return m;
     });
     el.replaceChildren(...marks);
