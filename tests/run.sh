@@ -8,13 +8,14 @@ cd "$(dirname "$0")/.."
 # machine; elsewhere sudo is used when available): Chromium for the browser tests, Redis
 # for the fleet's directory (tests/fleet.rs), PostgreSQL's server for the shared history
 # (tests/store_postgres.rs), nftables and iproute2 for packet loss and the link emulator
-# (tests/browser_webtransport.rs, tests/link.rs).
+# (tests/browser_webtransport.rs, tests/link.rs), npm for axe-core (tests/browser_a11y.rs).
 # The tests start and stop their own servers.
 NEED=()
 if ! command -v chromium >/dev/null 2>&1 && [ -z "${LASERTAG_CHROMIUM:-}" ]; then NEED+=(chromium); fi
 if ! command -v redis-server >/dev/null 2>&1 && [ -z "${LASERTAG_REDIS_SERVER:-}" ]; then NEED+=(redis-server); fi
 if ! command -v nft >/dev/null 2>&1; then NEED+=(nftables); fi
 if ! command -v ip >/dev/null 2>&1; then NEED+=(iproute2); fi
+if ! command -v npm >/dev/null 2>&1 && [ -z "${LASERTAG_AXE:-}" ]; then NEED+=(nodejs npm); fi
 if ! command -v initdb >/dev/null 2>&1 && ! ls /usr/lib/postgresql/*/bin/initdb >/dev/null 2>&1 \
   && [ -z "${LASERTAG_PG_BIN:-}" ]; then NEED+=(postgresql); fi
 if [ "${#NEED[@]}" -gt 0 ]; then
@@ -25,6 +26,19 @@ if [ "${#NEED[@]}" -gt 0 ]; then
   # Whatever services the packages start themselves are not used: the tests run servers
   # of their own on free ports.
   DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq "${NEED[@]}" >/dev/null
+fi
+# axe-core, the accessibility rules tests/browser_a11y.rs runs in Chromium: a pinned version
+# from npm into target/axe (its one file is all the test reads), unless LASERTAG_AXE names one.
+AXE_VERSION=4.14.1
+AXE_DIR=target/axe
+if [ -z "${LASERTAG_AXE:-}" ]; then
+  if ! grep -qs "\"version\": \"$AXE_VERSION\"" "$AXE_DIR/node_modules/axe-core/package.json"; then
+    echo "tests/run.sh: installing axe-core $AXE_VERSION (npm) into $AXE_DIR"
+    rm -rf "$AXE_DIR"
+    npm install --prefix "$AXE_DIR" --no-save --no-audit --no-fund --loglevel=error \
+      "axe-core@$AXE_VERSION" >/dev/null
+  fi
+  export LASERTAG_AXE="$PWD/$AXE_DIR/node_modules/axe-core/axe.min.js"
 fi
 # No incremental compilation caches: a full run builds every test binary once, and the
 # caches (as large again as the binaries) only fill the disk of a fresh machine.

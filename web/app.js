@@ -250,7 +250,16 @@ async function refreshLobby() {
     return tr;
   });
   if (!rows.length) rows.push(Object.assign(document.createElement("tr"), { innerHTML: "<td colspan=8>no matches</td>" }));
+  // The list is drawn anew every second: a row's button that has the keyboard's focus keeps
+  // it (else the focus would go with the old row, back to the top of the page).
+  const had = document.activeElement;
+  const row = had && had.tagName === "BUTTON" && $("matches").contains(had) ? had.closest("tr").dataset.id : null;
   $("matches").tBodies[0].replaceChildren(...rows);
+  if (row) {
+    const again = rows.find((tr) => tr.dataset.id === row);
+    const same = again && [...again.querySelectorAll("button")].find((b) => b.className === had.className);
+    if (same) same.focus();
+  }
 }
 
 async function loadMaps() {
