@@ -262,24 +262,33 @@ async fn axe_finds_no_serious_violation_and_the_lobby_works_with_the_keyboard() 
     .await;
     audit(&mut b, &source, "replay", &mut failures).await;
 
-    // 4. The party's waiting room, where the server has parties.
-    let party = s.post("/api/parties", &json!({"name": "host"})).await;
-    if party.status == 404 {
-        println!("party: skipped, the server has no parties yet (POST /api/parties is 404)");
-    } else {
-        assert_eq!(party.status, 201, "{}", party.body);
-        let code = party.body["code"]
-            .as_str()
-            .expect("a party code")
-            .to_string();
-        b.navigate(&format!("{base}/#/party/{code}")).await;
-        b.wait_for(
-            &format!("__lasertag.page === 'party' && document.body.innerText.includes('{code}')"),
+    // 4. The party's waiting room: the host's, made from the lobby's door (members, sides,
+    // settings, the invite and its QR code), then the form a friend's invite link opens.
+    b.navigate(&format!("{base}/#/")).await;
+    b.wait_for("!!document.getElementById('door-party')", 20)
+        .await;
+    b.eval(
+        "(() => { const e = document.getElementById('name'); e.value = 'host';
+           e.dispatchEvent(new Event('input', {bubbles: true}));
+           document.getElementById('door-party').click(); return true; })()",
+    )
+    .await;
+    let code = b
+        .wait_for(
+            "__lasertag.page === 'party' && __lasertag.partyConnected && __lasertag.partyCode",
             20,
         )
         .await;
-        audit(&mut b, &source, "party", &mut failures).await;
-    }
+    let code = code.as_str().expect("a party code").to_string();
+    audit(&mut b, &source, "party (host)", &mut failures).await;
+    let other = s.post("/api/parties", &json!({"name": "other"})).await;
+    assert_eq!(other.status, 201, "{}", other.body);
+    let invited = other.body["code"].as_str().expect("a party code");
+    assert_ne!(invited, code);
+    b.navigate(&format!("{base}/#/party/{invited}")).await;
+    b.wait_for("!document.getElementById('party-join').hidden", 20)
+        .await;
+    audit(&mut b, &source, "party (invited)", &mut failures).await;
 
     assert!(
         failures.is_empty(),
