@@ -446,7 +446,9 @@ export class PartyRoom {
     this.settings(p, host);
     $("party-rated").textContent = p.rated
       ? "Rated: one person plays, so this match counts for a rating."
-      : "Unrated: matches with more than one person do not change ratings.";
+      : p.members.length > 1
+        ? "Unrated: matches with more than one person do not change ratings."
+        : "Unrated: only the robot team's own length, on the hunted side, counts for a rating.";
     $("party-rated").classList.toggle("rated", Boolean(p.rated));
     // Start: the host's, when everyone is ready.
     const start = $("party-start");
