@@ -135,7 +135,8 @@ pub async fn join(
     responses((status = 200, body = PartyDto, description = "the room as it is now"),
               (status = 400, body = ErrorBody), (status = 401, body = ErrorBody, description = "no member token"),
               (status = 403, body = ErrorBody, description = "not a member's token, or not the host's for another member's side or the settings"),
-              (status = 404, body = ErrorBody, description = "no such party or member")),
+              (status = 404, body = ErrorBody, description = "no such party or member"),
+              (status = 429, body = ErrorBody, description = "this client named too many codes that name no party")),
     security(("owner_token" = [])))]
 pub async fn change(
     State(state): State<AppState>,
@@ -161,7 +162,8 @@ pub async fn change(
     responses((status = 200, body = PartyDto, description = "the room without them"),
               (status = 401, body = ErrorBody), (status = 403, body = ErrorBody, description = "neither the member's nor the host's token"),
               (status = 404, body = ErrorBody, description = "no such party or member"),
-              (status = 409, body = ErrorBody, description = "the host cannot leave their own party")),
+              (status = 409, body = ErrorBody, description = "the host cannot leave their own party"),
+              (status = 429, body = ErrorBody, description = "this client named too many codes that name no party")),
     security(("owner_token" = [])))]
 pub async fn remove(
     State(state): State<AppState>,
