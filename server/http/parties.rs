@@ -244,12 +244,7 @@ pub async fn upgrade(
     let registry = state.registry.clone();
     socket::refuse_while_stopping(&registry)?;
     socket::only_params(&query, &["token"])?;
-    let token = query.get("token").ok_or_else(|| {
-        ApiError::new(
-            StatusCode::UNAUTHORIZED,
-            "token: the room's socket needs ?token=<member_token>",
-        )
-    })?;
+    let token = socket::token_param(&query, "the room's socket")?;
     let (member, mut room) = registry
         .parties
         .subscribe(&code, token, ClientKey::of(ip))

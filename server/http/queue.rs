@@ -80,12 +80,7 @@ pub async fn upgrade(
     let registry = state.registry.clone();
     socket::refuse_while_stopping(&registry)?;
     socket::only_params(&query, &["token"])?;
-    let token = query.get("token").ok_or_else(|| {
-        ApiError::new(
-            StatusCode::UNAUTHORIZED,
-            "token: the queue's socket needs ?token=<token>",
-        )
-    })?;
+    let token = socket::token_param(&query, "the queue's socket")?;
     let mut view = registry
         .queue
         .watch(&ticket, token)

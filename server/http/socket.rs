@@ -148,6 +148,20 @@ pub fn refuse_while_stopping(registry: &Registry) -> Result<(), ApiError> {
     Ok(())
 }
 
+/// `?token=`, which a socket that is one person's own needs (a party member's, a queue
+/// ticket's): 401 naming `what` without it.
+pub fn token_param<'a>(
+    query: &'a HashMap<String, String>,
+    what: &str,
+) -> Result<&'a str, ApiError> {
+    query.get("token").map(String::as_str).ok_or_else(|| {
+        ApiError::new(
+            StatusCode::UNAUTHORIZED,
+            format!("token: {what} needs ?token=<token>"),
+        )
+    })
+}
+
 /// 400 for a query parameter the socket does not take; `names` are those it takes.
 pub fn only_params(query: &HashMap<String, String>, names: &[&str]) -> Result<(), ApiError> {
     match query.keys().find(|k| !names.contains(&k.as_str())) {

@@ -76,6 +76,47 @@ pub enum Created<R> {
     Elsewhere(R),
 }
 
+/// A person a party or the queue seats, and who could not be seated.
+#[derive(Debug)]
+pub struct Unseated {
+    pub name: String,
+    pub error: MatchError,
+}
+
+/// Seats everyone of `people` (a name and a side each) in match `id`, answering each seat's
+/// token in order. The seats are priced by whoever gathered the people (a party, the queue),
+/// not by each address's seat count, so friends behind one router play together. When one
+/// cannot be seated the match is stopped and removed: nothing is left running.
+pub async fn seat_all(
+    service: Service<'_>,
+    id: &str,
+    people: Vec<(crate::names::JoinName, crate::game::view::Team)>,
+) -> Result<Vec<String>, Unseated> {
+    let Some(handle) = service.registry.get(id) else {
+        return Err(Unseated {
+            name: String::new(),
+            error: MatchError::Gone(id.to_string()),
+        });
+    };
+    let mut tokens = Vec::with_capacity(people.len());
+    for (name, team) in people {
+        match handle.join(name.clone(), team, None).await {
+            Ok(joined) => tokens.push(joined.token),
+            Err(error) => {
+                handle
+                    .stop(lasertag_core::world::FinishReason::Stopped)
+                    .await;
+                service.registry.remove(id).await;
+                return Err(Unseated {
+                    name: name.name.as_str().to_string(),
+                    error,
+                });
+            }
+        }
+    }
+    Ok(tokens)
+}
+
 /// The lobby: this server's matches and, in a fleet, every other node's from the fleet's
 /// last read of the directory (never a wait on Redis). The secret seeds of this server's
 /// matches show only where `opens` the match's owner (the caller holds its token or the

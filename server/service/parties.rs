@@ -11,10 +11,9 @@ use crate::game::view::Team;
 use crate::protocol::fleet::Place;
 use crate::protocol::parties::party_match;
 use crate::service::Service;
-use crate::service::matches::{CreateError, Created};
+use crate::service::matches::{CreateError, Created, seat_all};
 use crate::service::names::{NamesError, check_join};
 use lasertag_core::difficulty::Difficulty;
-use lasertag_core::world::FinishReason;
 
 /// Why a party request was refused.
 #[derive(Debug, thiserror::Error)]
@@ -151,27 +150,23 @@ async fn seat_everyone(
         return Err(CreateError::Match(MatchError::Gone(party.code.clone())).into());
     };
     let id = created.summary.id.clone();
-    let Some(handle) = service.registry.get(&id) else {
-        return Err(CreateError::Match(MatchError::Gone(id)).into());
-    };
-    let mut seats = BTreeMap::new();
-    for m in &party.members {
-        // The party is the seats' price (at most 8 people, rooms bounded per client), so
-        // no address's own seat count is charged: friends behind one router play together.
-        match handle.join(m.name.clone(), m.side, None).await {
-            Ok(joined) => {
-                seats.insert(m.id.clone(), (joined.token, m.side));
-            }
-            Err(error) => {
-                handle.stop(FinishReason::Stopped).await;
-                service.registry.remove(&id).await;
-                return Err(PartiesError::Seat {
-                    name: m.name.name.as_str().to_string(),
-                    error,
-                });
-            }
-        }
-    }
+    let people = party
+        .members
+        .iter()
+        .map(|m| (m.name.clone(), m.side))
+        .collect();
+    let tokens = seat_all(service, &id, people)
+        .await
+        .map_err(|u| PartiesError::Seat {
+            name: u.name,
+            error: u.error,
+        })?;
+    let seats = party
+        .members
+        .iter()
+        .zip(tokens)
+        .map(|(m, token)| (m.id.clone(), (token, m.side)))
+        .collect();
     Ok((id, seats))
 }
 

@@ -12,12 +12,11 @@ use crate::game::view::Team;
 use crate::game::{MatchError, Registry};
 use crate::protocol::fleet::Place;
 use crate::protocol::parties::queue_match;
-use crate::service::matches::{CreateError, Created};
+use crate::service::matches::{CreateError, Created, seat_all};
 use crate::service::names::{NamesError, check_join};
 use crate::service::{Pool, ReplayPool, Service};
 use crate::store::StoreError;
 use lasertag_core::difficulty::Difficulty;
-use lasertag_core::world::FinishReason;
 
 #[derive(Debug, thiserror::Error)]
 pub enum QueueRefused {
@@ -110,22 +109,13 @@ async fn seat(service: Service<'_>, group: &Group, tickets: &[Ticket]) -> Result
         return Err(SeatError::Seat(MatchError::Gone(String::new())));
     };
     let id = created.summary.id.clone();
-    let handle = service
-        .registry
-        .get(&id)
-        .ok_or_else(|| SeatError::Seat(MatchError::Gone(id.clone())))?;
-    let mut seats = Vec::new();
-    for t in tickets {
-        // The queue is the seat's price (tickets per client), as a party's is.
-        match handle.join(t.name.clone(), Team::Opponents, None).await {
-            Ok(joined) => seats.push(joined.token),
-            Err(e) => {
-                handle.stop(FinishReason::Stopped).await;
-                service.registry.remove(&id).await;
-                return Err(SeatError::Seat(e));
-            }
-        }
-    }
+    let people = tickets
+        .iter()
+        .map(|t| (t.name.clone(), Team::Opponents))
+        .collect();
+    let seats = seat_all(service, &id, people)
+        .await
+        .map_err(|u| SeatError::Seat(u.error))?;
     for (t, token) in tickets.iter().zip(seats) {
         crate::game::queue::Queue::tell(
             t,

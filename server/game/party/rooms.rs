@@ -94,6 +94,24 @@ pub(super) struct Room {
 }
 
 impl Room {
+    /// A room nobody is connected to yet, its lapse counted from now.
+    fn new(party: Party, host_client: ClientKey) -> Room {
+        Room {
+            view: watch::Sender::new(RoomView {
+                party: party.clone(),
+                connected: BTreeSet::new(),
+                started: None,
+                gone: false,
+            }),
+            party,
+            sockets: BTreeMap::new(),
+            seen: Instant::now(),
+            host_client,
+            starts: 0,
+            starting: false,
+        }
+    }
+
     fn publish(&self, started: Option<Option<Arc<Started>>>) {
         let connected = self.sockets.keys().cloned().collect();
         self.view.send_modify(|v| {
@@ -245,20 +263,7 @@ impl Parties {
             match_id: None,
         };
         let member_id = party.host.clone();
-        let room = Room {
-            view: watch::Sender::new(RoomView {
-                party: party.clone(),
-                connected: BTreeSet::new(),
-                started: None,
-                gone: false,
-            }),
-            party,
-            sockets: BTreeMap::new(),
-            seen: Instant::now(),
-            host_client: client,
-            starts: 0,
-            starting: false,
-        };
+        let room = Room::new(party, client);
         self.keep(&room);
         rooms.insert(code.clone(), room);
         Ok((code, member_id, token))
@@ -542,20 +547,7 @@ impl Parties {
             let Some(host_client) = party.member(&party.host).map(|m| m.client) else {
                 continue;
             };
-            let room = Room {
-                view: watch::Sender::new(RoomView {
-                    party: party.clone(),
-                    connected: BTreeSet::new(),
-                    started: None,
-                    gone: false,
-                }),
-                party,
-                sockets: BTreeMap::new(),
-                seen: Instant::now(),
-                host_client,
-                starts: 0,
-                starting: false,
-            };
+            let room = Room::new(party, host_client);
             rooms.insert(k.code, room);
             n += 1;
         }
