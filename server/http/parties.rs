@@ -53,7 +53,7 @@ fn invite_url(headers: &HeaderMap, code: &str) -> String {
     }
 }
 
-#[utoipa::path(post, path = "/api/parties", request_body = NameRequest,
+#[utoipa::path(post, operation_id = "party_create", path = "/api/parties", request_body = NameRequest,
     responses((status = 201, body = PartyCreated, description = "a room, hosted by the caller: keep `member_token` (shown once)"),
               (status = 400, body = ErrorBody, description = "not a name"),
               (status = 403, body = ErrorBody, description = "somebody keeps that name: send its name_token"),
@@ -83,7 +83,7 @@ pub async fn create(
     ))
 }
 
-#[utoipa::path(get, path = "/api/parties/{code}", params(("code" = String, Path)),
+#[utoipa::path(get, operation_id = "party_get", path = "/api/parties/{code}", params(("code" = String, Path)),
     responses((status = 200, body = PartyDto),
               (status = 404, body = ErrorBody, description = "no such party"),
               (status = 429, body = ErrorBody, description = "this client named too many codes that name no party")))]
@@ -100,7 +100,7 @@ pub async fn get(
     Ok(Json(wire::party(&view)))
 }
 
-#[utoipa::path(post, path = "/api/parties/{code}/members", params(("code" = String, Path)),
+#[utoipa::path(post, operation_id = "party_join", path = "/api/parties/{code}/members", params(("code" = String, Path)),
     request_body = NameRequest,
     responses((status = 201, body = PartyJoined, description = "in the room: keep `member_token` (shown once)"),
               (status = 400, body = ErrorBody), (status = 403, body = ErrorBody, description = "somebody keeps that name"),
@@ -130,7 +130,7 @@ pub async fn join(
     ))
 }
 
-#[utoipa::path(patch, path = "/api/parties/{code}/members/{member_id}",
+#[utoipa::path(patch, operation_id = "party_change", path = "/api/parties/{code}/members/{member_id}",
     params(("code" = String, Path), ("member_id" = String, Path)), request_body = MemberPatch,
     responses((status = 200, body = PartyDto, description = "the room as it is now"),
               (status = 400, body = ErrorBody), (status = 401, body = ErrorBody, description = "no member token"),
@@ -157,7 +157,7 @@ pub async fn change(
     Ok(Json(wire::party(&view)))
 }
 
-#[utoipa::path(delete, path = "/api/parties/{code}/members/{member_id}",
+#[utoipa::path(delete, operation_id = "party_remove", path = "/api/parties/{code}/members/{member_id}",
     params(("code" = String, Path), ("member_id" = String, Path)),
     responses((status = 200, body = PartyDto, description = "the room without them"),
               (status = 401, body = ErrorBody), (status = 403, body = ErrorBody, description = "neither the member's nor the host's token"),
@@ -180,7 +180,7 @@ pub async fn remove(
     Ok(Json(wire::party(&view)))
 }
 
-#[utoipa::path(post, path = "/api/parties/{code}/start", params(("code" = String, Path)),
+#[utoipa::path(post, operation_id = "party_start", path = "/api/parties/{code}/start", params(("code" = String, Path)),
     responses((status = 201, body = PartyStarted, description = "the match runs, every member seated: each member's socket gets its seat"),
               (status = 401, body = ErrorBody), (status = 403, body = ErrorBody, description = "not the host's token"),
               (status = 404, body = ErrorBody, description = "no such party"),
@@ -198,7 +198,7 @@ pub async fn start(
     Ok((StatusCode::CREATED, Json(PartyStarted { match_id })))
 }
 
-#[utoipa::path(get, path = "/api/parties/{code}/invite.svg", params(("code" = String, Path)),
+#[utoipa::path(get, operation_id = "party_invite", path = "/api/parties/{code}/invite.svg", params(("code" = String, Path)),
     responses((status = 200, content_type = "image/svg+xml", body = String, description = "the invite link as a QR code"),
               (status = 404, body = ErrorBody), (status = 429, body = ErrorBody)))]
 pub async fn invite(

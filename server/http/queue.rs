@@ -22,7 +22,7 @@ use crate::protocol::parties::{self as wire, NameRequest, QueueTicket};
 use crate::protocol::socket as common;
 use crate::service::queue::{self, QueueRefused};
 
-#[utoipa::path(post, path = "/api/queue", request_body = NameRequest,
+#[utoipa::path(post, operation_id = "queue_enter", path = "/api/queue", request_body = NameRequest,
     responses((status = 202, body = QueueTicket, description = "waiting: open /ws/queue/{ticket}?token=… to be told the seat"),
               (status = 400, body = ErrorBody), (status = 403, body = ErrorBody, description = "somebody keeps that name"),
               (status = 429, body = ErrorBody, description = "this client holds as many tickets as it may"),
@@ -42,7 +42,7 @@ pub async fn enter(
     Ok((StatusCode::ACCEPTED, Json(QueueTicket { ticket, token })))
 }
 
-#[utoipa::path(delete, path = "/api/queue/{ticket}", params(("ticket" = String, Path)),
+#[utoipa::path(delete, operation_id = "queue_leave", path = "/api/queue/{ticket}", params(("ticket" = String, Path)),
     responses((status = 204, description = "out of the queue"),
               (status = 401, body = ErrorBody), (status = 403, body = ErrorBody, description = "not the ticket's token"),
               (status = 404, body = ErrorBody, description = "no such ticket waiting")),

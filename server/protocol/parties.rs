@@ -82,6 +82,7 @@ pub struct PartySettingsDto {
     pub map: String,
     pub difficulty: DifficultyName,
     /// 1 to 10.
+    #[schema(minimum = 1, maximum = 10)]
     pub minutes: u32,
 }
 
@@ -159,6 +160,7 @@ pub struct SettingsPatch {
     pub map: Option<String>,
     pub difficulty: Option<DifficultyName>,
     /// 1 to 10.
+    #[schema(minimum = 1, maximum = 10)]
     pub minutes: Option<u32>,
 }
 
