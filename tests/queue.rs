@@ -76,7 +76,9 @@ async fn six_people_who_queue_together_all_play() {
         );
     }
     // A figure for docs/queue.md, not a test: the seconds each waited, as its socket last said.
-    println!("six people queued together: seconds waited {waits:?}, people per match {per_match:?}");
+    println!(
+        "six people queued together: seconds waited {waits:?}, people per match {per_match:?}"
+    );
     assert!(per_match.values().all(|n| *n <= 5), "{per_match:?}");
     assert_eq!(per_match.values().sum::<usize>(), 6);
 }
