@@ -304,11 +304,7 @@ impl Parties {
         client: ClientKey,
     ) -> Result<(String, watch::Receiver<RoomView>), PartyError> {
         self.with_room(code, Some(client), |room| {
-            let member = room
-                .party
-                .holder(token)
-                .ok_or_else(|| PartyError::NotMember(room.party.code.clone()))?
-                .to_string();
+            let member = member_holding(&room.party, token)?;
             Ok((member, room.view.subscribe()))
         })
     }
@@ -344,10 +340,7 @@ impl Parties {
     ) -> Result<RoomView, PartyError> {
         self.with_room(code, Some(client), |room| {
             let party = &mut room.party;
-            let by = party
-                .holder(token)
-                .ok_or_else(|| PartyError::NotMember(party.code.clone()))?
-                .to_string();
+            let by = member_holding(party, token)?;
             let host = by == party.host;
             if party.member(target).is_none() {
                 return Err(PartyError::NoMember(party.code.clone(), target.to_string()));
@@ -405,10 +398,7 @@ impl Parties {
     ) -> Result<RoomView, PartyError> {
         self.with_room(code, Some(client), |room| {
             let party = &mut room.party;
-            let by = party
-                .holder(token)
-                .ok_or_else(|| PartyError::NotMember(party.code.clone()))?
-                .to_string();
+            let by = member_holding(party, token)?;
             if by != target && by != party.host {
                 return Err(PartyError::NotHost("remove a member"));
             }
@@ -561,4 +551,13 @@ impl Parties {
     pub fn is_empty(&self) -> bool {
         self.len() == 0
     }
+}
+
+/// The id of the member of `party` that `token` belongs to, or the refusal of a token that is
+/// no member's.
+fn member_holding(party: &Party, token: &str) -> Result<String, PartyError> {
+    party
+        .holder(token)
+        .map(str::to_string)
+        .ok_or_else(|| PartyError::NotMember(party.code.clone()))
 }
