@@ -10,6 +10,8 @@
 //!   match, tells its players `finished` (`server_shutdown`) when the drain ends, leaves the
 //!   directory and exits 0.
 //! - In headless Chromium, the lobby of one node plays a match hosted on another.
+//! - People who press *Play with others* on different nodes wait in one queue and play in
+//!   one match: a page on one node and a client of another.
 //! - With the fleet's shared PostgreSQL (`--database`), a match one node recorded is
 //!   listed and replayed by another, state for state.
 //!
@@ -405,6 +407,101 @@ async fn a_page_on_one_node_plays_a_match_hosted_on_another() {
     let moved = (after["x"].as_f64().unwrap() - before["x"].as_f64().unwrap()).abs()
         + (after["y"].as_f64().unwrap() - before["y"].as_f64().unwrap()).abs();
     assert!(moved > 0.2, "moved {moved} m on b: {before} -> {after}");
+    let errors = browser.eval("__lasertag.errors").await;
+    assert_eq!(errors, json!([]), "{errors}");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn people_who_queue_on_different_nodes_play_together() {
+    let redis = RedisServer::start();
+    let a = node(&redis, "a", &[]);
+    let b = node(&redis, "b", &[]);
+    let http = reqwest::Client::new();
+    until(10, "b sees a", || async {
+        let text = http
+            .get(b.url("/metrics"))
+            .send()
+            .await
+            .unwrap()
+            .text()
+            .await
+            .unwrap();
+        metric(&text, "lasertag_fleet_nodes") == Some(2.0)
+    })
+    .await;
+    // The queue is the lowest id's: b sends its newcomers to a.
+    let r = no_redirects()
+        .post(b.url("/api/queue"))
+        .json(&json!({"name": "looker"}))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 307);
+    assert_eq!(r.headers()["location"], a.url("/api/queue").as_str());
+
+    // A page served by b presses *Play with others*.
+    let mut browser = cdp::Browser::launch().await;
+    browser.navigate(&b.url("/")).await;
+    browser
+        .wait_for("window.__lasertag && __lasertag.page === 'lobby'", 20)
+        .await;
+    browser
+        .eval("document.getElementById('name').value = 'visitor'; document.getElementById('door-queue').click()")
+        .await;
+    browser
+        .wait_for("__lasertag.queue && __lasertag.queue.people !== null", 20)
+        .await;
+    assert_eq!(
+        browser.eval("__lasertag.queue.base").await,
+        json!(a.url(""))
+    );
+
+    // A client of b joins too (following the 307), and waits on a.
+    let r = http
+        .post(b.url("/api/queue"))
+        .json(&json!({"name": "friend"}))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 202);
+    assert!(r.url().as_str().starts_with(&a.url("")), "{}", r.url());
+    let ticket: Value = r.json().await.unwrap();
+    let url = format!(
+        "{}/ws/queue/{}?token={}",
+        a.url("").replacen("http", "ws", 1),
+        ticket["ticket"].as_str().unwrap(),
+        ticket["token"].as_str().unwrap()
+    );
+    let (stream, _) = tokio_tungstenite::connect_async(url).await.unwrap();
+    let mut ws = Ws { stream };
+    let seat = loop {
+        match ws.next().await {
+            Got::Json(v) if v["type"] == "waiting" => {}
+            Got::Json(v) if v["type"] == "matched" => break v,
+            other => panic!("{other:?}"),
+        }
+    };
+    let id = seat["match_id"].as_str().unwrap().to_owned();
+    // The page plays the same match, on a.
+    browser
+        .wait_for(
+            &format!(
+                "__lasertag.matchId === '{id}' && __lasertag.role === 'player' && __lasertag.connected && __lasertag.snapshots > 5"
+            ),
+            30,
+        )
+        .await;
+    assert_eq!(browser.eval("__lasertag.base").await, json!(a.url("")));
+    let on_a = listing(&http, &a).await;
+    let listed = on_a
+        .iter()
+        .find(|m| m["id"] == id.as_str())
+        .expect("listed");
+    assert_eq!(listed["node"]["id"], "a", "{listed}");
+    assert!(
+        listed["players"].as_u64() >= Some(1),
+        "the page is seated: {listed}"
+    );
     let errors = browser.eval("__lasertag.errors").await;
     assert_eq!(errors, json!([]), "{errors}");
 }

@@ -452,7 +452,9 @@ async function replay(g) {
 }
 
 /** What the party and queue pages take from the lobby: its name and the name's token. */
-const deps = { playerName, nameToken };
+/** What the party's room and the queue's view ask of this page: the player's name, a kept
+ * name's token, and where a match they were seated in is played. */
+const deps = { playerName, nameToken, playsOn: (id, base) => homes.set(id, base) };
 
 async function route() {
   if (game) { game.stop(); game = null; }

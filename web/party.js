@@ -4,6 +4,8 @@
 // and the seat a match gives, taken the way the lobby's doors take one: the seat token in
 // sessionStorage, then #/play/<id>.
 
+import { socketUrl } from "./socket.js";
+
 const $ = (id) => document.getElementById(id);
 const debug = (window.__lasertag = window.__lasertag || {});
 
@@ -41,11 +43,18 @@ export const parties = {
 };
 
 /** `path`'s JSON answer; an Error with the server's message and `status` otherwise. */
-export async function call(method, path, body, token) {
+export async function call(method, path, body, token, base = "") {
+  return (await answer(method, path, body, token, base)).data;
+}
+
+/** `path` on the node at `base` ("" for this server): the JSON answer, and the origin that
+ * gave it ("" for this server; in a fleet the queue is one node's, reached by following
+ * the 307). */
+export async function answer(method, path, body, token, base = "") {
   const headers = {};
   if (body) headers["content-type"] = "application/json";
   if (token) headers.authorization = `Bearer ${token}`;
-  const r = await fetch(path, { method, headers, body: body ? JSON.stringify(body) : undefined });
+  const r = await fetch(base + path, { method, headers, body: body ? JSON.stringify(body) : undefined });
   const text = await r.text();
   let data = null;
   try { data = text ? JSON.parse(text) : null; } catch { /* not JSON: say the status */ }
@@ -54,7 +63,8 @@ export async function call(method, path, body, token) {
     e.status = r.status;
     throw e;
   }
-  return data;
+  const origin = new URL(r.url, location.href).origin;
+  return { data, from: origin === location.origin ? "" : origin };
 }
 
 /** A party code as typed or linked: capitals, no spaces. */
@@ -104,10 +114,6 @@ export class LiveSocket {
     clearTimeout(this.timer);
     if (this.ws) { this.ws.onclose = null; this.ws.close(1000, "left"); }
   }
-}
-
-export function wsUrl(path) {
-  return `${location.protocol === "https:" ? "wss" : "ws"}://${location.host}${path}`;
 }
 
 /** The 3-2-1 over every member's page when the host starts, then `go()`. */
@@ -235,7 +241,7 @@ export class PartyRoom {
     this.conn("connecting…");
     this.loadChoices();
     this.socket = new LiveSocket({
-      url: () => wsUrl(`/ws/parties/${this.code}?token=${encodeURIComponent(this.entry.member_token)}`),
+      url: () => socketUrl("", `/ws/parties/${this.code}?token=${encodeURIComponent(this.entry.member_token)}`),
       onOpen: () => { this.conn(""); debug.partyConnected = true; },
       onMessage: (msg) => this.message(msg),
       onRetry: () => { debug.partyConnected = false; this.conn("reconnecting…"); },

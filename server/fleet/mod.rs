@@ -17,7 +17,7 @@
 mod directory;
 pub mod nodes;
 
-pub use nodes::{RemoteNode, Settings, View};
+pub use nodes::{Load, RemoteNode, Settings, View};
 
 use std::collections::{HashMap, VecDeque};
 use std::net::SocketAddr;
@@ -186,25 +186,6 @@ pub enum Placement {
     Remote(NodeRef),
 }
 
-/// A node's load, for placement.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Load {
-    pub held: usize,
-    pub capacity: usize,
-    pub draining: bool,
-}
-
-impl Load {
-    fn has_room(self) -> bool {
-        !self.draining && self.held < self.capacity
-    }
-
-    /// The share of its capacity it would hold with one more match.
-    fn after_one(self) -> f64 {
-        (self.held + 1) as f64 / self.capacity.max(1) as f64
-    }
-}
-
 /// Least-loaded with room: the node whose share of its capacity would be lowest with one
 /// more match. Ties stay here (no redirect for nothing); a node that is full or draining
 /// sends it to the best other one with room, or keeps it (and refuses it) when none has.
@@ -223,6 +204,23 @@ pub fn place<'a>(local: Load, others: impl IntoIterator<Item = (&'a NodeRef, Loa
         }
         _ => Placement::Local,
     }
+}
+
+/// The node whose queue every node's newcomers join: the one with the lowest id among
+/// those not draining and with room for a match (this node included), so that people who
+/// press *Play with others* on different nodes wait in one queue and meet. Every node reads
+/// the same directory, so they agree within a heartbeat; a ticket already waiting stays with
+/// the node that holds it, which goes on seating it. `None` when this node is that node.
+pub fn queue_home<'a>(
+    me: (&'a NodeRef, Load),
+    others: impl IntoIterator<Item = (&'a NodeRef, Load)>,
+) -> Option<NodeRef> {
+    let home = std::iter::once(me)
+        .chain(others)
+        .filter(|(_, l)| l.has_room())
+        .min_by(|(a, _), (b, _)| a.id.cmp(&b.id))
+        .map(|(n, _)| n);
+    home.filter(|n| n.id != me.0.id).cloned()
 }
 
 /// Matches this node sent to others (by node id, when) that their records did not show
@@ -358,14 +356,18 @@ impl Fleet {
         out
     }
 
-    /// Where a new match should go; a remote choice is counted against that node until
-    /// the next read of the directory.
-    pub fn place(&self) -> Placement {
-        let local = Load {
+    fn local_load(&self) -> Load {
+        Load {
             held: self.registry.len(),
             capacity: self.registry.config.max_matches,
             draining: self.registry.draining.is_cancelled(),
-        };
+        }
+    }
+
+    /// Where a new match should go; a remote choice is counted against that node until
+    /// the next read of the directory.
+    pub fn place(&self) -> Placement {
+        let local = self.local_load();
         let view = self.view();
         let placement = {
             let placed = self.placed.lock().unwrap_or_else(|e| e.into_inner());
@@ -374,8 +376,7 @@ impl Fleet {
                 view.nodes.iter().map(|n| {
                     let load = Load {
                         held: n.held + placed.count(&n.node.id),
-                        capacity: n.capacity,
-                        draining: n.node.draining,
+                        ..n.load()
                     };
                     (&n.node, load)
                 }),
@@ -388,6 +389,16 @@ impl Fleet {
                 .add(&node.id, Instant::now());
         }
         placement
+    }
+
+    /// The node whose queue a newcomer here joins ([`queue_home`]), when it is another.
+    pub fn queue_home(&self) -> Option<NodeRef> {
+        let me = self.me();
+        let view = self.view();
+        queue_home(
+            (&me, self.local_load()),
+            view.nodes.iter().map(|n| (&n.node, n.load())),
+        )
     }
 
     /// Where this node's running matches go when it stops: the least loaded other node that
@@ -466,6 +477,28 @@ mod tests {
         );
         assert_eq!(place(draining, [(&b, load(9, 10))]), Placement::Remote(b));
         assert_eq!(place(load(10, 10), []), Placement::Local);
+    }
+
+    #[test]
+    fn the_queue_lives_on_the_lowest_id_with_room() {
+        let (a, b, c) = (node("a"), node("b"), node("c"));
+        // The lowest id: here, or the other.
+        assert_eq!(queue_home((&a, load(3, 10)), [(&b, load(0, 10))]), None);
+        assert_eq!(
+            queue_home((&c, load(0, 10)), [(&b, load(9, 10)), (&a, load(5, 10))]),
+            Some(a.clone())
+        );
+        // A full or draining node holds no queue.
+        let draining = Load {
+            draining: true,
+            ..load(0, 10)
+        };
+        assert_eq!(
+            queue_home((&c, load(0, 10)), [(&a, draining), (&b, load(10, 10))]),
+            None
+        );
+        // Nobody has room: here, which refuses as outside a fleet.
+        assert_eq!(queue_home((&b, load(10, 10)), [(&a, draining)]), None);
     }
 
     #[test]

@@ -29,6 +29,36 @@ pub struct RemoteNode {
     pub matches: Vec<RemoteSummary>,
 }
 
+/// A node's load, for placement.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Load {
+    pub held: usize,
+    pub capacity: usize,
+    pub draining: bool,
+}
+
+impl Load {
+    pub(super) fn has_room(self) -> bool {
+        !self.draining && self.held < self.capacity
+    }
+
+    /// The share of its capacity it would hold with one more match.
+    pub(super) fn after_one(self) -> f64 {
+        (self.held + 1) as f64 / self.capacity.max(1) as f64
+    }
+}
+
+impl RemoteNode {
+    /// Its load as its last heartbeat gave it.
+    pub fn load(&self) -> Load {
+        Load {
+            held: self.held,
+            capacity: self.capacity,
+            draining: self.node.draining,
+        }
+    }
+}
+
 /// The other nodes of the fleet as of the last read of the directory.
 #[derive(Debug, Default)]
 pub struct View {

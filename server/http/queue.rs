@@ -6,7 +6,7 @@ use std::time::Duration;
 use axum::Json;
 use axum::extract::{Path, State};
 use axum::http::StatusCode;
-use axum::response::Response;
+use axum::response::{IntoResponse, Response};
 
 use crate::access::ClientKey;
 use crate::game::queue::TicketView;
@@ -18,12 +18,14 @@ use crate::http::limits::ClientIp;
 use crate::http::socket::{self, Asked, End, Manner};
 use crate::http::state::AppState;
 use crate::protocol::ErrorBody;
+use crate::protocol::fleet::Elsewhere;
 use crate::protocol::parties::{self as wire, NameRequest, QueueTicket};
 use crate::protocol::socket as common;
 use crate::service::queue::{self, QueueRefused};
 
 #[utoipa::path(post, operation_id = "queue_enter", path = "/api/queue", request_body = NameRequest,
     responses((status = 202, body = QueueTicket, description = "waiting: open /ws/queue/{ticket}?token=… to be told the seat"),
+              (status = 307, body = Elsewhere, description = "in a fleet: the queue is another node's; the same request to `Location` joins it there"),
               (status = 400, body = ErrorBody), (status = 403, body = ErrorBody, description = "somebody keeps that name"),
               (status = 429, body = ErrorBody, description = "this client holds as many tickets as it may"),
               (status = 503, body = ErrorBody, description = "the queue holds as many people as it may")))]
@@ -31,7 +33,17 @@ pub async fn enter(
     State(state): State<AppState>,
     ClientIp(ip): ClientIp,
     JsonBody(body): JsonBody<NameRequest>,
-) -> Result<(StatusCode, Json<QueueTicket>), ApiError> {
+) -> Result<Response, ApiError> {
+    // One queue for the fleet, so that people on different nodes meet: a newcomer here
+    // joins it on its node (the ticket, its socket and the match are all there).
+    if let Some(fleet) = &state.fleet
+        && let Some(home) = fleet.queue_home()
+    {
+        let message = format!("the queue is on node {}", home.id);
+        if let Some(moved) = crate::http::fleet::redirect(home, "/api/queue", message) {
+            return Ok(moved);
+        }
+    }
     let (ticket, token) = queue::enter(
         state.service(),
         ClientKey::of(ip),
@@ -39,7 +51,7 @@ pub async fn enter(
         body.name_token.as_deref(),
     )
     .await?;
-    Ok((StatusCode::ACCEPTED, Json(QueueTicket { ticket, token })))
+    Ok((StatusCode::ACCEPTED, Json(QueueTicket { ticket, token })).into_response())
 }
 
 #[utoipa::path(delete, operation_id = "queue_leave", path = "/api/queue/{ticket}", params(("ticket" = String, Path)),
