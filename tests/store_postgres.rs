@@ -187,6 +187,14 @@ fn answers(open: &dyn Fn(Retention) -> Box<dyn Backend>) -> Answers {
             .expect("write");
     }
     let stored = db.load("m2").expect("load").expect("m2 is there");
+    // A replay's windows give the chunks `load` gives, from any position; none past the end
+    // or of a match no longer stored.
+    let window = |db: &mut Box<dyn Backend>, id: &str, from: usize| {
+        db.input_chunks(id, from, 10).expect("a window")
+    };
+    assert_eq!(window(&mut db, "m2", 0), stored.chunks);
+    assert!(window(&mut db, "m2", stored.chunks.len()).is_empty());
+    assert!(window(&mut db, "m0", 0).is_empty(), "m0 was evicted");
     let ada = db.player("ada").expect("stats").expect("ada");
     let orders = [
         LeaderOrder::Wins,

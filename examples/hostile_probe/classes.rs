@@ -22,6 +22,7 @@ pub(crate) enum Class {
     LobbyStall,
     CommandCost,
     InputsGrowth,
+    CommandMemory,
     SeedOracle,
     EventsFog,
     SlowExport,
@@ -38,7 +39,7 @@ pub(crate) enum Class {
     QuicSessions,
 }
 
-pub(crate) const CLASSES: [Class; 26] = [
+pub(crate) const CLASSES: [Class; 27] = [
     Class::Slivers(64),
     Class::Slivers(256),
     Class::ExpensiveMatch,
@@ -51,6 +52,7 @@ pub(crate) const CLASSES: [Class; 26] = [
     Class::LobbyStall,
     Class::CommandCost,
     Class::InputsGrowth,
+    Class::CommandMemory,
     Class::SeedOracle,
     Class::EventsFog,
     Class::SlowExport,
@@ -81,6 +83,7 @@ impl Class {
             Class::LobbyStall => "lobby-stall".into(),
             Class::CommandCost => "command-cost".into(),
             Class::InputsGrowth => "inputs-growth".into(),
+            Class::CommandMemory => "command-memory".into(),
             Class::SeedOracle => "seed-oracle".into(),
             Class::EventsFog => "events-fog".into(),
             Class::SlowExport => "slow-export".into(),
@@ -144,6 +147,7 @@ pub(crate) async fn attack(class: Class, ctx: &Ctx) -> Result<Outcome, String> {
         Class::LobbyStall => lobby_stall(ctx).await,
         Class::CommandCost => outcome(crate::costs::command_cost(ctx).await?),
         Class::InputsGrowth => outcome(crate::costs::inputs_growth(ctx).await?),
+        Class::CommandMemory => outcome(crate::costs::command_memory(ctx).await?),
         Class::SeedOracle => crate::fair::seed_oracle(ctx).await.map(Outcome::from),
         Class::EventsFog => crate::fair::events_fog(ctx).await.map(Outcome::from),
         Class::SlowExport => crate::doors::slow_export(ctx).await.map(Outcome::of),

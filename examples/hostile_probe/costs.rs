@@ -92,3 +92,65 @@ pub(crate) async fn inputs_growth(ctx: &Ctx) -> Result<Got, String> {
         ),
     ))
 }
+
+/// 4,000 commands of 1,000 waypoints (~12 KB each) to an API-driven opponent of a real-time
+/// match, then the match deleted: what the live match holds of them in memory (the row's
+/// peak), and what it leaves once gone (the row's RSS after).
+pub(crate) async fn command_memory(ctx: &Ctx) -> Result<Got, String> {
+    const COMMANDS: usize = 4_000;
+    let body = json!({"map": "office", "opponents": 1, "opponent_control": "api",
+                      "planner": "idle", "time_limit_s": 3600});
+    let (_, id, token) = ctx.create(&body).await?;
+    let route: Vec<[f64; 2]> = (0..1000)
+        .map(|k| [2.0 + (k % 20) as f64, 2.0 + (k / 100) as f64])
+        .collect();
+    let command = json!({ "waypoints": route });
+    let path = format!("/api/matches/{id}/opponents/o0/command");
+    let mut statuses = BTreeMap::new();
+    let mut refusal = None;
+    let t = Instant::now();
+    // Within the server's 100 requests a second per client: the commands themselves, not
+    // the rate limit, are what is measured.
+    let mut pace = tokio::time::interval(std::time::Duration::from_millis(12));
+    for _ in 0..COMMANDS {
+        pace.tick().await;
+        let a = ctx.post(&path, &command, token.as_deref()).await?;
+        *statuses.entry(a.status).or_default() += 1;
+        if a.status != 204 {
+            refusal = Some(a.gist());
+            break;
+        }
+    }
+    let request_ms = ms_since(t);
+    let taken = crate::harness::rss_kib(ctx.pid);
+    pace.tick().await;
+    let last = ctx.public_tick(&id).await?.saturating_sub(1);
+    pace.tick().await;
+    let deleted = crate::harness::send(Ctx::with_token(
+        ctx.http.delete(ctx.url(&format!("/api/matches/{id}"))),
+        token.as_deref(),
+    ))
+    .await?;
+    // Its replay, read at its end and its middle: the commands come back from the store.
+    let mut read = Vec::new();
+    for tick in [last, last / 2] {
+        pace.tick().await;
+        let a = ctx
+            .get(&format!("/api/replays/{id}/state?tick={tick}"))
+            .await?;
+        read.push(a.status);
+    }
+    let mib = |k: Option<u64>| k.map_or("?".into(), |k| format!("{:.0}", k as f64 / 1024.0));
+    Ok((
+        tally(&statuses),
+        request_ms,
+        format!(
+            "{COMMANDS} commands of 1,000 waypoints into a real-time match; RSS {} MiB after them; refused with: {}; deleted: {}; its replay read at ticks {last} and {}: {read:?}, RSS {} MiB after",
+            mib(taken),
+            refusal.unwrap_or_else(|| "never".into()),
+            deleted.status,
+            last / 2,
+            mib(crate::harness::rss_kib(ctx.pid)),
+        ),
+    ))
+}

@@ -65,6 +65,8 @@
 //!   again to a manual match whose robots take orders (each a grid search);
 //! - `inputs-growth`: commands of 1,000 waypoints to an API-driven opponent until the match
 //!   refuses them;
+//! - `command-memory`: 4,000 such commands into a real-time match, which is then deleted:
+//!   the memory the live match holds of them (the peak) and leaves (after);
 //! - `replay-cost`: strangers (127.0.0.2 to .5) read two 6,000-tick replays at their end and
 //!   middle (each read a re-simulation) while a visitor creates a match every 300 ms;
 //! - `replay-memory`: the biggest of a few big matches the server admits (a large open map,

@@ -8,11 +8,12 @@
 //!
 //! The record streams to the store about once a second (`task/history.rs`), so what bounds
 //! the orders from outside (robots' and opponents' commands, which a client sends as fast
-//! as it may) is the store: [`MAX_RECORD_BYTES`] a match, priced with the match when it takes
-//! such orders (`admission::match_on`'s `disk`); past it a match refuses further orders. In
-//! memory a recording keeps the newest orders within [`MEMORY_ORDER_BYTES`] and lets go of
-//! older ones once the store has them, so a match driven for an hour holds no more memory
-//! than one driven for a minute; its replay then comes from the store. Without a store
+//! as it may) is the store: [`MAX_RECORD_BYTES`] a match, on disk, priced with the match when
+//! it takes such orders (`admission::match_on`'s `disk`); past it a match refuses further
+//! orders. In memory a recording keeps the newest orders within [`MEMORY_ORDER_BYTES`] and
+//! lets go of older ones once the store has them, so a match driven for an hour holds no more
+//! memory than one driven for a minute; its replay then reads them from the store in windows
+//! (`replay/inputs.rs`). Without a store
 //! nothing may be let go of, and the memory bound is the match's bound. Keys and seats come
 //! at most one per player and tick.
 
@@ -63,11 +64,13 @@ pub struct Recording {
 /// Orders from outside past what a match may record.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
 #[error(
-    "the match has recorded {held} bytes of commands, and this one would take it past its bound of {max} bytes (it keeps every command for its replay); it takes no more commands"
+    "the match has recorded {held} bytes of commands, and this one would take it past its bound of {max} bytes {kept} (every command is kept for its replay); it takes no more commands"
 )]
 pub struct RecordingFull {
     pub held: usize,
     pub max: usize,
+    /// Where the bound is: "on disk" (a store keeps the record), or "in memory".
+    pub kept: &'static str,
 }
 
 impl Recording {
@@ -129,6 +132,7 @@ impl Recording {
             return Err(RecordingFull {
                 held: self.order_bytes,
                 max,
+                kept: if self.spills { "on disk" } else { "in memory" },
             });
         }
         Ok(())

@@ -25,6 +25,12 @@ use crate::game::view::MatchMeta;
 use crate::store::codec::StoredSettings;
 use crate::store::{Listed, Store, StoreError, Write};
 
+mod inputs;
+
+pub use inputs::InputsError;
+
+use inputs::{Inputs, Position};
+
 /// Keyframes kept per replay: about 300 KB each for an office match, so at most tens of MB.
 pub const MAX_KEYFRAMES: u64 = 120;
 /// The closest keyframes may be (ticks): a seek then re-simulates at most this many.
@@ -60,7 +66,7 @@ pub struct Replay {
     pub complete: bool,
     arena: Arc<Arena>,
     config: MatchConfig,
-    inputs: Arc<[(u64, WorldInput)]>,
+    inputs: Inputs,
     /// Ticks between keyframes; `None`: the world is too big to keep copies of.
     spacing: Option<u64>,
     /// Worlds at multiples of `spacing`, in tick order (the start is always first).
@@ -79,6 +85,8 @@ pub enum ReplayError {
     PastTheEnd { asked: u64, last: u64 },
     #[error("the match could not be set up again: {0}")]
     Setup(#[from] SetupError),
+    #[error(transparent)]
+    Inputs(#[from] InputsError),
 }
 
 impl Replay {
@@ -121,31 +129,30 @@ impl Replay {
             complete: true,
             arena,
             config,
-            inputs: inputs.into(),
+            inputs: Inputs::memory(inputs),
             spacing,
             keyframes: Mutex::new(Vec::new()),
         }
     }
 
-    /// Bytes of its recorded inputs.
+    /// Bytes of its recorded inputs as it holds them (all, or their index).
     fn inputs_bytes(&self) -> u64 {
-        (self.inputs.len() * std::mem::size_of::<(u64, WorldInput)>()) as u64
+        self.inputs.bytes()
     }
 
-    /// A replay read back from the store.
-    pub fn from_stored(stored: crate::store::Stored) -> Result<Replay, LoadError> {
+    /// A replay read back from `store`: its inputs stay there when they are many.
+    pub fn from_stored(
+        store: &Arc<Store>,
+        stored: crate::store::Stored,
+    ) -> Result<Replay, LoadError> {
         let settings: StoredSettings = serde_json::from_str(&stored.settings)
             .map_err(|e| LoadError(format!("settings: {e}")))?;
         let config = settings.config().map_err(|e| LoadError(e.to_string()))?;
         let def =
             crate::maps::parse(&stored.map_document).map_err(|e| LoadError(format!("map: {e}")))?;
         let arena = Arc::new(Arena::new(def));
-        let mut inputs = Vec::new();
-        for chunk in &stored.chunks {
-            inputs.extend(
-                crate::store::codec::decode_inputs(chunk).map_err(|e| LoadError(e.to_string()))?,
-            );
-        }
+        let inputs = Inputs::of_chunks(Some(store), &stored.listed.id, &stored.chunks)
+            .map_err(|e| LoadError(e.to_string()))?;
         let l = stored.listed;
         let at =
             |ms: i64| SystemTime::UNIX_EPOCH + std::time::Duration::from_millis(ms.max(0) as u64);
@@ -165,7 +172,7 @@ impl Replay {
             spacing: keyframe_spacing(l.ticks, world_copy(&arena.def, &config)),
             arena,
             config,
-            inputs: inputs.into(),
+            inputs,
             keyframes: Mutex::new(Vec::new()),
         })
     }
@@ -190,15 +197,12 @@ impl Replay {
             });
         }
         let mut world = self.nearest(tick)?;
-        let mut next = self.inputs.partition_point(|(t, _)| *t < world.tick);
+        let mut at = self.inputs.walk_from(world.tick);
         // A keyframe holds the world before the inputs of its tick.
         loop {
-            while let Some((t, input)) = self.inputs.get(next)
-                && *t == world.tick
-            {
+            self.inputs.apply_at(&mut at, world.tick, |input| {
                 let _ = world.apply(input);
-                next += 1;
-            }
+            })?;
             if world.tick >= tick || world.status == MatchStatus::Finished {
                 break;
             }
@@ -249,8 +253,8 @@ impl Replay {
 #[derive(Debug, Clone)]
 pub struct Cursor {
     world: World,
-    /// The first input not applied yet.
-    next: usize,
+    /// The inputs after its tick.
+    inputs: Position,
 }
 
 impl Cursor {
@@ -264,26 +268,22 @@ impl Replay {
     /// A cursor at the end of `tick` (as [`Replay::world_at`] gives it).
     pub fn cursor(&self, tick: u64) -> Result<Cursor, ReplayError> {
         let world = self.world_at(tick)?;
-        let next = self.inputs.partition_point(|(t, _)| *t <= world.tick);
-        Ok(Cursor { world, next })
+        let inputs = self.inputs.walk_from(world.tick + 1);
+        Ok(Cursor { world, inputs })
     }
 
     /// Moves `cursor` one tick on; false (and nothing changes) at the match's last tick.
-    pub fn advance(&self, cursor: &mut Cursor) -> bool {
+    pub fn advance(&self, cursor: &mut Cursor) -> Result<bool, ReplayError> {
         let world = &mut cursor.world;
         if world.tick >= self.last_tick || world.status == MatchStatus::Finished {
-            return false;
+            return Ok(false);
         }
         world.step();
-        while let Some((t, input)) = self.inputs.get(cursor.next)
-            && *t <= world.tick
-        {
-            if *t == world.tick {
-                let _ = world.apply(input);
-            }
-            cursor.next += 1;
-        }
-        true
+        let tick = world.tick;
+        self.inputs.apply_at(&mut cursor.inputs, tick, |input| {
+            let _ = world.apply(input);
+        })?;
+        Ok(true)
     }
 }
 
@@ -307,7 +307,7 @@ pub struct History {
     replays: Mutex<VecDeque<Arc<Replay>>>,
     capacity: usize,
     opened: Mutex<VecDeque<Arc<Replay>>>,
-    store: Option<Store>,
+    store: Option<Arc<Store>>,
 }
 
 impl Default for History {
@@ -330,13 +330,13 @@ impl History {
     /// A history kept in `store`.
     pub fn with_store(store: Store) -> History {
         History {
-            store: Some(store),
+            store: Some(Arc::new(store)),
             ..History::new(CACHED_WITH_STORE)
         }
     }
 
     pub fn store(&self) -> Option<&Store> {
-        self.store.as_ref()
+        self.store.as_deref()
     }
 
     /// Hands `w` to the store (nothing to do without one); gives it back when the store's
@@ -398,7 +398,7 @@ impl History {
         let Some(stored) = store.read(|b| b.load(id))? else {
             return Ok(None);
         };
-        Ok(Some(self.keep(Replay::from_stored(stored)?)))
+        Ok(Some(self.keep(Replay::from_stored(store, stored)?)))
     }
 
     /// Ended matches, the last to end first: at most `limit`, those that ended before

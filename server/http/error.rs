@@ -9,7 +9,7 @@ use crate::game::admission::NoRoom;
 use crate::game::hub::SpectatorsRefused;
 use crate::game::party::PartyError;
 use crate::game::queue::QueueError;
-use crate::game::replay::HistoryError;
+use crate::game::replay::{HistoryError, InputsError, ReplayError};
 use crate::game::showcase::{NoSeat, NoShowcase};
 use crate::http::limits::BeliefRefused;
 use crate::protocol::ErrorBody;
@@ -306,6 +306,14 @@ impl From<ReplaysError> for ApiError {
             ReplaysError::Pool(e) => e.into(),
             ReplaysError::NotFound(_) | ReplaysError::PastTheEnd { .. } | ReplaysError::NoRobot => {
                 ApiError::not_found(e.to_string())
+            }
+            // The store could not give a window of a long record's inputs: its trouble, not
+            // the request's (the record gone from the store is gone for good).
+            ReplaysError::Replay(ReplayError::Inputs(InputsError::Gone)) => {
+                ApiError::not_found(e.to_string())
+            }
+            ReplaysError::Replay(ReplayError::Inputs(_)) => {
+                ApiError::new(StatusCode::SERVICE_UNAVAILABLE, e.to_string())
             }
             ReplaysError::Replay(_) => ApiError::bad_request(e.to_string()),
             ReplaysError::Busy(busy) => {

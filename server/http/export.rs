@@ -205,7 +205,8 @@ pub async fn export(
                 if next > to {
                     return None;
                 }
-                if !r.advance(&mut cursor) {
+                // Past the last tick before `to`, or a stored window that could not be read.
+                if !matches!(r.advance(&mut cursor), Ok(true)) {
                     return Some(Cut::Replay);
                 }
             }

@@ -253,7 +253,7 @@ impl Viewer {
                     .map_err(|e| e.to_string())?,
             };
             for _ in 0..steps {
-                if !replay.advance(&mut cursor) {
+                if !replay.advance(&mut cursor).map_err(|e| e.to_string())? {
                     break;
                 }
             }

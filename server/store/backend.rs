@@ -392,6 +392,15 @@ pub trait Backend: Send {
         without_prefix: Option<&str>,
     ) -> Result<Vec<Listed>, StoreError>;
     fn load(&mut self, id: &str) -> Result<Option<Stored>, StoreError>;
+    /// At most `count` of the ended match `id`'s chunks of inputs, from the `from`th (in
+    /// order, as [`Stored::chunks`] has them): a replay reads a long record in windows.
+    /// Fewer than asked at the end, none for a match no longer stored.
+    fn input_chunks(
+        &mut self,
+        id: &str,
+        from: usize,
+        count: usize,
+    ) -> Result<Vec<Vec<u8>>, StoreError>;
     /// The ids of the matches this server may resume: left running by a process that has
     /// stopped, oldest first.
     fn unfinished(&mut self) -> Result<Vec<String>, StoreError> {

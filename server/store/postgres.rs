@@ -453,6 +453,21 @@ impl Backend for Postgres {
         })
     }
 
+    fn input_chunks(
+        &mut self,
+        id: &str,
+        from: usize,
+        count: usize,
+    ) -> Result<Vec<Vec<u8>>, StoreError> {
+        let (from, count) = (from as i64, count as i64);
+        self.read(|c, st| {
+            c.query(&st.input_chunks, &[&id, &count, &from])?
+                .iter()
+                .map(|r| r.try_get(0))
+                .collect()
+        })
+    }
+
     fn load(&mut self, id: &str) -> Result<Option<Stored>, StoreError> {
         self.read(|c, st| {
             let Some(r) = c.query_opt(&st.load, &[&id])? else {

@@ -431,6 +431,28 @@ impl backend::Backend for Sqlite {
         load(&self.conn, id)
     }
 
+    fn input_chunks(
+        &mut self,
+        id: &str,
+        from: usize,
+        count: usize,
+    ) -> Result<Vec<Vec<u8>>, StoreError> {
+        let mut stmt = self
+            .conn
+            .prepare_cached(
+                "SELECT chunk FROM inputs
+                 WHERE seq = (SELECT seq FROM matches WHERE id = ?1 AND ended_at IS NOT NULL)
+                 ORDER BY rowid LIMIT ?2 OFFSET ?3",
+            )
+            .map_err(db)?;
+        stmt.query_map(rusqlite::params![id, count as i64, from as i64], |r| {
+            r.get::<_, Vec<u8>>(0)
+        })
+        .map_err(db)?
+        .collect::<Result<Vec<_>, _>>()
+        .map_err(db)
+    }
+
     fn unfinished(&mut self) -> Result<Vec<String>, StoreError> {
         unfinished(&self.conn)
     }

@@ -122,7 +122,7 @@ fn a_cursor_played_forward_meets_every_seek() {
     let replay = recorded();
     let mut cursor = replay.cursor(100).expect("cursor");
     let mut steps = 0;
-    while replay.advance(&mut cursor) {
+    while replay.advance(&mut cursor).expect("inputs") {
         steps += 1;
         let tick = cursor.world().tick;
         if tick.is_multiple_of(23) || tick == replay.last_tick {
@@ -131,5 +131,141 @@ fn a_cursor_played_forward_meets_every_seek() {
         }
     }
     assert_eq!(steps, replay.last_tick - 100);
-    assert!(!replay.advance(&mut cursor));
+    assert!(!replay.advance(&mut cursor).expect("inputs"));
+}
+
+#[test]
+fn a_long_record_is_replayed_from_the_store_in_windows() {
+    use crate::store::codec::{StoredClock, StoredSettings};
+    use crate::store::{Ended, Retention};
+    use lasertag_core::world::OpponentOrder;
+    use nalgebra::Point2;
+
+    // An opponent driven by commands of 1,000 waypoints: more than a replay keeps in memory.
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+    let maps = MapStore::load_dir(&root.join("maps")).expect("shipped maps");
+    let arena = maps.get("office").expect("office").arena.clone();
+    let config = MatchConfig {
+        opponent_control: ControlKind::Api,
+        seed: 5,
+        ..MatchConfig::default()
+    };
+    let route = |k: u64| {
+        OpponentOrder::Waypoints(
+            (0..1000)
+                .map(|i| Point2::new(2.0 + ((i + k) % 20) as f32, 2.0 + (i % 7) as f32))
+                .collect(),
+        )
+    };
+    let mut world = World::new(arena.clone(), config.clone()).expect("world");
+    let mut chunks: Vec<Vec<(u64, WorldInput)>> = vec![Vec::new()];
+    let mut bytes = 0;
+    while bytes <= 2 * inputs::MEMORY_BYTES {
+        let tick = world.tick;
+        for k in 0..3 {
+            let input = WorldInput::Opponent {
+                slot: 0,
+                order: route(tick + k),
+            };
+            world.apply(&input).expect("order");
+            bytes += crate::game::record::order_bytes(&input).unwrap() as u64;
+            chunks.last_mut().unwrap().push((tick, input));
+        }
+        world.step();
+        // An append about once a second of play, as a match's task makes them.
+        if world.tick.is_multiple_of(20) {
+            chunks.push(Vec::new());
+        }
+    }
+    let last_tick = world.tick;
+    let all: Vec<_> = chunks.iter().flatten().cloned().collect();
+    let in_memory = Replay::of(
+        &world,
+        recorded().meta,
+        arena.clone(),
+        config.clone(),
+        all,
+        SystemTime::now(),
+    );
+
+    let dir = std::env::temp_dir().join(format!("lasertag-replay-windows-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let store = Store::open(
+        &dir,
+        Retention {
+            max_matches: 10,
+            max_bytes: 1 << 30,
+        },
+    )
+    .expect("store");
+    let settings = StoredSettings::of(&config, StoredClock::Manual, false, 0, None, false);
+    store
+        .send(Write::Begin {
+            id: "long".into(),
+            arena,
+            settings: Box::new(settings),
+            live: Box::default(),
+            started_at: SystemTime::now(),
+        })
+        .expect("begin");
+    for inputs in chunks {
+        store
+            .send(Write::Append {
+                id: "long".into(),
+                inputs,
+                names: None,
+                live: None,
+                tick: last_tick,
+            })
+            .expect("append");
+    }
+    store
+        .send(Write::Finish {
+            id: "long".into(),
+            ended: Ended {
+                ended_at: 1,
+                ticks: last_tick,
+                winner: None,
+                reason: Some("stopped"),
+                players: Vec::new(),
+                rated: None,
+            },
+        })
+        .expect("finish");
+    store
+        .flush(std::time::Duration::from_secs(10))
+        .expect("flush");
+
+    let history = History::with_store(store);
+    let stored = history.load("long").expect("load").expect("stored");
+    assert!(
+        stored.inputs.stored(),
+        "past the memory bound the inputs stay in the store"
+    );
+    assert!(
+        stored.inputs_bytes() < 64 << 10,
+        "{}",
+        stored.inputs_bytes()
+    );
+    assert!(in_memory.inputs_bytes() > inputs::MEMORY_BYTES);
+    for tick in [0, 1, 19, 20, 21, last_tick / 2, last_tick - 1, last_tick] {
+        let (a, b) = (
+            in_memory.world_at(tick).unwrap(),
+            stored.world_at(tick).unwrap(),
+        );
+        assert_eq!(a.digest(), b.digest(), "tick {tick}");
+    }
+    let mut cursor = stored.cursor(7).expect("cursor");
+    while stored.advance(&mut cursor).expect("a window") {
+        let tick = cursor.world().tick;
+        if tick.is_multiple_of(17) || tick == last_tick {
+            assert_eq!(
+                cursor.world().digest(),
+                in_memory.world_at(tick).unwrap().digest(),
+                "tick {tick}"
+            );
+        }
+    }
+    assert_eq!(cursor.world().tick, last_tick);
+    let _ = std::fs::remove_dir_all(&dir);
 }

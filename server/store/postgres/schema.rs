@@ -172,6 +172,7 @@ pub(super) struct Statements {
     pub(super) forget_maps: Statement,
     pub(super) list: Statement,
     pub(super) load: Statement,
+    pub(super) input_chunks: Statement,
     pub(super) totals: Statement,
     pub(super) player: Statement,
     pub(super) played: Statement,
@@ -342,6 +343,11 @@ impl Statements {
                         ARRAY(SELECT chunk FROM inputs WHERE inputs.seq = m.seq ORDER BY n)
                  FROM matches m JOIN maps ON maps.hash = m.map_hash
                  WHERE m.id = $1 AND m.ended_at IS NOT NULL",
+            )?,
+            input_chunks: c.prepare(
+                "SELECT chunk FROM inputs
+                 WHERE seq = (SELECT seq FROM matches WHERE id = $1 AND ended_at IS NOT NULL)
+                 ORDER BY n LIMIT $2 OFFSET $3",
             )?,
             totals: c.prepare(
                 "SELECT COUNT(*), COALESCE(SUM(bytes), 0)::BIGINT FROM matches
