@@ -133,6 +133,38 @@ async fn a_replay_shows_what_the_live_match_showed_at_every_tick() {
 }
 
 #[tokio::test]
+async fn a_replay_of_a_long_record_read_from_the_store_shows_the_live_match() {
+    // Commands of 1,000 waypoints past what a replay keeps in memory (4 MB): the replay
+    // reads them back from the store in windows, and still shows every tick as it was.
+    let dir = temp_dir("replays-long");
+    let s = TestServer::start_stored(&dir).await;
+    let id = s
+        .create_match(
+            json!({"map": "office", "opponents": 1, "opponent_control": "api",
+            "planner": "idle", "clock": "manual", "seed": 11}),
+        )
+        .await;
+    let path = format!("/api/matches/{id}/opponents/o0/command");
+    let (states, beliefs) = play(&s, &id, 75, async |k| {
+        for j in 0..8u64 {
+            let route: Vec<[f64; 2]> = (0..1000u64)
+                .map(|i| [2.0 + ((i + k + j) % 20) as f64, 2.0 + (i % 5) as f64])
+                .collect();
+            let r = s.post(&path, &json!({ "waypoints": route })).await;
+            assert_eq!(r.status, 204, "{}", r.body);
+        }
+    })
+    .await;
+    end(&s, &id).await;
+    s.flush_history();
+    assert!(
+        s.registry.history.get(&id).is_none(),
+        "a record this long is not kept in memory"
+    );
+    check_replay(&s, &id, &states, &beliefs).await;
+}
+
+#[tokio::test]
 async fn a_replay_follows_a_player_over_the_websocket() {
     let dir = temp_dir("replays-player");
     let s = TestServer::start_stored(&dir).await;
