@@ -199,6 +199,54 @@ async fn past_the_servers_sessions_a_new_one_is_refused_at_once() {
     assert_eq!(kind, BINARY);
 }
 
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_player_takes_a_spectators_session_when_all_are_held() {
+    let s = TestServer::with_webtransport(Config {
+        max_webtransport_sessions: 1,
+        ..common::test_config()
+    })
+    .await;
+    let id = s
+        .create_match(
+            json!({"map": "office", "opponents": 2, "opponent_control": "human", "planner": "idle"}),
+        )
+        .await;
+    let (spectate, hash) = at(&s, &format!("/ws/matches/{id}?format=compact")).await;
+    let mut spectator = WtClient::connect(&spectate, &hash)
+        .await
+        .expect("a spectator");
+    assert_eq!(spectator.json().await["type"], "welcome");
+    // A second spectator finds every session held.
+    assert!(WtClient::connect(&spectate, &hash).await.is_err());
+    // A player does not: the spectator is moved off, told to come back (1012), and its page
+    // then takes the WebSocket.
+    let (_, token) = s.join(&id, "late").await;
+    let (play, _) = at(
+        &s,
+        &format!("/ws/matches/{id}?token={token}&format=compact"),
+    )
+    .await;
+    let mut player = WtClient::connect(&play, &hash).await.expect("the player");
+    let welcome = player.json().await;
+    assert_eq!(welcome["role"], "player", "{welcome}");
+    let close = spectator.next_of("close").await;
+    assert_eq!(close["code"], 1012, "{close}");
+    assert!(
+        close["reason"].as_str().unwrap().contains("WebSocket"),
+        "{close}"
+    );
+    // Players hold every session: the next player is refused, and plays on its WebSocket.
+    let (_, token) = s.join(&id, "later").await;
+    let (second, _) = at(
+        &s,
+        &format!("/ws/matches/{id}?token={token}&format=compact"),
+    )
+    .await;
+    assert!(WtClient::connect(&second, &hash).await.is_err());
+    let (kind, _) = player.datagram().await;
+    assert_eq!(kind, BINARY, "the player goes on over datagrams");
+}
+
 /// Where opponent `oid` is in the truth.
 async fn position(s: &TestServer, id: &str, oid: &str) -> (f64, f64) {
     let state = s.get(&format!("/api/matches/{id}")).await.body;

@@ -95,7 +95,10 @@ fn router(
     if let Some(runtime) = &keeps {
         runtime.spawn(crate::service::parties::keep(registry.clone()));
     }
+    let webtransport_seats =
+        crate::http::transport::seats::Seats::new(registry.config.max_webtransport_sessions);
     let state = AppState {
+        webtransport_seats,
         registry,
         limits: Arc::default(),
         pool: Pool::new(cores),

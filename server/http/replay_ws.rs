@@ -357,6 +357,9 @@ impl Viewer {
             tokio::select! {
                 biased;
                 _ = shutdown.cancelled() => {
+                    if self.sock.moved_off_webtransport() {
+                        return Err(End::moved_off_webtransport());
+                    }
                     return Err(End::going_away());
                 }
                 msg = self.sock.recv() => {

@@ -8,7 +8,11 @@
 //! Each socket's loop is its own (what it waits on differs); it reads with [`Socket::recv`],
 //! which is cancel-safe in a `select!`, and hands what came to [`Socket::read`].
 
+mod end;
 pub mod schedule;
+
+pub use end::End;
+use end::TOO_BIG;
 
 use std::collections::HashMap;
 use std::future::Future;
@@ -24,6 +28,7 @@ use axum::response::{IntoResponse, Response};
 use tokio_util::sync::CancellationToken;
 use tracing::Instrument;
 
+use crate::http::transport::seats;
 use crate::http::transport::session::{Refusable, Session};
 
 use crate::game::{ConnectionGuard, Registry};
@@ -45,54 +50,6 @@ pub const SEND_TIMEOUT: Duration = Duration::from_secs(10);
 const SHUTDOWN_DRAIN: Duration = Duration::from_secs(1);
 /// Close reasons are cut to this many bytes: they must fit a control frame (123 bytes).
 const REASON_BYTES: usize = 120;
-
-/// Close codes (RFC 6455 and IANA's registry): normal, going away, policy violation, message
-/// too big, internal error, service restart.
-const NORMAL: u16 = 1000;
-const GOING_AWAY: u16 = 1001;
-const POLICY: u16 = 1008;
-const TOO_BIG: u16 = 1009;
-const INTERNAL: u16 = 1011;
-const RESTART: u16 = 1012;
-
-/// Why a connection ends.
-#[derive(Debug)]
-pub enum End {
-    /// The client left or the socket failed: nothing more to send.
-    Gone,
-    /// Close with this code and reason.
-    Close(u16, String),
-}
-
-impl End {
-    /// The client broke a rule (1008).
-    pub fn policy(reason: impl Into<String>) -> End {
-        End::Close(POLICY, reason.into())
-    }
-
-    /// What the socket showed has ended (1000).
-    pub fn normal(reason: impl Into<String>) -> End {
-        End::Close(NORMAL, reason.into())
-    }
-
-    /// The server is shutting down (1001).
-    pub fn going_away() -> End {
-        End::Close(GOING_AWAY, "the server is shutting down".into())
-    }
-
-    /// The server is stopping, and the next one resumes the match: come back (1012).
-    pub fn restarting() -> End {
-        End::Close(
-            RESTART,
-            "the server is restarting; the match goes on: reconnect".into(),
-        )
-    }
-
-    /// The server failed at what the socket needed (1011).
-    pub fn internal(reason: impl Into<String>) -> End {
-        End::Close(INTERNAL, reason.into())
-    }
-}
 
 /// What a socket's upgrade request brings: the id in its path, its query, the client's
 /// address, and the upgrade itself (or why it is none, refused by [`admit`] after the
@@ -261,14 +218,30 @@ impl Admitted {
                     .instrument(span)
                 }),
             Ready::WebTransport(request) => {
+                let seats = state.webtransport_seats.clone();
                 tokio::spawn(
                     async move {
+                        // Players first: a spectator past the sessions the server carries
+                        // is refused (its page takes the WebSocket), a player takes the
+                        // place of the spectator who came last.
+                        let kind = seats::Kind::of_role(manner.role);
+                        let seat = match seats.take(kind, &registry.shutdown) {
+                            Ok(seat) => seat,
+                            Err(full) => {
+                                registry.metrics.refuse(Refusal::WebTransportFull);
+                                tracing::debug!("{full}");
+                                return request.refuse(StatusCode::SERVICE_UNAVAILABLE).await;
+                            }
+                        };
                         let Some(session) = request.accept(hard).await else {
                             return;
                         };
                         tracing::debug!("connected over WebTransport");
                         let carrier = Carrier::WebTransport(Box::new(session));
-                        serve(Socket::new(carrier, &registry, manner, address)).await;
+                        let mut socket = Socket::new(carrier, &registry, manner, address);
+                        socket.shutdown = seat.ends.clone();
+                        socket._guards._seat = Some(seat);
+                        serve(socket).await;
                         tracing::debug!("disconnected");
                     }
                     .instrument(span),
@@ -289,6 +262,8 @@ struct Guards {
     _address: AddressConnection,
     _open: ConnectionGuard,
     _client: ClientGuard,
+    /// A WebTransport session's place among those the server carries.
+    _seat: Option<seats::Seat>,
 }
 
 /// One client's socket, with its limits.
@@ -296,7 +271,11 @@ pub struct Socket {
     carrier: Carrier,
     manner: Manner,
     metrics: Metrics,
+    /// Ends the socket: the server's shutdown, or (a spectator's WebTransport session) a
+    /// player that needs its place.
     shutdown: CancellationToken,
+    /// The server's own shutdown.
+    stopping: CancellationToken,
     /// Whether a stop suspends the matches (`Registry::suspends_on_stop`).
     resumes: bool,
     max_message_bytes: usize,
@@ -320,6 +299,7 @@ impl Socket {
             carrier,
             metrics: registry.metrics.clone(),
             shutdown: registry.shutdown.clone(),
+            stopping: registry.shutdown.clone(),
             resumes: registry.suspends_on_stop(),
             max_message_bytes: cfg.max_message_bytes,
             hard_message_bytes: cfg.hard_message_bytes(),
@@ -330,20 +310,28 @@ impl Socket {
                 _address: address,
                 _open: registry.connection(),
                 _client: registry.metrics.client(manner.role),
+                _seat: None,
             },
             manner,
         }
     }
 
-    /// The server's shutdown token.
+    /// What ends the socket: the server's shutdown, or a player that needs a spectator's
+    /// WebTransport session (the socket then closes as "going away" and the page comes
+    /// back over its WebSocket).
     pub fn shutdown(&self) -> &CancellationToken {
         &self.shutdown
+    }
+
+    /// Whether a player took this spectator's WebTransport session (the server goes on).
+    pub fn moved_off_webtransport(&self) -> bool {
+        self.shutdown.is_cancelled() && !self.stopping.is_cancelled()
     }
 
     /// Whether the server is stopping and the match goes on in the next one (its store
     /// resumes matches): then a socket closes with [`End::restarting`], not `finished`.
     pub fn restarting(&self) -> bool {
-        self.resumes && self.shutdown.is_cancelled()
+        self.resumes && self.stopping.is_cancelled()
     }
 
     /// Counts `bytes` of snapshots sent, under the connection's role.
@@ -502,7 +490,7 @@ impl Socket {
         let Err(End::Close(code, reason)) = end else {
             return;
         };
-        let drain = if self.shutdown.is_cancelled() {
+        let drain = if self.stopping.is_cancelled() {
             SHUTDOWN_DRAIN
         } else {
             self.manner.close_drain

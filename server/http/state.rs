@@ -20,6 +20,8 @@ pub struct AppState {
     pub fleet: Option<Arc<Fleet>>,
     /// Where WebTransport is served, once [`crate::http::transport::start`] runs.
     pub transport: Arc<crate::http::transport::published::Published>,
+    /// The WebTransport sessions the server carries, players first.
+    pub webtransport_seats: Arc<crate::http::transport::seats::Seats>,
 }
 
 impl AppState {

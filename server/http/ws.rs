@@ -313,6 +313,9 @@ impl Connection {
                     }
                 }
                 _ = shutdown.cancelled(), if !self.finished_sent => {
+                    if self.sock.moved_off_webtransport() {
+                        return Err(End::moved_off_webtransport());
+                    }
                     if let Some(to) = self.handle.hub.moved.get() {
                         self.sock.text(wire::moved(to.as_deref())).await?;
                         return Err(End::restarting());

@@ -12,6 +12,7 @@
 
 pub mod certificate;
 pub mod published;
+pub mod seats;
 pub mod session;
 
 use std::collections::HashMap;
@@ -205,9 +206,13 @@ async fn accept_loop(state: AppState, endpoint: Arc<Endpoint<Server>>) {
             () = shutdown.cancelled() => break,
         };
         let ip = incoming.remote_address().ip().to_canonical();
-        // Past the sessions the server is sized for, refused at once: the page's session
-        // fails within a round trip and it plays over its WebSocket.
-        if endpoint.open_connections() >= state.registry.config.max_webtransport_sessions {
+        // Past the sessions the server is sized for and the handshakes that may be in
+        // progress, refused at once: the page's session fails within a round trip and it
+        // plays over its WebSocket. Below it, whether a session gets a place is decided once
+        // its request says who it is for (`seats`: players first).
+        if endpoint.open_connections()
+            >= state.registry.config.max_webtransport_sessions + HANDSHAKES
+        {
             state.registry.metrics.refuse(Refusal::WebTransportFull);
             incoming.refuse();
             continue;
