@@ -18,7 +18,7 @@ use std::sync::{Arc, Mutex};
 use std::time::SystemTime;
 
 use lasertag_core::sim::arena::Arena;
-use lasertag_core::world::{MatchConfig, MatchStatus, SetupError, Side, World, WorldInput};
+use lasertag_core::world::{MatchConfig, SetupError, Side, World, WorldInput};
 
 use crate::game::admission::{self, world_copy};
 use crate::game::view::MatchMeta;
@@ -199,10 +199,9 @@ impl Replay {
                 let _ = world.apply(input);
                 next += 1;
             }
-            if world.tick >= tick || world.status == MatchStatus::Finished {
+            if world.tick >= tick || !world.step() {
                 break;
             }
-            world.step();
             if self
                 .spacing
                 .is_some_and(|every| world.tick.is_multiple_of(every))
@@ -271,10 +270,9 @@ impl Replay {
     /// Moves `cursor` one tick on; false (and nothing changes) at the match's last tick.
     pub fn advance(&self, cursor: &mut Cursor) -> bool {
         let world = &mut cursor.world;
-        if world.tick >= self.last_tick || world.status == MatchStatus::Finished {
+        if world.tick >= self.last_tick || !world.step() {
             return false;
         }
-        world.step();
         while let Some((t, input)) = self.inputs.get(cursor.next)
             && *t <= world.tick
         {
