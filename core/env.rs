@@ -398,8 +398,7 @@ impl Episode {
         let start = self.world.tick;
         for _ in 0..spec.ticks_per_step {
             before_tick(&mut self.world);
-            self.world.step();
-            if self.world.status == MatchStatus::Finished {
+            if !self.world.step() || self.world.status == MatchStatus::Finished {
                 break;
             }
         }

@@ -20,7 +20,7 @@ use std::time::Instant;
 use clap::Parser;
 use lasertag::game::admission;
 use lasertag::maps::MapStore;
-use lasertag_core::world::{MatchConfig, MatchStatus, World};
+use lasertag_core::world::{MatchConfig, World};
 
 #[derive(Debug, Parser)]
 #[command(about = "Admission's tick price against measured tick times, per map and setting")]
@@ -68,9 +68,11 @@ fn main() -> Result<(), String> {
                 };
                 let mut world =
                     World::new(arena.clone(), config).map_err(|e| format!("{name}: {e}"))?;
-                while world.status == MatchStatus::Running && world.tick < args.ticks {
+                while world.tick < args.ticks {
                     let start = Instant::now();
-                    world.step();
+                    if !world.step() {
+                        break;
+                    }
                     times.push(start.elapsed().as_secs_f64() * 1e3);
                 }
             }

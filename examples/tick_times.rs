@@ -13,8 +13,8 @@ use lasertag::maps::MapStore;
 use lasertag_core::bots::BotKind;
 use lasertag_core::planner::PlannerKind;
 use lasertag_core::settings::Group;
+use lasertag_core::world::World;
 use lasertag_core::world::{MatchConfig, Placement};
-use lasertag_core::world::{MatchStatus, World};
 
 fn main() -> Result<(), String> {
     let args: Vec<String> = std::env::args().skip(1).collect();
@@ -51,9 +51,11 @@ fn main() -> Result<(), String> {
             ..MatchConfig::default()
         };
         let mut world = World::new(arena.clone(), config).map_err(|e| e.to_string())?;
-        while world.status == MatchStatus::Running && world.tick < 2400 {
+        while world.tick < 2400 {
             let start = Instant::now();
-            world.step();
+            if !world.step() {
+                break;
+            }
             times.push(start.elapsed().as_secs_f64() * 1e3);
         }
     }

@@ -32,7 +32,7 @@ use lasertag_core::planner::PlannerKind;
 use lasertag_core::sim::TICK_HZ;
 use lasertag_core::sim::arena::Arena;
 use lasertag_core::world::{MatchConfig, Placement};
-use lasertag_core::world::{MatchStatus, Side, World};
+use lasertag_core::world::{Side, World};
 
 /// A robot whose estimate is further than this from the truth is lost (m).
 pub const LOST_M: f32 = 1.0;
@@ -133,9 +133,7 @@ pub fn capture_run(
 ) -> Result<Option<f64>, LabError> {
     let config = config(cfg, bot, variant, seed);
     let mut world = World::new(arena, config)?;
-    while world.status == MatchStatus::Running {
-        world.step();
-    }
+    while world.step() {}
     Ok((world.winner == Some(Side::Robots)).then(|| world.time_s()))
 }
 

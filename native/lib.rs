@@ -29,12 +29,12 @@ use numpy::{
     PyReadonlyArray2, PyReadonlyArray3, PyReadwriteArray1, PyReadwriteArray2, PyReadwriteArray3,
     PyUntypedArrayMethods,
 };
-use pyo3::exceptions::{PyIndexError, PyValueError};
+use pyo3::exceptions::{PyIndexError, PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use rayon::prelude::*;
 
-use lasertag_core::env::engine::{self, EngineArgs, Refusal, Slot, check_shape};
+use lasertag_core::env::engine::{self, EngineArgs, Refusal, RestartFailed, Slot, check_shape};
 use lasertag_core::env::{ACTION_SIZE, EnvSpec, Rewards, mm, rad};
 use lasertag_core::sim::arena::Arena;
 use lasertag_core::sim::{AgentId, Pose};
@@ -79,7 +79,7 @@ fn step_world(
     actions: &[f32],
     obs: &mut [f32],
     rewards: &mut [f64],
-) -> (bool, bool) {
+) -> Result<(bool, bool), RestartFailed> {
     match team {
         None => slot.step_or_restart(arena, spec, actions, obs, rewards),
         Some(team) => {
@@ -113,6 +113,7 @@ fn refused(e: Refusal) -> PyErr {
     match e {
         Refusal::NoWorld { .. } => PyIndexError::new_err(e.to_string()),
         Refusal::Value { .. } | Refusal::Setup(_) => PyValueError::new_err(e.to_string()),
+        Refusal::Restart { .. } => PyRuntimeError::new_err(e.to_string()),
     }
 }
 
@@ -296,7 +297,9 @@ impl Engine {
     /// One step of every world (worlds × robots × 3 actions), each on whichever core is
     /// free, without the GIL. A world whose episode ended on the previous step starts its
     /// next one instead (Gymnasium's next-step auto-reset): its actions are ignored, its
-    /// vectors are the new episode's first, its rewards 0 and its flags false.
+    /// vectors are the new episode's first, its rewards 0 and its flags false. A next
+    /// episode whose seed places no match raises `RuntimeError` naming the lowest such
+    /// world and its seed (the other worlds have stepped).
     fn step_all(
         &mut self,
         py: Python<'_>,
@@ -338,26 +341,39 @@ impl Engine {
         let (arena, spec, slots) = self.inner.parts_mut();
         let teams = &mut self.teams;
         // The core's `step_all` with the worlds spread over rayon's threads.
-        py.detach(|| {
-            slots
-                .par_iter_mut()
-                .zip(teams.par_iter_mut())
-                .zip(actions.par_chunks_exact(robots * ACTION_SIZE))
-                .zip(obs.par_chunks_exact_mut(per_world))
-                .zip(rewards.par_chunks_exact_mut(robots))
-                .zip(terminated.par_iter_mut())
-                .zip(truncated.par_iter_mut())
-                .for_each(|((((((slot, team), a), o), r), term), trunc)| {
-                    (*term, *trunc) = step_world(slot, team, arena, spec, a, o, r);
-                });
-        });
-        Ok(())
+        let failed =
+            py.detach(|| {
+                slots
+                    .par_iter_mut()
+                    .zip(teams.par_iter_mut())
+                    .zip(actions.par_chunks_exact(robots * ACTION_SIZE))
+                    .zip(obs.par_chunks_exact_mut(per_world))
+                    .zip(rewards.par_chunks_exact_mut(robots))
+                    .zip(terminated.par_iter_mut())
+                    .zip(truncated.par_iter_mut())
+                    .enumerate()
+                    .filter_map(|(world, ((((((slot, team), a), o), r), term), trunc))| {
+                        match step_world(slot, team, arena, spec, a, o, r) {
+                            Ok(flags) => {
+                                (*term, *trunc) = flags;
+                                None
+                            }
+                            Err(e) => Some(e.of(world)),
+                        }
+                    })
+                    .min_by_key(|e| match e {
+                        Refusal::Restart { world, .. } => *world,
+                        _ => usize::MAX,
+                    })
+            });
+        failed.map_or(Ok(()), |e| Err(refused(e)))
     }
 
     /// `steps` steps of world `world`, step `k` with `actions[k % len]` (each robots × 3),
     /// timing the ticks (with the rewards) apart from the observation vectors: (ticks
     /// seconds, vectors seconds). The world goes on from where it was, and starts afresh
-    /// when its episode ends.
+    /// when its episode ends. At most `MAX_TIMED_TICKS` ticks a call (`BOUNDS["timed_ticks"]`,
+    /// what one step request to the server may advance), so a call returns in seconds.
     fn time_parts(
         &mut self,
         py: Python<'_>,
@@ -366,6 +382,7 @@ impl Engine {
         actions: PyReadonlyArray3<'_, f32>,
     ) -> PyResult<(f64, f64)> {
         let (robots, size) = (self.inner.robots(), self.inner.size());
+        engine::check_timed(steps as u64, self.inner.spec().ticks_per_step).map_err(refused)?;
         let shape = actions.shape();
         if shape.len() != 3 || shape[0] == 0 || shape[1..] != [robots, ACTION_SIZE] {
             return Err(refused(engine::refuse(
@@ -381,7 +398,7 @@ impl Engine {
         let (arena, spec, slots) = self.inner.parts_mut();
         let slot = &mut slots[world];
         let team = &mut self.teams[world];
-        Ok(py.detach(|| {
+        py.detach(|| {
             let (mut ticks, mut vectors) = (Duration::ZERO, Duration::ZERO);
             for a in actions.chunks_exact(per_step).cycle().take(steps) {
                 let t0 = Instant::now();
@@ -398,11 +415,13 @@ impl Engine {
                 ticks += t1 - t0;
                 if out.terminated || out.truncated {
                     slot.ended = true;
-                    step_world(slot, team, arena, spec, a, &mut obs, &mut rewards);
+                    step_world(slot, team, arena, spec, a, &mut obs, &mut rewards)
+                        .map_err(|e| e.of(world))?;
                 }
             }
-            (ticks.as_secs_f64(), vectors.as_secs_f64())
-        }))
+            Ok((ticks.as_secs_f64(), vectors.as_secs_f64()))
+        })
+        .map_err(refused)
     }
 
     /// World `world`'s state digest (`World::digest`): two runs agree on it only if they
@@ -552,6 +571,8 @@ fn bounds(py: Python<'_>) -> PyResult<Bound<'_, PyDict>> {
     d.set_item("detections", engine::MAX_DETECTIONS)?;
     d.set_item("time_limit_s", engine::MAX_TIME_LIMIT_S)?;
     d.set_item("ticks_per_step", engine::MAX_TICKS_PER_STEP)?;
+    d.set_item("max_steps", engine::MAX_STEPS)?;
+    d.set_item("timed_ticks", engine::MAX_TIMED_TICKS)?;
     d.set_item("agents", engine::MAX_AGENTS)?;
     Ok(d)
 }

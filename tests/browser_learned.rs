@@ -17,7 +17,8 @@ use serde_json::json;
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_person_plays_the_learned_team_from_the_lobby_and_replays_it() {
-    let s = TestServer::start().await;
+    // A server that keeps names: a rated match rates only a kept name.
+    let s = TestServer::start_stored(&common::temp_dir("learned")).await;
     let mut b = Browser::launch().await;
     let base = format!("http://{}", s.addr);
     b.navigate(&format!("{base}/")).await;

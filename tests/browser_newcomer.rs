@@ -382,7 +382,9 @@ async fn a_replays_address_follows_the_moment_it_shows() {
 /// remembers the team), Hunt seats the person on a robot of a co-op match.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn the_lobby_doors_start_a_rated_match_and_seat_a_hunter() {
-    let s = TestServer::start().await;
+    // A server that keeps names: a rated match rates only a kept name (else the HUD says
+    // unrated, tests/browser_doors.rs).
+    let s = TestServer::start_stored(&common::temp_dir("newcomer-doors")).await;
     let mut b = Browser::launch().await;
     let base = format!("http://{}", s.addr);
     b.navigate(&format!("{base}/")).await;

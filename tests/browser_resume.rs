@@ -1,6 +1,7 @@
 //! A person playing in headless Chromium when the server is killed with SIGKILL: the page
 //! says it is reconnecting, and once a server is back on the same store and address it takes
-//! its seat again by itself (the token it kept), and the match goes on from where it was.
+//! its seat again by itself (the token it kept), and the match goes on from where it was;
+//! the HUD's jitter is the new connection's, so a loopback link never reads as poor.
 //!
 //! Needs Chromium (`bash tests/run.sh` installs Debian's package when it is missing).
 
@@ -61,6 +62,13 @@ async fn the_page_reconnects_by_itself_after_the_server_is_killed_and_resumed() 
     let before = b.eval("__lasertag.lastTick").await.as_u64().unwrap_or(0);
     assert!(before > 40, "the match ran: tick {before}");
 
+    // Every line the HUD's ping shows from here on, with the reconnects so far.
+    b.eval(
+        "window.__hud = []; new MutationObserver(() => { const el = document.getElementById('hud-ping'); \
+         __hud.push({ text: el.textContent, quality: el.dataset.quality, reconnects: __lasertag.reconnects || 0 }); }) \
+         .observe(document.getElementById('hud-ping'), { childList: true, characterData: true, subtree: true })",
+    )
+    .await;
     server.child.kill().expect("SIGKILL");
     server.child.wait().expect("the server dies");
     let status = b
@@ -105,4 +113,25 @@ async fn the_page_reconnects_by_itself_after_the_server_is_killed_and_resumed() 
         "{status}"
     );
     assert_eq!(b.eval("__lasertag.joinError || null").await, Value::Null);
+    // The seconds after the reconnect, when arrivals from before the outage would have read
+    // as seconds of jitter: every line the HUD showed calls the loopback link good.
+    tokio::time::sleep(Duration::from_secs(4)).await;
+    let shown = b
+        .eval("JSON.stringify(__hud.filter((h) => h.reconnects >= 1))")
+        .await;
+    let shown: Vec<Value> = serde_json::from_str(shown.as_str().unwrap_or("[]")).unwrap();
+    assert!(
+        shown.len() >= 3,
+        "the HUD's ping after the reconnect: {shown:?}"
+    );
+    for line in &shown {
+        assert_ne!(line["quality"], json!("poor"), "{line}: {shown:?}");
+    }
+    let jitter = b
+        .eval("__lasertag.jitterMs")
+        .await
+        .as_f64()
+        .unwrap_or(f64::MAX);
+    assert!(jitter < 100.0, "jitter {jitter} ms on loopback");
+    println!("after the reconnect the HUD showed: {shown:?}");
 }

@@ -36,8 +36,7 @@ fn robots_on_office_stay_localised_for_three_minutes() {
     let mut seed = 11;
     while ticks < 180 * TICK_HZ as u64 {
         let mut world = World::new(arena("office"), config(seed, 180)).expect("match sets up");
-        while world.status == MatchStatus::Running && ticks < 180 * TICK_HZ as u64 {
-            world.step();
+        while ticks < 180 * TICK_HZ as u64 && world.step() {
             ticks += 1;
             for i in 0..world.robots.len() {
                 let e = position_error(&world, i);

@@ -6,6 +6,7 @@
 // runs in a fleet, the other nodes its listing names (a match is played on its own node).
 
 import { Game, debug } from "./game.js";
+import { claimName, keptNames, nameToken, releaseName, unkeptReason } from "./names.js";
 import { Replay } from "./replay.js";
 import { showHistory, showLeaderboard, showPlayer } from "./pages.js";
 import { PartyRoom, createParty, normalCode, parties } from "./party.js";
@@ -36,15 +37,20 @@ function playerName() {
 /** `path` on the node at `base` ("" for this server): the JSON answer, and the origin that
  * gave it ("" for this server; a new match may be placed on another node, which the
  * browser reaches by following the 307). */
-async function request(method, path, body, base = "") {
+async function request(method, path, body, base = "", bearer = null) {
+  const headers = body ? { "content-type": "application/json" } : {};
+  if (bearer) headers.authorization = `Bearer ${bearer}`;
   const r = await fetch(base + path, {
     method,
-    headers: body ? { "content-type": "application/json" } : {},
+    headers,
     body: body ? JSON.stringify(body) : undefined,
   });
   const text = await r.text();
   const data = text ? JSON.parse(text) : null;
-  if (!r.ok) throw new Error(data && data.error ? data.error : `${r.status}`);
+  if (!r.ok) {
+    // The server's words, and its status for the page's own (`seatRefused`).
+    throw Object.assign(new Error(data && data.error ? data.error : `${r.status}`), { status: r.status });
+  }
   const origin = new URL(r.url, location.href).origin;
   return { data, from: origin === location.origin ? "" : origin };
 }
@@ -75,56 +81,72 @@ async function homeOf(id) {
   return homes.get(id) || "";
 }
 
-/** The tokens of the names this browser keeps (`POST /api/names`), by name. */
-function keptNames() {
+/** The sessionStorage key of this tab's seat in match `id` on `team`. */
+const seatKey = (id, team) => `lasertag.token.${id}${team === "robots" ? ".robots" : ""}`;
+
+/** A refused join in a player's words: why there is no seat, and what to do about it (the
+ * server's own message stays in `detail`). */
+function seatRefused(e) {
+  const said = e.message || "";
+  let words = said;
+  if (e.status === 429 && /on this server/.test(said)) {
+    words = "You already hold as many seats as one address may on this server. A tab you " +
+      "closed keeps its seat for a while in case it comes back: go back to that match, or " +
+      "try again in a minute.";
+  } else if (e.status === 429 && /without playing/.test(said)) {
+    words = "You joined this match a moment ago and have not played yet: wait a few " +
+      "seconds and try again.";
+  } else if (e.status === 429) {
+    words = "This address is asking too often: try again in a moment.";
+  } else if (e.status === 409 && /one side/.test(said)) {
+    words = "You already play on the other side of this match.";
+  } else if (e.status === 409 && /free|limit/.test(said)) {
+    words = "This match has no free seat left.";
+  }
+  return Object.assign(new Error(words), { status: e.status, detail: said });
+}
+
+/** Takes a seat of match `id` on the node at `base`, on `team` (`opponents`, or `robots` for
+ * a pursuer slot), under the lobby's name: the name is claimed first when this browser does
+ * not keep it yet, and that claim is given up again when the seat is refused, so a refused
+ * join keeps nothing. The seat's token, kept for this tab. */
+async function join(id, base, team = "opponents") {
+  const name = playerName();
+  const claim = await claimName(name, base);
+  const body = team === "robots" ? { name, team } : { name };
+  if (claim.token) body.name_token = claim.token;
+  let joined;
   try {
-    return JSON.parse(localStorage.getItem("lasertag.names") || "{}") || {};
-  } catch {
-    return {};
+    joined = await api("POST", `/api/matches/${encodeURIComponent(id)}/players`, body, base);
+  } catch (e) {
+    await releaseName(name, claim, base);
+    throw seatRefused(e);
   }
+  sessionStorage.setItem(seatKey(id, team), joined.token);
+  return joined.token;
 }
 
-/** The token of `name`'s claim on the node at `base`: kept in this browser, or claimed now
- * (a name is claimed the first time it plays here, so its rating is its own). `null` when
- * the server keeps no names or this address keeps its most: the name then plays unrated. A
- * name somebody else keeps is an error naming it. */
-async function nameToken(name, base) {
-  const kept = keptNames();
-  if (kept[name]) return kept[name];
-  const r = await fetch(`${base}/api/names`, {
-    method: "POST",
-    headers: { "content-type": "application/json" },
-    body: JSON.stringify({ name }),
-  });
-  const data = await r.json().catch(() => null);
-  if (r.status === 201 && data) {
-    kept[name] = data.name_token;
-    kept[data.name] = data.name_token;
-    localStorage.setItem("lasertag.names", JSON.stringify(kept));
-    debug.nameKept = data.name;
-    return data.name_token;
-  }
-  if (r.status === 409 || r.status === 400) {
-    throw new Error(data && data.error ? `${data.error}; change “Your name” above` : `${r.status}`);
-  }
-  return null;
-}
-
-/** Takes a seat of match `id` on `team` (once per tab: `opponents`, or `robots` for a pursuer
- * slot) and returns the token. */
+/** This tab's seat of match `id` on `team` (taken once per tab), and its token. */
 async function tokenFor(id, base, team = "opponents") {
-  const key = `lasertag.token.${id}${team === "robots" ? ".robots" : ""}`;
-  let token = sessionStorage.getItem(key);
-  if (!token) {
-    const name = playerName();
-    const body = team === "robots" ? { name, team } : { name };
-    const nameTok = await nameToken(name, base);
-    if (nameTok) body.name_token = nameTok;
-    const joined = await api("POST", `/api/matches/${encodeURIComponent(id)}/players`, body, base);
-    token = joined.token;
-    sessionStorage.setItem(key, token);
+  return sessionStorage.getItem(seatKey(id, team)) || join(id, base, team);
+}
+
+/** A match made for this person to play (the doors, the form, Play again): created, then
+ * the seat taken before the page goes there. A seat that cannot be taken leaves nothing
+ * behind: the match is removed with its owner token and the name's fresh claim given up. */
+async function createAndPlay(body, team = "opponents") {
+  const m = await createMatch(body);
+  const base = homes.get(m.id) || "";
+  try {
+    await join(m.id, base, team);
+  } catch (e) {
+    await request("DELETE", `/api/matches/${encodeURIComponent(m.id)}`, null, base, m.owner_token)
+      .catch(() => { /* it ends by itself, unplayed, once its hold lapses */ });
+    homes.delete(m.id);
+    debug.undoneMatch = m.id;
+    throw e;
   }
-  return token;
+  location.hash = `#/play/${m.id}${team === "robots" ? "?team=robots" : ""}`;
 }
 
 /** Takes a seat in whichever showcase has one (the server starts another when all are
@@ -132,9 +154,12 @@ async function tokenFor(id, base, team = "opponents") {
 async function playShowcase() {
   const name = playerName();
   const body = { name };
-  const nameTok = await nameToken(name, "");
-  if (nameTok) body.name_token = nameTok;
-  const seat = await api("POST", "/api/showcase/players", body);
+  const claim = await claimName(name, "");
+  if (claim.token) body.name_token = claim.token;
+  const seat = await api("POST", "/api/showcase/players", body).catch(async (e) => {
+    await releaseName(name, claim, "");
+    throw seatRefused(e);
+  });
   homes.set(seat.match_id, "");
   sessionStorage.setItem(`lasertag.token.${seat.match_id}`, seat.token);
   location.hash = `#/play/${seat.match_id}`;
@@ -173,7 +198,9 @@ async function showOwnRating() {
   const name = $("name").value.trim();
   const out = $("own-rating");
   if (!name || !keptNames()[name]) {
-    out.textContent = name ? "a name is kept, and rated, once it has played here" : "";
+    const unkept = name && unkeptReason(name);
+    out.textContent = unkept ? `your name plays unrated here: ${unkept}`
+      : name ? "a name is kept, and rated, once it has played here" : "";
     return;
   }
   const r = await fetch(`/api/players/${encodeURIComponent(name)}`).catch(() => null);
@@ -332,8 +359,7 @@ async function playRated() {
   if (!d) throw new Error("the robot teams are still loading; try again in a moment");
   localStorage.setItem("lasertag.difficulty", d.name);
   const map = d.measured.length ? d.measured[0].map : $("create").elements.map.value;
-  const m = await createMatch({ map, opponents: 1, opponent_control: "human", difficulty: d.name });
-  location.hash = `#/play/${m.id}`;
+  await createAndPlay({ map, opponents: 1, opponent_control: "human", difficulty: d.name });
 }
 
 /** The co-op door: the chosen team plus one robot for the person, against bots that run. */
@@ -343,11 +369,10 @@ async function huntWithRobots() {
   // (the policy drives the others) rather than joining as one more.
   const robots = d && d.policy ? d.robots : Math.min(rules.bounds.robots.maximum, (d ? d.robots : 2) + 1);
   const map = d && d.measured.length ? d.measured[0].map : $("create").elements.map.value;
-  const m = await createMatch({
+  await createAndPlay({
     map, opponents: 2, opponent_control: "bot", opponent_bot: "evade", pursuer_slots: 1, robots,
     ...(d ? { difficulty: d.name } : { planner: "coordinated" }),
-  });
-  location.hash = `#/play/${m.id}?team=robots`;
+  }, "robots");
 }
 
 /** What each planner does, in a player's words (docs/planner.md, docs/search-planner.md). */
@@ -416,15 +441,14 @@ async function create(e) {
       const trained = (preset && preset.policy) || String(f.get("planner")).startsWith("policy:");
       team.robots = trained ? robots : Math.min(rules.bounds.robots.maximum, robots + 1);
     }
-    const m = await createMatch({
+    await createAndPlay({
       map: f.get("map"),
       opponents: Number(f.get("opponents")),
       opponent_control: control === "human" ? "human" : "bot",
       bots_joinable: control === "bots" && mode === "hunted",
       ...(hunter ? { pursuer_slots: 1, opponent_bot: "evade" } : {}),
       ...team,
-    });
-    location.hash = `#/play/${m.id}${hunter ? "?team=robots" : ""}`;
+    }, hunter ? "robots" : "opponents");
   } catch (err) {
     $("create-error").textContent = err.message;
   }
@@ -440,15 +464,18 @@ async function replay(g) {
   }
   const m = matches.find((x) => x.id === g.matchId);
   if (!m) { location.hash = "#/"; return; }
-  const fresh = await createMatch({
+  const again = {
     map: m.map, opponents: m.opponents, opponent_control: m.opponent_control,
     opponent_bot: m.opponent_bot, bots_joinable: m.bots_joinable,
     ...(m.pursuer_slots ? { pursuer_slots: m.pursuer_slots } : {}),
     ...(m.difficulty ? { difficulty: m.difficulty }
       : { robots: m.robots, planner: m.policy ? `policy:${m.policy}` : m.planner, time_limit_s: m.time_limit_s }),
-  });
-  const hunt = g.team === "robots" ? "?team=robots" : "";
-  location.hash = g.role === "player" || m.free_slots > 0 ? `#/play/${fresh.id}${hunt}` : `#/watch/${fresh.id}`;
+  };
+  if (g.role === "player" || m.free_slots > 0) {
+    await createAndPlay(again, g.team === "robots" ? "robots" : "opponents");
+    return;
+  }
+  location.hash = `#/watch/${(await createMatch(again)).id}`;
 }
 
 /** What the party and queue pages take from the lobby: its name and the name's token. */

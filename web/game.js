@@ -10,6 +10,7 @@ import { PageSocket, socketUrl } from "./socket.js";
 import { Sound } from "./sound.js";
 import { TouchPad, touchScreen } from "./touch.js";
 import { KINDS, LiveMarks, markerName } from "./marks.js";
+import { keptNames, unkeptReason } from "./names.js";
 
 const $ = (id) => document.getElementById(id);
 const TICK_MS = 50;
@@ -23,6 +24,10 @@ const MAX_DELAY_TICKS = 4;
 const MAX_EXTRAPOLATE_TICKS = 2;
 /** Arrivals kept to measure the jitter. */
 const JITTER_WINDOW = 60;
+/** Arrivals a connection needs before the HUD judges its link: the 95th percentile of
+ * fewer is their worst one (a connection's first second, a server that just resumed the
+ * match, says little of the link). */
+const JITTER_SETTLED = 20;
 
 /** What tests read: counts of what was drawn, the feed, the end. */
 export const debug = (window.__lasertag = window.__lasertag || {});
@@ -164,8 +169,10 @@ export class Game {
     const rtt = performance.now() - msg.t;
     debug.ping = rtt;
     const jitter = debug.jitterMs || 0;
-    // A hint a player can act on: what the round trip and the jitter will feel like.
-    const quality = rtt < 120 && jitter < 40 ? "good" : rtt < 250 && jitter < 100 ? "fair" : "poor";
+    // A hint a player can act on: what the round trip and the jitter will feel like, once
+    // the connection has shown enough arrivals to say.
+    const quality = this.arrivals.length < JITTER_SETTLED ? "measuring"
+      : rtt < 120 && jitter < 40 ? "good" : rtt < 250 && jitter < 100 ? "fair" : "poor";
     // The carrier, and the share of ticks whose snapshot never came (datagrams lost; over
     // a WebSocket none is lost, only late).
     const transport = this.socket.transport === "webtransport" ? "WebTransport" : "WebSocket";
@@ -179,6 +186,14 @@ export class Game {
   welcome(w) {
     this.welcomed = true;
     this.newConnection = true;
+    // Jitter is one connection's: arrivals from before a reconnect, seconds older than the
+    // outage was long, would read as seconds of it. The estimate and the time base start
+    // over, and so does the count of snapshots missed (the outage lost none).
+    this.arrivals = [];
+    this.offset = null;
+    this.missed = new Missed();
+    debug.jitterMs = 0;
+    debug.jitterResets = (debug.jitterResets || 0) + 1;
     this.map = w.map;
     this.segs = segments(w.map);
     this.you = w.you;
@@ -190,8 +205,14 @@ export class Game {
     debug.team = this.team;
     if (this.team === "robots" && !this.beliefSet) this.beliefOn = true;
     debug.belief = this.beliefOn;
-    this.rated = Boolean(w.rated);
+    // A rated match rates only a name its player keeps (docs/ratings.md): one this browser
+    // could not keep plays unrated, and the HUD says so from the start.
+    const unkept = w.role === "player" && w.rated && !keptNames()[w.name]
+      ? unkeptReason(w.name) || "your name is not kept on this server"
+      : null;
+    this.rated = Boolean(w.rated) && !unkept;
     debug.rated = this.rated;
+    debug.unrated = unkept;
     this.tickHz = w.tick_hz;
     // A match people play is shown to spectators late (so that nobody can watch where the
     // robots are while playing them): say so, wherever the page shows everything.
@@ -212,7 +233,9 @@ export class Game {
     this.predictor = predict ? new Predictor(w.map, this.segs, w.kinematics) : null;
     const watching = this.delay ? `spectating, delayed ${this.delay}` : "spectating";
     const playing = this.team === "robots" ? `hunting as robot ${w.you} (${w.name})` : `playing ${w.you} (${w.name})`;
-    const rated = this.rated && this.team === "opponents" ? " · rated: leaving before the end counts as a loss" : "";
+    const rated = this.team !== "opponents" ? ""
+      : this.rated ? " · rated: leaving before the end counts as a loss"
+        : unkept ? ` · unrated: ${unkept}` : "";
     $("hud-match").textContent = `${w.map.name} · ${w.role === "player" ? playing + rated : watching}`;
     $("hud-status").textContent = "";
     // On a touch screen a player drives with a stick and a tag button instead of keys.
@@ -510,6 +533,11 @@ export class Game {
     const snaps = this.snaps;
     if (!snaps.length) return null;
     const latest = snaps[snaps.length - 1];
+    if (this.offset === null) {
+      // A new connection has no time base until its first snapshot: the last one stays.
+      this.renderTick = latest.tick;
+      return { snap: latest, robots: latest.robots, opponents: latest.opponents };
+    }
     const t = (now - this.offset) / TICK_MS - this.delayTicks;
     this.renderTick = Math.min(t, latest.tick);
     if (t >= latest.tick) {

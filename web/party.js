@@ -109,10 +109,13 @@ export class LiveSocket {
     };
   }
 
+  /** Closes the socket for good: one close frame however often the page asks. */
   close() {
     this.closed = true;
     clearTimeout(this.timer);
-    if (this.ws) { this.ws.onclose = null; this.ws.close(1000, "left"); }
+    const ws = this.ws;
+    this.ws = null;
+    if (ws) { ws.onclose = null; ws.close(1000, "left"); }
   }
 }
 

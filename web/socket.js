@@ -6,7 +6,9 @@
 // resumes its matches within seconds: docs/operations.md).
 
 import { CompactDecoder } from "./compact.js";
-import { wantedTransport, webSocketCarrier, webTransportCarrier } from "./transport.js";
+import {
+  httpOrigin, transportOffer, wantedTransport, webSocketCarrier, webTransportCarrier,
+} from "./transport.js";
 
 /** The first wait before a lost connection is tried again; each next wait doubles, up to
  * `RETRY_MAX_MS`, until `GIVE_UP_MS` have passed since the connection was lost. */
@@ -43,6 +45,21 @@ export class PageSocket {
     this.carrier = null;
     this.attempt = null;
     this.taken = 0;
+    // What the node connected to offers (`GET /api/transport`): read once for the socket's
+    // node, again only after a connection to it was lost (a restarted server has a new
+    // certificate) or when the socket follows its match to another node.
+    this.offer = null;
+  }
+
+  /** The WebTransport offer of the node at `origin`, read once (see `offer`). */
+  offerOf(origin) {
+    if (!this.offer || this.offer.origin !== origin) {
+      const read = transportOffer(origin);
+      this.offer = { origin, read };
+      // A read that failed keeps nothing: the next try asks again.
+      read.catch(() => { if (this.offer && this.offer.read === read) this.offer = null; });
+    }
+    return this.offer.read;
   }
 
   /** Where to connect now: `url()`, on the node the match moved to when it did. */
@@ -113,22 +130,26 @@ export class PageSocket {
     if (wantedTransport() !== "webtransport") return viaWebSocket();
     // WebTransport first; the WebSocket when it does not open within a second.
     const asked = performance.now();
-    webTransportCarrier(url, on).then((carrier) => {
-      if (this.attempt !== token) return carrier.close();
-      this.carrier = carrier;
-      debug.transport = "webtransport";
-    }, (e) => {
-      if (this.attempt !== token) return;
-      debug.transportError = String(e);
-      debug.fallbackMs = performance.now() - asked;
-      viaWebSocket();
-    });
+    const stale = () => this.attempt !== token;
+    this.offerOf(httpOrigin(url))
+      .then((at) => (stale() ? Promise.reject(new Error("superseded")) : webTransportCarrier(url, on, at)))
+      .then((carrier) => {
+        if (stale()) return carrier.close();
+        this.carrier = carrier;
+        debug.transport = "webtransport";
+      }, (e) => {
+        if (stale()) return;
+        debug.transportError = String(e);
+        debug.fallbackMs = performance.now() - asked;
+        viaWebSocket();
+      });
   }
 
   /** The carrier closed without the page asking: tried again with a growing wait, unless
    * the page has dealt with it. */
   lost(e) {
     debug.connected = false;
+    this.offer = null;
     if (this.page.lost(e)) return;
     const now = performance.now();
     if (this.lostAt === null) this.lostAt = now;

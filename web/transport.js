@@ -15,6 +15,28 @@ const TEXT = 0;
 const ACK = 2;
 const utf8 = new TextDecoder();
 const encode = (s) => new TextEncoder().encode(s);
+/** The counters the tests read (`window.__lasertag`). */
+const debug = (window.__lasertag = window.__lasertag || {});
+
+/** A close the page sends on a carrier: counted, so tests can see there is one a session. */
+function counted(kind) {
+  debug.closesSent = (debug.closesSent || 0) + 1;
+  debug.lastClose = kind;
+}
+
+/** What the node at `http` (its origin) offers besides the WebSocket: `GET /api/transport`'s
+ * `webtransport` (its URL and the certificate hashes to pin), or null when it offers none. */
+export async function transportOffer(http) {
+  debug.transportFetches = (debug.transportFetches || 0) + 1;
+  const info = await (await fetch(`${http}/api/transport`)).json();
+  return (info && info.webtransport) || null;
+}
+
+/** The origin of the node a WebSocket URL names, over HTTP(S). */
+export function httpOrigin(wsUrl) {
+  const target = new URL(wsUrl);
+  return `${target.protocol === "wss:" ? "https" : "http"}://${target.host}`;
+}
 
 /** Which carrier the page asks for: `localStorage["lasertag.transport"]` forces
  * `websocket` or `webtransport`; otherwise WebTransport where the browser has it. */
@@ -39,6 +61,9 @@ export function webSocketCarrier(url, on) {
     close(code, reason) {
       ws.onmessage = null;
       ws.onclose = null;
+      // One close a session: none once the server's (the browser answered it) or ours is out.
+      if (ws.readyState === WebSocket.CLOSING || ws.readyState === WebSocket.CLOSED) return;
+      counted("websocket");
       ws.close(code, reason);
     },
   };
@@ -52,13 +77,11 @@ function hexBytes(hex) {
 }
 
 /** A WebTransport session to the socket a WebSocket URL names (`ws://host/ws/...?...`), on
- * the node at that host: resolves to a carrier once open, rejects when the server offers
- * none, the browser cannot, or it does not open within `WEBTRANSPORT_WAIT_MS`. */
-export async function webTransportCarrier(wsUrl, on) {
+ * the node at that host, with what that node offers (`transportOffer`, read by the caller
+ * once for its session's node): resolves to a carrier once open, rejects when the server
+ * offers none, the browser cannot, or it does not open within `WEBTRANSPORT_WAIT_MS`. */
+export async function webTransportCarrier(wsUrl, on, at) {
   const target = new URL(wsUrl);
-  const http = `${target.protocol === "wss:" ? "https" : "http"}://${target.host}`;
-  const info = await (await fetch(`${http}/api/transport`)).json();
-  const at = info && info.webtransport;
   if (!at) throw new Error("the server offers no WebTransport");
   const hashes = at.certificate_hashes.map((h) => ({ algorithm: h.algorithm, value: hexBytes(h.value) }));
   const wt = new WebTransport(`${at.url}${target.pathname}${target.search}`,
@@ -76,6 +99,14 @@ export async function webTransportCarrier(wsUrl, on) {
     clearTimeout(timer);
   }
   let closed = false;
+  // Whether the page's close went out (the session's one).
+  let sent = false;
+  const end = () => {
+    if (sent) return;
+    sent = true;
+    counted("webtransport");
+    wt.close();
+  };
   const finish = (how) => {
     if (closed) return;
     closed = true;
@@ -111,7 +142,7 @@ export async function webTransportCarrier(wsUrl, on) {
           const c = text.includes('"close"') ? JSON.parse(text) : null;
           if (c && c.type === "close") {
             finish({ code: c.code, reason: c.reason });
-            wt.close();
+            end();
             return;
           }
           on.message(text);
@@ -172,7 +203,7 @@ export async function webTransportCarrier(wsUrl, on) {
     },
     close() {
       closed = true;
-      wt.close();
+      end();
     },
   };
 }

@@ -16,6 +16,7 @@
 //! `contains`, which NaN never passes, where `x < lo || x > hi` would let it through); and
 //! every array for its length. No argument makes the engine panic or abort.
 
+mod bounds;
 pub mod exercise;
 
 use std::sync::Arc;
@@ -24,90 +25,9 @@ use super::{ACTION_SIZE, EnvSpec, Episode, EpisodeSeeds, Layout, Outcome, Reward
 use crate::sim::TICK_HZ;
 use crate::sim::arena::{Arena, MapDef};
 use crate::sim::map_rules::{self, MapSpec};
-use crate::world::{MatchConfig, Placement, SetupError, World};
+use crate::world::{MatchConfig, Placement, World};
 
-/// Robots on a world's team: the server's bound on `robots` of `POST /api/matches`
-/// (`server/protocol/bounds.rs`, whose tests keep these constants equal to its own).
-pub const MAX_ROBOTS: usize = 8;
-/// Opponents in a world: the server's bound on `opponents`.
-pub const MAX_OPPONENTS: usize = 32;
-/// Detection slots in a robot's vector: as many as a world may have opponents (a slot
-/// past those would always be empty).
-pub const MAX_DETECTIONS: usize = MAX_OPPONENTS;
-/// A match's time limit in seconds is in (0, this]: the server's bound on `time_limit_s`.
-pub const MAX_TIME_LIMIT_S: f64 = 86_400.0;
-/// Ticks one step may advance: the server's bound on `ticks` of `act`.
-pub const MAX_TICKS_PER_STEP: u64 = 100_000;
-/// Robots over all the worlds of one engine (worlds × robots). A world of the default
-/// match holds about 220 KB, one of 8 robots and 32 opponents about 530 KB, so the budget
-/// keeps an engine under about 4 GB with every setting at its default; each world's own
-/// size follows its settings (the tracker's particles, …), each within its declared range.
-pub const MAX_AGENTS: usize = 16_384;
-/// The largest start coordinate (and heading) given: the server's bound on coordinates of
-/// a request (`server/schema.rs`).
-pub const MAX_COORDINATE: f32 = 1e6;
-
-/// Why the engine refused a call.
-#[derive(Debug, Clone, PartialEq, thiserror::Error)]
-pub enum Refusal {
-    /// An argument out of its range, or an array of the wrong shape (Python's `ValueError`).
-    #[error("{field}: {message}")]
-    Value { field: String, message: String },
-    /// A world index past the vector's (Python's `IndexError`).
-    #[error("world {world}: out of range 0..{worlds}")]
-    NoWorld { world: usize, worlds: usize },
-    /// Settings the map cannot start a match with (a given start in a wall, no room).
-    #[error(transparent)]
-    Setup(#[from] SetupError),
-}
-
-/// The refusal of `field`.
-pub fn refuse(field: impl Into<String>, message: impl Into<String>) -> Refusal {
-    Refusal::Value {
-        field: field.into(),
-        message: message.into(),
-    }
-}
-
-/// `got` values where `want` are needed.
-pub fn check_len(name: &str, got: usize, want: usize) -> Result<(), Refusal> {
-    if got == want {
-        Ok(())
-    } else {
-        Err(refuse(
-            name,
-            format!(
-                "{got} values, the engine needs {want} (a C-contiguous array of the right shape)"
-            ),
-        ))
-    }
-}
-
-/// An array of shape `got` where `want` is needed: the same number of values in another
-/// shape (robots × 3 given as 3 × robots) is refused too, as it would be read wrongly.
-pub fn check_shape(name: &str, got: &[usize], want: &[usize]) -> Result<(), Refusal> {
-    if got == want {
-        Ok(())
-    } else {
-        Err(refuse(
-            name,
-            format!("shape {got:?}, the engine needs {want:?}"),
-        ))
-    }
-}
-
-/// A match's time limit of `seconds` in ticks, as the server rounds it, once the seconds
-/// are finite and within (0, [`MAX_TIME_LIMIT_S`]].
-pub fn time_limit_ticks(seconds: f64) -> Result<u64, Refusal> {
-    if seconds > 0.0 && seconds <= MAX_TIME_LIMIT_S {
-        Ok((seconds * TICK_HZ as f64).round().max(1.0) as u64)
-    } else {
-        Err(refuse(
-            "time_limit_s",
-            format!("{seconds} must be finite and in (0, {MAX_TIME_LIMIT_S}]"),
-        ))
-    }
-}
+pub use bounds::*;
 
 /// What an engine is built from, as its caller gives it; [`EngineArgs::check`] checks it.
 #[derive(Debug, Clone)]
@@ -226,8 +146,16 @@ impl EngineArgs {
             ));
         }
         count("ticks_per_step", self.ticks_per_step, 1, MAX_TICKS_PER_STEP)?;
-        if self.max_steps == Some(0) {
-            return Err(refuse("max_steps", "must be at least 1 (or None)"));
+        if let Some(steps) = self.max_steps
+            && !(1..=MAX_STEPS).contains(&steps)
+        {
+            return Err(refuse(
+                "max_steps",
+                format!(
+                    "{steps} must be in 1..={MAX_STEPS} (a step is at least a tick, and a \
+                     match lasts at most that many), or None"
+                ),
+            ));
         }
         let most_ticks = (MAX_TIME_LIMIT_S * TICK_HZ as f64) as u64;
         if !(1..=most_ticks).contains(&c.time_limit_ticks) {
@@ -344,6 +272,8 @@ impl Slot {
     /// One step in a vector: its episode's, or its next episode's start when the last step
     /// ended it (its actions ignored, its vectors the new episode's first, its rewards 0).
     /// Returns (terminated, truncated). The arrays are one world's (checked by the caller).
+    /// A next episode whose seed places no match is an error, and the slot stays ended: a
+    /// later call draws the next seed.
     pub fn step_or_restart(
         &mut self,
         arena: &Arc<Arena>,
@@ -351,7 +281,7 @@ impl Slot {
         actions: &[f32],
         obs: &mut [f32],
         rewards: &mut [f64],
-    ) -> (bool, bool) {
+    ) -> Result<(bool, bool), RestartFailed> {
         self.step_or_restart_with(arena, spec, actions, obs, rewards, &mut |_| {})
     }
 
@@ -365,23 +295,20 @@ impl Slot {
         obs: &mut [f32],
         rewards: &mut [f64],
         before_tick: &mut dyn FnMut(&mut World),
-    ) -> (bool, bool) {
+    ) -> Result<(bool, bool), RestartFailed> {
         if self.ended {
             let seed = self.seeds.draw();
-            // The settings built a world once already: the same ones on the same arena
-            // build every later one.
-            if let Ok(episode) = Episode::new(arena.clone(), spec, seed) {
-                self.episode = episode;
-            }
+            self.episode = Episode::new(arena.clone(), spec, seed)
+                .map_err(|error| RestartFailed { seed, error })?;
             self.begin(seed, spec, obs);
             rewards.fill(0.0);
-            return (false, false);
+            return Ok((false, false));
         }
         let out: Outcome = self
             .episode
             .step_with(spec, actions, obs, rewards, before_tick);
         self.ended = out.terminated || out.truncated;
-        (out.terminated, out.truncated)
+        Ok((out.terminated, out.truncated))
     }
 }
 
@@ -573,15 +500,18 @@ impl Engine {
         let robots = self.robots();
         let per_world = robots * self.size();
         let (arena, spec, slots) = self.parts_mut();
-        for (((((slot, a), o), r), term), trunc) in slots
+        for (world, (((((slot, a), o), r), term), trunc)) in slots
             .iter_mut()
             .zip(actions.chunks_exact(robots * ACTION_SIZE))
             .zip(obs.chunks_exact_mut(per_world))
             .zip(rewards.chunks_exact_mut(robots))
             .zip(terminated.iter_mut())
             .zip(truncated.iter_mut())
+            .enumerate()
         {
-            (*term, *trunc) = slot.step_or_restart(arena, spec, a, o, r);
+            (*term, *trunc) = slot
+                .step_or_restart(arena, spec, a, o, r)
+                .map_err(|e| e.of(world))?;
         }
         Ok(())
     }

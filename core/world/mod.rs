@@ -282,16 +282,19 @@ impl World {
             .collect()
     }
 
-    /// Advances the match by one tick (see the module docs for the stages).
-    pub fn step(&mut self) {
-        self.step_marked(&mut |_| {});
+    /// Advances the match by one tick (see the module docs for the stages): true when it
+    /// did. A finished match stays as it is and answers false, so a loop that steps until
+    /// a tick stops on it rather than spinning (`while world.tick < n && world.step() {}`).
+    pub fn step(&mut self) -> bool {
+        self.step_marked(&mut |_| {})
     }
 
     /// [`World::step`], calling `mark` at the [`StepMark`]s of the team stage (not at all in
     /// a tick that ends the match before it). The match is the same whatever `mark` does.
-    pub fn step_marked(&mut self, mark: &mut dyn FnMut(StepMark)) {
+    /// True when the match advanced (it had not finished).
+    pub fn step_marked(&mut self, mark: &mut dyn FnMut(StepMark)) -> bool {
         if self.status == MatchStatus::Finished {
-            return;
+            return false;
         }
         self.tick += 1;
         let motions = self.inputs();
@@ -301,6 +304,7 @@ impl World {
         self.rules();
         self.think(mark);
         self.keep_trail();
+        true
     }
 
     /// Notes where every agent ended this tick, keeping [`MAX_REWIND_TICKS`] of them.

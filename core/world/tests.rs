@@ -110,11 +110,11 @@ fn the_time_limit_ends_the_match_for_the_opponents() {
         ..config(PlannerKind::Idle, ControlKind::Bot)
     };
     let mut w = World::new(duel(), cfg).unwrap();
-    for _ in 0..100 {
-        w.step();
-    }
-    assert_eq!(w.tick, 40);
-    assert_eq!(w.winner, Some(Side::Opponents));
+    // A loop on the tick ends with the match: a finished match's step does not advance.
+    let stepped = std::iter::from_fn(|| (w.tick < 100 && w.step()).then_some(())).count();
+    assert_eq!((stepped, w.tick), (40, 40));
+    assert!(!w.step(), "a finished match stays at its last tick");
+    assert_eq!((w.tick, w.winner), (40, Some(Side::Opponents)));
 }
 
 #[test]

@@ -26,7 +26,7 @@ from . import _native
 from .args import DEFAULT_REWARDS, check_arguments, check_seed
 from .observation import ObservationLayout
 from .render import Renderer, check_scale
-from .rules import SHIPPED, check_bound, check_detections
+from .rules import SHIPPED, check_bound, check_detections, check_max_steps
 from .team import TeamEnv, action_space, agent_robots
 
 __all__ = ["NativeParallelEnv", "LasertagVectorEnv", "vector_env", "shipped_map", "SHIPPED_MAPS"]
@@ -59,6 +59,7 @@ def _check(*, robots, opponents, ticks_per_step, seed, max_steps, detections, re
     check_bound(rules, "opponents", opponents)
     check_bound(rules, "ticks", ticks_per_step, "ticks_per_step")
     check_detections(rules, detections)
+    check_max_steps(rules, max_steps)
     if time_limit_s is not None:
         check_bound(rules, "time_limit_s", time_limit_s)
 

@@ -16,7 +16,7 @@ from .args import DEFAULT_REWARDS, check_arguments
 from .client import Client, ServerError, error_message, loads
 from .observation import ObservationLayout
 from .render import Renderer, check_scale
-from .rules import SHIPPED, check_bound, check_detections, fetch
+from .rules import SHIPPED, check_bound, check_detections, check_max_steps, fetch
 from .server import LocalServer
 from .team import TeamEnv
 
@@ -91,6 +91,7 @@ class LasertagParallelEnv(TeamEnv):
             check_bound(self.rules, "opponents", opponents)
             check_bound(self.rules, "ticks", ticks_per_step, "ticks_per_step")
             check_detections(self.rules, detections)
+            check_max_steps(self.rules, max_steps)
             if time_limit_s is not None:
                 check_bound(self.rules, "time_limit_s", time_limit_s)
             if isinstance(map, str):

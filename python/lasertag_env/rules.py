@@ -17,7 +17,7 @@ import os
 
 from .client import Client, ServerError
 
-__all__ = ["SHIPPED", "fetch", "check_bound", "check_detections"]
+__all__ = ["SHIPPED", "fetch", "check_bound", "check_detections", "check_max_steps", "most_steps"]
 
 
 def _load_shipped() -> dict:
@@ -69,4 +69,24 @@ def check_detections(rules: dict, detections) -> None:
         raise ValueError(
             f"detections: {detections} must be in 0..={most} (at most the opponents a "
             "match may have)"
+        )
+
+
+def most_steps(rules: dict) -> int:
+    """The most steps an episode may be given (``max_steps``): the ticks of the longest
+    match the server starts (``time_limit_s``'s maximum at ``tick_hz``). A step advances at
+    least one tick, so no episode ever takes more."""
+    return int(rules["bounds"]["time_limit_s"]["maximum"] * rules["tick_hz"])
+
+
+def check_max_steps(rules: dict, max_steps) -> None:
+    """Raises ``ValueError`` when ``max_steps`` (None: no bound but the match's time limit)
+    is below 1 or above :func:`most_steps`."""
+    if max_steps is None:
+        return
+    most = most_steps(rules)
+    if not 1 <= max_steps <= most:
+        raise ValueError(
+            f"max_steps: {max_steps} must be in 1..={most} (a step is at least a tick, and "
+            "a match lasts at most that many), or None"
         )

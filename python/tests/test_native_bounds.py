@@ -249,3 +249,75 @@ def test_a_map_object_is_bounded_by_the_map_rules():
         bad[field] = value
         with pytest.raises(ValueError, match=f"map.{field}"):
             lasertag_env.parallel_env(map=bad)
+
+
+def test_max_steps_and_timing_runs_are_bounded_as_the_server_bounds_them():
+    most = lasertag_env.rules.most_steps(SHIPPED)
+    assert most == 86400 * 20 == _native.BOUNDS["max_steps"]
+    got = outcomes(
+        f"lasertag_env.parallel_env(max_steps={most + 1})",
+        f"lasertag_env.vector_env(2, max_steps={most + 1})",
+        f"engine(max_steps={most + 1})",
+        f"engine(max_steps={most}).time_parts(0, {_native.BOUNDS['timed_ticks'] + 1}, np.zeros((1, 2, 3), np.float32))",
+        "engine(ticks=1000).time_parts(0, 101, np.zeros((1, 2, 3), np.float32))",
+        "engine().time_parts(0, 0, np.zeros((1, 2, 3), np.float32))",
+        # Within the bounds still works.
+        f"lasertag_env.parallel_env(max_steps={most}).reset()",
+        "engine(ticks=1000).time_parts(0, 100, np.zeros((1, 2, 3), np.float32))",
+    )
+    bound = f"must be in 1..={most} (a step is at least a tick, and a match lasts at most that many)"
+    assert got[0] == f"ValueError: max_steps: {most + 1} {bound}, or None", got[0]
+    assert got[1] == got[0]
+    assert got[2] == got[0]
+    assert got[3].startswith("ValueError: steps: 100001 must be in 1..=100000"), got[3]
+    assert got[4].startswith("ValueError: steps: 101 must be in 1..=100 (at most 100000 ticks"), got[4]
+    assert got[5].startswith("ValueError: steps: 0 must be in 1..=100000"), got[5]
+    assert got[6] == "accepted", got[6]
+    assert got[7] == "accepted", got[7]
+
+
+def test_the_http_backend_bounds_max_steps_as_the_native_one(server):
+    most = lasertag_env.rules.most_steps(SHIPPED)
+    with pytest.raises(ValueError, match=rf"max_steps: {most + 1} must be in 1..={most}"):
+        lasertag_env.parallel_env(server=server, max_steps=most + 1)
+
+
+# A closet with room for two agents 1 m apart only near its ends: random starts that put the
+# first agent in its middle leave the second nowhere.
+CLOSET = {
+    "name": "closet", "width": 2.0, "height": 1.0, "obstacles": [],
+    "robot_spawns": [[0.5, 0.5, 0.0]], "opponent_spawns": [[1.5, 0.5]], "landmarks": [],
+}
+
+
+def test_an_auto_reset_that_places_no_match_raises_naming_the_world_and_seed():
+    # One world, an episode a step: some seed's random starts leave no room.
+    for seed in range(200):
+        try:
+            v = lasertag_env.vector_env(1, map=CLOSET, robots=1, opponents=1, seed=seed,
+                                        placement="random", max_steps=1)
+            v.reset(seed=seed)
+            break
+        except ValueError:
+            continue
+    else:
+        pytest.fail("no seed places the first episode")
+    error = None
+    for _ in range(400):
+        try:
+            v.step(np.zeros((1, 3), np.float32))
+        except RuntimeError as e:
+            error = str(e)
+            break
+    assert error is not None, "every seed placed its match"
+    assert error.startswith("world 0: its next episode (seed "), error
+    assert "could not start" in error and 'placement "spawns"' in error, error
+    # The world is not left replaying its ended episode: a later step draws the next seed.
+    for _ in range(400):
+        try:
+            v.step(np.zeros((1, 3), np.float32))
+            break
+        except RuntimeError:
+            continue
+    else:
+        pytest.fail("no later seed places the match")

@@ -18,7 +18,7 @@ use std::sync::{Arc, Mutex};
 use std::time::SystemTime;
 
 use lasertag_core::sim::arena::Arena;
-use lasertag_core::world::{MatchConfig, MatchStatus, SetupError, Side, World, WorldInput};
+use lasertag_core::world::{MatchConfig, SetupError, Side, World, WorldInput};
 
 use crate::game::admission::{self, world_copy};
 use crate::game::view::MatchMeta;
@@ -203,10 +203,9 @@ impl Replay {
             self.inputs.apply_at(&mut at, world.tick, |input| {
                 let _ = world.apply(input);
             })?;
-            if world.tick >= tick || world.status == MatchStatus::Finished {
+            if world.tick >= tick || !world.step() {
                 break;
             }
-            world.step();
             if self
                 .spacing
                 .is_some_and(|every| world.tick.is_multiple_of(every))
@@ -275,10 +274,9 @@ impl Replay {
     /// Moves `cursor` one tick on; false (and nothing changes) at the match's last tick.
     pub fn advance(&self, cursor: &mut Cursor) -> Result<bool, ReplayError> {
         let world = &mut cursor.world;
-        if world.tick >= self.last_tick || world.status == MatchStatus::Finished {
+        if world.tick >= self.last_tick || !world.step() {
             return Ok(false);
         }
-        world.step();
         let tick = world.tick;
         self.inputs.apply_at(&mut cursor.inputs, tick, |input| {
             let _ = world.apply(input);

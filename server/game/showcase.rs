@@ -78,9 +78,7 @@ async fn start(registry: &Registry, priced: bool) -> Result<String, NoShowcase> 
             };
             let mut probe = World::new(arena.clone(), config.clone()).ok()?;
             let run_to = |probe: &mut World, tick: u64| {
-                while probe.tick < tick && probe.status == MatchStatus::Running {
-                    probe.step();
-                }
+                while probe.tick < tick && probe.step() {}
             };
             run_to(&mut probe, delay);
             if untagged(&probe) < FREE_AFTER_HEAD_START {

@@ -73,6 +73,9 @@ fn every_count_is_bounded_before_anything_is_allocated_for_it() {
         "ticks_per_step"
     );
     assert_eq!(refused(|a| a.max_steps = Some(0)).0, "max_steps");
+    let (field, message) = refused(|a| a.max_steps = Some(MAX_STEPS + 1));
+    assert_eq!(field, "max_steps");
+    assert!(message.contains("1..=1728000"), "{message}");
     assert_eq!(refused(|a| a.beams = 0).0, "beams");
     assert_eq!(refused(|a| a.beams = usize::MAX).0, "beams");
     assert_eq!(
@@ -97,6 +100,7 @@ fn the_bounds_themselves_are_accepted() {
     a.detections = MAX_DETECTIONS;
     a.worlds = MAX_AGENTS / MAX_ROBOTS;
     a.ticks_per_step = MAX_TICKS_PER_STEP;
+    a.max_steps = Some(MAX_STEPS);
     a.config.time_limit_ticks = time_limit_ticks(MAX_TIME_LIMIT_S).unwrap();
     let checked = a.check().unwrap();
     assert_eq!(checked.worlds() * checked.spec().config.robots, MAX_AGENTS);
@@ -203,6 +207,82 @@ fn step_all_is_each_worlds_step() {
             .step_all(&actions, &mut obs, &mut rewards, &mut term, &mut [false; 3])
             .is_err()
     );
+}
+
+#[test]
+fn a_timing_run_is_bounded_as_a_step_request_is() {
+    assert_eq!(MAX_STEPS, 86_400 * 20);
+    assert!(check_timed(MAX_TIMED_TICKS, 1).is_ok());
+    assert!(check_timed(1, MAX_TICKS_PER_STEP).is_ok());
+    for (steps, ticks) in [
+        (0, 1),
+        (MAX_TIMED_TICKS + 1, 1),
+        (2, MAX_TICKS_PER_STEP),
+        (u64::MAX, 3),
+    ] {
+        let e = check_timed(steps, ticks).unwrap_err();
+        assert!(e.to_string().starts_with("steps: "), "{e}");
+    }
+}
+
+/// A closet with room for two agents 1 m apart only near its ends: random starts that put
+/// the first agent in its middle leave the second nowhere.
+fn closet() -> EngineArgs {
+    let mut a = args();
+    a.map = MapSpec {
+        name: "closet".into(),
+        width: 2.0,
+        height: 1.0,
+        obstacles: vec![],
+        robot_spawns: vec![[0.5, 0.5, 0.0]],
+        opponent_spawns: vec![[1.5, 0.5]],
+        landmarks: vec![],
+    };
+    a.config.robots = 1;
+    a.config.placement = Placement::Random;
+    a.worlds = 1;
+    a.max_steps = Some(1);
+    a
+}
+
+#[test]
+fn a_next_episode_that_places_no_match_is_an_error_naming_its_world_and_seed() {
+    // A first episode that places, then one episode a step until a seed places none.
+    let mut engine = (0..200)
+        .find_map(|seed| Engine::new(EngineArgs { seed, ..closet() }).ok())
+        .expect("some seed places the first episode");
+    let size = engine.size();
+    let (mut obs, mut rewards) = (vec![0.0; size], vec![0.0; 1]);
+    let (mut term, mut trunc) = ([false], [false]);
+    let step =
+        |e: &mut Engine,
+         obs: &mut [f32],
+         rewards: &mut [f64],
+         term: &mut [bool],
+         trunc: &mut [bool]| { e.step_all(&[0.0; 3], obs, rewards, term, trunc) };
+    let e = (0..400)
+        .find_map(|_| step(&mut engine, &mut obs, &mut rewards, &mut term, &mut trunc).err())
+        .expect("some seed places no match");
+    let Refusal::Restart { world, seed, .. } = &e else {
+        panic!("{e:?}");
+    };
+    assert_eq!(*world, 0);
+    let text = e.to_string();
+    assert!(
+        text.starts_with(&format!(
+            "world 0: its next episode (seed {seed}) could not start: "
+        )) && text.contains("no free place")
+            && text.contains("placement \"spawns\""),
+        "{text}"
+    );
+    // Not a replay of the ended episode: the world stays ended, and a later call draws
+    // its next seed, which starts once one places.
+    let next = (0..400)
+        .find(|_| step(&mut engine, &mut obs, &mut rewards, &mut term, &mut trunc).is_ok())
+        .expect("a later seed places");
+    assert!(next < 400);
+    assert_ne!(engine.seeds()[0], *seed);
+    assert_eq!(engine.world(0).unwrap().episode.world().tick, 0);
 }
 
 #[test]
