@@ -46,7 +46,7 @@ use crate::game::Registry;
 use crate::service::{Pool, ReplayPool};
 pub use error::ApiError;
 pub use serve::{
-    ConnectionLimits, TooFewFiles, derive_caps, raise_open_files_limit, serve,
+    Caps, ConnectionLimits, TooFewFiles, derive_caps, raise_open_files_limit, serve,
     trim_memory_periodically,
 };
 pub use state::AppState;
