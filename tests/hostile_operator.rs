@@ -5,6 +5,8 @@
 //!   (a load test from one address is not cut to a sixteenth of them); the default is
 //!   derived from the files; a cap the files cannot hold is lowered with one warning naming
 //!   what was asked and what was granted.
+//! - A server stopping with a finished match in its store logs nothing about it: the match is
+//!   not "suspended", and nothing more of it is written.
 
 #![cfg(unix)]
 
@@ -15,6 +17,7 @@ mod process;
 use std::time::Duration;
 
 use process::Server;
+use serde_json::json;
 use tokio::io::AsyncReadExt;
 use tokio::net::TcpStream;
 
@@ -131,4 +134,39 @@ async fn an_operators_connection_cap_is_used_as_given_within_the_open_files() {
         assert!(line.contains("asked=1000000"), "{line}");
         assert!(line.contains(&format!("granted={ROOM}")), "{line}");
     }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_finished_match_is_not_suspended_nor_written_at_a_stop() {
+    let data = common::temp_dir("operator-stop").display().to_string();
+    let s = Server::start(&serve_args(&data, &[]));
+    let http = reqwest::Client::new();
+    let made: serde_json::Value = http
+        .post(s.url("/api/matches"))
+        .json(&json!({"map": "office", "clock": "manual", "time_limit_s": 5, "seed": 3}))
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
+    let id = made["id"].as_str().unwrap().to_string();
+    let token = made["owner_token"].as_str().unwrap().to_string();
+    let state = process::step(&http, &s, &id, &token, 200).await;
+    assert_eq!(state["status"], "finished", "{state}");
+    // A few of the task's housekeeping rounds, each of which may flush to the store.
+    tokio::time::sleep(Duration::from_millis(2500)).await;
+    let pid = s.child.id().to_string();
+    let killed = std::process::Command::new("kill")
+        .args(["-TERM", &pid])
+        .status()
+        .expect("kill runs");
+    assert!(killed.success());
+    let mut s = s;
+    let _ = s.child.wait();
+    // The log's last lines, read by the harness's thread.
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    assert_eq!(warnings(&s), Vec::<String>::new());
+    assert_eq!(log_lines(&s, "suspended"), Vec::<String>::new());
+    assert_eq!(log_lines(&s, "shut down cleanly").len(), 1);
 }

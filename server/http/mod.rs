@@ -221,7 +221,11 @@ fn router(
             state.clone(),
             rate_limit::rate_limit,
         ));
-    router = router.layer(TraceLayer::new_for_http()).merge(act);
+    // Failed requests are logged by `ApiError` (its 503s, refusals the server means, only at
+    // debug): the layer's own line for each would say it again, at ERROR for every 503.
+    let trace = TraceLayer::new_for_http()
+        .on_failure(tower_http::trace::DefaultOnFailure::new().level(tracing::Level::DEBUG));
+    router = router.layer(trace).merge(act);
     if in_fleet {
         // Outside everything that answers, so that redirects and refusals carry it too (a
         // page reads neither without it).
