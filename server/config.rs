@@ -234,10 +234,12 @@ pub struct Config {
           default_value = defaults::IDLE_MANUAL_AFTER, value_parser = seconds)]
     pub idle_manual_after: Duration,
     /// TCP connections open at once, WebSockets included; past it the server stops
-    /// accepting until one closes (new clients wait in the kernel's backlog).
-    #[arg(long, env = "LASERTAG_MAX_CONNECTIONS", default_value_t = defaults::MAX_CONNECTIONS,
+    /// accepting until one closes (new clients wait in the kernel's backlog). Default 4096;
+    /// given or not, never more than the open files leave (`http::derive_caps`), and a given
+    /// value lowered to that is logged with what was asked and what was granted.
+    #[arg(long, env = "LASERTAG_MAX_CONNECTIONS",
           value_parser = clap::value_parser!(u64).range(1..).map(|v| v as usize))]
-    pub max_connections: usize,
+    pub max_connections: Option<usize>,
     /// WebTransport sessions open at once. Each costs the server far more CPU than a
     /// WebSocket (QUIC encrypts and paces every datagram itself: about 24 µs a snapshot,
     /// docs/network.md); past it a new session is refused at once and the page plays over
@@ -357,10 +359,12 @@ pub struct Config {
     pub export_budget: Duration,
     /// TCP connections (HTTP and WebSocket alike) open at once from one client (an IPv4
     /// address, or an IPv6 /64); past it a new connection is closed as soon as it is
-    /// accepted. Kept well below `--max-connections`, so other clients always find room.
-    #[arg(long, env = "LASERTAG_MAX_TCP_PER_ADDRESS", default_value_t = defaults::MAX_TCP_PER_ADDRESS,
+    /// accepted. Default 256, and at most a sixteenth of what the open files leave, so other
+    /// clients always find room; a given value is the operator's and is used as given, only
+    /// never more than the open files leave (logged with what was asked and granted).
+    #[arg(long, env = "LASERTAG_MAX_TCP_PER_ADDRESS",
           value_parser = clap::value_parser!(u64).range(1..).map(|v| v as usize))]
-    pub max_tcp_per_address: usize,
+    pub max_tcp_per_address: Option<usize>,
     /// Opponent slots one client (an IPv4 address, or an IPv6 /64) may hold over all
     /// matches at once, played or not; more joins are refused with 429. With the showcases
     /// that start when every one is full, it keeps a few addresses from taking every seat
@@ -455,7 +459,7 @@ impl Default for Config {
             max_policy_bytes: defaults::MAX_POLICY_BYTES,
             max_policy_inference_us: defaults::MAX_POLICY_INFERENCE_US,
             idle_manual_after: secs(defaults::IDLE_MANUAL_AFTER),
-            max_connections: defaults::MAX_CONNECTIONS,
+            max_connections: None,
             max_webtransport_sessions: defaults::MAX_WEBTRANSPORT_SESSIONS,
             header_read_timeout: secs(defaults::HEADER_READ_TIMEOUT),
             max_request_memory_mb: defaults::MAX_REQUEST_MEMORY_MB,
@@ -476,7 +480,7 @@ impl Default for Config {
             max_exports_per_address: defaults::MAX_EXPORTS_PER_ADDRESS,
             export_stall: secs(defaults::EXPORT_STALL),
             export_budget: secs(defaults::EXPORT_BUDGET),
-            max_tcp_per_address: defaults::MAX_TCP_PER_ADDRESS,
+            max_tcp_per_address: None,
             max_seats_per_address: defaults::MAX_SEATS_PER_ADDRESS,
             both_sides_per_address: false,
             max_names_per_address: defaults::MAX_NAMES_PER_ADDRESS,

@@ -9,6 +9,9 @@
 //!   `moved` with that node's URL before the close, and the match goes on there.
 //! - A node paused with SIGSTOP past its lease loses its match to another and, woken with
 //!   SIGCONT, stops it and writes nothing more to it (its fence is gone).
+//! - A node that adopted matches, one of which then finished, drains and hands the other
+//!   over without a warning: nothing more of the finished match is written, and it is not
+//!   "suspended".
 //!
 //! Needs `redis-server` and PostgreSQL's server (`bash tests/run.sh` installs them).
 
@@ -264,5 +267,64 @@ async fn a_node_paused_past_its_lease_loses_its_match_and_writes_nothing_more_to
             .filter(|l| l.contains("removed"))
             .collect::<Vec<_>>()
             .join("\n")
+    );
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_drain_after_an_adoption_whose_match_finished_warns_of_nothing() {
+    let redis = RedisServer::start();
+    let db = std::thread::spawn(|| postgres::database("adoption_drain"))
+        .join()
+        .expect("a database");
+    let mut p = on(&redis, &db.url, "p");
+    let q = fleet_nodes::node(
+        &redis,
+        "q",
+        &["--database", db.url.as_str(), "--drain-s", "3"],
+    );
+    let http = fleet_nodes::no_redirects();
+    let (ends, token) = made_on(
+        &http,
+        &p,
+        json!({"map": "office", "clock": "manual", "seed": 5, "opponent_bot": "evade",
+            "time_limit_s": 10}),
+    )
+    .await;
+    process::step(&http, &p, &ends, &token, 100).await;
+    let (lasts, _) = made_on(
+        &http,
+        &p,
+        json!({"map": "office", "robots": 2, "opponents": 2, "opponent_bot": "evade",
+            "seed": 7, "time_limit_s": 600}),
+    )
+    .await;
+    tokio::time::sleep(Duration::from_millis(1600)).await; // the store has them
+    p.child.kill().expect("SIGKILL");
+    p.child.wait().expect("p dies");
+
+    until_hosted(&http, &q, &ends, Some(&token), 30).await;
+    until_hosted(&http, &q, &lasts, None, 10).await;
+    // The adopted match ends on q (its time limit is tick 200), and stays listed a while.
+    let state = process::step(&http, &q, &ends, &token, 150).await;
+    assert_eq!(state["status"], "finished", "{state}");
+    // A few seconds of q's housekeeping with it finished.
+    tokio::time::sleep(Duration::from_secs(3)).await;
+    let r = on(&redis, &db.url, "r");
+    tokio::time::sleep(Duration::from_secs(2)).await; // q sees r in the directory
+    signal(&q, "-TERM");
+    // The drain (3 s, for the running match), then the hand-over to r.
+    until_hosted(&http, &r, &lasts, None, 30).await;
+    let mut q = q;
+    let _ = q.child.wait();
+    tokio::time::sleep(Duration::from_millis(300)).await; // the log's last lines read
+    let warned = q.warnings.lock().unwrap_or_else(|e| e.into_inner()).clone();
+    assert_eq!(warned, Vec::<String>::new());
+    let log = q.log.lock().unwrap_or_else(|e| e.into_inner()).clone();
+    let suspended: Vec<&String> = log.iter().filter(|l| l.contains("suspended")).collect();
+    assert_eq!(suspended.len(), 1, "{suspended:?}");
+    assert!(suspended[0].contains(&lasts), "{suspended:?}");
+    assert!(
+        log.iter().any(|l| l.contains("matches handed over")),
+        "{log:?}"
     );
 }

@@ -84,7 +84,7 @@ async fn closed_within(stream: &mut TcpStream, wait: Duration) -> bool {
 async fn a_slow_client_is_cut_off_and_the_connection_cap_holds() {
     let s = TestServer::start_with(Config {
         header_read_timeout: Duration::from_millis(300),
-        max_connections: 8,
+        max_connections: Some(8),
         ..test_config()
     })
     .await;

@@ -256,3 +256,59 @@ async fn an_inference_over_the_servers_limit_is_refused() {
     );
     assert_eq!(names(&s).await, ["learned"]);
 }
+
+/// A model of about `kb` kilobytes (a hidden layer of floats sized to it).
+fn model_of_kb(kb: usize) -> Vec<u8> {
+    let hidden = kb * 1000 / (4 * OBSERVATION);
+    model(
+        OBSERVATION,
+        &[
+            layer(hidden, OBSERVATION, 0.01, "Tanh"),
+            layer(3, hidden, 0.01, ""),
+        ],
+    )
+}
+
+#[tokio::test]
+async fn kept_policies_load_within_max_policies_and_their_bytes_take_the_disk_budget() {
+    let dir = common::temp_dir("policies-kept");
+    let stored = |config: Config| {
+        let retention = lasertag::store::Retention {
+            max_matches: 10_000,
+            max_bytes: 1 << 30,
+        };
+        let store = lasertag::store::Store::open(&dir, retention).expect("the store opens");
+        TestServer::start_with_history(config, lasertag::game::replay::History::with_store(store))
+    };
+    // A server whose disk budget (2 MB) holds one model of 1.2 MB and not two: the store
+    // keeps each model as uploaded.
+    let config = Config {
+        disk_budget_mb: 2,
+        max_policy_inference_us: 10_000_000,
+        ..test_config()
+    };
+    let s = stored(config.clone()).await;
+    let r = upload(&s, "first", model_of_kb(1200)).await;
+    assert_eq!(r.status, 201, "{}", r.body);
+    let r = upload(&s, "second", model_of_kb(1200)).await;
+    assert_eq!(r.status, 503, "{}", r.body);
+    let said = r.body["error"].as_str().unwrap_or_default();
+    assert!(said.contains("disk budget"), "{said}");
+    assert!(upload(&s, "small", small_policy()).await.status == 201);
+    s.flush_history();
+    drop(s);
+
+    // Another server on the store, holding one policy besides the shipped one: it loads the
+    // oldest kept one and leaves the other in the store.
+    let s = stored(Config {
+        max_policies: 2,
+        ..config
+    })
+    .await;
+    let loaded = lasertag::game::resume::restore_policies(&s.registry);
+    assert_eq!(loaded, 1);
+    assert_eq!(names(&s).await, ["first", "learned"]);
+    // As an upload would find it: full.
+    let r = upload(&s, "third", small_policy()).await;
+    assert_eq!(r.status, 503, "{}", r.body);
+}

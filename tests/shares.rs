@@ -214,7 +214,7 @@ async fn an_export_that_reads_nothing_gives_its_slot_to_a_newcomer() {
 #[tokio::test]
 async fn one_address_is_capped_at_accept_and_others_are_answered() {
     let s = TestServer::start_with(Config {
-        max_tcp_per_address: 4,
+        max_tcp_per_address: Some(4),
         ..test_config()
     })
     .await;

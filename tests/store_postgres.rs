@@ -508,6 +508,38 @@ fn kept_policies_answer_alike_in_both_databases() {
 }
 
 #[test]
+fn kept_policies_count_against_the_history_bytes() {
+    let database = pg::database("policy_bytes");
+    let retention = Retention {
+        max_matches: 100,
+        max_bytes: 200_000,
+    };
+    let mut db = Postgres::open(&database.url, retention).expect("open");
+    for i in 0..3 {
+        db.write(&a_match(&format!("k{i}"), 10, "ada", true))
+            .expect("write");
+    }
+    assert_eq!(ids(&mut db, None), ["k2", "k1", "k0"]);
+    // A model that takes all but 1,000 of the history's bytes: the ended matches go, the
+    // newest too, at the next end.
+    let policy = lasertag::store::KeptPolicy {
+        name: "heavy".into(),
+        model: vec![7; 199_000],
+        token: "hash".into(),
+        client: "10.0.0.1".into(),
+        every: 2,
+        added_at: 1,
+    };
+    assert!(db.keep_policy(&policy).expect("keep"));
+    db.write(&a_match("k3", 10, "ada", true)).expect("write");
+    assert_eq!(ids(&mut db, None), Vec::<String>::new());
+    // Without it, they fit again.
+    db.drop_policy("heavy").expect("drop");
+    db.write(&a_match("k4", 10, "ada", true)).expect("write");
+    assert_eq!(ids(&mut db, None), ["k4"]);
+}
+
+#[test]
 fn migrations_run_once_even_at_once_and_a_newer_schema_is_refused() {
     let database = pg::database("migrations");
     // Servers of a fleet starting together: one migrates, the others wait and find it done.

@@ -525,9 +525,10 @@ pub enum NoRoom {
         asked_ms: f64,
         budget_ms: f64,
     },
-    /// The running matches' records and this one's would be priced past the store's budget.
+    /// The running matches' records, the uploaded policies kept and this request would be
+    /// priced past the store's budget.
     #[error(
-        "the server's budget of {} for running matches' records is taken ({} admitted; this match may record {}); try again when matches have ended",
+        "the server's disk budget of {} is taken ({} held by running matches' records and kept policies; this asks for {}); try again when matches have ended or policies are deleted",
         mb(*.budget),
         mb(*.held),
         mb(*.asked)

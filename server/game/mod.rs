@@ -195,10 +195,17 @@ impl Registry {
             });
         }
         let disk = cfg.disk_budget_mb.saturating_mul(1_000_000);
-        if price.disk > 0 && admitted.disk + price.disk > disk {
+        // The uploaded policies the store keeps take the disk as long as they are held.
+        let held_disk = admitted.disk
+            + self
+                .policies
+                .read()
+                .unwrap_or_else(|e| e.into_inner())
+                .uploaded_disk();
+        if price.disk > 0 && held_disk + price.disk > disk {
             self.metrics.refuse(crate::metrics::Refusal::Budget);
             return Err(NoRoom::Disk {
-                held: admitted.disk,
+                held: held_disk,
                 asked: price.disk,
                 budget: disk,
             });

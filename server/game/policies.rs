@@ -30,6 +30,9 @@ pub struct StoredPolicy {
     pub inference_us: f64,
     /// Bytes it holds in memory (its parameters), priced against the server's budget.
     pub memory: u64,
+    /// Bytes the store keeps of it (the model as uploaded; none for a shipped one), charged
+    /// to the server's disk budget for as long as it is held.
+    pub disk: u64,
     /// Ticks between its decisions.
     pub every: u64,
 }
@@ -76,6 +79,7 @@ impl PolicyStore {
                     let stored = StoredPolicy {
                         inference_us: time_inference(&policy),
                         memory: memory_of(&policy),
+                        disk: 0,
                         policy: Arc::new(policy),
                         owner: Owner::default(),
                         every: DEFAULT_EVERY,
@@ -125,6 +129,11 @@ impl PolicyStore {
             .filter(|p| !p.shipped() && (client.is_none() || p.owner.client == client))
             .map(|p| p.memory)
             .sum()
+    }
+
+    /// Bytes the store keeps of the uploaded policies (see [`StoredPolicy::disk`]).
+    pub fn uploaded_disk(&self) -> u64 {
+        self.policies.values().map(|p| p.disk).sum()
     }
 
     /// Adds `stored` as `name`; false when the name is taken.
@@ -187,6 +196,7 @@ pub fn from_kept(kept: &KeptPolicy) -> Result<StoredPolicy, PolicyError> {
     Ok(StoredPolicy {
         inference_us: time_inference(&policy),
         memory: memory_of(&policy),
+        disk: kept.model.len() as u64,
         policy: Arc::new(policy),
         owner: Owner {
             token: SecretHash::from_hex(&kept.token),

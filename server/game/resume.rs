@@ -18,8 +18,9 @@
 //! `lasertag_matches_resumed_total{outcome="lost"}` counts it.
 //!
 //! Uploaded policies come back with them: the store keeps each one's model, and a server
-//! loads them all before it resumes a match ([`restore_policies`]), and a policy it lacks
-//! when it adopts a match another server of a fleet ran ([`hold_if_kept`]).
+//! loads them, as many as its `--max-policies` holds, before it resumes a match
+//! ([`restore_policies`]), and a policy it lacks when it adopts a match another server of a
+//! fleet ran ([`hold_if_kept`]).
 
 use std::collections::VecDeque;
 use std::sync::{Arc, Mutex};
@@ -392,14 +393,34 @@ fn rebuild_one(registry: &Registry, id: &str) -> Result<Rebuilt, ResumeError> {
     Ok(rebuilt)
 }
 
+/// What [`hold`] did with a kept policy.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Held {
+    /// Loaded: the server holds it now, as uploaded.
+    Loaded,
+    /// Not loaded: the server holds `--max-policies` already.
+    Full,
+    /// Not loaded: held already, or the model does not load (logged).
+    Not,
+}
+
 /// Holds `kept` unless a policy by its name is held already (a shipped one wins over an
-/// uploaded one of the same name); whether the server now holds it as uploaded.
-fn hold(registry: &Registry, kept: &KeptPolicy) -> bool {
+/// uploaded one of the same name) or the server holds its most (`--max-policies`, as an
+/// upload would find it).
+fn hold(registry: &Registry, kept: &KeptPolicy) -> Held {
+    let full = || {
+        let held = registry.policies.read().unwrap_or_else(|e| e.into_inner());
+        !held.contains(&kept.name) && held.len() >= registry.config.max_policies
+    };
+    // Before the model is read: a full server reads none.
+    if full() {
+        return Held::Full;
+    }
     let stored = match policies::from_kept(kept) {
         Ok(stored) => stored,
         Err(e) => {
             tracing::error!(policy = kept.name, error = %e, "a kept policy does not load");
-            return false;
+            return Held::Not;
         }
     };
     let max_us = registry.config.max_policy_inference_us as f64;
@@ -419,13 +440,25 @@ fn hold(registry: &Registry, kept: &KeptPolicy) -> bool {
                 "a kept policy has the name of a shipped one; the shipped one is served"
             );
         }
-        return !held.shipped();
+        return Held::Not;
     }
-    policies.insert(kept.name.clone(), stored)
+    // Checked again under the lock: another match's resume may have loaded one meanwhile.
+    if policies.len() >= registry.config.max_policies {
+        return Held::Full;
+    }
+    if policies.insert(kept.name.clone(), stored) {
+        Held::Loaded
+    } else {
+        Held::Not
+    }
 }
 
-/// Loads every policy the registry's store keeps (blocking: a read and each model checked):
-/// the server calls it before it resumes matches or serves its first request.
+/// Loads the policies the registry's store keeps, oldest first, as many as
+/// `--max-policies` leaves room for (blocking: a read and each model checked): the server
+/// calls it before it resumes matches or serves its first request. A store servers share may
+/// keep more than this server holds (another node's `--max-policies` is larger): those are
+/// left in the store, with one warning, and one that a match adopted here needs is loaded
+/// when there is room ([`hold_if_kept`]). Answers how many it loaded.
 pub fn restore_policies(registry: &Registry) -> usize {
     let Some(store) = registry.history.store() else {
         return 0;
@@ -437,7 +470,23 @@ pub fn restore_policies(registry: &Registry) -> usize {
             return 0;
         }
     };
-    kept.iter().filter(|k| hold(registry, k)).count()
+    let (mut loaded, mut left) = (0, 0);
+    for k in &kept {
+        match hold(registry, k) {
+            Held::Loaded => loaded += 1,
+            Held::Full => left += 1,
+            Held::Not => {}
+        }
+    }
+    if left > 0 {
+        tracing::warn!(
+            left,
+            loaded,
+            max_policies = registry.config.max_policies,
+            "the store keeps more policies than --max-policies lets this server hold: the newest are left there (raise --max-policies to serve them here)"
+        );
+    }
+    loaded
 }
 
 /// Takes back the parties' rooms the registry's store keeps (blocking: one read): the server
@@ -473,8 +522,12 @@ pub fn hold_if_kept(registry: &Registry, name: &str) {
         .store()
         .map(|s: &Store| s.read(|b| b.kept_policy(name)))
     {
-        Some(Ok(Some(kept))) => {
-            hold(registry, &kept);
+        Some(Ok(Some(kept))) if hold(registry, &kept) == Held::Full => {
+            tracing::warn!(
+                policy = name,
+                max_policies = registry.config.max_policies,
+                "a match needs a kept policy, but this server holds --max-policies already: its robots wait (raise --max-policies)"
+            );
         }
         Some(Err(e)) => tracing::warn!(policy = name, "cannot read a kept policy: {e}"),
         _ => {}

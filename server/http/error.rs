@@ -118,7 +118,12 @@ fn input_status(e: &InputError) -> StatusCode {
 
 impl IntoResponse for ApiError {
     fn into_response(self) -> Response {
-        if self.status.is_server_error() {
+        // A 503 is a refusal the server means (full, draining, a match being resumed), told
+        // to the client with when to try again and counted in `lasertag_refused_total`: not
+        // an error to act on, and a crowd of them would bury the log's real ones.
+        if self.status == StatusCode::SERVICE_UNAVAILABLE {
+            tracing::debug!(error = %self.message, "refused with 503");
+        } else if self.status.is_server_error() {
             tracing::error!(status = %self.status, error = %self.message, "request failed");
         }
         let mut response = (

@@ -46,7 +46,7 @@ use crate::game::Registry;
 use crate::service::{Pool, ReplayPool};
 pub use error::ApiError;
 pub use serve::{
-    ConnectionLimits, TooFewFiles, derive_caps, raise_open_files_limit, serve,
+    Caps, ConnectionLimits, TooFewFiles, derive_caps, raise_open_files_limit, serve,
     trim_memory_periodically,
 };
 pub use state::AppState;
@@ -224,7 +224,11 @@ fn router(
             state.clone(),
             rate_limit::rate_limit,
         ));
-    router = router.layer(TraceLayer::new_for_http()).merge(act);
+    // Failed requests are logged by `ApiError` (its 503s, refusals the server means, only at
+    // debug): the layer's own line for each would say it again, at ERROR for every 503.
+    let trace = TraceLayer::new_for_http()
+        .on_failure(tower_http::trace::DefaultOnFailure::new().level(tracing::Level::DEBUG));
+    router = router.layer(trace).merge(act);
     if in_fleet {
         // Outside everything that answers, so that redirects and refusals carry it too (a
         // page reads neither without it).

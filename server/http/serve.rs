@@ -13,7 +13,8 @@
 //!   room (`/api/health` keeps answering while one address floods).
 //! - The server's cap never exceeds the file descriptors the process may open, less a
 //!   reserve for its files, database and match runtimes, so `accept` never runs out of them,
-//!   and a client's cap is a small share of the server's ([`derive_caps`]);
+//!   and a client's default cap is a small share of the server's; a cap the operator gives
+//!   is used as given, within what the files hold ([`derive_caps`]);
 //!   [`raise_open_files_limit`] lifts the soft limit to the hard one at start, and a limit
 //!   too low to serve stops the start with an error that says so ([`TooFewFiles`]).
 //! - [`trim_memory_periodically`] hands freed memory back to the operating system, every 5 s
@@ -88,27 +89,47 @@ pub struct TooFewFiles {
 }
 
 impl ConnectionLimits {
-    /// The limits of `registry`'s config, derived from the file descriptors the process
-    /// may open (see [`derive_caps`]).
+    /// The limits of `registry`'s config under the file descriptors the process may open
+    /// (see [`derive_caps`]). A cap the operator gave that the files cannot hold is lowered
+    /// to what they can, with one warning naming the flag, what was asked and what was
+    /// granted; defaults derived from the files are logged as information.
     pub fn of(registry: &Arc<Registry>) -> Result<ConnectionLimits, TooFewFiles> {
         let config = &registry.config;
-        let (max_connections, max_per_address) = derive_caps(
-            open_files_limit(),
-            config.max_connections,
-            config.max_tcp_per_address,
-        )?;
-        if max_connections < config.max_connections || max_per_address < config.max_tcp_per_address
-        {
-            tracing::warn!(
-                max_connections,
-                max_per_address,
-                open_files = open_files_limit(),
-                "fewer file descriptors than --max-connections needs: caps lowered"
-            );
+        let files = open_files_limit();
+        let caps = derive_caps(files, config.max_connections, config.max_tcp_per_address)?;
+        for (flag, asked, granted) in [
+            (
+                "--max-connections",
+                config.max_connections,
+                caps.max_connections,
+            ),
+            (
+                "--max-tcp-per-address",
+                config.max_tcp_per_address,
+                caps.max_per_address,
+            ),
+        ] {
+            if let Some(asked) = asked
+                && granted < asked
+            {
+                tracing::warn!(
+                    flag,
+                    asked,
+                    granted,
+                    open_files = files,
+                    "the open files limit cannot hold the connections asked: granted fewer (raise the hard limit: `ulimit -Hn`, systemd's LimitNOFILE=, docker's --ulimit nofile=)"
+                );
+            }
         }
+        tracing::info!(
+            max_connections = caps.max_connections,
+            max_per_address = caps.max_per_address,
+            open_files = files,
+            "connection caps"
+        );
         Ok(ConnectionLimits {
-            max_connections,
-            max_per_address,
+            max_connections: caps.max_connections,
+            max_per_address: caps.max_per_address,
             header_read_timeout: config.header_read_timeout,
             registry: Some(registry.clone()),
             tls: None,
@@ -116,34 +137,55 @@ impl ConnectionLimits {
     }
 }
 
+/// The connection caps the accept loop enforces, as [`derive_caps`] grants them.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Caps {
+    /// Connections open at once.
+    pub max_connections: usize,
+    /// Connections open at once from one client.
+    pub max_per_address: usize,
+}
+
 /// The server's and each client's connection caps under an open files limit of `files`
-/// (none: no limit): the server's at most what the files leave once a reserve is kept (a
-/// quarter of the limit, at most [`FD_RESERVE`]), each client's at most a
-/// [`CLIENTS_WITH_ROOM`]th of that, so that one client never takes what the files leave.
-/// Too few files to serve [`MIN_CONNECTIONS`] is an error. (An operator's own
-/// `--max-connections` below the files' room is theirs: it lowers no client's cap.)
+/// (none: no limit), from the caps the operator asked for (`None`: the default).
+///
+/// What the files leave is the limit less a reserve (a quarter of it, at most
+/// [`FD_RESERVE`]); too little to serve [`MIN_CONNECTIONS`] is an error. A cap the operator
+/// gave is used as given, clamped only to what the files leave: it is theirs, whatever it
+/// does to other clients. The defaults are derived: the server's
+/// [`MAX_CONNECTIONS`](crate::config::defaults::MAX_CONNECTIONS) within what the files
+/// leave, and each client's
+/// [`MAX_TCP_PER_ADDRESS`](crate::config::defaults::MAX_TCP_PER_ADDRESS) within a
+/// [`CLIENTS_WITH_ROOM`]th of that, so that by default one client never takes what the
+/// files leave. (A `--max-connections` below the files' room lowers no client's cap.)
 pub fn derive_caps(
     files: Option<u64>,
-    max_connections: usize,
-    max_per_address: usize,
-) -> Result<(usize, usize), TooFewFiles> {
-    let Some(files) = files else {
-        return Ok((max_connections, max_per_address));
+    max_connections: Option<usize>,
+    max_per_address: Option<usize>,
+) -> Result<Caps, TooFewFiles> {
+    use crate::config::defaults::{MAX_CONNECTIONS, MAX_TCP_PER_ADDRESS};
+    let room = match files {
+        None => usize::MAX,
+        Some(files) => {
+            let reserve = (files / 4).min(FD_RESERVE);
+            let room = files - reserve;
+            if room < MIN_CONNECTIONS as u64 {
+                return Err(TooFewFiles {
+                    files,
+                    room,
+                    reserve,
+                });
+            }
+            usize::try_from(room).unwrap_or(usize::MAX)
+        }
     };
-    let reserve = (files / 4).min(FD_RESERVE);
-    let room = files - reserve;
-    if room < MIN_CONNECTIONS as u64 {
-        return Err(TooFewFiles {
-            files,
-            room,
-            reserve,
-        });
-    }
-    let room = usize::try_from(room).unwrap_or(usize::MAX);
-    Ok((
-        max_connections.min(room),
-        max_per_address.min(room / CLIENTS_WITH_ROOM),
-    ))
+    Ok(Caps {
+        max_connections: max_connections.unwrap_or(MAX_CONNECTIONS).min(room),
+        max_per_address: match max_per_address {
+            Some(asked) => asked.min(room),
+            None => MAX_TCP_PER_ADDRESS.min(room / CLIENTS_WITH_ROOM),
+        },
+    })
 }
 
 /// The soft limit of open files (`RLIMIT_NOFILE`), where the platform has one.
@@ -478,23 +520,59 @@ impl AsyncWrite for Counted {
 mod tests {
     use super::*;
 
-    #[test]
-    fn a_generous_limit_keeps_the_configured_caps() {
-        assert_eq!(derive_caps(Some(1 << 20), 4096, 256), Ok((4096, 256)));
-        assert_eq!(derive_caps(None, 4096, 256), Ok((4096, 256)));
+    fn caps(max_connections: usize, max_per_address: usize) -> Caps {
+        Caps {
+            max_connections,
+            max_per_address,
+        }
     }
 
     #[test]
-    fn a_small_limit_lowers_both_caps_so_one_client_cannot_take_the_room() {
+    fn a_generous_limit_keeps_the_defaults_and_what_was_asked() {
+        assert_eq!(derive_caps(Some(1 << 20), None, None), Ok(caps(4096, 256)));
+        assert_eq!(derive_caps(None, None, None), Ok(caps(4096, 256)));
+        assert_eq!(
+            derive_caps(Some(1 << 20), Some(10_000), Some(5_000)),
+            Ok(caps(10_000, 5_000))
+        );
+        assert_eq!(
+            derive_caps(None, Some(usize::MAX), Some(usize::MAX)),
+            Ok(caps(usize::MAX, usize::MAX))
+        );
+    }
+
+    #[test]
+    fn a_small_limit_lowers_the_defaults_so_one_client_cannot_take_the_room() {
         // 256 files: 64 kept, 192 connections, 12 per client: 16 clients find room.
-        assert_eq!(derive_caps(Some(256), 4096, 256), Ok((192, 12)));
+        assert_eq!(derive_caps(Some(256), None, None), Ok(caps(192, 12)));
         // 1024 files (a common soft default): 768 connections, 48 per client.
-        assert_eq!(derive_caps(Some(1024), 4096, 256), Ok((768, 48)));
+        assert_eq!(derive_caps(Some(1024), None, None), Ok(caps(768, 48)));
+        // 20,000 files: the default 256 per client is below a sixteenth (1,218).
+        assert_eq!(derive_caps(Some(20_000), None, None), Ok(caps(4096, 256)));
+    }
+
+    #[test]
+    fn an_explicit_cap_is_granted_up_to_what_the_files_hold_and_no_sixteenth() {
+        // The operator's load test from one address: all of it, not a sixteenth (1,218).
+        assert_eq!(
+            derive_caps(Some(20_000), Some(1_000_000), Some(1_000_000)),
+            Ok(caps(19_488, 19_488))
+        );
+        assert_eq!(
+            derive_caps(Some(20_000), None, Some(3_000)),
+            Ok(caps(4096, 3_000))
+        );
+        // Below what the files leave, an explicit cap is used as given, even a tiny one.
+        assert_eq!(
+            derive_caps(Some(1024), Some(100), Some(1)),
+            Ok(caps(100, 1))
+        );
+        assert_eq!(derive_caps(Some(1024), None, Some(700)), Ok(caps(768, 700)));
     }
 
     #[test]
     fn too_few_files_to_serve_is_an_error_naming_the_limit() {
-        let e = derive_caps(Some(64), 4096, 256).unwrap_err();
+        let e = derive_caps(Some(64), Some(4096), None).unwrap_err();
         assert_eq!(e.files, 64);
         assert!(e.to_string().contains("open files limit (64)"), "{e}");
         assert!(e.to_string().contains("ulimit"), "{e}");

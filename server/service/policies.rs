@@ -172,8 +172,16 @@ pub async fn add(
         return Err(PoliciesError::TooSlow { took_us, max_us });
     }
     let memory = memory_of(&policy);
+    // The store keeps the model as uploaded: its bytes are charged to the disk budget too
+    // (with no store they are kept nowhere).
+    let disk = if registry.history.store().is_some() {
+        bytes.len() as u64
+    } else {
+        0
+    };
     let price = Price {
         memory,
+        disk,
         ..Price::default()
     };
     within_request_limits(registry, "the policy", price)?;
@@ -209,6 +217,7 @@ pub async fn add(
         owner,
         inference_us: took_us,
         memory,
+        disk,
         every,
     };
     let created = info(&name, &stored);

@@ -15,6 +15,8 @@ pub struct Server {
     pub addr: SocketAddr,
     /// The log lines that name a warning or an error, as they come.
     pub warnings: std::sync::Arc<std::sync::Mutex<Vec<String>>>,
+    /// Every log line, as they come (the first 20,000).
+    pub log: std::sync::Arc<std::sync::Mutex<Vec<String>>>,
 }
 
 impl Drop for Server {
@@ -39,25 +41,62 @@ impl Server {
     /// `lasertag serve --addr <addr>` with `args` after it and `env` added (a fixed address:
     /// a server started again where the last one was, for clients that reconnect).
     pub fn start_at(addr: &str, args: &[&str], env: &[(&str, &str)]) -> Server {
+        Server::spawn(Server::command(addr, args, env))
+    }
+
+    /// [`Server::start`] in a process whose open files limit (soft and hard) is `files`, as
+    /// a host's `ulimit -n` would set it.
+    #[cfg(unix)]
+    pub fn start_with_files(files: u64, args: &[&str]) -> Server {
+        use std::os::unix::process::CommandExt;
+        let mut cmd = Server::command("127.0.0.1:0", args, &[]);
+        // SAFETY: between fork and exec the closure only calls setrlimit, which is
+        // async-signal-safe, on a local.
+        unsafe {
+            cmd.pre_exec(move || {
+                let lim = libc::rlimit {
+                    rlim_cur: files as libc::rlim_t,
+                    rlim_max: files as libc::rlim_t,
+                };
+                if libc::setrlimit(libc::RLIMIT_NOFILE, &lim) != 0 {
+                    return Err(std::io::Error::last_os_error());
+                }
+                Ok(())
+            });
+        }
+        Server::spawn(cmd)
+    }
+
+    fn command(addr: &str, args: &[&str], env: &[(&str, &str)]) -> Command {
         let root = env!("CARGO_MANIFEST_DIR");
-        let mut child = Command::new(env!("CARGO_BIN_EXE_lasertag"))
-            .current_dir(root)
+        let mut cmd = Command::new(env!("CARGO_BIN_EXE_lasertag"));
+        cmd.current_dir(root)
             .args(["serve", "--addr", addr])
             .args(args)
             .envs(env.iter().copied())
             .env("RUST_LOG", "info")
             .env("NO_COLOR", "1")
             .stdout(Stdio::piped())
-            .stderr(Stdio::inherit())
-            .spawn()
-            .expect("the lasertag binary starts");
+            .stderr(Stdio::inherit());
+        cmd
+    }
+
+    fn spawn(mut cmd: Command) -> Server {
+        let mut child = cmd.spawn().expect("the lasertag binary starts");
         let stdout = child.stdout.take().expect("piped stdout");
         let (tx, rx) = std::sync::mpsc::channel();
         let warnings = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
-        let kept = warnings.clone();
+        let log = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
+        let (kept, all) = (warnings.clone(), log.clone());
         // Keep reading the log (so the pipe never fills) and pass the address on.
         std::thread::spawn(move || {
             for line in BufReader::new(stdout).lines().map_while(Result::ok) {
+                {
+                    let mut all = all.lock().unwrap_or_else(|e| e.into_inner());
+                    if all.len() < 20_000 {
+                        all.push(line.clone());
+                    }
+                }
                 if line.contains(" WARN ") || line.contains(" ERROR ") {
                     let mut kept = kept.lock().unwrap_or_else(|e| e.into_inner());
                     if kept.len() < 10_000 {
@@ -83,6 +122,7 @@ impl Server {
             child,
             addr,
             warnings,
+            log,
         }
     }
 

@@ -1,7 +1,8 @@
 //! How a match task feeds the history: the match's start (with what resumes it: owner and
 //! seats, tokens hashed), its inputs about once a second (and its seats when they change),
 //! and its end, handed to the store's writer without ever waiting on it (a full queue
-//! means trying again at the next flush), and the finished match kept for replay.
+//! means trying again at the next flush), and the finished match kept for replay. After its
+//! end nothing more of the match goes to the store.
 
 use std::time::{Duration, Instant, SystemTime};
 
@@ -60,7 +61,7 @@ impl MatchTask {
     /// Sends the inputs since the last flush and the tick reached, when a flush is due (or
     /// `now` is set).
     pub(super) fn store_flush(&mut self, force: bool) {
-        if !force && self.store.last_flush.elapsed() < FLUSH_EVERY {
+        if self.store.ended || (!force && self.store.last_flush.elapsed() < FLUSH_EVERY) {
             return;
         }
         self.store.last_flush = Instant::now();
@@ -156,6 +157,7 @@ impl MatchTask {
             }),
         };
         debug_assert_eq!(listed.ticks, ended.ticks);
+        self.store.ended = true;
         if self.store.begun
             && self
                 .settings

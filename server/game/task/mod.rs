@@ -293,6 +293,10 @@ impl<'a> Reading<'a> {
 pub(super) struct StoreProgress {
     /// The store has the match's start.
     pub(super) begun: bool,
+    /// The match's end went to the store: nothing more of it does (a match another server
+    /// began and this one adopted no longer takes writes from it once finished, and any
+    /// write then would be refused and logged).
+    pub(super) ended: bool,
     pub(super) last_flush: Instant,
     /// The tick of the newest checkpoint the store has (or was sent), if any.
     pub(super) last_checkpoint: Option<u64>,
@@ -476,6 +480,7 @@ fn spawn(
         store: StoreProgress {
             // A resumed match's start is in the store already.
             begun: catch_up.is_some(),
+            ended: false,
             last_flush: now,
             last_checkpoint,
             checkpoint_bytes: admission::checkpoint_bytes(&world.arena.def, &world.config),
@@ -634,8 +639,11 @@ impl MatchTask {
                 req = rx.recv() => {
                     let Some(req) = req else { break };
                     if let Request::Suspend = req {
-                        self.store_flush(true);
-                        tracing::info!(tick = self.world.tick, "match suspended: the store has it to resume");
+                        // A finished match has nothing to resume: it only ends.
+                        if self.world.status == MatchStatus::Running {
+                            self.store_flush(true);
+                            tracing::info!(tick = self.world.tick, "match suspended: the store has it to resume");
+                        }
                         break;
                     }
                     if self.lease_lapsed() {

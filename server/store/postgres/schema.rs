@@ -317,7 +317,8 @@ impl Statements {
                      SELECT seq, ROW_NUMBER() OVER w AS k, (SUM(bytes) OVER w)::BIGINT AS total
                      FROM matches WHERE ended_at IS NOT NULL
                      WINDOW w AS (ORDER BY seq DESC)
-                   ) ranked WHERE k > $1 OR total > $2)",
+                   ) ranked WHERE k > $1
+                     OR total > $2 - (SELECT COALESCE(SUM(octet_length(model)), 0) FROM policies))",
             )?,
             // A map another server is storing a match with right now is locked: skipped.
             forget_maps: c.prepare(
