@@ -81,6 +81,18 @@ where
     }
 }
 
+/// Waits until the page plays match `id` as a player, its snapshots coming.
+async fn playing(browser: &mut cdp::Browser, id: &str) {
+    browser
+        .wait_for(
+            &format!(
+                "__lasertag.matchId === '{id}' && __lasertag.role === 'player' && __lasertag.connected && __lasertag.snapshots > 5"
+            ),
+            30,
+        )
+        .await;
+}
+
 fn metric(text: &str, name: &str) -> Option<f64> {
     text.lines()
         .find_map(|l| l.strip_prefix(name)?.trim().parse().ok())
@@ -382,14 +394,7 @@ async fn a_page_on_one_node_plays_a_match_hosted_on_another() {
     browser
         .eval(&format!("{row}.querySelector('button.play').click()"))
         .await;
-    browser
-        .wait_for(
-            &format!(
-                "__lasertag.matchId === '{id}' && __lasertag.role === 'player' && __lasertag.connected && __lasertag.snapshots > 5"
-            ),
-            20,
-        )
-        .await;
+    playing(&mut browser, &id).await;
     assert_eq!(browser.eval("__lasertag.base").await, json!(b.url("")));
     assert_eq!(browser.eval("location.origin").await, json!(a.url("")));
     let on_b = listing(&http, &b).await;
@@ -483,14 +488,7 @@ async fn people_who_queue_on_different_nodes_play_together() {
     };
     let id = seat["match_id"].as_str().unwrap().to_owned();
     // The page plays the same match, on a.
-    browser
-        .wait_for(
-            &format!(
-                "__lasertag.matchId === '{id}' && __lasertag.role === 'player' && __lasertag.connected && __lasertag.snapshots > 5"
-            ),
-            30,
-        )
-        .await;
+    playing(&mut browser, &id).await;
     assert_eq!(browser.eval("__lasertag.base").await, json!(a.url("")));
     let on_a = listing(&http, &a).await;
     let listed = on_a

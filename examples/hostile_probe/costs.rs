@@ -60,6 +60,14 @@ pub(crate) async fn command_cost(ctx: &Ctx) -> Result<Got, String> {
     ))
 }
 
+/// An opponent's command of 1,000 waypoints on `office` (~12 KB of JSON).
+fn thousand_waypoints() -> serde_json::Value {
+    let route: Vec<[f64; 2]> = (0..1000)
+        .map(|k| [2.0 + (k % 20) as f64, 2.0 + (k / 100) as f64])
+        .collect();
+    json!({ "waypoints": route })
+}
+
 /// Commands of 1,000 waypoints to an API-driven opponent until the match refuses them (or
 /// 2,000 were taken): what the match records for its replay grows with each.
 pub(crate) async fn inputs_growth(ctx: &Ctx) -> Result<Got, String> {
@@ -67,10 +75,7 @@ pub(crate) async fn inputs_growth(ctx: &Ctx) -> Result<Got, String> {
     let body = json!({"map": "office", "opponents": 1, "opponent_control": "api",
                       "clock": "manual"});
     let (_, id, token) = ctx.create(&body).await?;
-    let route: Vec<[f64; 2]> = (0..1000)
-        .map(|k| [2.0 + (k % 20) as f64, 2.0 + (k / 100) as f64])
-        .collect();
-    let command = json!({ "waypoints": route });
+    let command = thousand_waypoints();
     let path = format!("/api/matches/{id}/opponents/o0/command");
     let mut statuses = BTreeMap::new();
     let mut refusal = None;
@@ -101,10 +106,7 @@ pub(crate) async fn command_memory(ctx: &Ctx) -> Result<Got, String> {
     let body = json!({"map": "office", "opponents": 1, "opponent_control": "api",
                       "planner": "idle", "time_limit_s": 3600});
     let (_, id, token) = ctx.create(&body).await?;
-    let route: Vec<[f64; 2]> = (0..1000)
-        .map(|k| [2.0 + (k % 20) as f64, 2.0 + (k / 100) as f64])
-        .collect();
-    let command = json!({ "waypoints": route });
+    let command = thousand_waypoints();
     let path = format!("/api/matches/{id}/opponents/o0/command");
     let mut statuses = BTreeMap::new();
     let mut refusal = None;
