@@ -93,6 +93,12 @@ async fn playing(browser: &mut cdp::Browser, id: &str) {
         .await;
 }
 
+/// `server`'s metrics, as Prometheus reads them.
+async fn metrics_of(http: &reqwest::Client, server: &Server) -> String {
+    let r = http.get(server.url("/metrics")).send().await;
+    r.expect("the metrics answer").text().await.expect("text")
+}
+
 fn metric(text: &str, name: &str) -> Option<f64> {
     text.lines()
         .find_map(|l| l.strip_prefix(name)?.trim().parse().ok())
@@ -141,14 +147,7 @@ async fn three_nodes_list_redirect_place_lose_a_killed_node_and_drain_one() {
             "other nodes' summaries are whole: {listed}"
         );
     }
-    let metrics = http
-        .get(a.url("/metrics"))
-        .send()
-        .await
-        .unwrap()
-        .text()
-        .await
-        .unwrap();
+    let metrics = metrics_of(&http, &a).await;
     assert_eq!(metric(&metrics, "lasertag_fleet_nodes"), Some(3.0));
     assert!(metric(&metrics, "lasertag_fleet_redis_round_trips_total") > Some(0.0));
 
@@ -423,15 +422,7 @@ async fn people_who_queue_on_different_nodes_play_together() {
     let b = node(&redis, "b", &[]);
     let http = reqwest::Client::new();
     until(10, "b sees a", || async {
-        let text = http
-            .get(b.url("/metrics"))
-            .send()
-            .await
-            .unwrap()
-            .text()
-            .await
-            .unwrap();
-        metric(&text, "lasertag_fleet_nodes") == Some(2.0)
+        metric(&metrics_of(&http, &b).await, "lasertag_fleet_nodes") == Some(2.0)
     })
     .await;
     // The queue is the lowest id's: b sends its newcomers to a.

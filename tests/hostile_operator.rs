@@ -141,17 +141,12 @@ async fn a_finished_match_is_not_suspended_nor_written_at_a_stop() {
     let data = common::temp_dir("operator-stop").display().to_string();
     let s = Server::start(&serve_args(&data, &[]));
     let http = reqwest::Client::new();
-    let made: serde_json::Value = http
-        .post(s.url("/api/matches"))
-        .json(&json!({"map": "office", "clock": "manual", "time_limit_s": 5, "seed": 3}))
-        .send()
-        .await
-        .unwrap()
-        .json()
-        .await
-        .unwrap();
-    let id = made["id"].as_str().unwrap().to_string();
-    let token = made["owner_token"].as_str().unwrap().to_string();
+    let (id, token) = process::create_with(
+        &http,
+        &s,
+        json!({"map": "office", "clock": "manual", "time_limit_s": 5, "seed": 3}),
+    )
+    .await;
     let state = process::step(&http, &s, &id, &token, 200).await;
     assert_eq!(state["status"], "finished", "{state}");
     // A few of the task's housekeeping rounds, each of which may flush to the store.

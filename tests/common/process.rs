@@ -133,12 +133,20 @@ impl Server {
 
 /// A manual match on `s`: (id, owner token).
 pub async fn create(client: &reqwest::Client, s: &Server, seed: u64) -> (String, String) {
+    create_with(
+        client,
+        s,
+        json!({"map": "office", "robots": 2, "opponents": 2, "clock": "manual",
+            "opponent_bot": "evade", "seed": seed}),
+    )
+    .await
+}
+
+/// `POST /api/matches` of `body` on `s`: the match's id and owner token.
+pub async fn create_with(client: &reqwest::Client, s: &Server, body: Value) -> (String, String) {
     let r: Value = client
         .post(s.url("/api/matches"))
-        .json(
-            &json!({"map": "office", "robots": 2, "opponents": 2, "clock": "manual",
-            "opponent_bot": "evade", "seed": seed}),
-        )
+        .json(&body)
         .send()
         .await
         .unwrap()
