@@ -62,8 +62,12 @@ pub struct Inputs(Source);
 /// Where they are.
 #[derive(Debug, Clone)]
 enum Source {
-    /// All of them, oldest first.
-    Memory(Arc<[(u64, WorldInput)]>),
+    /// All of them, oldest first, and what they take (counted once: they never change, and
+    /// the history's budget asks on every replay it keeps).
+    Memory {
+        all: Arc<[(u64, WorldInput)]>,
+        bytes: u64,
+    },
     /// In the store, chunk by chunk; only their index here.
     Stored {
         store: Arc<Store>,
@@ -84,7 +88,11 @@ pub struct Position {
 impl Inputs {
     /// `inputs`, all in memory.
     pub fn memory(inputs: Vec<(u64, WorldInput)>) -> Inputs {
-        Inputs(Source::Memory(inputs.into()))
+        let bytes = inputs.iter().map(|(_, i)| bytes_of(i)).sum();
+        Inputs(Source::Memory {
+            all: inputs.into(),
+            bytes,
+        })
     }
 
     /// The inputs of the stored match `id`, from its `chunks` as the store gave them: kept
@@ -135,7 +143,7 @@ impl Inputs {
     /// What holding them costs: all of them in memory, or the index.
     pub fn bytes(&self) -> u64 {
         match &self.0 {
-            Source::Memory(all) => all.iter().map(|(_, i)| bytes_of(i)).sum(),
+            Source::Memory { bytes, .. } => *bytes,
             Source::Stored { chunks, .. } => (chunks.len() * std::mem::size_of::<Chunk>()) as u64,
         }
     }
@@ -143,7 +151,7 @@ impl Inputs {
     /// A walk that starts at the first input applied at `tick` or later.
     pub fn walk_from(&self, tick: u64) -> Position {
         let next = match &self.0 {
-            Source::Memory(all) => all.partition_point(|(t, _)| *t < tick),
+            Source::Memory { all, .. } => all.partition_point(|(t, _)| *t < tick),
             Source::Stored { chunks, .. } => chunks.partition_point(|c| c.last_tick < tick),
         };
         Position {
@@ -161,7 +169,7 @@ impl Inputs {
         mut apply: impl FnMut(&WorldInput),
     ) -> Result<(), InputsError> {
         match &self.0 {
-            Source::Memory(all) => {
+            Source::Memory { all, .. } => {
                 while let Some((t, input)) = all.get(at.next)
                     && *t <= tick
                 {
