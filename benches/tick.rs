@@ -152,24 +152,29 @@ fn checkpoint(c: &mut Criterion) {
 }
 
 /// One step of the research environment's episode (`core::env`, what `lasertag_env`'s
-/// in-process engine runs): office, 2 robots driven by actions against a `wander` bot, the
-/// team tracker at its minimum (no observation reads it), observations packed. `default`
-/// has every robot localising; `light` turns the localiser off (each robot's estimate its
-/// odometry), the settings of docs/research.md's "light" rows.
+/// in-process engine runs): office, 2 robots driven by actions against a `wander` bot,
+/// observations packed. `belief` is the environments' default: every robot localising and
+/// the team tracker at its default size, whose belief the observation carries. The plain
+/// row has the tracker at its minimum (`team_tracker=False`); `light` also turns the
+/// localiser off (each robot's estimate its odometry), the settings of docs/research.md's
+/// "light" rows.
 fn env_step(c: &mut Criterion) {
     use lasertag_core::env::{EnvSpec, Episode, Layout, Rewards};
     let store = MapStore::load_dir(&Path::new(env!("CARGO_MANIFEST_DIR")).join("maps")).unwrap();
     let arena = store.get("office").unwrap().arena.clone();
-    for (name, localisation) in [
-        ("env/step_office_2r_1o", true),
-        ("env/step_office_2r_1o_light", false),
+    for (name, localisation, belief) in [
+        ("env/step_office_2r_1o_belief", true, true),
+        ("env/step_office_2r_1o", true, false),
+        ("env/step_office_2r_1o_light", false, false),
     ] {
         let mut config = MatchConfig {
             planner: PlannerKind::Api,
             localisation,
             ..MatchConfig::default()
         };
-        config.tracker.particles_per_role = 10;
+        if !belief {
+            config.tracker.particles_per_role = 10;
+        }
         let p = &config.physics;
         let layout = Layout::new(
             2,

@@ -20,6 +20,7 @@ use std::sync::Arc;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
+use crate::nav::ReachCache;
 use crate::sim::arena::Arena;
 use crate::sim::{AgentId, TICK_HZ};
 use crate::tracker::features;
@@ -285,6 +286,8 @@ pub struct Episode {
     tags: Vec<u32>,
     /// The match's time limit in ticks, as the HTTP backend computes it from the summary.
     limit_ticks: f64,
+    /// Each robot's last search for its belief features (asked every step).
+    reach: Vec<ReachCache>,
 }
 
 impl Episode {
@@ -298,6 +301,7 @@ impl Episode {
         let world = World::new(arena, config)?;
         Ok(Episode {
             tags: vec![0; world.robots.len()],
+            reach: vec![ReachCache::default(); world.robots.len()],
             world,
             steps: 0,
             limit_ticks: (limit_s * TICK_HZ as f64).max(1.0),
@@ -314,15 +318,19 @@ impl Episode {
     }
 
     /// Every robot's vector into `out` (robots × `layout.size()`), as after a reset.
-    pub fn observe_start(&self, spec: &EnvSpec, out: &mut [f32]) {
+    pub fn observe_start(&mut self, spec: &EnvSpec, out: &mut [f32]) {
         self.observe(spec, 0.0, out);
     }
 
     /// Every robot's vector into `out` (robots × `layout.size()`).
-    pub fn observe(&self, spec: &EnvSpec, time_fraction: f64, out: &mut [f32]) {
+    pub fn observe(&mut self, spec: &EnvSpec, time_fraction: f64, out: &mut [f32]) {
         let size = spec.layout.size();
-        for (i, row) in out.chunks_exact_mut(size).enumerate() {
-            if let Some(o) = self.world.observation(i) {
+        for ((i, row), reach) in out
+            .chunks_exact_mut(size)
+            .enumerate()
+            .zip(self.reach.iter_mut())
+        {
+            if let Some(o) = self.world.observation_with(i, reach) {
                 spec.layout.encode(&o, i, time_fraction, row);
             }
         }

@@ -237,7 +237,11 @@ impl ReachField {
     /// The field from the passable cell nearest to `from` out to `reach` metres; `None` when
     /// no passable cell is near.
     pub fn new(grid: &ClearanceGrid, from: Point2<f32>, reach: f32) -> Option<ReachField> {
-        let start = start_cell(grid, from)?;
+        Some(ReachField::from_start(grid, start_cell(grid, from)?, reach))
+    }
+
+    /// The field from grid cell `start` (passable) out to `reach` metres.
+    fn from_start(grid: &ClearanceGrid, start: usize, reach: f32) -> ReachField {
         let scale = grid.cell / STRAIGHT as f32;
         let limit = units_within(reach, scale);
         // A step moves one row or column at most and costs at least STRAIGHT units: no cell
@@ -259,7 +263,7 @@ impl ReachField {
         ) {
             Ok(search) | Err(Exhausted(search)) => search,
         };
-        Some(ReachField {
+        ReachField {
             col0,
             row0,
             cols,
@@ -269,7 +273,7 @@ impl ReachField {
             prev,
             limit,
             scale,
-        })
+        }
     }
 
     /// Cells of the window: the length a [`ReachField::waypoint_ahead`] memo needs.
@@ -332,6 +336,40 @@ impl ReachField {
 
 /// The most travel units whose distance in metres (`units × scale` in f32) is within
 /// `reach`: one unit more is past it.
+/// The last [`ReachField`] of one walker on one grid (a robot in its match), kept while the
+/// walker's start cell stays the same: a field depends on nothing else, so a robot that has
+/// not left its cell since the last search is given the same field without a search. A
+/// robot at full speed crosses a cell in about two ticks, and one standing still never.
+#[derive(Debug, Clone, Default)]
+pub struct ReachCache {
+    /// The field, with the start cell and the reach (as bits) it was searched for.
+    kept: Option<(usize, u32, ReachField)>,
+    /// The field's [`ReachField::waypoint_ahead`] answers so far.
+    memo: Vec<u32>,
+}
+
+impl ReachCache {
+    /// [`ReachField::new`]`(grid, from, reach)` with its waypoint memo, from the cache when
+    /// the start cell and the reach are the last call's. `grid` must be every call's.
+    pub fn field(
+        &mut self,
+        grid: &ClearanceGrid,
+        from: Point2<f32>,
+        reach: f32,
+    ) -> Option<(&ReachField, &mut [u32])> {
+        let start = start_cell(grid, from)?;
+        let key = (start, reach.to_bits());
+        if !matches!(&self.kept, Some((s, r, _)) if (*s, *r) == key) {
+            let field = ReachField::from_start(grid, start, reach);
+            self.memo.clear();
+            self.memo.resize(field.window_len(), u32::MAX);
+            self.kept = Some((start, key.1, field));
+        }
+        let (_, _, field) = self.kept.as_ref()?;
+        Some((field, &mut self.memo))
+    }
+}
+
 fn units_within(reach: f32, scale: f32) -> u32 {
     let mut limit = (reach / scale).max(0.0).floor().min(u32::MAX as f32 / 2.0) as u32;
     while limit > 0 && limit as f32 * scale > reach {

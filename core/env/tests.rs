@@ -69,7 +69,7 @@ fn the_vector_has_every_part_and_stays_in_its_bounds() {
     // 181 beams, pose 4, spread, 2 status, time, 3 per detection, 9 per teammate, then the
     // belief: a grid of 16, the 8 path sectors, 2 roles of 7 and the untagged share.
     assert_eq!(layout.size(), 181 + 4 + 1 + 2 + 1 + 3 + 9 + 16 + 8 + 14 + 1);
-    let episode = Episode::new(room(), &spec, 3).unwrap();
+    let mut episode = Episode::new(room(), &spec, 3).unwrap();
     let mut obs = vec![f32::NAN; 2 * layout.size()];
     episode.observe_start(&spec, &mut obs);
     for row in obs.chunks(layout.size()) {

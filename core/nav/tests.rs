@@ -293,3 +293,40 @@ fn a_waypoint_ahead_is_where_the_path_sets_off() {
     let near = g.cell_of(Point2::new(1.5, 1.0)).unwrap();
     assert_eq!(f.waypoint_ahead(near, 1.0, &mut memo), Some(near));
 }
+
+#[test]
+fn a_kept_reach_field_answers_as_a_fresh_one_from_wherever_its_walker_stands() {
+    let a = two_rooms();
+    let g = &a.grid;
+    let mut cache = ReachCache::default();
+    // A walk across the door in steps smaller than a cell: some keep the cell, some leave it.
+    let walk: Vec<Point2<f32>> = (0..60)
+        .map(|i| Point2::new(3.0 + i as f32 * 0.04, 4.6))
+        .collect();
+    let mut searched = 0;
+    let mut last_start = None;
+    for from in walk {
+        let fresh = ReachField::new(g, from, 6.0).unwrap();
+        let mut fresh_memo = vec![u32::MAX; fresh.window_len()];
+        let start = start_cell(g, from).unwrap();
+        if last_start != Some(start) {
+            searched += 1;
+            last_start = Some(start);
+        }
+        let (kept, memo) = cache.field(g, from, 6.0).unwrap();
+        for cell in (0..g.len()).step_by(7) {
+            assert_eq!(
+                kept.metres(cell),
+                fresh.metres(cell),
+                "cell {cell} from {from:?}"
+            );
+            assert_eq!(
+                kept.waypoint_ahead(cell, 1.0, memo),
+                fresh.waypoint_ahead(cell, 1.0, &mut fresh_memo),
+                "cell {cell} from {from:?}"
+            );
+        }
+    }
+    // The walk both stayed in cells and left them: the cache was used and renewed.
+    assert!((10..60).contains(&searched), "{searched} cells on the walk");
+}

@@ -21,7 +21,7 @@
 
 use nalgebra::{Point2, Vector2};
 
-use crate::nav::ReachField;
+use crate::nav::{ReachCache, ReachField};
 use crate::sim::Pose;
 use crate::sim::arena::ClearanceGrid;
 use crate::tracker::Role;
@@ -81,6 +81,18 @@ impl BeliefFeatures {
     /// The features of `roles` seen from `pose` (the robot's own estimate), in a match of
     /// `opponents` opponents on the arena whose clearance grid is `nav`.
     pub fn of(roles: &[Role], pose: Pose, opponents: usize, nav: &ClearanceGrid) -> BeliefFeatures {
+        BeliefFeatures::of_with(roles, pose, opponents, nav, &mut ReachCache::default())
+    }
+
+    /// [`BeliefFeatures::of`] with the robot's own [`ReachCache`]: the same values, without
+    /// a search while the robot's estimate stays in the cell of the last one.
+    pub fn of_with(
+        roles: &[Role],
+        pose: Pose,
+        opponents: usize,
+        nav: &ClearanceGrid,
+        reach: &mut ReachCache,
+    ) -> BeliefFeatures {
         let mut out = BeliefFeatures::default();
         let (sin, cos) = (pose.theta as f64).sin_cos();
         let origin = Vector2::new(pose.pos.x as f64, pose.pos.y as f64);
@@ -95,7 +107,10 @@ impl BeliefFeatures {
         let total = untagged.iter().fold(0.0f64, |t, r| t + r.count as f64);
         let mut grid = [0.0f64; GRID_CELLS];
         let mut paths = [0.0f64; SECTORS];
-        let mut ways = Ways::new(nav, pose.pos);
+        let mut ways = Ways {
+            nav,
+            field: reach.field(nav, pose.pos, PATH_REACH_M),
+        };
         let mut summaries: Vec<(f64, [f64; ROLE_VALUES])> = Vec::with_capacity(untagged.len());
         for role in &untagged {
             let (particles, weights) = (role.particles(), role.weights());
@@ -162,23 +177,16 @@ impl BeliefFeatures {
 /// [`PATH_REACH_M`] from its estimate, and the waypoints found so far.
 struct Ways<'a> {
     nav: &'a ClearanceGrid,
-    field: Option<ReachField>,
-    memo: Vec<u32>,
+    field: Option<(&'a ReachField, &'a mut [u32])>,
 }
 
-impl<'a> Ways<'a> {
-    fn new(nav: &'a ClearanceGrid, from: Point2<f32>) -> Ways<'a> {
-        let field = ReachField::new(nav, from, PATH_REACH_M);
-        let memo = vec![u32::MAX; field.as_ref().map_or(0, ReachField::window_len)];
-        Ways { nav, field, memo }
-    }
-
+impl Ways<'_> {
     /// The point [`PATH_AHEAD_M`] along the shortest path to `p` (or `p`'s cell when
     /// nearer); `None` when `p` is beyond the reach or where no robot fits.
     fn toward(&mut self, p: Point2<f32>) -> Option<Point2<f32>> {
-        let field = self.field.as_ref()?;
+        let (field, memo) = self.field.as_mut()?;
         let cell = self.nav.cell_of(p)?;
-        let way = field.waypoint_ahead(cell, PATH_AHEAD_M, &mut self.memo)?;
+        let way = field.waypoint_ahead(cell, PATH_AHEAD_M, memo)?;
         Some(self.nav.centre(way))
     }
 }

@@ -13,7 +13,7 @@
 //! radio delivered of its teammates. The referee's truth stays out.
 
 use super::*;
-use crate::nav::{PathFollower, path_within, steer};
+use crate::nav::{PathFollower, ReachCache, path_within, steer};
 use crate::tracker::features::BeliefFeatures;
 
 /// Waypoints one order may carry: each is a path search over the navigation grid.
@@ -275,6 +275,16 @@ impl World {
 
     /// What robot `index` knows now, or `None` for a robot the match does not have.
     pub fn observation(&self, index: usize) -> Option<RobotObservation<'_>> {
+        self.observation_with(index, &mut ReachCache::default())
+    }
+
+    /// [`World::observation`] with the robot's own [`ReachCache`] for its belief features:
+    /// the same observation, cheaper when asked every tick.
+    pub fn observation_with(
+        &self,
+        index: usize,
+        reach: &mut ReachCache,
+    ) -> Option<RobotObservation<'_>> {
         let r = self.robots.get(index)?;
         let frozen = self.robot_frozen(index);
         let estimates: Vec<Pose> = self.robots.iter().map(|r| r.estimate).collect();
@@ -309,11 +319,12 @@ impl World {
                 .team
                 .belief_of(index, self.robots.len())
                 .map(|t| {
-                    BeliefFeatures::of(
+                    BeliefFeatures::of_with(
                         &t.roles,
                         r.estimate,
                         self.config.opponents,
                         &self.arena.grid,
+                        reach,
                     )
                 })
                 .unwrap_or_default(),
