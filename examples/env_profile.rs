@@ -7,7 +7,7 @@
 //! `belief` (the team tracker at its default size, whose belief the observation carries:
 //! `vector_env`'s default), `plain` (`team_tracker=False`) and `light` (also no localiser).
 //! Episodes of 1,200 steps (the environments' `max_steps`) follow each other with seeds
-//! 0, 1, 2, …
+//! 0, 1, 2, …; the robots' actions are random, as the benchmark's (`--actions`).
 //!
 //! It prints the wall time a step and a checksum of every observation vector, reward and
 //! world digest of the run: two builds that print the same checksum stepped the same
@@ -26,9 +26,11 @@ use std::time::Instant;
 
 use clap::{Parser, ValueEnum};
 use lasertag::maps::store::MapStore;
-use lasertag_core::env::{EnvSpec, Episode, Layout, Rewards};
+use lasertag_core::env::{ACTION_SIZE, EnvSpec, Episode, Layout, Rewards};
 use lasertag_core::planner::PlannerKind;
 use lasertag_core::world::MatchConfig;
+use rand::{RngExt, SeedableRng};
+use rand_chacha::ChaCha8Rng;
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
 enum Setting {
@@ -47,6 +49,17 @@ struct Args {
     /// Steps of the run, over as many 1,200-step episodes as it takes.
     #[arg(long, default_value_t = 20_000)]
     steps: u64,
+    /// The robots' actions: uniform random values from a table of 64 steps, as
+    /// `python/benchmarks/backends.py` steps them, or `roam` (forward and a slow turn, tag
+    /// held, every step: as a policy that hunts moves).
+    #[arg(long, value_enum, default_value = "random")]
+    actions: Actions,
+}
+
+#[derive(Clone, Copy, Debug, ValueEnum)]
+enum Actions {
+    Random,
+    Roam,
 }
 
 /// The environments' `max_steps`.
@@ -85,19 +98,28 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let size = spec.layout.size();
     let mut obs = vec![0.0f32; robots * size];
     let mut rewards = vec![0.0f64; robots];
-    // Forward and a slow turn, tag held, for each robot: they roam and fire as a policy's
-    // would.
-    let actions: Vec<f32> = [0.8f32, 0.3, 1.0, 0.6, -0.2, 0.0]
-        .into_iter()
-        .cycle()
-        .take(robots * 3)
-        .collect();
+    let per_step = robots * ACTION_SIZE;
+    let actions: Vec<f32> = match args.actions {
+        Actions::Random => {
+            let mut rng = ChaCha8Rng::seed_from_u64(0);
+            (0..64 * per_step)
+                .map(|_| rng.random_range(-1.0f32..1.0))
+                .collect()
+        }
+        Actions::Roam => [0.8f32, 0.3, 1.0, 0.6, -0.2, 0.0]
+            .into_iter()
+            .cycle()
+            .take(per_step)
+            .collect(),
+    };
+    let mut table = actions.chunks_exact(per_step).cycle();
     let mut seed = 0;
     let mut episode = Episode::new(arena.clone(), &spec, seed)?;
     let mut sum = Checksum::default();
     let start = Instant::now();
     for _ in 0..args.steps {
-        let out = episode.step(&spec, &actions, &mut obs, &mut rewards);
+        let step_actions = table.next().ok_or("no actions")?;
+        let out = episode.step(&spec, step_actions, &mut obs, &mut rewards);
         sum.add(obs.iter().map(|v| v.to_bits() as u64));
         sum.add(rewards.iter().map(|r| r.to_bits()));
         if out.terminated || out.truncated {

@@ -68,12 +68,17 @@ if "$VENV_PY" -m pip --version >/dev/null 2>&1; then
   # The package's own version does not change with its code: reinstall it every run.
   "$VENV_PY" -m pip install -q --disable-pip-version-check --no-deps --force-reinstall ./python
   LASERTAG_BIN=target/debug/lasertag "$PY_DIR/venv/bin/python" -m pytest python/tests
+  BENCH_PY="$VENV_PY"
 else
   # A Python without venv (Debian's python3 without python3-venv): install into a folder.
   rm -rf "$PY_DIR/pkgs"
   python3 -m pip install -q --disable-pip-version-check -c python/constraints.txt --target "$PY_DIR/pkgs" ./python pytest
   LASERTAG_BIN=target/debug/lasertag PYTHONPATH="$PWD/$PY_DIR/pkgs" python3 -m pytest python/tests
+  BENCH_PY="env PYTHONPATH=$PWD/$PY_DIR/pkgs python3"
 fi
+# docs/research.md's speed benchmark cannot rot: its in-process rows, a fraction of a second
+# each (the figures are the script's to print, not a test's to judge).
+$BENCH_PY python/benchmarks/backends.py --seconds 0.3 --warmup 0.1 --no-http --no-simple-tag --worlds 1 64
 
 # The training example cannot rot: a few hundred PPO steps on the in-process engine, the
 # evaluation and the ONNX export, in a venv of its own (PyTorch, pinned, is installed for

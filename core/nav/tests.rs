@@ -330,3 +330,37 @@ fn a_kept_reach_field_answers_as_a_fresh_one_from_wherever_its_walker_stands() {
     // The walk both stayed in cells and left them: the cache was used and renewed.
     assert!((10..60).contains(&searched), "{searched} cells on the walk");
 }
+
+#[test]
+fn the_centre_ahead_of_a_point_is_its_cells_waypoint() {
+    let a = two_rooms();
+    let g = &a.grid;
+    for from in [
+        Point2::new(1.0, 1.0),
+        Point2::new(4.6, 4.6),
+        Point2::new(9.5, 5.5),
+    ] {
+        let f = ReachField::new(g, from, 6.0).unwrap();
+        let (mut memo, mut memo2) = (
+            vec![u32::MAX; f.window_len()],
+            vec![u32::MAX; f.window_len()],
+        );
+        let mut found = 0;
+        for i in -3..110 {
+            for j in -3..70 {
+                let p = Point2::new(i as f32 * 0.097, j as f32 * 0.091);
+                let by_cell = g
+                    .cell_of(p)
+                    .and_then(|c| f.waypoint_ahead(c, 1.0, &mut memo))
+                    .map(|w| g.centre(w));
+                assert_eq!(
+                    f.centre_ahead(g, p, 1.0, &mut memo2),
+                    by_cell,
+                    "{p:?} from {from:?}"
+                );
+                found += usize::from(by_cell.is_some());
+            }
+        }
+        assert!(found > 1000, "{found} points within reach of {from:?}");
+    }
+}

@@ -185,9 +185,7 @@ impl Ways<'_> {
     /// nearer); `None` when `p` is beyond the reach or where no robot fits.
     fn toward(&mut self, p: Point2<f32>) -> Option<Point2<f32>> {
         let (field, memo) = self.field.as_mut()?;
-        let cell = self.nav.cell_of(p)?;
-        let way = field.waypoint_ahead(cell, PATH_AHEAD_M, memo)?;
-        Some(self.nav.centre(way))
+        field.centre_ahead(self.nav, p, PATH_AHEAD_M, memo)
     }
 }
 
