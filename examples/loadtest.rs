@@ -10,9 +10,10 @@
 //! default planner and tracker against 3 evading bots, so that few matches end within the
 //! window), spreads the spectators over them round-robin (belief on,
 //! as spectators have it by default), reads for `--seconds`, then reports:
-//! - each match's tick rate and per-tick compute time (p50/p99/max, measured inside the match
-//!   task: the step plus building the published frame; from `/api/matches/{id}/stats`) and its
-//!   late ticks;
+//! - each match's tick rate (its ticks over the time between its two reads of its stats, each
+//!   timed at the middle of its round trip) and per-tick compute time (p50/p99/max, measured
+//!   inside the match task: the step plus building the published frame; from
+//!   `/api/matches/{id}/stats`) and its late ticks;
 //! - snapshots per second per client (min, 1st percentile, median) and clients starved
 //!   (under 15 Hz);
 //! - bytes per snapshot, with and without the belief.
@@ -390,10 +391,15 @@ async fn run(args: Args) -> Result<(), String> {
     }
     // Ticks at the start and end of the measured window.
     tokio::time::sleep_until(start.into()).await;
+    // Each read is timed at the middle of its round trip: the reads are sequential and, at
+    // this load, tens of milliseconds each, so the last match's first read comes seconds
+    // after the window opens; dividing by the window instead of by the time between a
+    // match's own two reads would count those seconds as ticks the match never ran.
     let tick_at = |id: String| {
         let http = http.clone();
         let base = base.clone();
         async move {
+            let sent = Instant::now();
             let v: Value = http
                 .get(format!("{base}/api/matches/{id}/stats"))
                 .send()
@@ -402,13 +408,14 @@ async fn run(args: Args) -> Result<(), String> {
                 .json()
                 .await
                 .ok()?;
-            Some(v)
+            Some((sent + sent.elapsed() / 2, v))
         }
     };
     let mut first = Vec::new();
     for id in &ids {
         first.push(tick_at(id.clone()).await);
     }
+    let first_reads = start.elapsed();
     let mut stats: Vec<ClientStats> = Vec::new();
     for c in clients {
         stats.push(c.await.unwrap_or_default());
@@ -416,9 +423,11 @@ async fn run(args: Args) -> Result<(), String> {
     tokio::time::sleep_until(until.into()).await; // (when there are no spectators to wait for)
     let secs = args.seconds as f64;
     let mut last = Vec::new();
+    let last_from = Instant::now();
     for id in &ids {
         last.push(tick_at(id.clone()).await);
     }
+    let last_reads = last_from.elapsed();
     // Matches that ended during the window (robots tagged every bot) stop ticking: their tick
     // rate and their spectators' snapshot rate are not counted below.
     let summaries: Vec<Value> = match http.get(format!("{base}/api/matches")).send().await {
@@ -441,18 +450,19 @@ async fn run(args: Args) -> Result<(), String> {
     let mut late = 0;
     let mut lines = Vec::new();
     for ((a, b), done) in first.iter().zip(&last).zip(&finished) {
-        let (Some(a), Some(b)) = (a, b) else { continue };
+        let (Some((at_a, a)), Some((at_b, b))) = (a, b) else {
+            continue;
+        };
         let ticks = b["tick"].as_f64().unwrap_or(0.0) - a["tick"].as_f64().unwrap_or(0.0);
+        let rate = ticks / at_b.duration_since(*at_a).as_secs_f64().max(1e-3);
         lines.push(format!(
-            "{:.1} Hz p50 {} p99 {} µs",
-            ticks / secs,
-            b["tick_us_p50"],
-            b["tick_us_p99"]
+            "{rate:.1} Hz p50 {} p99 {} µs",
+            b["tick_us_p50"], b["tick_us_p99"]
         ));
         if *done {
             lines.push("  (finished during the window)".into());
         } else {
-            hz.push(ticks / secs);
+            hz.push(rate);
         }
         p50.push(b["tick_us_p50"].as_f64().unwrap_or(0.0));
         p99.push(b["tick_us_p99"].as_f64().unwrap_or(0.0));
@@ -471,6 +481,11 @@ async fn run(args: Args) -> Result<(), String> {
         "  tick rate        min {:.2} Hz, median {:.2} Hz (target 20)",
         pct(&hz, 0.0),
         pct(&hz, 0.5)
+    );
+    println!(
+        "                   (a match's ticks between its two reads of its stats; the reads of all matches took {:.1} s at the window's start, {:.1} s at its end)",
+        first_reads.as_secs_f64(),
+        last_reads.as_secs_f64()
     );
     println!(
         "  tick compute     p50 {:.0} µs (median over matches), p99 {:.0} µs (worst match {:.0} µs), max {:.0} µs",

@@ -60,3 +60,27 @@ fn every_shipped_map_and_setting_is_priced_within_one_and_a_half_times_its_measu
         }
     }
 }
+
+/// A match priced past `HEAVY_TICK_MS` runs its ticks off the runtime's workers, so that its
+/// long ticks do not hold the other matches' ticks and reads queued behind them: the `search`
+/// planner choosing every tick five deep over six branches is such a match on every shipped
+/// map, and every ordinary setting (its price near its p99 of about a millisecond) stays on
+/// the workers, where hundreds of matches tick without a thread hand-off each.
+#[test]
+fn only_a_deep_search_runs_its_ticks_off_the_workers() {
+    use lasertag::game::admission::holds_a_worker;
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let maps = MapStore::load_dir(&root.join("maps")).expect("the shipped maps load");
+    for m in maps.iter() {
+        for (setting, config) in calibration_settings() {
+            let price = match_on(&m.arena.def, &config);
+            assert_eq!(
+                holds_a_worker(&price),
+                setting == "search_deep_2r_3o",
+                "{} {setting}: priced {:.2} ms a tick",
+                m.arena.def.name,
+                price.tick_ms
+            );
+        }
+    }
+}

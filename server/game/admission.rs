@@ -304,6 +304,20 @@ pub fn match_on(def: &MapDef, config: &MatchConfig) -> Price {
     }
 }
 
+/// Milliseconds of a match's tick, at its price, past which the tick runs off the runtime's
+/// workers (`tokio::task::block_in_place`): a tick holds its worker until it ends, and
+/// every task queued on that worker (other matches' ticks, reads of them) waits as long.
+/// Ordinary matches are priced at 0.5–1.3 ms and stay on the workers (the hand-off wakes a
+/// thread, tens of microseconds, too dear for hundreds of matches at 20 Hz each); a
+/// `search` planner looking several levels deep every tick is priced at 10–16 ms, a fifth
+/// to a third of the period, and hands its worker's queue on.
+pub const HEAVY_TICK_MS: f64 = 2.0;
+
+/// Whether a match priced at `price` runs its ticks off the workers (see [`HEAVY_TICK_MS`]).
+pub fn holds_a_worker(price: &Price) -> bool {
+    price.tick_ms > HEAVY_TICK_MS
+}
+
 /// Microseconds of one robot's observation for a policy besides its belief features: the
 /// layout's encoding, the teammates, the detections (measured by `benches/policy.rs`).
 const POLICY_OBSERVATION_US: f64 = 4.0;

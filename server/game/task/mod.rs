@@ -474,6 +474,8 @@ fn spawn(
             None,
         ),
     };
+    let heavy_ticks =
+        admission::holds_a_worker(&admission::match_on(&world.arena.def, &world.config));
     let mut task = MatchTask {
         recording,
         archived: false,
@@ -514,6 +516,7 @@ fn spawn(
         late_ticks: 0,
         overruns: std::collections::VecDeque::with_capacity(OVERRUN_WINDOW),
         overrun_count: 0,
+        heavy_ticks,
     };
     task.reseat(seats);
     task.publish_summary();
@@ -610,6 +613,10 @@ struct MatchTask {
     /// Whether each of the last ticks overran, and how many did.
     overruns: std::collections::VecDeque<bool>,
     overrun_count: usize,
+    /// Whether a tick of this match is priced past `admission::HEAVY_TICK_MS`: its ticks
+    /// then run off the workers, so that the tasks queued behind it on its worker (other
+    /// matches' ticks, reads of them) are not held for the whole of a long tick.
+    heavy_ticks: bool,
 }
 
 impl MatchTask {
@@ -690,8 +697,10 @@ impl MatchTask {
                         self.settings.metrics.late_ticks.inc();
                     }
                     last_tick = Some(now);
-                    self.step();
-                    self.publish();
+                    off_the_workers(self.heavy_ticks, || {
+                        self.step();
+                        self.publish();
+                    });
                     self.record(now.elapsed());
                     if self.world.status == MatchStatus::Finished {
                         tracing::info!(tick = self.world.tick, winner = ?self.world.winner, "match finished");
@@ -707,7 +716,7 @@ impl MatchTask {
                         let mut done = 0;
                         while done < n {
                             let t = Instant::now();
-                            self.step();
+                            off_the_workers(self.heavy_ticks, || self.step());
                             self.record(t.elapsed());
                             done += 1;
                             let slice_over = slice.elapsed() >= STEP_SLICE;
