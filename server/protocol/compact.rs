@@ -28,7 +28,7 @@
 //! ```
 //!
 //! A role's points go as cells [`BELIEF_CELL_CM`] wide, about 1.2 bytes each
-//! ([`cells`]): they are most of what a spectator is sent.
+//! ([`cells`]): as pairs of centimetres they would be most of what a spectator is sent.
 //!
 //! `flags`: 1 spectator view, 2 belief, 4 slow parts, 8 finished, 16 robots won, 32
 //! opponents won, 64 `you` is a robot (a person on the robot team; else an opponent), 128

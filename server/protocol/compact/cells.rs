@@ -2,7 +2,7 @@
 //! (docs/api.md, "Compact snapshots").
 //!
 //! The points are particles the page draws as squares 7 cm wide (at least 2.5 px): at whole
-//! centimetres, 4 bytes a point, they were most of a spectator's bytes. Here each point is
+//! centimetres, 4 bytes a point, they would be most of a spectator's bytes. Here each point is
 //! rounded to a cell `cell` centimetres wide on a grid whose corner is the cloud's lowest
 //! x and y, and the cells are listed in raster order as gaps from one to the next, each in a
 //! Golomb-Rice code (`k` chosen for the role): a cloud of a few hundred points takes about
