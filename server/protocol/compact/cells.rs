@@ -76,7 +76,7 @@ pub fn encode(out: &mut Vec<u8>, points: &[[i32; 2]], cell: u16) {
         }
         bits.push(false);
         for i in (0..k).rev() {
-            bits.push(g >> i & 1 == 1);
+            bits.push((g >> i) & 1 == 1);
         }
     }
 }
@@ -136,7 +136,7 @@ pub fn decode(bytes: &[u8], cell: u16) -> Result<(Vec<[u32; 2]>, usize), CellsEr
     let mut bit = 0usize;
     let mut read = || {
         let byte = bytes.get(start + bit / 8).ok_or(CellsError::Overrun)?;
-        let b = byte >> (7 - bit % 8) & 1;
+        let b = (byte >> (7 - bit % 8)) & 1;
         bit += 1;
         Ok::<u64, CellsError>(u64::from(b))
     };
@@ -152,9 +152,9 @@ pub fn decode(bytes: &[u8], cell: u16) -> Result<(Vec<[u32; 2]>, usize), CellsEr
         }
         let mut low = 0u64;
         for _ in 0..k {
-            low = low << 1 | read()?;
+            low = (low << 1) | read()?;
         }
-        sum += quotient << k | low;
+        sum += (quotient << k) | low;
         if sum / columns > u64::from(u16::MAX) {
             return Err(CellsError::GapTooLong);
         }
