@@ -178,7 +178,7 @@ async fn compact_snapshots_are_small_and_say_what_the_json_says() {
     let welcome = player.json().await;
     assert_eq!(
         (welcome["protocol"].as_u64(), welcome["format"].as_str()),
-        (Some(2), Some("compact"))
+        (Some(3), Some("compact"))
     );
     assert_eq!(spectator.json().await["format"], "compact");
     let mut biggest = (0, 0);

@@ -50,8 +50,10 @@ async fn the_transport_is_published_with_the_servers_port_and_hash() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_spectator_gets_welcome_on_the_stream_and_snapshots_as_datagrams() {
     let s = server().await;
+    // Four robots: their scans pass a datagram's 1,024 bytes (three robots' fit, as does a
+    // belief), so those snapshots go on the stream.
     let id = s
-        .create_match(json!({"map": "office", "opponent_control": "bot"}))
+        .create_match(json!({"map": "office", "opponent_control": "bot", "robots": 4}))
         .await;
     let (url, hash) = at(&s, &format!("/ws/matches/{id}?format=compact")).await;
     let mut c = WtClient::connect(&url, &hash).await.expect("connects");

@@ -124,6 +124,7 @@ export class CompactDecoder {
     let belief;
     if (hasBelief) {
       belief = { tick: u32(), roles: [] };
+      const cell = u8();
       for (let n = u8(); n > 0; n--) {
         const role = { id: u32(), count: u8() };
         const bits = u8();
@@ -132,8 +133,26 @@ export class CompactDecoder {
         role.confidence = Math.round((u8() / 255) * 100) / 100;
         role.particles = u32();
         role.mean = [m(), m()];
+        // Cells `cell` cm wide, as Rice-coded gaps in raster order from the cloud's lowest
+        // x and y (server/protocol/compact/cells.rs): each point back in centimetres.
         const points = [];
-        for (let k = u16(); k > 0; k--) points.push(u16(), u16());
+        const count = u16();
+        if (count > 0) {
+          const x0 = u16(), y0 = u16(), columns = u16() + 1, k = u8();
+          const from = at;
+          let bit = 0;
+          const read = () => { const b = (d.getUint8(from + (bit >> 3)) >> (7 - (bit & 7))) & 1; bit++; return b; };
+          let sum = 0;
+          for (let i = 0; i < count; i++) {
+            let gap = 0;
+            while (read()) gap++;
+            // Doubled, not shifted: a gap may pass the 32 bits JavaScript's shifts keep.
+            for (let j = 0; j < k; j++) gap = gap * 2 + read();
+            sum += gap;
+            points.push(x0 + (sum % columns) * cell, y0 + Math.floor(sum / columns) * cell);
+          }
+          at = from + Math.ceil(bit / 8);
+        }
         role.points = points;
         belief.roles.push(role);
       }

@@ -337,7 +337,7 @@ impl Viewer {
             belief_every: BELIEF_EVERY,
             belief: self.belief,
             kinematics,
-            protocol: 2,
+            protocol: 3,
             format: if self.options.compact {
                 "compact"
             } else {

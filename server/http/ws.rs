@@ -234,7 +234,7 @@ impl Connection {
                 self.seat.as_ref().map_or(AgentId::Opponent(0), |s| s.body),
             ),
             rated: hub.summary.borrow().meta.rated,
-            protocol: 2,
+            protocol: 3,
             format: if self.compact { "compact" } else { "json" },
             belief: self.belief,
             limits: Limits {

@@ -23,9 +23,12 @@
 //!     name, connected, anonymous) [name: u8 bytes, UTF-8]
 //!     (an anonymous sighting, in a person on the robot team's view: index 255, theta 0,
 //!     bit 32 set, no control or name: where something is, not who or which way it faces)
-//! [belief: u32 tick | u8 roles, each: u32 id | u8 count | u8 bits (tagged, state ×2) |
-//!     u8 confidence (/255) | u32 particles | u16 mean x, y | u16 points, each u16 x, y]
+//! [belief: u32 tick | u8 cell (cm) | u8 roles, each: u32 id | u8 count | u8 bits (tagged,
+//!     state ×2) | u8 confidence (/255) | u32 particles | u16 mean x, y | points as cells]
 //! ```
+//!
+//! A role's points go as cells [`BELIEF_CELL_CM`] wide, about 1.2 bytes each
+//! ([`cells`]): as pairs of centimetres they would be most of what a spectator is sent.
 //!
 //! `flags`: 1 spectator view, 2 belief, 4 slow parts, 8 finished, 16 robots won, 32
 //! opponents won, 64 `you` is a robot (a person on the robot team; else an opponent), 128
@@ -53,6 +56,8 @@
 //! goes on the stream, its motion alone first as a datagram of kind 3 ([`KIND_MOTION`]):
 //! laid out as kind 1, shown, never a baseline (the whole of that tick follows).
 
+pub mod cells;
+
 use crate::game::view::{BeliefView, Frame, Visible};
 use lasertag_core::sim::AgentId;
 use lasertag_core::world::{ControlKind, MatchStatus, Side};
@@ -64,6 +69,9 @@ pub const ANONYMOUS_INDEX: u8 = u8::MAX;
 pub const SLOW_EVERY: u64 = 4;
 /// The belief comes with every this many ticks' snapshot (2.5 Hz), when switched on.
 pub const BELIEF_COMPACT_EVERY: u64 = 8;
+/// The cells a belief's points are rounded to, centimetres: under the 7 cm squares the page
+/// draws them as, so a point moves by at most 2 cm, a third of its square.
+pub const BELIEF_CELL_CM: u8 = 4;
 
 /// A coordinate in metres as centimetres, clamped to what a `u16` holds.
 fn cm(v: f32) -> u16 {
@@ -420,6 +428,7 @@ fn shown<'a, T>(agents: &'a [T], visible: Option<&[bool]>) -> Vec<(usize, &'a T)
 
 fn encode_belief(o: &mut Out, b: &BeliefView) {
     o.u32(b.tick.min(u32::MAX as u64) as u32);
+    o.u8(BELIEF_CELL_CM);
     o.count(b.roles.len());
     for r in b.roles.iter().take(u8::MAX as usize) {
         o.u32(r.id.min(u32::MAX as u64) as u32);
@@ -434,11 +443,7 @@ fn encode_belief(o: &mut Out, b: &BeliefView) {
         o.u32(r.particles.min(u32::MAX as usize) as u32);
         o.u16(cm(r.mean[0]));
         o.u16(cm(r.mean[1]));
-        let n = r.points.len().min(u16::MAX as usize);
-        o.u16(n as u16);
-        for p in &r.points[..n] {
-            o.point(*p);
-        }
+        cells::encode(&mut o.0, &r.points, u16::from(BELIEF_CELL_CM));
     }
 }
 
@@ -514,6 +519,44 @@ mod tests {
             apply_delta(&base, &d[..d.len() - 1]),
             Err(DeltaError::Overrun)
         );
+    }
+
+    #[test]
+    fn a_beliefs_points_go_as_cells_behind_each_roles_header() {
+        use crate::game::view::RoleView;
+        let role = |id: u64, points: Vec<[i32; 2]>| RoleView {
+            id,
+            count: 1,
+            tagged: false,
+            confidence: 1.0,
+            state: lasertag_core::tracker::Confidence::Valid,
+            particles: 500,
+            mean: [10.0, 5.0],
+            points,
+        };
+        let cloud: Vec<[i32; 2]> = (0..200).map(|i| [990 + i % 20, 480 + i / 5]).collect();
+        let b = BeliefView {
+            tick: 40,
+            roles: vec![role(3, cloud.clone()), role(4, vec![])],
+        };
+        let mut o = Out(Vec::new());
+        encode_belief(&mut o, &b);
+        let bytes = o.0;
+        assert_eq!(bytes[..6], [40, 0, 0, 0, BELIEF_CELL_CM, 2]);
+        // id, count, bits, confidence, particles, mean: 15 bytes, then the cells.
+        let header = 6 + 15;
+        let cell = u16::from(BELIEF_CELL_CM);
+        let (points, len) = cells::decode(&bytes[header..], cell).expect("the first role's");
+        assert_eq!(points.len(), cloud.len());
+        assert!(
+            len < cloud.len() * 2,
+            "{len} bytes for {} points",
+            cloud.len()
+        );
+        let second = header + len + 15;
+        assert_eq!(bytes[second - 15..second - 11], 4u32.to_le_bytes());
+        assert_eq!(cells::decode(&bytes[second..], cell), Ok((vec![], 2)));
+        assert_eq!(bytes.len(), second + 2);
     }
 
     #[test]
