@@ -43,8 +43,14 @@ async fn join_by_link(base: &str, code: &str, name: &str, phone: bool) -> Browse
         .await;
     type_into(&mut b, "party-join-name", name).await;
     click(&mut b, "party-join-button").await;
+    // Joined is when the page's room holds this member: a view of the room from before the
+    // join (the invite page's) lacks them, and their buttons act on the member the room
+    // shows, so a click before then would do nothing.
     b.wait_for(
-        "!!(window.__lasertag.party && window.__lasertag.partyConnected)",
+        &format!(
+            "!!(window.__lasertag.partyConnected
+               && (window.__lasertag.party?.members || []).some((m) => m.name === {name:?}))"
+        ),
         20,
     )
     .await;
