@@ -286,7 +286,7 @@ pub struct Episode {
     tags: Vec<u32>,
     /// The match's time limit in ticks, as the HTTP backend computes it from the summary.
     limit_ticks: f64,
-    /// Each robot's last search for its belief features (asked every step).
+    /// Each robot's kept searches for its belief features (asked every step).
     reach: Vec<ReachCache>,
 }
 

@@ -373,8 +373,6 @@ impl ReachField {
     }
 }
 
-/// The most travel units whose distance in metres (`units × scale` in f32) is within
-/// `reach`: one unit more is past it.
 /// The last two [`ReachField`]s of one walker on one grid (a robot in its match), kept by
 /// their start cells: a field depends on nothing else, so a robot that has not left its
 /// cell since the last search, or has stepped back into the cell before, is given the same
@@ -415,6 +413,8 @@ impl ReachCache {
     }
 }
 
+/// The most travel units whose distance in metres (`units × scale` in f32) is within
+/// `reach`: one unit more is past it.
 fn units_within(reach: f32, scale: f32) -> u32 {
     let mut limit = (reach / scale).max(0.0).floor().min(u32::MAX as f32 / 2.0) as u32;
     while limit > 0 && limit as f32 * scale > reach {

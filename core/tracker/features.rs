@@ -85,7 +85,7 @@ impl BeliefFeatures {
     }
 
     /// [`BeliefFeatures::of`] with the robot's own [`ReachCache`]: the same values, without
-    /// a search while the robot's estimate stays in the cell of the last one.
+    /// a search while the robot's estimate stays in a cell the cache has a field from.
     pub fn of_with(
         roles: &[Role],
         pose: Pose,
