@@ -17,7 +17,8 @@
 //!   peak (sampled every 50 ms) and after it (6 s after its last answer);
 //! - the bystander's tick (`GET /api/matches/{id}` every 100 ms): whether it advanced, its
 //!   ticks per second, and the longest time it did not advance (the sampling alone makes that
-//!   100–150 ms);
+//!   100–150 ms), and, after the class, the longest interval between two of its ticks as its
+//!   own task measured it (`longest_tick_gap_ms` of its `/stats`: 50 ms when on time);
 //! - `GET /api/health` every 100 ms, from an address of its own (127.0.0.250): the median
 //!   and slowest answers, and answers that never came.
 //!
@@ -165,6 +166,10 @@ struct Row {
     bystander_ticked: Option<bool>,
     ticks_per_s: Option<f64>,
     longest_gap_ms: Option<f64>,
+    /// The bystander's own longest interval between two ticks, as its task measured it
+    /// (`longest_tick_gap_ms` of its `/stats`; none from builds without it): the polled gap
+    /// above includes the 100 ms of sampling and the poll's own wait.
+    tick_gap_ms: Option<f64>,
     health_p50_ms: Option<f64>,
     health_max_ms: Option<f64>,
     health_failed: u32,
@@ -260,6 +265,12 @@ async fn measure(args: &Args, class: Class, version: &mut Option<String>) -> Row
         .flatten()
         .max();
     row.rss_mib = [mib(before), mib(peak), mib(after)];
+    if let Ok(a) = ctx
+        .get(&format!("/api/matches/{}/stats", ctx.bystander))
+        .await
+    {
+        row.tick_gap_ms = a.body["longest_tick_gap_ms"].as_f64();
+    }
     (row.bystander_ticked, row.ticks_per_s, row.longest_gap_ms) =
         bystander_figures(first, &watch.ticks, from, to);
     row.health_max_ms = (watch.health_max_ms > 0.0).then_some(watch.health_max_ms);
@@ -299,12 +310,12 @@ fn notes(r: &Row) -> String {
 
 fn markdown(rows: &[Row]) -> String {
     let mut out = String::from(
-        "| class | status | request ms | RSS MiB before / peak / after | bystander ticked | bystander ticks/s | longest bystander gap ms | health p50 ms | health max ms | data KiB after | notes |\n|---|---|---|---|---|---|---|---|---|---|---|\n",
+        "| class | status | request ms | RSS MiB before / peak / after | bystander ticked | bystander ticks/s | longest bystander gap ms (polled / its task's) | health p50 ms | health max ms | data KiB after | notes |\n|---|---|---|---|---|---|---|---|---|---|---|\n",
     );
     for r in rows {
         let [b, p, a] = r.rss_mib;
         out += &format!(
-            "| {} | {} | {} | {} / {} / {} | {} | {} | {} | {} | {} | {} | {} |\n",
+            "| {} | {} | {} | {} / {} / {} | {} | {} | {} / {} | {} | {} | {} | {} |\n",
             r.class,
             r.outcome.status,
             num(r.outcome.request_ms),
@@ -318,6 +329,7 @@ fn markdown(rows: &[Row]) -> String {
             },
             num(r.ticks_per_s),
             num(r.longest_gap_ms),
+            num(r.tick_gap_ms),
             num(r.health_p50_ms),
             num(r.health_max_ms),
             num(r.data_kib),
@@ -336,6 +348,7 @@ fn to_json(rows: &[Row]) -> Value {
                    "rss_mib": {"before": r.rss_mib[0], "peak": r.rss_mib[1], "after": r.rss_mib[2]},
                    "bystander_ticked": r.bystander_ticked, "bystander_ticks_per_s": r.ticks_per_s,
                    "bystander_longest_gap_ms": r.longest_gap_ms,
+                   "bystander_tick_gap_ms": r.tick_gap_ms,
                    "health_p50_ms": r.health_p50_ms, "health_max_ms": r.health_max_ms, "health_failed": r.health_failed,
                    "data_kib_after": r.data_kib,
                    "server_exit": r.server_exit, "note": r.outcome.note, "seconds": r.seconds})

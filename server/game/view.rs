@@ -800,6 +800,8 @@ pub struct Stats {
     pub tick_us_mean: f64,
     /// Real-time ticks that were late by more than a whole tick period.
     pub late_ticks: u64,
+    /// The longest wall-clock interval between two real-time ticks, milliseconds.
+    pub longest_tick_gap_ms: f64,
     pub frames_published: u64,
     pub spectators: usize,
     pub players_connected: usize,

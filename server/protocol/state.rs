@@ -190,6 +190,9 @@ pub struct MatchStats {
     pub tick_us_mean: f64,
     /// Real-time ticks that were late by more than a whole tick period (skipped, not burst).
     pub late_ticks: u64,
+    /// The longest wall-clock interval between two of its real-time ticks so far,
+    /// milliseconds (50 when every tick came on time; 0 before its second tick).
+    pub longest_tick_gap_ms: f64,
     /// Frames published to viewers so far.
     pub frames_published: u64,
     pub spectators: usize,
@@ -207,6 +210,7 @@ pub fn stats(id: &str, s: &view::Stats) -> MatchStats {
         tick_us_max: s.tick_us_max,
         tick_us_mean: s.tick_us_mean,
         late_ticks: s.late_ticks,
+        longest_tick_gap_ms: s.longest_tick_gap_ms,
         frames_published: s.frames_published,
         spectators: s.spectators,
         players_connected: s.players_connected,

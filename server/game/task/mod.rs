@@ -514,6 +514,7 @@ fn spawn(
         tick_us: Vec::with_capacity(TICK_WINDOW),
         tick_next: 0,
         late_ticks: 0,
+        longest_tick_gap: Duration::ZERO,
         overruns: std::collections::VecDeque::with_capacity(OVERRUN_WINDOW),
         overrun_count: 0,
         heavy_ticks,
@@ -610,6 +611,8 @@ struct MatchTask {
     tick_us: Vec<u32>,
     tick_next: usize,
     late_ticks: u64,
+    /// The longest wall-clock interval between two real-time ticks.
+    longest_tick_gap: Duration,
     /// Whether each of the last ticks overran, and how many did.
     overruns: std::collections::VecDeque<bool>,
     overrun_count: usize,
@@ -692,9 +695,12 @@ impl MatchTask {
                         continue;
                     }
                     let now = Instant::now();
-                    if last_tick.is_some_and(|t| now - t > period + period / 2) {
-                        self.late_ticks += 1;
-                        self.settings.metrics.late_ticks.inc();
+                    if let Some(gap) = last_tick.map(|t| now - t) {
+                        self.longest_tick_gap = self.longest_tick_gap.max(gap);
+                        if gap > period + period / 2 {
+                            self.late_ticks += 1;
+                            self.settings.metrics.late_ticks.inc();
+                        }
                     }
                     last_tick = Some(now);
                     off_the_workers(self.heavy_ticks, || {
@@ -1058,6 +1064,7 @@ impl MatchTask {
                 v.iter().map(|x| *x as f64).sum::<f64>() / v.len() as f64
             },
             late_ticks: self.late_ticks,
+            longest_tick_gap_ms: self.longest_tick_gap.as_secs_f64() * 1e3,
             frames_published: self.frames_published,
             spectators: self.spectators.load(Ordering::Relaxed),
             players_connected: self
