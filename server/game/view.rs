@@ -73,7 +73,7 @@ pub struct RobotFrame {
 
 /// Localisation particles shown per robot. Every spectator snapshot carries them, so they
 /// count against the 8 KB a snapshot with the belief may take: 40 per robot took the
-/// largest of those to 8.2 KB in the load test (`examples/loadtest.rs`), and a converged
+/// largest of those to 8.2 KB in the load test (`examples/loadtest/`), and a converged
 /// cloud is a few centimetres across, where 24 dots show it as well.
 pub const CLOUD_POINTS: usize = 24;
 

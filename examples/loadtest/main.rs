@@ -16,7 +16,10 @@
 //!   `/api/matches/{id}/stats`) and its late ticks;
 //! - snapshots per second per client (min, 1st percentile, median) and clients starved
 //!   (under 15 Hz);
-//! - bytes per snapshot, with and without the belief.
+//! - bytes per snapshot, with and without the belief;
+//! - with `--players-per-match`, the same for the people playing (each at a bot's slot,
+//!   an input every tick), and for each role the sessions by carrier: how many ended on
+//!   WebTransport and on a WebSocket, refused a session or moved off one for a player.
 //!
 //! The matches are deleted at the end.
 //!
@@ -25,20 +28,22 @@
 //! as deltas against those): the in-process server then also serves it in UDP, and the
 //! spectators open their sessions 8 at a time (a client's handshakes in progress are capped).
 //! A spectator whose session is refused (past `--max-webtransport-sessions`) watches over a
-//! WebSocket, as the page does; the report says how many did.
+//! WebSocket, as the page does; the report says how many did. The clients are in
+//! `clients.rs`.
 
 use std::net::SocketAddr;
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
 #[allow(dead_code)]
-#[path = "../tests/common/wt.rs"]
+#[path = "../../tests/common/wt.rs"]
 mod wt;
 
+mod clients;
+use clients::{Carrier, Client, ClientStats, Published, Seat};
+
 use clap::Parser;
-use futures_util::StreamExt;
 use serde_json::{Value, json};
-use tokio_tungstenite::tungstenite::Message;
 
 #[derive(Debug, Parser)]
 #[command(about = "Load test: real-time matches and WebSocket spectators on loopback")]
@@ -76,175 +81,14 @@ struct Args {
     /// What the spectators watch over: `websocket` or `webtransport` (compact only).
     #[arg(long, default_value = "websocket", value_parser = ["websocket", "webtransport"])]
     transport: String,
-}
-
-/// Where WebTransport sessions open, and the hash to pin (`GET /api/transport`).
-#[derive(Clone)]
-struct Published {
-    url: String,
-    hash: wtransport::tls::Sha256Digest,
-    /// Handshakes in progress at once (a client's are capped at 8 on the server).
-    handshakes: std::sync::Arc<tokio::sync::Semaphore>,
-    /// Spectators whose session was refused, watching over a WebSocket.
-    fell_back: std::sync::Arc<std::sync::atomic::AtomicUsize>,
-}
-
-/// [`spectate`] over WebTransport: compact snapshots by datagram or on the stream, what is
-/// held acknowledged every second one, as the page does; a session refused (the server's
-/// sessions full) watches over a WebSocket instead, as the page does.
-async fn spectate_webtransport(
-    addr: SocketAddr,
-    at: Published,
-    id: String,
-    until: Instant,
-    start: Instant,
-) -> ClientStats {
-    let mut st = ClientStats::default();
-    let url = format!("{}/ws/matches/{id}?format=compact", at.url);
-    let connected = {
-        let _permit = at.handshakes.acquire().await;
-        wt::WtClient::connect(&url, &at.hash).await
-    };
-    let Ok(client) = connected else {
-        at.fell_back
-            .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-        return spectate(addr, id, until, start, "compact").await;
-    };
-    let (mut snapshots, conn) = client.snapshots();
-    let mut held = wt::Held::default();
-    let mut last_tick = None;
-    loop {
-        let now = Instant::now();
-        if now >= until {
-            break;
-        }
-        let a = match tokio::time::timeout(until - now, snapshots.recv()).await {
-            Err(_) => break,
-            Ok(Some(a)) => a,
-            Ok(None) => {
-                st.closed_early = true;
-                break;
-            }
-        };
-        let (kind, flags, len) = (a.bytes[0], a.bytes.get(1).copied(), a.bytes.len() as u64);
-        let tick = lasertag::protocol::compact::tick_of(&a.bytes);
-        if let (Ok(Some(_)), Some(ack)) = (held.take(a.bytes), held.ack_due()) {
-            let _ = conn.send_datagram(ack);
-        }
-        // Wholes and deltas (a motion part is followed by its whole).
-        if Instant::now() >= start
-            && matches!(kind, 1 | 2)
-            && let (Some(t), Some(f)) = (tick, flags)
-        {
-            st.count(u64::from(t), &mut last_tick, f & 2 != 0, len);
-        }
-    }
-    conn.close(0u32.into(), b"done");
-    st
-}
-
-#[derive(Debug, Default, Clone)]
-struct ClientStats {
-    snapshots: u64,
-    distinct_ticks: u64,
-    bytes_plain: u64,
-    n_plain: u64,
-    bytes_belief: u64,
-    n_belief: u64,
-    max_belief: u64,
-    max_plain: u64,
-    events: u64,
-    closed_early: bool,
-}
-
-fn tick_of(text: &str) -> Option<u64> {
-    let i = text.find("\"tick\":")? + 7;
-    let rest = &text[i..];
-    let end = rest
-        .find(|c: char| !c.is_ascii_digit())
-        .unwrap_or(rest.len());
-    rest[..end].parse().ok()
-}
-
-async fn spectate(
-    addr: SocketAddr,
-    id: String,
-    until: Instant,
-    start: Instant,
-    format: &str,
-) -> ClientStats {
-    let mut st = ClientStats::default();
-    let url = format!("ws://{addr}/ws/matches/{id}?format={format}");
-    let Ok((mut ws, _)) =
-        tokio_tungstenite::connect_async_with_config(url, Some(lean_client()), true).await
-    else {
-        st.closed_early = true;
-        return st;
-    };
-    let mut last_tick = None;
-    loop {
-        let now = Instant::now();
-        if now >= until {
-            break;
-        }
-        let msg = match tokio::time::timeout(until - now, ws.next()).await {
-            Err(_) => break,
-            Ok(Some(Ok(m))) => m,
-            Ok(_) => {
-                st.closed_early = true;
-                break;
-            }
-        };
-        if Instant::now() < start {
-            continue; // warm-up: connecting clients
-        }
-        if let Message::Binary(b) = &msg {
-            // A compact snapshot, whole (kind 1) or a delta (2): flags (2: with the
-            // belief), the tick.
-            if let (Some(1 | 2), Some(tick)) = (b.first(), lasertag::protocol::compact::tick_of(b))
-            {
-                st.count(
-                    u64::from(tick),
-                    &mut last_tick,
-                    b[1] & 2 != 0,
-                    b.len() as u64,
-                );
-            }
-            continue;
-        }
-        let Message::Text(t) = msg else { continue };
-        let text = t.as_str();
-        if text.starts_with("{\"type\":\"snapshot\"") {
-            if let Some(tick) = tick_of(text) {
-                let belief = text.contains("\"belief\":");
-                st.count(tick, &mut last_tick, belief, text.len() as u64);
-            }
-        } else if text.starts_with("{\"type\":\"event\"") {
-            st.events += 1;
-        }
-    }
-    let _ = ws.close(None).await;
-    st
-}
-
-impl ClientStats {
-    /// One snapshot of `len` bytes for `tick`.
-    fn count(&mut self, tick: u64, last_tick: &mut Option<u64>, belief: bool, len: u64) {
-        self.snapshots += 1;
-        if *last_tick != Some(tick) {
-            self.distinct_ticks += 1;
-            *last_tick = Some(tick);
-        }
-        if belief {
-            self.bytes_belief += len;
-            self.n_belief += 1;
-            self.max_belief = self.max_belief.max(len);
-        } else {
-            self.bytes_plain += len;
-            self.n_plain += 1;
-            self.max_plain = self.max_plain.max(len);
-        }
-    }
+    /// People playing each match (0..=--opponents), each at a bot's opponent slot, sending an
+    /// input every tick over the spectators' carrier (datagrams over WebTransport). They
+    /// connect after the spectators, so that over WebTransport they find the sessions
+    /// spectators hold (the server moves spectators off for them). A match with players is
+    /// made as people's are: `bots_joinable`, a secret seed, no spectator delay. Against a
+    /// server of its own, `--addr` needs `--max-seats-per-address` raised to the players.
+    #[arg(long, default_value_t = 0)]
+    players_per_match: usize,
 }
 
 fn pct(sorted: &[f64], q: f64) -> f64 {
@@ -260,6 +104,12 @@ async fn run(args: Args) -> Result<(), String> {
         || !(1..=600).contains(&args.seconds)
     {
         return Err("--matches 1..=500, --spectators 0..=5000, --seconds 1..=600".into());
+    }
+    if args.players_per_match > args.opponents {
+        return Err(format!(
+            "--players-per-match {} is more than the {} bot opponents a match has for people to take (--opponents)",
+            args.players_per_match, args.opponents
+        ));
     }
     let addr = match args.addr {
         Some(a) if a.ip().is_loopback() => a,
@@ -287,6 +137,7 @@ async fn run(args: Args) -> Result<(), String> {
                 requests_per_s: 1e6,
                 request_burst: 1e6,
                 max_webtransport_sessions: args.max_webtransport_sessions,
+                max_seats_per_address: usize::MAX,
                 ..lasertag::config::Config::default()
             };
             // The allocator policy the server's `main` sets.
@@ -332,7 +183,6 @@ async fn run(args: Args) -> Result<(), String> {
             url,
             hash,
             handshakes: std::sync::Arc::new(tokio::sync::Semaphore::new(8)),
-            fell_back: Default::default(),
         })
     } else {
         None
@@ -340,10 +190,15 @@ async fn run(args: Args) -> Result<(), String> {
     let mut ids = Vec::new();
     let mut owner_tokens = Vec::new();
     for i in 0..args.matches {
-        let body = json!({"map": args.map, "robots": 2, "opponents": args.opponents,
+        let mut body = json!({"map": args.map, "robots": 2, "opponents": args.opponents,
             "opponent_bot": "evade", "planner": args.planner,
             "seed": i,
             "time_limit_s": (args.seconds + 120) as f64});
+        if args.players_per_match > 0 {
+            body["bots_joinable"] = json!(true);
+            body["spectator_delay_s"] = json!(0.0);
+            body.as_object_mut().map(|b| b.remove("seed"));
+        }
         let r = http
             .post(format!("{base}/api/matches"))
             .json(&body)
@@ -361,34 +216,75 @@ async fn run(args: Args) -> Result<(), String> {
         owner_tokens.push(v["owner_token"].as_str().unwrap_or_default().to_string());
     }
     println!(
-        "{} real-time matches on {} (2 {} robots, {} evade bots), {} spectators over {} ({}), {} s, server {addr}",
+        "{} real-time matches on {} (2 {} robots, {} evade bots, {} of them played by people), {} spectators over {} ({}), {} s, server {addr}",
         args.matches,
         args.map,
         args.planner,
         args.opponents,
+        args.players_per_match,
         args.spectators,
         args.transport,
         args.format,
         args.seconds
     );
-    let warmup = Duration::from_secs(3);
-    let start = Instant::now() + warmup;
-    let until = start + Duration::from_secs(args.seconds);
+    let (open_window, opened) = tokio::sync::watch::channel(None);
+    let window = clients::Window::new(opened);
     let mut clients = Vec::new();
-    for k in 0..args.spectators {
-        let id = ids[k % ids.len()].clone();
-        let format = args.format.clone();
+    let seats = (0..args.spectators)
+        .map(|k| (ids[k % ids.len()].clone(), Seat::Spectator))
+        .chain((0..args.matches * args.players_per_match).map(|k| {
+            let (i, p) = (k / args.players_per_match, k % args.players_per_match);
+            (
+                ids[i].clone(),
+                Seat::Player {
+                    name: format!("load{i}p{p}"),
+                },
+            )
+        }));
+    for (k, (id, seat)) in seats.enumerate() {
+        let client = Client {
+            addr,
+            id,
+            seat,
+            http: http.clone(),
+            window: window.clone(),
+            format: args.format.clone(),
+        };
         let published = published.clone();
         clients.push(tokio::spawn(async move {
             match published {
-                Some(at) => spectate_webtransport(addr, at, id, until, start).await,
-                None => spectate(addr, id, until, start, &format).await,
+                Some(at) => client.over_webtransport(&at).await,
+                None => client.over_websocket().await,
             }
         }));
         if k % 50 == 49 {
             tokio::time::sleep(Duration::from_millis(20)).await;
         }
     }
+    let match_of = |k: usize| {
+        if k < args.spectators {
+            k % ids.len()
+        } else {
+            (k - args.spectators) / args.players_per_match.max(1)
+        }
+    };
+    // The window opens 5 s after every client is connected (or has given up), or after
+    // a minute in any case.
+    let total = clients.len();
+    let connecting = Instant::now();
+    while window.connected.load(std::sync::atomic::Ordering::Relaxed) < total
+        && connecting.elapsed() < Duration::from_secs(60)
+    {
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+    println!(
+        "({} of {total} clients connected in {:.1} s)",
+        window.connected.load(std::sync::atomic::Ordering::Relaxed),
+        connecting.elapsed().as_secs_f64()
+    );
+    let start = Instant::now() + Duration::from_secs(5);
+    let until = start + Duration::from_secs(args.seconds);
+    let _ = open_window.send(Some((start, until)));
     // Ticks at the start and end of the measured window.
     tokio::time::sleep_until(start.into()).await;
     // Each read is timed at the middle of its round trip: the reads are sequential and, at
@@ -500,64 +396,18 @@ async fn run(args: Args) -> Result<(), String> {
         }
     }
     println!("  late ticks       {late} in all (a tick more than 1.5 periods after the previous)");
-    // Clients.
-    let running: Vec<&ClientStats> = stats
-        .iter()
-        .enumerate()
-        .filter(|(k, _)| !finished[k % ids.len()])
-        .map(|(_, s)| s)
-        .collect();
-    let mut rate: Vec<f64> = running.iter().map(|s| s.snapshots as f64 / secs).collect();
-    rate.sort_by(f64::total_cmp);
-    let distinct: Vec<f64> = running
-        .iter()
-        .map(|s| s.distinct_ticks as f64 / secs)
-        .collect();
-    let starved = rate.iter().filter(|r| **r < 15.0).count();
-    let closed = stats.iter().filter(|s| s.closed_early).count();
-    println!(
-        "\nspectators ({}; {} of them on matches that ran throughout):",
-        stats.len(),
-        running.len()
-    );
-    println!(
-        "  snapshots/s      min {:.2}, p1 {:.2}, median {:.2}, mean {:.2}",
-        pct(&rate, 0.0),
-        pct(&rate, 0.01),
-        pct(&rate, 0.5),
-        rate.iter().sum::<f64>() / rate.len().max(1) as f64
-    );
-    println!(
-        "  distinct ticks/s mean {:.2}",
-        distinct.iter().sum::<f64>() / distinct.len().max(1) as f64
-    );
-    println!("  starved (<15/s)  {starved}; closed early {closed}");
-    if let Some(at) = &published {
-        println!(
-            "  over WebSockets  {} (their WebTransport session refused: the server's sessions full)",
-            at.fell_back.load(std::sync::atomic::Ordering::Relaxed)
-        );
+    // Clients, by role.
+    for (role, player) in [("spectators", false), ("players", true)] {
+        let of_role: Vec<(usize, &ClientStats)> = stats
+            .iter()
+            .enumerate()
+            .filter(|(_, s)| s.player == player)
+            .collect();
+        if of_role.is_empty() {
+            continue;
+        }
+        report_clients(role, &of_role, |k| finished[match_of(k)], secs);
     }
-    let sum = |f: fn(&ClientStats) -> u64| stats.iter().map(f).sum::<u64>();
-    let (bb, nb, bp, np) = (
-        sum(|s| s.bytes_belief),
-        sum(|s| s.n_belief),
-        sum(|s| s.bytes_plain),
-        sum(|s| s.n_plain),
-    );
-    let maxb = stats.iter().map(|s| s.max_belief).max().unwrap_or(0);
-    let maxp = stats.iter().map(|s| s.max_plain).max().unwrap_or(0);
-    println!(
-        "  bytes/snapshot   with belief: mean {:.0}, max {maxb}; without: mean {:.0}, max {maxp}; overall mean {:.0}",
-        bb as f64 / nb.max(1) as f64,
-        bp as f64 / np.max(1) as f64,
-        (bb + bp) as f64 / (nb + np).max(1) as f64
-    );
-    println!(
-        "  throughput       {:.1} MB/s to all spectators; {:.1} KiB/s per spectator",
-        (bb + bp) as f64 / secs / 1e6,
-        (bb + bp) as f64 / secs / 1024.0 / stats.len().max(1) as f64
-    );
     for (id, token) in ids.iter().zip(&owner_tokens) {
         let _ = http
             .delete(format!("{base}/api/matches/{id}"))
@@ -586,9 +436,73 @@ fn main() -> std::process::ExitCode {
     }
 }
 
-/// A client that reads 4 KiB at a time: tungstenite's default 128 KiB read buffer is zeroed
-/// on every read, and thousands of clients on the server's own cores would measure that
-/// rather than the server (a browser has no such cost).
-fn lean_client() -> tokio_tungstenite::tungstenite::protocol::WebSocketConfig {
-    tokio_tungstenite::tungstenite::protocol::WebSocketConfig::default().read_buffer_size(4 << 10)
+/// The report of one role's clients (`(index, stats)`; `finished(index)`: its match ended
+/// during the window, so its snapshot rate is not counted).
+fn report_clients(
+    role: &str,
+    clients: &[(usize, &ClientStats)],
+    finished: impl Fn(usize) -> bool,
+    secs: f64,
+) {
+    let running: Vec<&ClientStats> = clients
+        .iter()
+        .filter(|(k, _)| !finished(*k))
+        .map(|(_, s)| *s)
+        .collect();
+    let mut rate: Vec<f64> = running.iter().map(|s| s.snapshots as f64 / secs).collect();
+    rate.sort_by(f64::total_cmp);
+    let distinct: Vec<f64> = running
+        .iter()
+        .map(|s| s.distinct_ticks as f64 / secs)
+        .collect();
+    let starved = rate.iter().filter(|r| **r < 15.0).count();
+    let count = |f: &dyn Fn(&ClientStats) -> bool| clients.iter().filter(|(_, s)| f(s)).count();
+    println!(
+        "\n{role} ({}; {} of them on matches that ran throughout):",
+        clients.len(),
+        running.len()
+    );
+    println!(
+        "  carriers         WebTransport {}, WebSocket {} ({} refused a WebTransport session, {} moved off one for a player)",
+        count(&|s| s.carrier == Carrier::WebTransport),
+        count(&|s| s.carrier == Carrier::WebSocket),
+        count(&|s| s.refused),
+        count(&|s| s.moved),
+    );
+    println!(
+        "  snapshots/s      min {:.2}, p1 {:.2}, median {:.2}, mean {:.2}",
+        pct(&rate, 0.0),
+        pct(&rate, 0.01),
+        pct(&rate, 0.5),
+        rate.iter().sum::<f64>() / rate.len().max(1) as f64
+    );
+    println!(
+        "  distinct ticks/s mean {:.2}",
+        distinct.iter().sum::<f64>() / distinct.len().max(1) as f64
+    );
+    println!(
+        "  starved (<15/s)  {starved}; closed early {}",
+        count(&|s| s.closed_early)
+    );
+    let sum = |f: fn(&ClientStats) -> u64| clients.iter().map(|(_, s)| f(s)).sum::<u64>();
+    let (bb, nb, bp, np) = (
+        sum(|s| s.bytes_belief),
+        sum(|s| s.n_belief),
+        sum(|s| s.bytes_plain),
+        sum(|s| s.n_plain),
+    );
+    let maxb = clients.iter().map(|(_, s)| s.max_belief).max().unwrap_or(0);
+    let maxp = clients.iter().map(|(_, s)| s.max_plain).max().unwrap_or(0);
+    println!(
+        "  bytes/snapshot   with belief: mean {:.0}, max {maxb}; without: mean {:.0}, max {maxp}; overall mean {:.0}",
+        bb as f64 / nb.max(1) as f64,
+        bp as f64 / np.max(1) as f64,
+        (bb + bp) as f64 / (nb + np).max(1) as f64
+    );
+    let one = role.strip_suffix('s').unwrap_or(role);
+    println!(
+        "  throughput       {:.1} MB/s to all {role}; {:.1} KiB/s per {one}",
+        (bb + bp) as f64 / secs / 1e6,
+        (bb + bp) as f64 / secs / 1024.0 / clients.len().max(1) as f64
+    );
 }
