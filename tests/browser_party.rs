@@ -49,7 +49,8 @@ async fn join_by_link(base: &str, code: &str, name: &str, phone: bool) -> Browse
     b.wait_for(
         &format!(
             "!!(window.__lasertag.partyConnected
-               && (window.__lasertag.party?.members || []).some((m) => m.name === {name:?}))"
+               && (window.__lasertag.party?.members || []).some((m) =>
+                    m.name === {name:?} && m.id === window.__lasertag.partyMember))"
         ),
         20,
     )
@@ -125,6 +126,15 @@ async fn three_friends_gather_play_mark_and_come_back_for_another() {
 
     for b in [&mut host, &mut ann, &mut bob] {
         click(b, "party-ready").await;
+    }
+    // Each sees themselves ready (on failure, that page's own state is shown).
+    for b in [&mut host, &mut ann, &mut bob] {
+        b.wait_for(
+            "!!(window.__lasertag.party?.members || []).find((m) =>
+                m.id === window.__lasertag.partyMember)?.ready",
+            20,
+        )
+        .await;
     }
     host.wait_for(
         "(window.__lasertag.party?.members || []).length === 3

@@ -158,13 +158,19 @@ export class PartyRoom {
     this.deps = deps;
     this.party = null;
     this.entry = parties.get(this.code);
-    Object.assign(debug, { page: "party", partyCode: this.code, party: null, countdown: null });
+    Object.assign(debug, {
+      page: "party", partyCode: this.code, party: null, countdown: null,
+      partyMember: this.entry?.member_id ?? null,
+    });
     document.title = `Party ${this.code} · lasertag`;
     $("party-error").textContent = "";
     $("party-announce").textContent = "";
     $("party-copy-status").textContent = "";
     $("party-room").hidden = true;
     $("party-join").hidden = true;
+    // Not ready until the room says otherwise (a room shown before may have left it pressed).
+    $("party-ready").setAttribute("aria-pressed", "false");
+    $("party-ready").classList.remove("on");
     this.wire();
     if (this.entry) this.enter(); else this.askName();
   }
@@ -206,6 +212,7 @@ export class PartyRoom {
       if (tok) body.name_token = tok;
       const m = await call("POST", `/api/parties/${this.code}/members`, body);
       this.entry = { code: this.code, member_id: m.member_id, member_token: m.member_token };
+      debug.partyMember = m.member_id;
       parties.put(this.entry);
       $("party-join").hidden = true;
       this.enter();
@@ -327,8 +334,11 @@ export class PartyRoom {
     $("party-join").onsubmit = (e) => this.join(e);
     $("party-copy").onclick = () => this.copy();
     $("party-ready").onclick = () => {
-      const me = this.me();
-      if (me) this.patch({ ready: !me.ready });
+      if (!this.entry) return;
+      // The person changes what they see pressed, even before the room's first push that
+      // holds them has come (just after joining), when `me()` is not there yet.
+      const pressed = $("party-ready").getAttribute("aria-pressed") === "true";
+      this.patch({ ready: !pressed });
     };
     $("party-side").onchange = (e) => this.patch({ side: e.target.value });
     const setting = (key, value) => this.patch({ settings: { [key]: value } });
