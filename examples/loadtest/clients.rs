@@ -106,6 +106,8 @@ pub(crate) struct ClientStats {
     pub max_plain: u64,
     pub events: u64,
     pub closed_early: bool,
+    /// Why its WebTransport session was closed early, as the server said.
+    pub close_reason: Option<String>,
     last_tick: Option<u64>,
 }
 
@@ -316,6 +318,7 @@ impl Client {
                 Ok(Some(a)) => a,
                 Ok(None) if self.player() => {
                     st.closed_early = true;
+                    st.close_reason = Some(conn.closed().await.to_string());
                     break;
                 }
                 Ok(None) => {

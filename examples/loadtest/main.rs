@@ -484,6 +484,15 @@ fn report_clients(
         "  starved (<15/s)  {starved}; closed early {}",
         count(&|s| s.closed_early)
     );
+    let mut reasons: Vec<&str> = clients
+        .iter()
+        .filter_map(|(_, s)| s.close_reason.as_deref())
+        .collect();
+    reasons.sort_unstable();
+    reasons.dedup();
+    for r in reasons {
+        println!("    closed: {r}");
+    }
     let sum = |f: fn(&ClientStats) -> u64| clients.iter().map(|(_, s)| f(s)).sum::<u64>();
     let (bb, nb, bp, np) = (
         sum(|s| s.bytes_belief),
