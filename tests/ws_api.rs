@@ -79,7 +79,7 @@ async fn a_spectator_gets_every_tick_with_everything() {
     assert_eq!(stats.status, 200, "{}", stats.body);
     assert!(stats.body["ticks_measured"].as_u64().unwrap() >= 50);
     assert!(stats.body["tick_us_p99"].as_f64().unwrap() > 0.0);
-    // Ticks come a period apart or later, never sooner (the interval skips, it never bursts).
+    // Most ticks come a period apart, so the longest interval is at least about one.
     let gap = stats.body["longest_tick_gap_ms"].as_f64().unwrap();
     assert!(gap >= 45.0, "longest tick gap {gap} ms");
     assert_eq!(stats.body["spectators"], 1);

@@ -66,7 +66,7 @@ impl Window {
             .map_or(now + Duration::from_secs(3600), |(_, until)| until)
     }
 
-    fn connected(&self) {
+    fn note_connected(&self) {
         self.connected.fetch_add(1, Ordering::Relaxed);
     }
 }
@@ -193,7 +193,7 @@ impl Client {
         match self.join().await {
             Ok(token) => self.websocket_into(&mut st, token.as_deref()).await,
             Err(()) => {
-                self.window.connected();
+                self.window.note_connected();
                 st.closed_early = true;
             }
         }
@@ -206,7 +206,7 @@ impl Client {
         let connected =
             tokio_tungstenite::connect_async_with_config(url, Some(lean_client()), true).await;
         if !st.moved {
-            self.window.connected();
+            self.window.note_connected();
         }
         let Ok((mut ws, _)) = connected else {
             st.closed_early = true;
@@ -278,7 +278,7 @@ impl Client {
         let (connected, token) = {
             let _permit = at.handshakes.acquire().await;
             let Ok(token) = self.join().await else {
-                self.window.connected();
+                self.window.note_connected();
                 st.closed_early = true;
                 return st;
             };
@@ -290,7 +290,7 @@ impl Client {
             self.websocket_into(&mut st, token.as_deref()).await;
             return st;
         };
-        self.window.connected();
+        self.window.note_connected();
         let (mut snapshots, conn) = client.snapshots();
         let mut held = wt::Held::default();
         let mut inputs = tokio::time::interval(Duration::from_millis(50));
