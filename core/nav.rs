@@ -17,6 +17,9 @@ pub use follow::{PathFollower, steer, turn_to};
 
 mod dial;
 mod follow;
+mod ways;
+
+pub use ways::{ReachCache, WayMap};
 
 /// The passable cell a search from `from` starts at: the nearest within a metre and two cells
 /// (an agent pressed against a wall stands on a cell where it does not fit).
@@ -276,11 +279,6 @@ impl ReachField {
         }
     }
 
-    /// Cells of the window: the length a [`ReachField::waypoint_ahead`] memo needs.
-    pub fn window_len(&self) -> usize {
-        self.units.len()
-    }
-
     /// The window cell of grid cell `cell`, if the window holds it.
     fn local(&self, cell: usize) -> Option<usize> {
         let (c, r) = (cell % self.grid_cols, cell / self.grid_cols);
@@ -297,119 +295,6 @@ impl ReachField {
     pub fn metres(&self, cell: usize) -> Option<f32> {
         let u = self.units[self.local(cell)?];
         (u <= self.limit).then_some(u as f32 * self.scale)
-    }
-
-    /// For grid cell `cell` within the reach, the grid cell where its shortest path from the
-    /// start first runs more than `ahead` metres from the start (`cell` itself when it is no
-    /// farther): the way to set off toward `cell`. `memo` ([`ReachField::window_len`]
-    /// entries, `u32::MAX` for unknown) keeps the answers, so asking for many cells costs
-    /// about one pass over the tree.
-    pub fn waypoint_ahead(&self, cell: usize, ahead: f32, memo: &mut [u32]) -> Option<usize> {
-        self.metres(cell)?;
-        let key = self.key(self.local(cell)?, ahead, memo);
-        Some(self.global(key))
-    }
-
-    /// The centre of [`ReachField::waypoint_ahead`]'s cell for the cell holding `p`, as
-    /// `grid.centre(field.waypoint_ahead(grid.cell_of(p)?, ahead, memo)?)` gives it, with
-    /// no division to turn grid cells into window cells and back: what sorting a belief's
-    /// particles by their way asks for each particle.
-    pub fn centre_ahead(
-        &self,
-        grid: &ClearanceGrid,
-        p: Point2<f32>,
-        ahead: f32,
-        memo: &mut [u32],
-    ) -> Option<Point2<f32>> {
-        if !(p.x >= 0.0 && p.y >= 0.0) {
-            return None;
-        }
-        // As `ClearanceGrid::cell_of`, in the window's rows and columns.
-        let (c, r) = ((p.x / grid.cell) as usize, (p.y / grid.cell) as usize);
-        if c >= grid.cols || r >= grid.rows {
-            return None;
-        }
-        let (c, r) = (c.checked_sub(self.col0)?, r.checked_sub(self.row0)?);
-        let local = r * self.cols + c;
-        if c >= self.cols || local >= self.units.len() || self.units[local] > self.limit {
-            return None;
-        }
-        let key = self.key(local, ahead, memo);
-        let (kc, kr) = (self.col0 + key % self.cols, self.row0 + key / self.cols);
-        Some(Point2::new(
-            (kc as f32 + 0.5) * grid.cell,
-            (kr as f32 + 0.5) * grid.cell,
-        ))
-    }
-
-    /// The window cell where the shortest path to window cell `first` (within the reach)
-    /// first runs more than `ahead` metres from the start, noted in `memo` on every cell
-    /// the walk passed.
-    fn key(&self, first: usize, ahead: f32, memo: &mut [u32]) -> usize {
-        let metres = |c: usize| self.units[c] as f32 * self.scale;
-        let mut at = first;
-        let key = loop {
-            if memo[at] != u32::MAX {
-                break memo[at] as usize;
-            }
-            if at == self.start || metres(at) <= ahead {
-                break at;
-            }
-            let before = self.prev[at] as usize;
-            if metres(before) <= ahead {
-                break at;
-            }
-            at = before;
-        };
-        // The same walk again, to note the answer on every cell it passed (no list of them
-        // to allocate: this runs for each particle of the belief).
-        let mut c = first;
-        while c != at {
-            memo[c] = key as u32;
-            c = self.prev[c] as usize;
-        }
-        memo[at] = key as u32;
-        key
-    }
-}
-
-/// The last two [`ReachField`]s of one walker on one grid (a robot in its match), kept by
-/// their start cells: a field depends on nothing else, so a robot that has not left its
-/// cell since the last search, or has stepped back into the cell before, is given the same
-/// field without a search. A robot at full speed crosses a cell in about two ticks, one
-/// standing still never, and one that dithers (as a policy's random actions early in
-/// training do) moves between two cells: examples/env_profile's random actions search for
-/// 25% of the observations with one field kept and 8% with two.
-#[derive(Debug, Clone, Default)]
-pub struct ReachCache {
-    /// Fields with the start cell and the reach (as bits) each was searched for, and each
-    /// one's [`ReachField::waypoint_ahead`] answers so far; the latest used first.
-    kept: Vec<(usize, u32, ReachField, Vec<u32>)>,
-}
-
-/// Fields a [`ReachCache`] keeps (about 180 KB each for the belief features' 6 m).
-const REACH_FIELDS_KEPT: usize = 2;
-
-impl ReachCache {
-    /// [`ReachField::new`]`(grid, from, reach)` with its waypoint memo, from the cache when
-    /// a kept field has the start cell and the reach. `grid` must be every call's.
-    pub fn field(
-        &mut self,
-        grid: &ClearanceGrid,
-        from: Point2<f32>,
-        reach: f32,
-    ) -> Option<(&ReachField, &mut [u32])> {
-        let key = (start_cell(grid, from)?, reach.to_bits());
-        if let Some(i) = self.kept.iter().position(|(s, r, ..)| (*s, *r) == key) {
-            self.kept[..=i].rotate_right(1);
-        } else {
-            let field = ReachField::from_start(grid, key.0, reach);
-            let memo = vec![u32::MAX; field.window_len()];
-            self.kept.truncate(REACH_FIELDS_KEPT - 1);
-            self.kept.insert(0, (key.0, key.1, field, memo));
-        }
-        let (_, _, field, memo) = self.kept.first_mut()?;
-        Some((&*field, memo))
     }
 }
 

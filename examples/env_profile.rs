@@ -54,6 +54,10 @@ struct Args {
     /// held, every step: as a policy that hunts moves).
     #[arg(long, value_enum, default_value = "random")]
     actions: Actions,
+    /// Episodes stepped in turn, one step each (as `vector_env(N)` steps its worlds on one
+    /// thread): how much a step slows when many worlds' state no longer fits the caches.
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..=4096))]
+    worlds: u64,
 }
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
@@ -113,26 +117,32 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             .collect(),
     };
     let mut table = actions.chunks_exact(per_step).cycle();
-    let mut seed = 0;
-    let mut episode = Episode::new(arena.clone(), &spec, seed)?;
+    // Worlds start with seeds 0..N; a world whose episode ends restarts with the next seed
+    // not yet used.
+    let mut seed = args.worlds;
+    let mut episodes = (0..args.worlds)
+        .map(|s| Episode::new(arena.clone(), &spec, s))
+        .collect::<Result<Vec<_>, _>>()?;
     let mut sum = Checksum::default();
     let start = Instant::now();
-    for _ in 0..args.steps {
+    for step in 0..args.steps {
+        let episode = &mut episodes[(step % args.worlds) as usize];
         let step_actions = table.next().ok_or("no actions")?;
         let out = episode.step(&spec, step_actions, &mut obs, &mut rewards);
         sum.add(obs.iter().map(|v| v.to_bits() as u64));
         sum.add(rewards.iter().map(|r| r.to_bits()));
         if out.terminated || out.truncated {
             sum.add([episode.world().digest()]);
+            *episode = Episode::new(arena.clone(), &spec, seed)?;
             seed += 1;
-            episode = Episode::new(arena.clone(), &spec, seed)?;
         }
     }
     let elapsed = start.elapsed();
-    sum.add([episode.world().digest()]);
+    sum.add(episodes.iter().map(|e| e.world().digest()));
     println!(
-        "{:?}: {} steps, {:.1} µs a step, checksum {:016x}",
+        "{:?}, {} world(s): {} steps, {:.1} µs a step, checksum {:016x}",
         args.setting,
+        args.worlds,
         args.steps,
         elapsed.as_secs_f64() * 1e6 / args.steps as f64,
         sum.0

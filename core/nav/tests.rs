@@ -254,13 +254,13 @@ fn a_reach_field_is_the_whole_fields_inside_its_reach() {
         let g = &a.grid;
         let whole = DistanceField::from_point_within(g, from, reach).unwrap();
         let near = ReachField::new(g, from, reach).unwrap();
-        let mut memo = vec![u32::MAX; near.window_len()];
+        let ways = WayMap::new(&near, 1.0);
         let mut within = 0;
         for cell in 0..g.len() {
             let d = whole.dist[cell];
             let expected = (d <= reach).then_some(d);
             assert_eq!(near.metres(cell), expected, "cell {cell} from {from:?}");
-            let way = near.waypoint_ahead(cell, 1.0, &mut memo);
+            let way = ways.waypoint(g, cell);
             if expected.is_some() {
                 within += 1;
                 assert_eq!(way, Some(waypoint_by_walking(&whole, cell, 1.0)));
@@ -277,21 +277,21 @@ fn a_waypoint_ahead_is_where_the_path_sets_off() {
     let a = two_rooms();
     let g = &a.grid;
     let from = Point2::new(1.0, 1.0);
-    let f = ReachField::new(g, from, 20.0).unwrap();
+    let f = WayMap::new(&ReachField::new(g, from, 20.0).unwrap(), 1.0);
     let whole = DistanceField::from_point(g, from).unwrap();
-    let mut memo = vec![u32::MAX; f.window_len()];
     // Beyond the wall: the first metre of the way leads toward the door, on that way.
     let far = g.cell_of(Point2::new(9.0, 1.0)).unwrap();
-    let way = f.waypoint_ahead(far, 1.0, &mut memo).unwrap();
+    let way = f.waypoint(g, far).unwrap();
     assert!(whole.dist[way] > 1.0 && whole.dist[whole.prev[way] as usize] <= 1.0);
     assert!(whole.cells_to(far).unwrap().contains(&way));
-    // Asked again (from the memo) and for a cell on the same way: the same answer.
-    assert_eq!(f.waypoint_ahead(far, 1.0, &mut memo), Some(way));
+    // A cell on the same way has the same waypoint.
     let on_the_way = whole.cells_to(far).unwrap()[30];
-    assert_eq!(f.waypoint_ahead(on_the_way, 1.0, &mut memo), Some(way));
+    assert_eq!(f.waypoint(g, on_the_way), Some(way));
     // A cell nearer than the metre is its own waypoint.
     let near = g.cell_of(Point2::new(1.5, 1.0)).unwrap();
-    assert_eq!(f.waypoint_ahead(near, 1.0, &mut memo), Some(near));
+    assert_eq!(f.waypoint(g, near), Some(near));
+    // The waypoints are few: the cells a little past the metre, and the nearer ones.
+    assert!(f.waypoints().len() < 1_000, "{}", f.waypoints().len());
 }
 
 #[test]
@@ -306,23 +306,17 @@ fn a_kept_reach_field_answers_as_a_fresh_one_from_wherever_its_walker_stands() {
     let mut searched = 0;
     let mut last_start = None;
     for from in walk {
-        let fresh = ReachField::new(g, from, 6.0).unwrap();
-        let mut fresh_memo = vec![u32::MAX; fresh.window_len()];
+        let fresh = WayMap::new(&ReachField::new(g, from, 6.0).unwrap(), 1.0);
         let start = start_cell(g, from).unwrap();
         if last_start != Some(start) {
             searched += 1;
             last_start = Some(start);
         }
-        let (kept, memo) = cache.field(g, from, 6.0).unwrap();
+        let kept = cache.ways(g, from, 6.0, 1.0).unwrap();
         for cell in (0..g.len()).step_by(7) {
             assert_eq!(
-                kept.metres(cell),
-                fresh.metres(cell),
-                "cell {cell} from {from:?}"
-            );
-            assert_eq!(
-                kept.waypoint_ahead(cell, 1.0, memo),
-                fresh.waypoint_ahead(cell, 1.0, &mut fresh_memo),
+                kept.waypoint(g, cell),
+                fresh.waypoint(g, cell),
                 "cell {cell} from {from:?}"
             );
         }
@@ -332,7 +326,7 @@ fn a_kept_reach_field_answers_as_a_fresh_one_from_wherever_its_walker_stands() {
 }
 
 #[test]
-fn the_centre_ahead_of_a_point_is_its_cells_waypoint() {
+fn a_points_waypoint_is_its_cells() {
     let a = two_rooms();
     let g = &a.grid;
     for from in [
@@ -340,21 +334,14 @@ fn the_centre_ahead_of_a_point_is_its_cells_waypoint() {
         Point2::new(4.6, 4.6),
         Point2::new(9.5, 5.5),
     ] {
-        let f = ReachField::new(g, from, 6.0).unwrap();
-        let (mut memo, mut memo2) = (
-            vec![u32::MAX; f.window_len()],
-            vec![u32::MAX; f.window_len()],
-        );
+        let f = WayMap::new(&ReachField::new(g, from, 6.0).unwrap(), 1.0);
         let mut found = 0;
         for i in -3..110 {
             for j in -3..70 {
                 let p = Point2::new(i as f32 * 0.097, j as f32 * 0.091);
-                let by_cell = g
-                    .cell_of(p)
-                    .and_then(|c| f.waypoint_ahead(c, 1.0, &mut memo))
-                    .map(|w| g.centre(w));
+                let by_cell = g.cell_of(p).and_then(|c| f.waypoint(g, c));
                 assert_eq!(
-                    f.centre_ahead(g, p, 1.0, &mut memo2),
+                    f.id_ahead(g, p).map(|id| f.waypoints()[id]),
                     by_cell,
                     "{p:?} from {from:?}"
                 );

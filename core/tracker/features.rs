@@ -21,7 +21,7 @@
 
 use nalgebra::{Point2, Vector2};
 
-use crate::nav::{ReachCache, ReachField};
+use crate::nav::ReachCache;
 use crate::sim::Pose;
 use crate::sim::arena::ClearanceGrid;
 use crate::tracker::Role;
@@ -107,11 +107,16 @@ impl BeliefFeatures {
         let total = untagged.iter().fold(0.0f64, |t, r| t + r.count as f64);
         let mut grid = [0.0f64; GRID_CELLS];
         let mut paths = [0.0f64; SECTORS];
-        let mut ways = Ways {
-            nav,
-            field: reach.field(nav, pose.pos, PATH_REACH_M),
-        };
+        let ways = reach.ways(nav, pose.pos, PATH_REACH_M, PATH_AHEAD_M);
+        // The bearing sector of each waypoint: particles share a few dozen of them.
+        let way_sectors: Vec<u8> = ways.map_or_else(Vec::new, |m| {
+            m.waypoints()
+                .iter()
+                .map(|&w| sector(local(nav.centre(w))) as u8)
+                .collect()
+        });
         let mut summaries: Vec<(f64, [f64; ROLE_VALUES])> = Vec::with_capacity(untagged.len());
+        let mut scratch: Vec<(Vector2<f64>, f64)> = Vec::new();
         for role in &untagged {
             let (particles, weights) = (role.particles(), role.weights());
             let sum_w = weights.iter().fold(0.0f64, |t, w| t + *w as f64);
@@ -119,19 +124,26 @@ impl BeliefFeatures {
                 continue;
             }
             let share = role.count as f64 / total;
+            // Each particle's weight share and place in the robot's frame, worked out once
+            // for both passes below (the same values the passes would each work out).
+            scratch.clear();
+            scratch.extend(
+                particles
+                    .iter()
+                    .zip(weights)
+                    .map(|(p, w)| (local(*p), *w as f64 / sum_w)),
+            );
             let mut mean = Vector2::zeros();
-            for (p, w) in particles.iter().zip(weights) {
-                let l = local(*p);
-                let w = *w as f64 / sum_w;
+            for (p, &(l, w)) in particles.iter().zip(&scratch) {
                 grid[cell(l)] += share * w;
-                if let Some(way) = ways.toward(*p) {
-                    paths[sector(local(way))] += share * w;
+                if let Some(id) = ways.and_then(|m| m.id_ahead(nav, *p)) {
+                    paths[way_sectors[id] as usize] += share * w;
                 }
                 mean += l * w;
             }
             let mut var = 0.0;
-            for (p, w) in particles.iter().zip(weights) {
-                var += (*w as f64 / sum_w) * (local(*p) - mean).norm_squared();
+            for &(l, w) in &scratch {
+                var += w * (l - mean).norm_squared();
             }
             let summary = [
                 1.0,
@@ -170,22 +182,6 @@ impl BeliefFeatures {
             .chain(self.roles.iter().flatten())
             .chain(std::iter::once(&self.untagged))
             .copied()
-    }
-}
-
-/// Where to set off toward points near the robot: a distance field out to
-/// [`PATH_REACH_M`] from its estimate, and the waypoints found so far.
-struct Ways<'a> {
-    nav: &'a ClearanceGrid,
-    field: Option<(&'a ReachField, &'a mut [u32])>,
-}
-
-impl Ways<'_> {
-    /// The point [`PATH_AHEAD_M`] along the shortest path to `p` (or `p`'s cell when
-    /// nearer); `None` when `p` is beyond the reach or where no robot fits.
-    fn toward(&mut self, p: Point2<f32>) -> Option<Point2<f32>> {
-        let (field, memo) = self.field.as_mut()?;
-        field.centre_ahead(self.nav, p, PATH_AHEAD_M, memo)
     }
 }
 

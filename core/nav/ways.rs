@@ -1,0 +1,170 @@
+//! The way to set off toward every cell near a walker, read as a table: what the belief
+//! features ask for each particle of the team's belief at every step.
+
+use nalgebra::Point2;
+
+use super::{ReachField, start_cell};
+use crate::sim::arena::ClearanceGrid;
+
+/// No way: the cell is beyond the reach, or no walker fits there.
+const NONE: u16 = u16::MAX;
+
+/// For every cell of a [`ReachField`]'s window within its reach, the cell where the
+/// cell's shortest path from the start first runs more than `ahead` metres from the start
+/// (the cell itself when it is no farther): the way to set off toward it.
+///
+/// Those waypoints are few (the cells a little more than `ahead` from the start, and the
+/// nearer ones), so each window cell holds the number of its waypoint in a short list: a
+/// caller that needs something of every waypoint (the belief features: its bearing from
+/// the robot) works it out once per waypoint, and a lookup per point reads two bytes. A
+/// robot of the research environment keeps two maps, and with 64 worlds on two cores
+/// they no longer stay in the caches between its steps: every cache line a lookup touches
+/// is a miss, so the table is as narrow as it can be (docs/performance.md).
+#[derive(Debug, Clone)]
+pub struct WayMap {
+    /// The window's first column and row in the grid, its columns and rows.
+    col0: usize,
+    row0: usize,
+    cols: usize,
+    rows: usize,
+    /// Per window cell: its waypoint's place in `waypoints`, or [`NONE`].
+    ids: Vec<u16>,
+    /// The waypoints, as grid cells.
+    waypoints: Vec<usize>,
+}
+
+impl WayMap {
+    /// The waypoints `ahead` metres out along `field`'s shortest paths.
+    ///
+    /// Panics if there are 65,535 waypoints or more: they lie within `ahead` and a cell of
+    /// the start, so it takes an `ahead` of some 12 m on a 10 cm grid (callers pass a metre).
+    pub fn new(field: &ReachField, ahead: f32) -> WayMap {
+        let n = field.units.len();
+        let metres = |c: usize| field.units[c] as f32 * field.scale;
+        // Cells within the reach by their travel: a cell's predecessor is nearer, so its
+        // waypoint is known before the cell's own. Sorted by counting: units are small
+        // integers up to the limit, and a comparison sort took more than the search.
+        let limit = field.limit as usize;
+        let mut first = vec![0u32; limit + 2];
+        for &u in &field.units {
+            if u <= field.limit {
+                first[u as usize + 1] += 1;
+            }
+        }
+        for u in 1..first.len() {
+            first[u] += first[u - 1];
+        }
+        let mut order = vec![0u32; first[limit + 1] as usize];
+        for (c, &u) in field.units.iter().enumerate() {
+            if u <= field.limit {
+                let slot = &mut first[u as usize];
+                order[*slot as usize] = c as u32;
+                *slot += 1;
+            }
+        }
+        let mut ids = vec![NONE; n];
+        let mut waypoints = Vec::new();
+        for &c in &order {
+            let c = c as usize;
+            let before = field.prev[c] as usize;
+            ids[c] = if c == field.start || metres(c) <= ahead || metres(before) <= ahead {
+                let id = u16::try_from(waypoints.len())
+                    .ok()
+                    .filter(|&id| id != NONE)
+                    .expect("fewer than 65,535 waypoints within `ahead` of the start");
+                waypoints.push(field.global(c));
+                id
+            } else {
+                ids[before]
+            };
+        }
+        WayMap {
+            col0: field.col0,
+            row0: field.row0,
+            cols: field.cols,
+            rows: n / field.cols,
+            ids,
+            waypoints,
+        }
+    }
+
+    /// The waypoints, as grid cells; [`WayMap::id_ahead`] numbers them.
+    pub fn waypoints(&self) -> &[usize] {
+        &self.waypoints
+    }
+
+    /// The grid cell of grid cell `cell`'s waypoint, when `cell` is within the reach.
+    pub fn waypoint(&self, grid: &ClearanceGrid, cell: usize) -> Option<usize> {
+        let id = self.id(cell % grid.cols, cell / grid.cols)?;
+        Some(self.waypoints[id])
+    }
+
+    /// The number (in [`WayMap::waypoints`]) of the waypoint of the cell holding `p`, as
+    /// `map.waypoint(grid, grid.cell_of(p)?)` finds it.
+    #[inline]
+    pub fn id_ahead(&self, grid: &ClearanceGrid, p: Point2<f32>) -> Option<usize> {
+        if !(p.x >= 0.0 && p.y >= 0.0) {
+            return None;
+        }
+        // As `ClearanceGrid::cell_of`.
+        let (c, r) = ((p.x / grid.cell) as usize, (p.y / grid.cell) as usize);
+        if c >= grid.cols || r >= grid.rows {
+            return None;
+        }
+        self.id(c, r)
+    }
+
+    /// The waypoint number of the cell at grid column `c`, row `r`.
+    #[inline]
+    fn id(&self, c: usize, r: usize) -> Option<usize> {
+        let (c, r) = (c.checked_sub(self.col0)?, r.checked_sub(self.row0)?);
+        if c >= self.cols || r >= self.rows {
+            return None;
+        }
+        let id = self.ids[r * self.cols + c];
+        (id != NONE).then_some(id as usize)
+    }
+}
+
+/// The last two [`WayMap`]s of one walker on one grid (a robot in its match), kept by
+/// their start cells: a map depends on nothing else (with its reach and `ahead`), so a
+/// robot that has not left its cell since the last search, or has stepped back into the
+/// cell before, is given the same map without a search. A robot at full speed crosses a
+/// cell in about two ticks, one standing still never, and one that dithers (as a policy's
+/// random actions early in training do) moves between two cells: examples/env_profile's
+/// random actions search for 25% of the observations with one map kept and 8% with two.
+#[derive(Debug, Clone, Default)]
+pub struct ReachCache {
+    /// Maps with the start cell, the reach and `ahead` (as bits) each was made for; the
+    /// latest used first.
+    kept: Vec<(usize, u32, u32, WayMap)>,
+}
+
+/// Maps a [`ReachCache`] keeps (about 30 KB each for the belief features' 6 m).
+const REACH_FIELDS_KEPT: usize = 2;
+
+impl ReachCache {
+    /// `WayMap::new(&ReachField::new(grid, from, reach)?, ahead)`, from the cache when a
+    /// kept map has the start cell, the reach and `ahead`. `grid` must be every call's.
+    pub fn ways(
+        &mut self,
+        grid: &ClearanceGrid,
+        from: Point2<f32>,
+        reach: f32,
+        ahead: f32,
+    ) -> Option<&WayMap> {
+        let key = (start_cell(grid, from)?, reach.to_bits(), ahead.to_bits());
+        if let Some(i) = self
+            .kept
+            .iter()
+            .position(|(s, r, a, _)| (*s, *r, *a) == key)
+        {
+            self.kept[..=i].rotate_right(1);
+        } else {
+            let map = WayMap::new(&ReachField::from_start(grid, key.0, reach), ahead);
+            self.kept.truncate(REACH_FIELDS_KEPT - 1);
+            self.kept.insert(0, (key.0, key.1, key.2, map));
+        }
+        self.kept.first().map(|(.., map)| map)
+    }
+}
