@@ -245,6 +245,18 @@ impl ReachField {
 
     /// The field from grid cell `start` (passable) out to `reach` metres.
     fn from_start(grid: &ClearanceGrid, start: usize, reach: f32) -> ReachField {
+        ReachField::search(grid, start, reach, |_, _| Unwatched).0
+    }
+
+    /// [`ReachField::from_start`], with a watch on the search that `watch` makes from the
+    /// field's window (its place, `start`, `limit` and `scale` set, its tables still empty)
+    /// and the window's cells.
+    fn search<W: Watch>(
+        grid: &ClearanceGrid,
+        start: usize,
+        reach: f32,
+        watch: impl FnOnce(&ReachField, usize) -> W,
+    ) -> (ReachField, W) {
         let scale = grid.cell / STRAIGHT as f32;
         let limit = units_within(reach, scale);
         // A step moves one row or column at most and costs at least STRAIGHT units: no cell
@@ -255,28 +267,29 @@ impl ReachField {
         let cols = (sc + span).min(grid.cols - 1) - col0 + 1;
         let rows = (sr + span).min(grid.rows - 1) - row0 + 1;
         let open = OpenCells::window(grid, col0, row0, cols, rows);
-        let local = (sr - row0) * cols + (sc - col0);
-        let (units, prev) = match dial(
-            local,
-            &open,
-            None,
-            limit,
-            &mut u64::MAX.clone(),
-            &mut Unwatched,
-        ) {
-            Ok(search) | Err(Exhausted(search)) => search,
-        };
-        ReachField {
+        let mut field = ReachField {
             col0,
             row0,
             cols,
             grid_cols: grid.cols,
-            start: local,
-            units,
-            prev,
+            start: (sr - row0) * cols + (sc - col0),
+            units: Vec::new(),
+            prev: Vec::new(),
             limit,
             scale,
-        }
+        };
+        let mut watch = watch(&field, cols * rows);
+        (field.units, field.prev) = match dial(
+            field.start,
+            &open,
+            None,
+            limit,
+            &mut u64::MAX.clone(),
+            &mut watch,
+        ) {
+            Ok(search) | Err(Exhausted(search)) => search,
+        };
+        (field, watch)
     }
 
     /// The window cell of grid cell `cell`, if the window holds it.

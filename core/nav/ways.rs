@@ -3,7 +3,7 @@
 
 use nalgebra::Point2;
 
-use super::{ReachField, start_cell};
+use super::{ReachField, Watch, start_cell};
 use crate::sim::arena::ClearanceGrid;
 
 /// No way: the cell is beyond the reach, or no walker fits there.
@@ -34,58 +34,46 @@ pub struct WayMap {
 }
 
 impl WayMap {
-    /// The waypoints `ahead` metres out along `field`'s shortest paths.
+    /// The map `ahead` metres out along the shortest paths from grid cell `start` (passable)
+    /// out to `reach` metres: [`WayMap::new`] of [`ReachField::from_start`], numbered as the
+    /// search settles each cell (a cell's predecessor settles before it), without a pass
+    /// of its own over the field.
     ///
     /// Panics if there are 65,535 waypoints or more: they lie within `ahead` and a cell of
     /// the start, so it takes an `ahead` of some 12 m on a 10 cm grid (callers pass a metre).
+    pub fn search(grid: &ClearanceGrid, start: usize, reach: f32, ahead: f32) -> WayMap {
+        let (field, numbering) = ReachField::search(grid, start, reach, |field, cells| Numbering {
+            scale: field.scale,
+            ahead,
+            ids: vec![NONE; cells],
+            waypoints: Vec::new(),
+        });
+        field.ways(numbering)
+    }
+
+    /// The waypoints `ahead` metres out along `field`'s shortest paths, numbered in a pass
+    /// over the field by travel ([`WayMap::search`] numbers them during the search).
+    #[cfg(test)]
     pub fn new(field: &ReachField, ahead: f32) -> WayMap {
         let n = field.units.len();
-        let metres = |c: usize| field.units[c] as f32 * field.scale;
         // Cells within the reach by their travel: a cell's predecessor is nearer, so its
-        // waypoint is known before the cell's own. Sorted by counting: units are small
-        // integers up to the limit, and a comparison sort took more than the search.
-        let limit = field.limit as usize;
-        let mut first = vec![0u32; limit + 2];
-        for &u in &field.units {
-            if u <= field.limit {
-                first[u as usize + 1] += 1;
-            }
+        // waypoint is known before the cell's own.
+        let mut order: Vec<usize> = (0..n).filter(|&c| field.units[c] <= field.limit).collect();
+        order.sort_by_key(|&c| field.units[c]);
+        let mut numbering = Numbering {
+            scale: field.scale,
+            ahead,
+            ids: vec![NONE; n],
+            waypoints: Vec::new(),
+        };
+        for c in order {
+            let from = (c != field.start).then(|| {
+                let before = field.prev[c] as usize;
+                (before, field.units[before])
+            });
+            numbering.settled(c, field.units[c], from);
         }
-        for u in 1..first.len() {
-            first[u] += first[u - 1];
-        }
-        let mut order = vec![0u32; first[limit + 1] as usize];
-        for (c, &u) in field.units.iter().enumerate() {
-            if u <= field.limit {
-                let slot = &mut first[u as usize];
-                order[*slot as usize] = c as u32;
-                *slot += 1;
-            }
-        }
-        let mut ids = vec![NONE; n];
-        let mut waypoints = Vec::new();
-        for &c in &order {
-            let c = c as usize;
-            let before = field.prev[c] as usize;
-            ids[c] = if c == field.start || metres(c) <= ahead || metres(before) <= ahead {
-                let id = u16::try_from(waypoints.len())
-                    .ok()
-                    .filter(|&id| id != NONE)
-                    .expect("fewer than 65,535 waypoints within `ahead` of the start");
-                waypoints.push(field.global(c));
-                id
-            } else {
-                ids[before]
-            };
-        }
-        WayMap {
-            col0: field.col0,
-            row0: field.row0,
-            cols: field.cols,
-            rows: n / field.cols,
-            ids,
-            waypoints,
-        }
+        field.ways(numbering)
     }
 
     /// The waypoints, as grid cells; [`WayMap::id_ahead`] numbers them.
@@ -126,6 +114,63 @@ impl WayMap {
     }
 }
 
+/// Numbers the waypoints of a [`ReachField`]'s cells as its search settles them: each
+/// cell's predecessor is settled before it.
+struct Numbering {
+    /// Metres a travel unit, and the metres out to the waypoints.
+    scale: f32,
+    ahead: f32,
+    /// Per window cell: its waypoint's number, or [`NONE`] while unsettled.
+    ids: Vec<u16>,
+    /// The waypoints, as window cells.
+    waypoints: Vec<usize>,
+}
+
+impl Watch for Numbering {
+    fn settled(&mut self, cell: usize, units: u32, from: Option<(usize, u32)>) {
+        let metres = |u: u32| u as f32 * self.scale;
+        self.ids[cell] = match from {
+            Some((before, before_units))
+                if metres(units) > self.ahead && metres(before_units) > self.ahead =>
+            {
+                self.ids[before]
+            }
+            // The start, or a cell no farther than `ahead`, or the first past it: its own
+            // waypoint.
+            _ => {
+                let id = u16::try_from(self.waypoints.len())
+                    .ok()
+                    .filter(|&id| id != NONE)
+                    .expect("fewer than 65,535 waypoints within `ahead` of the start");
+                self.waypoints.push(cell);
+                id
+            }
+        };
+    }
+
+    fn go_on(&mut self, _: u32) -> bool {
+        true
+    }
+}
+
+impl ReachField {
+    /// The map of this field's window from its waypoints' numbering.
+    fn ways(&self, numbering: Numbering) -> WayMap {
+        WayMap {
+            col0: self.col0,
+            row0: self.row0,
+            cols: self.cols,
+            rows: self.units.len() / self.cols,
+            ids: numbering.ids,
+            waypoints: numbering
+                .waypoints
+                .into_iter()
+                .map(|c| self.global(c))
+                .collect(),
+        }
+    }
+}
+
 /// The last two [`WayMap`]s of one walker on one grid (a robot in its match), kept by
 /// their start cells: a map depends on nothing else (with its reach and `ahead`), so a
 /// robot that has not left its cell since the last search, or has stepped back into the
@@ -144,7 +189,7 @@ pub struct ReachCache {
 const REACH_FIELDS_KEPT: usize = 2;
 
 impl ReachCache {
-    /// `WayMap::new(&ReachField::new(grid, from, reach)?, ahead)`, from the cache when a
+    /// The [`WayMap`] of the field from `from` out to `reach`, from the cache when a
     /// kept map has the start cell, the reach and `ahead`. `grid` must be every call's.
     pub fn ways(
         &mut self,
@@ -161,7 +206,7 @@ impl ReachCache {
         {
             self.kept[..=i].rotate_right(1);
         } else {
-            let map = WayMap::new(&ReachField::from_start(grid, key.0, reach), ahead);
+            let map = WayMap::search(grid, key.0, reach, ahead);
             self.kept.truncate(REACH_FIELDS_KEPT - 1);
             self.kept.insert(0, (key.0, key.1, key.2, map));
         }
