@@ -3,7 +3,7 @@
 
 use nalgebra::Point2;
 
-use super::{ReachField, Watch, start_cell};
+use super::{ReachField, Watch, start_cell, units_within};
 use crate::sim::arena::ClearanceGrid;
 
 /// No way: the cell is beyond the reach, or no walker fits there.
@@ -42,11 +42,8 @@ impl WayMap {
     /// Panics if there are 65,535 waypoints or more: they lie within `ahead` and a cell of
     /// the start, so it takes an `ahead` of some 12 m on a 10 cm grid (callers pass a metre).
     pub fn search(grid: &ClearanceGrid, start: usize, reach: f32, ahead: f32) -> WayMap {
-        let (field, numbering) = ReachField::search(grid, start, reach, |field, cells| Numbering {
-            scale: field.scale,
-            ahead,
-            ids: vec![NONE; cells],
-            waypoints: Vec::new(),
+        let (field, numbering) = ReachField::search(grid, start, reach, |field, cells| {
+            Numbering::new(field, ahead, cells)
         });
         field.ways(numbering)
     }
@@ -60,12 +57,7 @@ impl WayMap {
         // waypoint is known before the cell's own.
         let mut order: Vec<usize> = (0..n).filter(|&c| field.units[c] <= field.limit).collect();
         order.sort_by_key(|&c| field.units[c]);
-        let mut numbering = Numbering {
-            scale: field.scale,
-            ahead,
-            ids: vec![NONE; n],
-            waypoints: Vec::new(),
-        };
+        let mut numbering = Numbering::new(field, ahead, n);
         for c in order {
             let from = (c != field.start).then(|| {
                 let before = field.prev[c] as usize;
@@ -117,22 +109,30 @@ impl WayMap {
 /// Numbers the waypoints of a [`ReachField`]'s cells as its search settles them: each
 /// cell's predecessor is settled before it.
 struct Numbering {
-    /// Metres a travel unit, and the metres out to the waypoints.
-    scale: f32,
-    ahead: f32,
+    /// The most travel units no farther than `ahead` metres.
+    inner: u32,
     /// Per window cell: its waypoint's number, or [`NONE`] while unsettled.
     ids: Vec<u16>,
     /// The waypoints, as window cells.
     waypoints: Vec<usize>,
 }
 
+impl Numbering {
+    fn new(field: &ReachField, ahead: f32, cells: usize) -> Numbering {
+        Numbering {
+            inner: units_within(ahead, field.scale),
+            ids: vec![NONE; cells],
+            waypoints: Vec::new(),
+        }
+    }
+}
+
 impl Watch for Numbering {
+    // Called for every cell the search settles: inlined into it.
+    #[inline(always)]
     fn settled(&mut self, cell: usize, units: u32, from: Option<(usize, u32)>) {
-        let metres = |u: u32| u as f32 * self.scale;
         self.ids[cell] = match from {
-            Some((before, before_units))
-                if metres(units) > self.ahead && metres(before_units) > self.ahead =>
-            {
+            Some((before, before_units)) if units > self.inner && before_units > self.inner => {
                 self.ids[before]
             }
             // The start, or a cell no farther than `ahead`, or the first past it: its own

@@ -108,13 +108,9 @@ impl BeliefFeatures {
         let mut grid = [0.0f64; GRID_CELLS];
         let mut paths = [0.0f64; SECTORS];
         let ways = reach.ways(nav, pose.pos, PATH_REACH_M, PATH_AHEAD_M);
-        // The bearing sector of each waypoint: particles share a few dozen of them.
-        let way_sectors: Vec<u8> = ways.map_or_else(Vec::new, |m| {
-            m.waypoints()
-                .iter()
-                .map(|&w| sector(local(nav.centre(w))) as u8)
-                .collect()
-        });
+        // The bearing sector of each waypoint, worked out when a particle first needs it:
+        // a thousand particles share a few hundred waypoints.
+        let mut way_sectors = vec![UNKNOWN; ways.map_or(0, |m| m.waypoints().len())];
         let mut summaries: Vec<(f64, [f64; ROLE_VALUES])> = Vec::with_capacity(untagged.len());
         let mut scratch: Vec<(Vector2<f64>, f64)> = Vec::new();
         for role in &untagged {
@@ -136,8 +132,12 @@ impl BeliefFeatures {
             let mut mean = Vector2::zeros();
             for (p, &(l, w)) in particles.iter().zip(&scratch) {
                 grid[cell(l)] += share * w;
-                if let Some(id) = ways.and_then(|m| m.id_ahead(nav, *p)) {
-                    paths[way_sectors[id] as usize] += share * w;
+                if let Some((id, m)) = ways.and_then(|m| Some((m.id_ahead(nav, *p)?, m))) {
+                    let s = &mut way_sectors[id];
+                    if *s == UNKNOWN {
+                        *s = sector(local(nav.centre(m.waypoints()[id]))) as u8;
+                    }
+                    paths[*s as usize] += share * w;
                 }
                 mean += l * w;
             }
@@ -184,6 +184,9 @@ impl BeliefFeatures {
             .copied()
     }
 }
+
+/// A waypoint's sector not yet worked out.
+const UNKNOWN: u8 = u8::MAX;
 
 /// A ten-thousandth, as the API writes these values.
 fn round4(v: f64) -> f64 {
