@@ -9,6 +9,10 @@
 //! Episodes of 1,200 steps (the environments' `max_steps`) follow each other with seeds
 //! 0, 1, 2, …; the robots' actions are random, as the benchmark's (`--actions`).
 //!
+//! `--worlds N` steps N episodes in turn, one step each, as each of `vector_env`'s threads
+//! steps its worlds: how much a step slows when many worlds' state no longer fits the
+//! caches.
+//!
 //! It prints the wall time a step and a checksum of every observation vector, reward and
 //! world digest of the run: two builds that print the same checksum stepped the same
 //! episodes bit for bit.
@@ -54,8 +58,7 @@ struct Args {
     /// held, every step: as a policy that hunts moves).
     #[arg(long, value_enum, default_value = "random")]
     actions: Actions,
-    /// Episodes stepped in turn, one step each (as `vector_env(N)` steps its worlds on one
-    /// thread): how much a step slows when many worlds' state no longer fits the caches.
+    /// Episodes stepped in turn, one step each.
     #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..=4096))]
     worlds: u64,
 }

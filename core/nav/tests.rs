@@ -222,7 +222,7 @@ fn a_bounded_search_finds_the_full_searchs_path_or_gives_up() {
 }
 
 /// Where the shortest path to `cell` in `f` first runs more than `ahead` metres from the
-/// start, by walking its predecessors (what [`ReachField::waypoint_ahead`] answers).
+/// start, by walking its predecessors (what [`WayMap::waypoint`] answers).
 fn waypoint_by_walking(f: &DistanceField, cell: usize, ahead: f32) -> usize {
     let mut at = cell;
     while at != f.start && f.dist[f.prev[at] as usize] > ahead {
