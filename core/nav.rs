@@ -11,7 +11,7 @@
 use nalgebra::Point2;
 
 use crate::sim::arena::ClearanceGrid;
-use dial::{Exhausted, OpenCells, STRAIGHT, dial};
+use dial::{Exhausted, OpenCells, STRAIGHT, dial, start_cell, units_within};
 pub use dial::{Unwatched, Watch};
 pub use follow::{PathFollower, steer, turn_to};
 
@@ -19,13 +19,7 @@ mod dial;
 mod follow;
 mod ways;
 
-pub use ways::{ReachCache, WayMap};
-
-/// The passable cell a search from `from` starts at: the nearest within a metre and two cells
-/// (an agent pressed against a wall stands on a cell where it does not fit).
-fn start_cell(grid: &ClearanceGrid, from: Point2<f32>) -> Option<usize> {
-    grid.nearest_passable(from, (1.0 / grid.cell).ceil() as usize + 2)
-}
+pub use ways::{ReachCache, ReachField, WayMap};
 
 /// Travel distances from one start cell to every reachable cell.
 #[derive(Debug, Clone)]
@@ -210,118 +204,6 @@ impl DistanceField {
         pts.extend(cells.iter().map(|&c| grid.centre(c)));
         Some(smooth(grid, &pts))
     }
-}
-
-/// The travel distances from a point out to a reach, as [`DistanceField::from_point_within`]
-/// gives them, searched over only the window of the grid that the reach can touch: its
-/// tables are the window's (a few thousand cells), not the map's, so many small searches on
-/// a large map cost what they settle. Every cell within the reach has the whole field's
-/// distance and predecessor: the window holds every path that short, and the search visits
-/// its cells in the whole field's order.
-#[derive(Debug, Clone)]
-pub struct ReachField {
-    /// The window's first column and row in the grid, and its columns.
-    col0: usize,
-    row0: usize,
-    cols: usize,
-    /// The grid's columns.
-    grid_cols: usize,
-    /// The start, as a window cell.
-    start: usize,
-    /// Travel units and predecessors of the window's cells.
-    units: Vec<u32>,
-    prev: Vec<u32>,
-    /// The most units within the reach, and metres a unit.
-    limit: u32,
-    scale: f32,
-}
-
-impl ReachField {
-    /// The field from the passable cell nearest to `from` out to `reach` metres; `None` when
-    /// no passable cell is near.
-    pub fn new(grid: &ClearanceGrid, from: Point2<f32>, reach: f32) -> Option<ReachField> {
-        Some(ReachField::from_start(grid, start_cell(grid, from)?, reach))
-    }
-
-    /// The field from grid cell `start` (passable) out to `reach` metres.
-    fn from_start(grid: &ClearanceGrid, start: usize, reach: f32) -> ReachField {
-        ReachField::search(grid, start, reach, |_, _| Unwatched).0
-    }
-
-    /// [`ReachField::from_start`], with a watch on the search that `watch` makes from the
-    /// field's window (its place, `start`, `limit` and `scale` set, its tables still empty)
-    /// and the window's cells.
-    fn search<W: Watch>(
-        grid: &ClearanceGrid,
-        start: usize,
-        reach: f32,
-        watch: impl FnOnce(&ReachField, usize) -> W,
-    ) -> (ReachField, W) {
-        let scale = grid.cell / STRAIGHT as f32;
-        let limit = units_within(reach, scale);
-        // A step moves one row or column at most and costs at least STRAIGHT units: no cell
-        // farther than this many rows or columns is within the limit.
-        let span = (limit / STRAIGHT) as usize;
-        let (sc, sr) = (start % grid.cols, start / grid.cols);
-        let (col0, row0) = (sc.saturating_sub(span), sr.saturating_sub(span));
-        let cols = (sc + span).min(grid.cols - 1) - col0 + 1;
-        let rows = (sr + span).min(grid.rows - 1) - row0 + 1;
-        let open = OpenCells::window(grid, col0, row0, cols, rows);
-        let mut field = ReachField {
-            col0,
-            row0,
-            cols,
-            grid_cols: grid.cols,
-            start: (sr - row0) * cols + (sc - col0),
-            units: Vec::new(),
-            prev: Vec::new(),
-            limit,
-            scale,
-        };
-        let mut watch = watch(&field, cols * rows);
-        (field.units, field.prev) = match dial(
-            field.start,
-            &open,
-            None,
-            limit,
-            &mut u64::MAX.clone(),
-            &mut watch,
-        ) {
-            Ok(search) | Err(Exhausted(search)) => search,
-        };
-        (field, watch)
-    }
-
-    /// The window cell of grid cell `cell`, if the window holds it.
-    fn local(&self, cell: usize) -> Option<usize> {
-        let (c, r) = (cell % self.grid_cols, cell / self.grid_cols);
-        let (c, r) = (c.checked_sub(self.col0)?, r.checked_sub(self.row0)?);
-        (c < self.cols && r * self.cols + c < self.units.len()).then_some(r * self.cols + c)
-    }
-
-    /// The grid cell of window cell `local`.
-    fn global(&self, local: usize) -> usize {
-        (self.row0 + local / self.cols) * self.grid_cols + self.col0 + local % self.cols
-    }
-
-    /// Metres of travel to grid cell `cell`, when it is within the reach.
-    pub fn metres(&self, cell: usize) -> Option<f32> {
-        let u = self.units[self.local(cell)?];
-        (u <= self.limit).then_some(u as f32 * self.scale)
-    }
-}
-
-/// The most travel units whose distance in metres (`units × scale` in f32) is within
-/// `reach`: one unit more is past it.
-fn units_within(reach: f32, scale: f32) -> u32 {
-    let mut limit = (reach / scale).max(0.0).floor().min(u32::MAX as f32 / 2.0) as u32;
-    while limit > 0 && limit as f32 * scale > reach {
-        limit -= 1;
-    }
-    while ((limit + 1) as f32 * scale) <= reach {
-        limit += 1;
-    }
-    limit
 }
 
 /// Units of [`path_within`]'s work that setting a search up over a grid of `cells` takes

@@ -227,3 +227,22 @@ pub(super) fn dial<W: Watch>(
     }
     Ok((units, prev))
 }
+
+/// The passable cell a search from `from` starts at: the nearest within a metre and two cells
+/// (an agent pressed against a wall stands on a cell where it does not fit).
+pub(super) fn start_cell(grid: &ClearanceGrid, from: Point2<f32>) -> Option<usize> {
+    grid.nearest_passable(from, (1.0 / grid.cell).ceil() as usize + 2)
+}
+
+/// The most travel units whose distance in metres (`units × scale` in f32) is within
+/// `reach`: one unit more is past it.
+pub(super) fn units_within(reach: f32, scale: f32) -> u32 {
+    let mut limit = (reach / scale).max(0.0).floor().min(u32::MAX as f32 / 2.0) as u32;
+    while limit > 0 && limit as f32 * scale > reach {
+        limit -= 1;
+    }
+    while ((limit + 1) as f32 * scale) <= reach {
+        limit += 1;
+    }
+    limit
+}
