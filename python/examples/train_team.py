@@ -60,6 +60,8 @@ Outputs in ``--out``:
   Gemm and Tanh, input ``obs`` [1, 240], output ``action`` [1, 3]; checked with
   ``onnx.checker``, its operators against the server's allow-list, and its outputs against
   torch's);
+- the loop's speed on stdout with each evaluation, and in ``summary.json``: environment steps
+  a second of collecting, and of collecting and learning together (evaluations apart);
 - a table on stdout: per map and bot, captures and median capture times, the ratios learned /
   baseline and learned / coordinated, and Wilcoxon signed-rank tests on the per-seed times
   (a capture not made counts as the 90 s limit).
@@ -80,6 +82,7 @@ import os
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import argparse  # noqa: E402
+import concurrent.futures  # noqa: E402
 import csv  # noqa: E402
 import json  # noqa: E402
 import math  # noqa: E402
@@ -181,6 +184,15 @@ def play(map_name: str, seeds: list[int], bot: str, actor=None, planner: str = "
         times[live & t] = k * STEP_S
         done |= t | tr
     return {"time": times, "return": ret}
+
+
+def speed_line(env_steps: int, collect_s: float, learn_s: float) -> str:
+    """The training loop's speed so far: environment steps (one world's, every robot acting)
+    a second of collecting, and of collecting and learning together (evaluations apart)."""
+    both = collect_s + learn_s
+    return (f"{env_steps / max(collect_s, 1e-9):,.0f} steps/s collecting, "
+            f"{env_steps / max(both, 1e-9):,.0f} steps/s end to end "
+            f"(collect {collect_s:.0f} s, learn {learn_s:.0f} s)")
 
 
 def mean_actor(model: nn.Module):
@@ -327,7 +339,12 @@ def main() -> None:
     p.add_argument("--eval-seeds", type=int, default=100, help="fixed seeds per map, final comparison")
     p.add_argument("--curve-seeds", type=int, default=16, help="fixed seeds per map, learning curve")
     p.add_argument("--eval-every", type=int, default=30, help="updates between curve points")
-    p.add_argument("--threads", type=int, default=1, help="torch threads")
+    p.add_argument("--threads", type=int, default=2,
+                   help="torch threads while learning (collecting uses one: the environments' "
+                        "own threads have the cores then, and torch's would spin against them)")
+    p.add_argument("--step-threads", type=int, default=4,
+                   help="Python threads stepping the vector environments at once (each step "
+                        "releases the GIL and spreads its worlds over the cores)")
     p.add_argument("--hidden", type=int, default=64)
     p.add_argument("--lr", type=float, default=3e-4)
     p.add_argument("--gamma", type=float, default=0.99)
@@ -408,6 +425,11 @@ def main() -> None:
     curve_seeds = [CURVE_SEED + i for i in range(args.curve_seeds)]
     ep_returns: list[float] = []
     ep_ret = np.zeros(n_entries)
+    # Wall seconds of collecting (policy forward passes and environment steps) and of
+    # learning (GAE and the PPO epochs), evaluations left out: the training loop's own speed.
+    collect_s = learn_s = 0.0
+    stepper = (concurrent.futures.ThreadPoolExecutor(args.step_threads)
+               if args.step_threads > 1 else None)
 
     def evaluate(update: int) -> None:
         actor = mean_actor(agent.exported())
@@ -443,6 +465,8 @@ def main() -> None:
         for g in opt.param_groups:
             g["lr"] = frac * args.lr
         agent.eval()
+        torch.set_num_threads(1)
+        t_collect = time.perf_counter()
         for t in range(T):
             obs_t = torch.from_numpy(obs)
             with torch.no_grad():
@@ -450,7 +474,11 @@ def main() -> None:
             obs_buf[t], act_buf[t], logp_buf[t], val_buf[t] = obs_t, action, logp, value
             valid_buf[t] = ~prev_done
             a = action.numpy()
-            outs = [e.step(a[bounds[i] : bounds[i + 1]]) for i, e in enumerate(envs)]
+            parts = [a[bounds[i] : bounds[i + 1]] for i in range(len(envs))]
+            if stepper is None:
+                outs = [e.step(x) for e, x in zip(envs, parts)]
+            else:
+                outs = list(stepper.map(lambda e, x: e.step(x), envs, parts))
             obs = np.concatenate([o[0] for o in outs])
             rew = np.concatenate([o[1] for o in outs]).astype(np.float32)
             term = np.concatenate([o[2] for o in outs])
@@ -467,6 +495,10 @@ def main() -> None:
                 ep_ret[ended] = 0.0
             prev_done = term | trunc
             env_steps += int(valid.reshape(-1, ENV["robots"])[:, 0].sum())
+
+        t_learn = time.perf_counter()
+        collect_s += t_learn - t_collect
+        torch.set_num_threads(args.threads)
 
         # GAE(λ) per robot; a capture ends the chain with value 0, a truncation with the
         # value of the episode's last observation (the next sample's, which is not trained on).
@@ -512,10 +544,12 @@ def main() -> None:
                 nn.utils.clip_grad_norm_(agent.parameters(), args.max_grad_norm)
                 opt.step()
                 clipfracs.append(((ratio - 1).abs() > args.clip).float().mean().item())
+        learn_s += time.perf_counter() - t_learn
         if update % args.eval_every == 0 or update == updates:
             print(f"    value loss {vl.item():.4f}  clip fraction {np.mean(clipfracs):.3f}  "
                   f"training episodes' mean return (shaped, per robot) "
                   f"{np.mean(ep_returns[-200:]) if ep_returns else float('nan'):.3f}", flush=True)
+            print(f"    {speed_line(env_steps, collect_s, learn_s)}", flush=True)
             evaluate(update)
     train_s = time.perf_counter() - t0
 
@@ -614,10 +648,14 @@ def main() -> None:
     with open(os.path.join(args.out, "summary.json"), "w") as f:
         json.dump({"args": vars(args), "maps": maps, "held_out": h, "env": ENV,
                    "env_steps": env_steps, "updates": updates, "train_wall_s": round(train_s, 1),
+                   "collect_s": round(collect_s, 1), "learn_s": round(learn_s, 1),
+                   "steps_per_s": {"collect": round(env_steps / max(collect_s, 1e-9)),
+                                   "end_to_end": round(env_steps / max(collect_s + learn_s, 1e-9))},
                    "total_wall_s": round(time.perf_counter() - t0, 1), "onnx": onnx_info,
                    "script_revision": rev or "uncommitted", "script_modified": bool(dirty),
                    "results": summary}, f, indent=1)
-    print(f"\n{env_steps:,} environment steps in {train_s:.0f} s of training; "
+    print(f"\n{speed_line(env_steps, collect_s, learn_s)}")
+    print(f"{env_steps:,} environment steps in {train_s:.0f} s of training; "
           f"{time.perf_counter() - t0:.0f} s in all; files in {args.out}")
 
 
