@@ -137,9 +137,9 @@ pub struct WayMap {
 
 impl WayMap {
     /// The map `ahead` metres out along the shortest paths from grid cell `start` (passable)
-    /// out to `reach` metres: [`WayMap::new`] of [`ReachField::from_start`], numbered as the
-    /// search settles each cell (a cell's predecessor settles before it), without a pass
-    /// of its own over the field.
+    /// out to `reach` metres, numbered as the search settles each cell (a cell's predecessor
+    /// settles before it), without a pass of its own over the field (the tests' `new`
+    /// numbers a finished field the same way, by travel).
     ///
     /// Panics if there are 65,535 waypoints or more: they lie within `ahead` and a cell of
     /// the start, so it takes an `ahead` of some 12 m on a 10 cm grid (callers pass a metre).
