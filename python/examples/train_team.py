@@ -186,12 +186,17 @@ def play(map_name: str, seeds: list[int], bot: str, actor=None, planner: str = "
     return {"time": times, "return": ret}
 
 
-def speed_line(env_steps: int, collect_s: float, learn_s: float) -> str:
+def speeds(env_steps: int, collect_s: float, learn_s: float) -> dict:
     """The training loop's speed so far: environment steps (one world's, every robot acting)
     a second of collecting, and of collecting and learning together (evaluations apart)."""
-    both = collect_s + learn_s
-    return (f"{env_steps / max(collect_s, 1e-9):,.0f} steps/s collecting, "
-            f"{env_steps / max(both, 1e-9):,.0f} steps/s end to end "
+    return {"collect": round(env_steps / max(collect_s, 1e-9)),
+            "end_to_end": round(env_steps / max(collect_s + learn_s, 1e-9))}
+
+
+def speed_line(env_steps: int, collect_s: float, learn_s: float) -> str:
+    """:func:`speeds` as a line of the log."""
+    s = speeds(env_steps, collect_s, learn_s)
+    return (f"{s['collect']:,} steps/s collecting, {s['end_to_end']:,} steps/s end to end "
             f"(collect {collect_s:.0f} s, learn {learn_s:.0f} s)")
 
 
@@ -428,8 +433,7 @@ def main() -> None:
     # Wall seconds of collecting (policy forward passes and environment steps) and of
     # learning (GAE and the PPO epochs), evaluations left out: the training loop's own speed.
     collect_s = learn_s = 0.0
-    stepper = (concurrent.futures.ThreadPoolExecutor(args.step_threads)
-               if args.step_threads > 1 else None)
+    stepper = concurrent.futures.ThreadPoolExecutor(max(1, args.step_threads))
 
     def evaluate(update: int) -> None:
         actor = mean_actor(agent.exported())
@@ -475,10 +479,7 @@ def main() -> None:
             valid_buf[t] = ~prev_done
             a = action.numpy()
             parts = [a[bounds[i] : bounds[i + 1]] for i in range(len(envs))]
-            if stepper is None:
-                outs = [e.step(x) for e, x in zip(envs, parts)]
-            else:
-                outs = list(stepper.map(lambda e, x: e.step(x), envs, parts))
+            outs = list(stepper.map(lambda e, x: e.step(x), envs, parts))
             obs = np.concatenate([o[0] for o in outs])
             rew = np.concatenate([o[1] for o in outs]).astype(np.float32)
             term = np.concatenate([o[2] for o in outs])
@@ -649,8 +650,7 @@ def main() -> None:
         json.dump({"args": vars(args), "maps": maps, "held_out": h, "env": ENV,
                    "env_steps": env_steps, "updates": updates, "train_wall_s": round(train_s, 1),
                    "collect_s": round(collect_s, 1), "learn_s": round(learn_s, 1),
-                   "steps_per_s": {"collect": round(env_steps / max(collect_s, 1e-9)),
-                                   "end_to_end": round(env_steps / max(collect_s + learn_s, 1e-9))},
+                   "steps_per_s": speeds(env_steps, collect_s, learn_s),
                    "total_wall_s": round(time.perf_counter() - t0, 1), "onnx": onnx_info,
                    "script_revision": rev or "uncommitted", "script_modified": bool(dirty),
                    "results": summary}, f, indent=1)
