@@ -93,7 +93,7 @@ impl Baseline {
                 let state = &mut self.robots[i];
                 state.chase = Some((target, tick));
                 state.needs_goal = true;
-                let (motion, tag) = engage(robot, physics, target, range, bearing);
+                let (motion, tag) = engage(arena, robot, physics, target, range, bearing);
                 commands.push(RobotCommand {
                     motion,
                     tag,

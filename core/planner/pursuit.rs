@@ -1,5 +1,10 @@
 //! Chasing a detected opponent: turn to it, close in, fire once it is inside the tag cone.
 //!
+//! A shot flies from the shooter's centre to the target's (`sim::rules::shot_target`), but
+//! the laser sees any part of a disc: an opponent standing just past a wall's corner is seen
+//! and cannot be hit from where the robot stands. [`engage`] then walks around the corner
+//! rather than aiming and missing until the match ends.
+//!
 //! [`engage`] is the plain rule every planner uses. The coordinated planner wraps it in
 //! [`engage_looking_ahead`], Fabiani & Latombe's one-step decision: of a few candidate
 //! motions it takes the one most likely to keep the opponent in view ([`keeps_in_view`]),
@@ -7,7 +12,7 @@
 
 use nalgebra::{Point2, Vector2};
 
-use crate::nav::{steer, turn_to};
+use crate::nav::{path_within, steer, turn_to};
 use crate::planner::view::RobotView;
 use crate::sim::arena::Arena;
 use crate::sim::motion::propose;
@@ -27,14 +32,39 @@ pub fn nearest_sighting(robot: &RobotView) -> Option<(Point2<f32>, f32, f32)> {
         .map(|d| (detection_point(robot.pose, d), d.range, d.bearing))
 }
 
+/// Grid rings around a seen opponent searched for a cell to walk to: its own cell is
+/// passable unless the estimate put it in a wall.
+const TARGET_CELL_RINGS: usize = 2;
+
+/// Where a robot at `from` walks to get a clear shot at `target`, when a wall stands on the
+/// line between them: the first corner of the way there. `None` when the line is clear (or
+/// there is no way).
+fn around_the_corner(arena: &Arena, from: Point2<f32>, target: Point2<f32>) -> Option<Point2<f32>> {
+    if arena.line_of_sight(from, target) {
+        return None;
+    }
+    let grid = &arena.grid;
+    let goal = grid.nearest_passable(target, TARGET_CELL_RINGS)?;
+    // The target is within the laser's range: the search settles a few metres of grid,
+    // and runs only while a wall hides the target's centre.
+    let mut unbounded = u64::MAX;
+    let path = path_within(grid, from, goal, &mut unbounded).ok()??;
+    path.into_iter().skip(1).find(|p| (p - from).norm() > 0.1)
+}
+
 /// Motion and trigger for a robot that sees an opponent at `range`, `bearing`.
 pub fn engage(
+    arena: &Arena,
     robot: &RobotView,
     physics: &Physics,
     target: Point2<f32>,
     range: f32,
     bearing: f32,
 ) -> (Motion, bool) {
+    if let Some(corner) = around_the_corner(arena, robot.pose.pos, target) {
+        // Every shot from here would hit the wall.
+        return (steer(robot.pose, corner, physics.robot_turn_rate), false);
+    }
     // Fire a little inside the device's limits: detections are noisy.
     let fire = robot.can_fire
         && range <= physics.tag_range - 0.3
@@ -74,7 +104,7 @@ pub fn engage_looking_ahead(
     horizon: f32,
     (target, range, bearing): (Point2<f32>, f32, f32),
 ) -> (Motion, bool) {
-    let (plain, fire) = engage(robot, physics, target, range, bearing);
+    let (plain, fire) = engage(arena, robot, physics, target, range, bearing);
     // Within tag range the plain rule aims, and aim is what tags (also while the device
     // cools down: a detour then spoils the next shot).
     if horizon <= 0.0 || fire || range <= physics.tag_range - 0.3 {
@@ -213,6 +243,47 @@ mod tests {
     }
 
     #[test]
+    fn a_target_seen_past_a_corner_is_walked_around_not_shot_at() {
+        // A wall from the floor to y = 3 at x = 6; the opponent stands just past its end,
+        // its disc in the laser's view but its centre hidden from the robot's.
+        let mut def = room().def.clone();
+        def.obstacles = vec![vec![
+            Point2::new(6.0, 0.0),
+            Point2::new(6.2, 0.0),
+            Point2::new(6.2, 3.0),
+            Point2::new(6.0, 3.0),
+        ]];
+        let arena = Arena::new(def);
+        let physics = Physics::default();
+        let target = Point2::new(7.0, 3.3);
+        let aimed = |from: Point2<f32>| {
+            let d = target - from;
+            Pose::new(from.x, from.y, d.y.atan2(d.x))
+        };
+        let shooter = aimed(Point2::new(5.0, 2.6));
+        assert!(!arena.line_of_sight(shooter.pos, target));
+        let view = RobotView {
+            can_fire: true,
+            ..robot(shooter, 0.0, &[])
+        };
+        let range = (target - shooter.pos).norm();
+        let (motion, fire) = engage(&arena, &view, &physics, target, range, 0.0);
+        assert!(!fire, "every shot from here hits the wall");
+        let corner = around_the_corner(&arena, shooter.pos, target).expect("a way round");
+        assert!(corner.y > 3.0, "round the wall's end: {corner:?}");
+        assert_eq!(motion, steer(shooter, corner, physics.robot_turn_rate));
+        // From past the end the line is clear: aim and fire.
+        let clear = aimed(Point2::new(5.5, 3.6));
+        let view = RobotView {
+            can_fire: true,
+            ..robot(clear, 0.0, &[])
+        };
+        let range = (target - clear.pos).norm();
+        assert!(around_the_corner(&arena, clear.pos, target).is_none());
+        assert!(engage(&arena, &view, &physics, target, range, 0.0).1);
+    }
+
+    #[test]
     fn an_uncertain_pursuer_along_a_wall_steps_off_it_and_keeps_its_target_in_view() {
         let arena = room();
         let physics = Physics::default();
@@ -226,7 +297,7 @@ mod tests {
         let horizon = 0.5;
         for (spread, moves_off) in [(0.0, false), (0.3, true)] {
             let view = robot(pose, spread, &seen);
-            let (plain, _) = engage(&view, &physics, target, range, bearing);
+            let (plain, _) = engage(&arena, &view, &physics, target, range, bearing);
             let (chosen, _) =
                 engage_looking_ahead(&arena, &view, &physics, horizon, (target, range, bearing));
             let keep = |m| keeps_in_view(&arena, &physics, pose, spread, target, m, horizon);
@@ -257,11 +328,11 @@ mod tests {
         }];
         let (target, range, bearing) = nearest_sighting(&robot(pose, 0.0, &seen)).unwrap();
         let mut view = robot(pose, 0.3, &seen);
-        let plain = engage(&view, &physics, target, range, bearing);
+        let plain = engage(&arena, &view, &physics, target, range, bearing);
         let off = engage_looking_ahead(&arena, &view, &physics, 0.0, (target, range, bearing));
         assert_eq!(off, plain);
         view.can_fire = true;
-        let firing = engage(&view, &physics, target, range, bearing);
+        let firing = engage(&arena, &view, &physics, target, range, bearing);
         assert!(firing.1, "in the cone and in range");
         let ahead = engage_looking_ahead(&arena, &view, &physics, 0.5, (target, range, bearing));
         assert_eq!(ahead, firing, "a shot is not spoilt by a detour");
