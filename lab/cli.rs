@@ -3,6 +3,9 @@
 //! this crate never reads JSON. Every experiment takes `--shard INDEX/COUNT`
 //! ([`ShardArgs`], declared once); `merge` joins the parts and prints what the unsharded
 //! command prints.
+//!
+//! Long file: every experiment's flags are declared here, once, each beside the checks that
+//! turn it into its study's configuration; split, a flag and its check would live apart.
 
 use crate::error::{LabError, MergeError};
 use std::path::{Path, PathBuf};
@@ -108,6 +111,11 @@ pub enum Experiment {
         /// `coordinated` must be among them (the summary compares with both).
         #[arg(long, default_value = crate::capture::planner::DEFAULT)]
         planners: String,
+        /// The opponent bots, comma-separated: `wander`, `evade`, and `idle` (one that
+        /// never moves, as a person hiding: the study's parked time says whether a team
+        /// waits it out).
+        #[arg(long, default_value = crate::capture::DEFAULT_BOTS)]
+        bots: String,
     },
     /// How hard each difficulty preset is: its robots' win rate and median time to the tag
     /// against the `wander` and `evade` bots, from the spawns, for the preset's match length
@@ -300,6 +308,7 @@ pub fn run(e: Experiment, load: LoadMaps) -> Result<(), LabError> {
             radio_loss,
             oracle_belief,
             planners,
+            bots,
             shard: ShardArgs { shard },
         } => {
             if runs == 0 || time_limit == 0 {
@@ -314,6 +323,8 @@ pub fn run(e: Experiment, load: LoadMaps) -> Result<(), LabError> {
             }
             let planners = crate::capture::Planner::parse_list(&planners)
                 .map_err(|e| LabError::Arguments(format!("--planners {e}")))?;
+            let bots = crate::capture::parse_bots(&bots)
+                .map_err(|e| LabError::Arguments(format!("--bots {e}")))?;
             let chosen = chosen_maps(load, &maps, &on)?;
             let mut coordination = lasertag_core::planner::coordinated::Settings::default();
             for kv in &set {
@@ -346,6 +357,7 @@ pub fn run(e: Experiment, load: LoadMaps) -> Result<(), LabError> {
                     radio,
                     oracle_belief,
                     planners,
+                    bots,
                 },
                 maps: MapStamp::all(&arenas),
             };

@@ -22,6 +22,7 @@ mod onnx;
 mod proto;
 mod shipped;
 pub mod team;
+pub mod unpark;
 
 pub use shipped::{SHIPPED, shipped};
 pub use team::TeamPolicy;

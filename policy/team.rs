@@ -2,6 +2,9 @@
 //! environment's one layout, `lasertag_core::env::Layout`) through the model, its action read
 //! as the environments read one (`lasertag_core::env::drive_order`), every `every` ticks.
 //!
+//! A robot the policy leaves standing still is walked on by [`crate::unpark`]: a served team
+//! never waits out a person who hides.
+//!
 //! The shell (the server's match task, the native engine, the experiments) applies the orders
 //! as inputs, so they go into the match's record like any robot command: a replay or a
 //! resumed match never needs the model again to reproduce what happened.
@@ -13,6 +16,7 @@ use lasertag_core::sim::Physics;
 use lasertag_core::sim::arena::Arena;
 use lasertag_core::world::{RobotOrder, World};
 
+use crate::unpark::{Decision, Unpark};
 use crate::{Policy, PolicyError};
 
 /// Ticks between two decisions of a served policy: ten a second. The shipped team was trained
@@ -38,6 +42,8 @@ pub struct TeamPolicy {
     observation: Vec<f32>,
     action: Vec<f32>,
     scratch: Vec<f32>,
+    /// Each robot's guard against parking.
+    unpark: Vec<Unpark>,
 }
 
 /// The detection slots a model of `input_len` values has in a team of `robots` on a match
@@ -117,6 +123,7 @@ impl TeamPolicy {
             every: every.max(1),
             action: Vec::with_capacity(ACTION_SIZE),
             scratch: Vec::new(),
+            unpark: vec![Unpark::default(); robots],
         })
     }
 
@@ -126,7 +133,8 @@ impl TeamPolicy {
     }
 
     /// The orders of this tick (none between decisions): one for every robot driven from
-    /// outside that no person holds, from what that robot knows now.
+    /// outside that no person holds, from what that robot knows now (none for a robot
+    /// walking on from where it stood).
     pub fn orders(&mut self, world: &World) -> Vec<(usize, RobotOrder)> {
         if !world.tick.is_multiple_of(self.every) {
             return Vec::new();
@@ -134,9 +142,19 @@ impl TeamPolicy {
         let limit = world.config.time_limit_ticks.max(1) as f64;
         let time_fraction = (world.tick as f64 / limit).min(1.0);
         let mut orders = Vec::new();
+        self.unpark.resize(world.robots.len(), Unpark::default());
         for i in 0..world.robots.len() {
             if !world.robot_outside(i) || world.robots[i].seated {
+                self.unpark[i] = Unpark::default();
                 continue;
+            }
+            match self.unpark[i].decide(world, i) {
+                Decision::Policy => {}
+                Decision::Walking => continue,
+                Decision::Start(order) => {
+                    orders.push((i, order));
+                    continue;
+                }
             }
             let Some(o) = world.observation(i) else {
                 continue;
@@ -153,5 +171,76 @@ impl TeamPolicy {
             }
         }
         orders
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::Limits;
+    use crate::testing::model;
+    use crate::unpark::UNPARK_AFTER_TICKS;
+    use lasertag_core::bots::BotKind;
+    use lasertag_core::planner::PlannerKind;
+    use lasertag_core::sim::arena::MapDef;
+    use lasertag_core::sim::still::LongestStill;
+    use lasertag_core::world::{MatchConfig, MatchStatus, WorldInput};
+    use nalgebra::Point2;
+
+    #[test]
+    fn a_policy_that_stands_still_is_walked_on_before_a_person_would_call_it_parked() {
+        // Two rooms joined by a door; the opponent stands in the far one, out of sight.
+        let arena = Arc::new(Arena::new(MapDef {
+            name: "rooms".into(),
+            width: 16.0,
+            height: 8.0,
+            obstacles: vec![vec![
+                Point2::new(8.0, 0.0),
+                Point2::new(8.2, 0.0),
+                Point2::new(8.2, 6.0),
+                Point2::new(8.0, 6.0),
+            ]],
+            robot_spawns: vec![[1.0, 1.0, 0.0], [1.0, 3.0, 0.0]],
+            opponent_spawns: vec![Point2::new(14.0, 1.0)],
+            landmarks: vec![],
+        }));
+        let config = MatchConfig {
+            robots: 2,
+            opponents: 1,
+            opponent_bot: BotKind::Idle,
+            planner: PlannerKind::Api,
+            time_limit_ticks: 60 * 20,
+            ..MatchConfig::default()
+        };
+        let mut world = World::new(arena.clone(), config).expect("a world");
+        let physics = world.config.physics.clone();
+        // A model whose every action is 0: forward 0, turn 0, no tag. It stands forever.
+        let inputs = layout(2, 0, 16.0, 8.0, &physics).size();
+        let stand = model(
+            inputs,
+            &[(vec![vec![0.0; inputs]; 3], vec![0.0; 3], "Identity")],
+        );
+        let policy = Arc::new(Policy::from_onnx(&stand, &Limits::default()).expect("a model"));
+        let mut team = TeamPolicy::new(policy, &arena, 2, &physics, DEFAULT_EVERY).expect("fits");
+        let mut still = LongestStill::default();
+        let mut walks = 0;
+        while world.status == MatchStatus::Running && world.tick < 40 * 20 {
+            for (robot, order) in team.orders(&world) {
+                walks += matches!(order, RobotOrder::Waypoints(_)) as usize;
+                world
+                    .apply(&WorldInput::Robot { robot, order })
+                    .expect("the order is taken");
+            }
+            world.step();
+            for (i, r) in world.robots.iter().enumerate() {
+                still.push(i, r.pose.pos, world.tick);
+            }
+        }
+        assert!(walks >= 2, "both robots were walked on: {walks} walks");
+        assert!(
+            still.longest_ticks() < 2 * UNPARK_AFTER_TICKS,
+            "no robot stood 10 s: the longest stood {} ticks",
+            still.longest_ticks()
+        );
     }
 }

@@ -98,10 +98,51 @@ fn capture_writes_every_run_and_a_summary() {
     ]);
     assert!(o.status.success(), "{o:?}");
     let (header, rows) = csv(&out.join("capture.csv"));
-    assert_eq!(header, "map,bot,planner,seed,captured,time_s,first_seen_s");
+    assert_eq!(
+        header,
+        "map,bot,planner,seed,captured,time_s,first_seen_s,longest_still_s"
+    );
     assert_eq!(rows, 2 * 3 * 2, "2 bots × 3 planners × 2 runs");
     assert_eq!(csv(&out.join("capture_summary.csv")).1, 2 * 3);
     svg(&out.join("capture_office_wander.svg"));
+    let _ = std::fs::remove_dir_all(&out);
+}
+
+#[test]
+fn capture_runs_the_bots_asked_for_and_names_one_it_does_not_know() {
+    let out = out_dir("capture_bots");
+    let run = |bots: &str| {
+        experiment(&[
+            "capture",
+            "--runs",
+            "1",
+            "--time-limit",
+            "5",
+            "--on",
+            "office",
+            "--bots",
+            bots,
+            "--out",
+            out.to_str().unwrap(),
+        ])
+    };
+    let o = run("idle");
+    assert!(o.status.success(), "{o:?}");
+    let (_, rows) = csv(&out.join("capture.csv"));
+    assert_eq!(rows, 3, "1 bot × 3 planners × 1 run");
+    let (header, _) = csv(&out.join("capture_summary.csv"));
+    assert!(
+        header.ends_with("median_longest_still_s,max_longest_still_s,runs_still_over_10s"),
+        "{header}"
+    );
+    svg(&out.join("capture_office_idle.svg"));
+    let o = run("idle,walker");
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("--bots") && err.contains("\"walker\""),
+        "{err}"
+    );
     let _ = std::fs::remove_dir_all(&out);
 }
 

@@ -39,6 +39,7 @@ const SIM_FLOORS: &[&str] = &[
     "sensors",
     "views",
     "rules",
+    "still",
 ];
 
 /// The server library's modules from the ground floor up.

@@ -8,6 +8,7 @@
 //! - `motion`: kinematics and collision resolution of disc agents.
 //! - `sensors`: laser scans and anonymous opponent detections.
 //! - `rules`: tagging, freezing, elimination.
+//! - `still`: how long an agent has stood in one place.
 //! - `views`: what each candidate destination's laser would see (the planner's footprints).
 
 pub mod arena;
@@ -16,6 +17,7 @@ pub mod motion;
 pub mod rules;
 pub(crate) mod segments;
 pub mod sensors;
+pub mod still;
 pub mod views;
 
 use nalgebra::{Point2, Vector2};

@@ -15,9 +15,16 @@
 //! finding and chasing; with `oracle_belief` every tracker is handed the truth each tick,
 //! which bounds what a better search of the belief could gain.
 //!
+//! It also measures how long robots stand still while an opponent is untagged (the longest
+//! spell of any robot, [`lasertag_core::sim::still`]): a team that parks is one a person
+//! beats by waiting, so `--bots idle` (an opponent that hides and never moves) is among the
+//! bots a study can run.
+//!
 //! `--planners` adds teams to the three: a shipped trained policy (`policy:<name>`), whose
 //! orders go in before each tick ([`crate::policy`]), in every table, file and plot.
 
+mod bots;
+mod oracle;
 pub mod planner;
 mod statistics;
 
@@ -25,21 +32,23 @@ use crate::error::LabError;
 use std::path::Path;
 use std::sync::Arc;
 
-use nalgebra::Point2;
-
 use crate::part::Params;
 use crate::plot::{self, Series};
 use crate::record::{Fields, Line, Record};
 use crate::study::{MapStamp, Study, group_from_params, group_to_params};
 use crate::tracking::{self, Parts, Track};
+pub(crate) use bots::bot_name;
+use bots::bots_name;
+pub use bots::{DEFAULT_BOTS, parse_bots};
 use lasertag_core::bots::BotKind;
 use lasertag_core::sim::TICK_HZ;
 use lasertag_core::sim::arena::Arena;
+use lasertag_core::sim::still::LongestStill;
 use lasertag_core::world::{MatchConfig, Placement};
 use lasertag_core::world::{MatchStatus, Side, World};
 pub use planner::Planner;
 pub use statistics::{mann_whitney_p, wilcoxon_signed_rank_p};
-pub(crate) use statistics::{mean_ci, median, stats};
+pub(crate) use statistics::{mean_ci, median, parked, stats};
 
 #[derive(Debug, Clone)]
 pub struct CaptureConfig {
@@ -58,6 +67,8 @@ pub struct CaptureConfig {
     pub oracle_belief: bool,
     /// The teams compared, in order (`--planners`; `baseline` and `coordinated` among them).
     pub planners: Vec<Planner>,
+    /// The opponent bots, in order (`--bots`).
+    pub bots: Vec<BotKind>,
 }
 
 /// One setting of the experiment.
@@ -68,14 +79,6 @@ struct Setting {
     planner: Planner,
 }
 
-pub(crate) fn bot_name(b: BotKind) -> &'static str {
-    match b {
-        BotKind::Wander => "wander",
-        BotKind::Evade => "evade",
-        BotKind::Idle => "idle",
-    }
-}
-
 /// When, in seconds from the start, a run's robots first saw an opponent and when they had
 /// tagged every opponent (`None`: not within the time limit). Capture time is finding plus
 /// chasing: the first sighting splits them, and says how much of it a planner that
@@ -84,17 +87,22 @@ pub(crate) fn bot_name(b: BotKind) -> &'static str {
 pub struct Outcome {
     pub tagged: Option<f64>,
     pub first_seen: Option<f64>,
+    /// The longest any robot stood still (within its own radius of one point) while an
+    /// opponent was untagged and the robot could move, in seconds.
+    pub longest_still_s: f64,
 }
 
 impl Record for Outcome {
     fn write(&self, out: &mut Line) {
         self.tagged.write(out);
         self.first_seen.write(out);
+        self.longest_still_s.write(out);
     }
     fn read(input: &mut Fields) -> Result<Outcome, String> {
         Ok(Outcome {
             tagged: Record::read(input)?,
             first_seen: Record::read(input)?,
+            longest_still_s: Record::read(input)?,
         })
     }
 }
@@ -124,9 +132,10 @@ fn one_run(
     let mut team = crate::policy::for_world(&world)?;
     let mut track = Track::default();
     let mut first_seen = None;
+    let mut still = LongestStill::default();
     while world.status == MatchStatus::Running {
         if cfg.oracle_belief {
-            reveal_opponents(&mut world);
+            oracle::reveal_opponents(&mut world);
         }
         // A policy decides from the belief as it is now (the oracle's, with one).
         crate::policy::step(team.as_mut(), &mut world);
@@ -138,36 +147,22 @@ fn one_run(
         // track, and its zero would flatter every run by a tick.
         if world.status == MatchStatus::Running {
             track.push(&world);
+            for (i, r) in world.robots.iter().enumerate() {
+                if world.robot_frozen(i) {
+                    still.pause(i);
+                } else {
+                    still.push(i, r.pose.pos, world.tick);
+                }
+            }
         }
     }
     let tagged = (world.winner == Some(Side::Robots)).then(|| world.time_s());
-    Ok((Outcome { tagged, first_seen }, track.finish()))
-}
-
-/// Puts every untagged role's cloud of every tracker on the nearest untagged opponent, at
-/// full confidence: the planners then choose from a belief that is the truth.
-fn reveal_opponents(world: &mut World) {
-    let truth: Vec<Point2<f32>> = world
-        .opponents
-        .iter()
-        .filter(|o| !o.tagged)
-        .map(|o| o.pose.pos)
-        .collect();
-    for tracker in &mut world.team.trackers {
-        for role in tracker.roles.iter_mut().filter(|r| !r.tagged) {
-            let centre = role.particles().first().copied().unwrap_or_default();
-            let Some(&at) = truth.iter().min_by(|a, b| {
-                (**a - centre)
-                    .norm_squared()
-                    .total_cmp(&(**b - centre).norm_squared())
-            }) else {
-                return;
-            };
-            let n = role.particles().len().max(1);
-            role.reset(vec![at; n]);
-            role.confidence = 1.0;
-        }
-    }
+    let outcome = Outcome {
+        tagged,
+        first_seen,
+        longest_still_s: still.longest_ticks() as f64 / TICK_HZ as f64,
+    };
+    Ok((outcome, track.finish()))
 }
 
 /// The median time to the first sighting (a run that saw nothing counts as the `limit`) and
@@ -199,8 +194,6 @@ fn gospa_curve(tracks: &[Track]) -> Vec<(Parts, usize)> {
         .collect()
 }
 
-const BOTS: [BotKind; 2] = [BotKind::Wander, BotKind::Evade];
-
 /// The study: the configuration and the maps it runs on, in order. Run `j` is setting
 /// `j / runs` (map, then bot, then planner) with seed `seed + j % runs`.
 #[derive(Debug, Clone)]
@@ -217,7 +210,7 @@ impl Capture {
     fn settings(&self) -> Vec<Setting> {
         let mut settings = Vec::new();
         for map in 0..self.maps.len() {
-            for bot in BOTS {
+            for &bot in &self.cfg.bots {
                 for planner in &self.cfg.planners {
                     settings.push(Setting {
                         map,
@@ -264,6 +257,7 @@ impl Study for Capture {
         group_to_params(&c.radio, "radio", &mut p);
         MapStamp::to_params(&self.maps, &mut p);
         p.set("planners", planner::list_name(&c.planners));
+        p.set("bots", bots_name(&c.bots));
         let policies = c.planners.iter().filter_map(|p| match p {
             Planner::Policy(name) => Some(name.as_str()),
             Planner::BuiltIn(_) => None,
@@ -286,6 +280,9 @@ impl Study for Capture {
                 // Parts written before the list was a parameter compared the default three.
                 planners: Planner::parse_list(p.get("planners").unwrap_or(planner::DEFAULT))
                     .map_err(|e| format!("parameter `planners`: {e}"))?,
+                // Parts written before the list was a parameter ran the paper's two.
+                bots: parse_bots(p.get("bots").unwrap_or(DEFAULT_BOTS))
+                    .map_err(|e| format!("parameter `bots`: {e}"))?,
             },
             maps: MapStamp::from_params(p)?,
         })
@@ -304,18 +301,19 @@ impl Study for Capture {
 fn write(study: &Capture, runs: Vec<Run>, out: &Path) -> Result<String, LabError> {
     let cfg = &study.cfg;
     let settings = study.settings();
-    let (bots, planners) = (BOTS, &cfg.planners);
+    let (bots, planners) = (&cfg.bots, &cfg.planners);
     let names: Vec<String> = planners.iter().map(Planner::name).collect();
     let (outcomes, tracks): (Vec<Outcome>, Vec<Track>) = runs.into_iter().unzip();
     let results: Vec<Option<f64>> = outcomes.iter().map(|o| o.tagged).collect();
     let limit = cfg.time_limit_s as f64;
-    let mut csv = String::from("map,bot,planner,seed,captured,time_s,first_seen_s\n");
+    let mut csv =
+        String::from("map,bot,planner,seed,captured,time_s,first_seen_s,longest_still_s\n");
     let mut summary = format!(
-        "map,bot,planner,runs,captured,median_s,mean_s,mean_ci95_low_s,mean_ci95_high_s,median_ratio_vs_baseline,mann_whitney_p,{},mean_gospa_ci95_m,median_ratio_vs_coordinated,mann_whitney_p_vs_coordinated,median_first_seen_s,median_chase_s,wilcoxon_p_vs_coordinated,wilcoxon_p_vs_baseline\n",
+        "map,bot,planner,runs,captured,median_s,mean_s,mean_ci95_low_s,mean_ci95_high_s,median_ratio_vs_baseline,mann_whitney_p,{},mean_gospa_ci95_m,median_ratio_vs_coordinated,mann_whitney_p_vs_coordinated,median_first_seen_s,median_chase_s,wilcoxon_p_vs_coordinated,wilcoxon_p_vs_baseline,median_longest_still_s,max_longest_still_s,runs_still_over_10s\n",
         tracking::csv_header("mean_")
     );
     let mut table = format!(
-        "{:<10} {:<7} {:<14} {:>8} {:>8} {:>8} {:>16} {:>6} {:>9} {:>7}\n",
+        "{:<10} {:<7} {:<14} {:>8} {:>8} {:>8} {:>16} {:>6} {:>9} {:>7} {:>7}\n",
         "map",
         "bot",
         "planner",
@@ -325,7 +323,8 @@ fn write(study: &Capture, runs: Vec<Run>, out: &Path) -> Result<String, LabError
         "95% CI of mean",
         "ratio",
         "p",
-        "GOSPA"
+        "GOSPA",
+        "still"
     );
     let mut gospa_csv = format!("map,bot,planner,seed,{}\n", tracking::csv_header("mean_"));
     let mut gospa_time = format!(
@@ -339,14 +338,15 @@ fn write(study: &Capture, runs: Vec<Run>, out: &Path) -> Result<String, LabError
             .enumerate()
         {
             csv.push_str(&format!(
-                "{},{},{},{},{},{},{}\n",
+                "{},{},{},{},{},{},{},{:.2}\n",
                 study.maps[s.map].name,
                 bot_name(s.bot),
                 s.planner.name(),
                 cfg.seed + i as u64,
                 o.tagged.is_some(),
                 seconds(o.tagged),
-                seconds(o.first_seen)
+                seconds(o.first_seen),
+                o.longest_still_s
             ));
         }
         for (i, t) in tracks[k * cfg.runs..(k + 1) * cfg.runs].iter().enumerate() {
@@ -361,7 +361,7 @@ fn write(study: &Capture, runs: Vec<Run>, out: &Path) -> Result<String, LabError
         }
     }
     for (map, MapStamp { name: map_name, .. }) in study.maps.iter().enumerate() {
-        for &bot in &bots {
+        for &bot in bots {
             let idx = |p: &Planner| {
                 settings
                     .iter()
@@ -404,8 +404,10 @@ fn write(study: &Capture, runs: Vec<Run>, out: &Path) -> Result<String, LabError
                 let paired_pv = wilcoxon_signed_rank_p(&as_values(&times), &as_values(&greedy));
                 let paired_base_pv = wilcoxon_signed_rank_p(&as_values(&times), &as_values(&base));
                 let (first_seen, chase) = find_and_chase(&outcomes_of(p), limit);
+                let spells: Vec<f64> = outcomes_of(p).iter().map(|o| o.longest_still_s).collect();
+                let (still_median, still_max, still_over) = parked(&spells);
                 summary.push_str(&format!(
-                    "{},{},{},{},{captured},{median:.2},{mean:.2},{lo:.2},{hi:.2},{ratio:.3},{pv:.3e},{},{gospa_ci:.4},{greedy_ratio:.3},{greedy_pv:.3e},{first_seen:.2},{chase:.2},{paired_pv:.3e},{paired_base_pv:.3e}\n",
+                    "{},{},{},{},{captured},{median:.2},{mean:.2},{lo:.2},{hi:.2},{ratio:.3},{pv:.3e},{},{gospa_ci:.4},{greedy_ratio:.3},{greedy_pv:.3e},{first_seen:.2},{chase:.2},{paired_pv:.3e},{paired_base_pv:.3e},{still_median:.2},{still_max:.2},{still_over}\n",
                     map_name,
                     bot_name(bot),
                     name,
@@ -413,7 +415,7 @@ fn write(study: &Capture, runs: Vec<Run>, out: &Path) -> Result<String, LabError
                     gospa.csv()
                 ));
                 table.push_str(&format!(
-                    "{:<10} {:<7} {:<14} {:>4}/{:<3} {:>7.1}s {:>7.1}s {:>16} {:>6.2} {:>9.2e} {:>6.2}m\n",
+                    "{:<10} {:<7} {:<14} {:>4}/{:<3} {:>7.1}s {:>7.1}s {:>16} {:>6.2} {:>9.2e} {:>6.2}m {:>6.1}s\n",
                     map_name,
                     bot_name(bot),
                     name,
@@ -424,7 +426,8 @@ fn write(study: &Capture, runs: Vec<Run>, out: &Path) -> Result<String, LabError
                     format!("[{lo:.1}, {hi:.1}] s"),
                     ratio,
                     pv,
-                    gospa.gospa
+                    gospa.gospa,
+                    still_max
                 ));
                 let curve = gospa_curve(tracks_of(p));
                 for (t, (parts, n)) in curve.iter().enumerate() {
@@ -511,7 +514,11 @@ mod tests {
 
     #[test]
     fn finding_counts_unseen_runs_at_the_limit_and_chasing_only_tagged_ones() {
-        let o = |tagged, first_seen| Outcome { tagged, first_seen };
+        let o = |tagged, first_seen| Outcome {
+            tagged,
+            first_seen,
+            longest_still_s: 0.0,
+        };
         let runs = [
             o(Some(12.0), Some(2.0)),
             o(Some(9.0), Some(8.0)),
@@ -525,47 +532,17 @@ mod tests {
     }
 
     #[test]
-    fn an_oracle_belief_puts_every_cloud_on_the_opponent() {
-        use lasertag_core::sim::arena::MapDef;
-        let arena = Arc::new(Arena::new(MapDef {
-            name: "room".into(),
-            width: 10.0,
-            height: 6.0,
-            obstacles: vec![],
-            robot_spawns: vec![[1.0, 1.0, 0.0], [1.0, 2.0, 0.0]],
-            opponent_spawns: vec![Point2::new(8.0, 4.0)],
-            landmarks: vec![],
-        }));
-        let config = MatchConfig {
-            robots: 2,
-            opponents: 1,
-            ..MatchConfig::default()
-        };
-        let mut world = World::new(arena, config).unwrap();
-        world.step();
-        let truth = world.opponents[0].pose.pos;
-        let on_truth = |w: &World| {
-            w.team.trackers.iter().all(|t| {
-                t.roles
-                    .iter()
-                    .all(|r| !r.particles().is_empty() && r.particles().iter().all(|p| *p == truth))
-            })
-        };
-        assert!(!on_truth(&world), "a fresh tracker guesses over the room");
-        reveal_opponents(&mut world);
-        assert!(on_truth(&world));
-    }
-
-    #[test]
     fn an_outcome_reads_back_as_written() {
         for o in [
             Outcome {
                 tagged: Some(7.25),
                 first_seen: Some(1.5),
+                longest_still_s: 3.45,
             },
             Outcome {
                 tagged: None,
                 first_seen: None,
+                longest_still_s: 0.0,
             },
         ] {
             assert_eq!(crate::record::from_line(&crate::record::to_line(&o)), Ok(o));

@@ -112,6 +112,18 @@ fn two_sided_p(z: f64) -> f64 {
     libm::erfc(z / std::f64::consts::SQRT_2).clamp(0.0, 1.0)
 }
 
+/// The longest a robot should stand still while hunting: a team that parks for longer is one
+/// a person beats by waiting. Runs with a longer spell are counted.
+const PARKED_S: f64 = 10.0;
+
+/// The median and the longest of runs' longest spells of standing still (s), and how many
+/// runs had one over [`PARKED_S`].
+pub(crate) fn parked(spells: &[f64]) -> (f64, f64, usize) {
+    let longest = spells.iter().copied().fold(0.0, f64::max);
+    let over = spells.iter().filter(|s| **s > PARKED_S).count();
+    (median(&mut spells.to_vec()), longest, over)
+}
+
 /// The median of `xs` (sorted in place); `NaN` for none.
 pub(crate) fn median(xs: &mut [f64]) -> f64 {
     xs.sort_by(f64::total_cmp);

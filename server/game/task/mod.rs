@@ -842,9 +842,19 @@ impl MatchTask {
         let Some(policy) = self.settings.policy.as_mut() else {
             return;
         };
-        for (robot, order) in policy.orders(&self.world) {
-            // Drive orders in range for robots driven from outside are always taken.
-            let _ = self.apply(WorldInput::Robot { robot, order });
+        let inputs: Vec<WorldInput> = policy
+            .orders(&self.world)
+            .into_iter()
+            .map(|(robot, order)| WorldInput::Robot { robot, order })
+            .collect();
+        // A robot walked on from where it stood gets a route: the match's own work, as
+        // much as its order can take (one waypoint, once in seconds), not a request's.
+        let cells = self.world.arena.grid.len();
+        self.world
+            .set_route_budget(crate::game::work::route_work(&inputs, cells));
+        for input in inputs {
+            // Drive orders in range, and routes within that budget, are always taken.
+            let _ = self.apply(input);
         }
     }
 
