@@ -15,13 +15,14 @@
 //! recorded like any order, so replays and resumed matches never need the guard. A resumed
 //! match's guard starts afresh: a robot may then stand one more [`UNPARK_AFTER_TICKS`].
 
-use lasertag_core::sim::still::{STILL_RADIUS_M, StillSpell};
+use std::collections::VecDeque;
+
+use lasertag_core::sim::still::STILL_RADIUS_M;
 use lasertag_core::world::{RobotOrder, World};
 use nalgebra::Point2;
 
-/// Ticks a robot may stand still (within its radius of one point) before it is walked on:
-/// 5 s, half the 10 s a robot of a served team should never stand while hunting, so that a
-/// robot that stood on a spot it then rocks around is still walked well inside them.
+/// Ticks a robot may stand still before it is walked on: 5 s, half the 10 s a robot of a
+/// served team should never stand while hunting.
 pub const UNPARK_AFTER_TICKS: u64 = 100;
 /// The longest a walk lasts before the policy drives again: 10 s.
 const WALK_TICKS: u64 = 200;
@@ -40,7 +41,8 @@ const GOAL_CANDIDATES: usize = 64;
 /// One robot's guard.
 #[derive(Debug, Clone, Default)]
 pub struct Unpark {
-    spell: Option<StillSpell>,
+    /// Where its odometry was on its decision ticks over the last [`UNPARK_AFTER_TICKS`].
+    trail: VecDeque<(u64, Point2<f32>)>,
     walk: Option<Walk>,
 }
 
@@ -69,27 +71,27 @@ impl Unpark {
         let tick = world.tick;
         let robot = &world.robots[i];
         if world.robot_frozen(i) {
-            // It cannot move: no spell, and a walk starts over once it can.
+            // It cannot move: its standing does not count, and a walk starts over.
             *self = Unpark::default();
             return Decision::Policy;
         }
         let at = robot.odometry.pos;
-        let spell = self.spell.get_or_insert(StillSpell::new(at, tick));
-        let still = spell.update(at, tick);
+        self.note(tick, at);
         if let Some(walk) = self.walk {
             let arrived = (robot.estimate.pos - walk.goal).norm() <= ARRIVED_M;
             // A sighting hands the robot back to the policy once the walk has taken it off
             // the spot: a policy that stood while seeing an opponent would stand again.
             let moved = (at - walk.from).norm() > STILL_RADIUS_M;
             let sees = moved && !robot.scan.detections.is_empty();
-            if !(arrived || sees || tick >= walk.until_tick || still >= WALK_STUCK_TICKS) {
+            let stuck = self.stood(tick, WALK_STUCK_TICKS);
+            if !(arrived || sees || tick >= walk.until_tick || stuck) {
                 return Decision::Walking;
             }
             self.walk = None;
-            *spell = StillSpell::new(at, tick);
+            self.trail.clear();
             return Decision::Policy;
         }
-        if still < UNPARK_AFTER_TICKS {
+        if !self.stood(tick, UNPARK_AFTER_TICKS) {
             return Decision::Policy;
         }
         let Some(goal) = walk_goal(world, i) else {
@@ -100,8 +102,38 @@ impl Unpark {
             until_tick: tick + WALK_TICKS,
             from: at,
         });
-        *spell = StillSpell::new(at, tick);
+        self.trail.clear();
         Decision::Start(RobotOrder::Waypoints(vec![goal]))
+    }
+
+    /// The robot was at `at` on tick `tick`.
+    fn note(&mut self, tick: u64, at: Point2<f32>) {
+        self.trail.push_back((tick, at));
+        // Kept: the last point at or before the window's start, and every one after it.
+        while self
+            .trail
+            .get(1)
+            .is_some_and(|(t, _)| t + UNPARK_AFTER_TICKS <= tick)
+        {
+            self.trail.pop_front();
+        }
+    }
+
+    /// Whether the robot has stood for the last `ticks`: the trail reaches that far back and
+    /// every point of it since is within twice [`STILL_RADIUS_M`] of where it is now. A
+    /// robot that stayed within the radius of any one point for `ticks` stood so (any two
+    /// of its points are within twice the radius), whatever point a measurement of its
+    /// spell took as the centre: the guard cannot be later than the measurement.
+    fn stood(&self, tick: u64, ticks: u64) -> bool {
+        let (Some(&(first, _)), Some(&(_, now))) = (self.trail.front(), self.trail.back()) else {
+            return false;
+        };
+        first + ticks <= tick
+            && self
+                .trail
+                .iter()
+                .filter(|(t, _)| t + ticks >= tick)
+                .all(|(_, p)| (p - now).norm() <= 2.0 * STILL_RADIUS_M)
     }
 }
 
@@ -163,4 +195,44 @@ fn walk_goal(world: &World, i: usize) -> Option<Point2<f32>> {
     };
     farthest(&mut cloud.iter().map(|(p, _)| *p))
         .or_else(|| farthest(&mut world.arena.def.opponent_spawns.iter().copied()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use lasertag_core::sim::still::LongestStill;
+
+    #[test]
+    fn a_robot_is_judged_standing_within_the_time_any_measured_spell_takes() {
+        // It drives in from the left, then rocks between x = 1.0 and 1.24 every decision,
+        // deciding every 3 ticks: a measured spell may centre anywhere on that stretch.
+        let (mut guard, mut measured) = (Unpark::default(), LongestStill::default());
+        let mut judged = None;
+        for tick in (0..400).step_by(3) {
+            let x = if tick < 30 {
+                tick as f32 / 30.0
+            } else {
+                1.0 + 0.24 * ((tick / 3) % 2) as f32
+            };
+            let at = Point2::new(x, 2.0);
+            guard.note(tick, at);
+            measured.push(0, at, tick);
+            if guard.stood(tick, UNPARK_AFTER_TICKS) {
+                judged = Some(tick);
+                break;
+            }
+        }
+        let judged = judged.expect("judged standing");
+        assert!(
+            measured.longest_ticks() <= UNPARK_AFTER_TICKS + 3,
+            "judged at tick {judged}, when the measured spell was {} ticks",
+            measured.longest_ticks()
+        );
+        // It came within twice the radius of x = 1.0, where it rocks from, at tick 15: the
+        // window of the last 100 ticks may begin up to a decision before.
+        assert!(
+            judged + 3 >= 15 + UNPARK_AFTER_TICKS,
+            "judged while driving: {judged}"
+        );
+    }
 }

@@ -8,7 +8,7 @@ use rand::RngExt;
 use rand_chacha::ChaCha8Rng;
 
 use crate::nav::{DistanceField, PathFollower, steer, turn_to};
-use crate::planner::pursuit::{engage, nearest_sighting, pursuit_goal};
+use crate::planner::pursuit::{around_the_corner, engage, nearest_sighting, pursuit_goal};
 use crate::planner::view::{Knowledge, RobotCommand, TeamView};
 use crate::radio::Status;
 use crate::sim::arena::Arena;
@@ -104,8 +104,11 @@ impl Baseline {
             let state = &mut self.robots[i];
             if let Some((target, seen)) = state.chase {
                 if tick < seen + CHASE_MEMORY_TICKS && (target - robot.pose.pos).norm() > 0.5 {
+                    // Round the corner `engage` was heading for, if a wall hides the target:
+                    // straight at it, the robot would turn back and forth between the two.
+                    let via = around_the_corner(arena, robot.pose.pos, target).unwrap_or(target);
                     commands.push(RobotCommand {
-                        motion: steer(robot.pose, target, physics.robot_turn_rate),
+                        motion: steer(robot.pose, via, physics.robot_turn_rate),
                         tag: false,
                         goal: Some(pursuit_goal(robot.pose, target)),
                     });

@@ -39,7 +39,11 @@ const TARGET_CELL_RINGS: usize = 2;
 /// Where a robot at `from` walks to get a clear shot at `target`, when a wall stands on the
 /// line between them: the first corner of the way there. `None` when the line is clear (or
 /// there is no way).
-fn around_the_corner(arena: &Arena, from: Point2<f32>, target: Point2<f32>) -> Option<Point2<f32>> {
+pub(crate) fn around_the_corner(
+    arena: &Arena,
+    from: Point2<f32>,
+    target: Point2<f32>,
+) -> Option<Point2<f32>> {
     if arena.line_of_sight(from, target) {
         return None;
     }

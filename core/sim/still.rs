@@ -1,6 +1,6 @@
-//! How long an agent has stood still: the one definition the served teams' guard against
-//! parking (`lasertag_policy::team`), the capture experiment's parked time and the browser
-//! test share.
+//! How long an agent has stood still: the one definition the capture experiment's parked
+//! time and the browser test share, and which the served teams' guard against parking
+//! (`lasertag_policy::unpark`) is built to act within.
 //!
 //! "Still" is about place, not heading: a robot turning on the spot, or rocking back and
 //! forth within a hand's breadth, is as parked to the person hiding from it as one that does
