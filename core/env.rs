@@ -21,8 +21,9 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
 use crate::nav::ReachCache;
+use crate::planner::RobotCommand;
 use crate::sim::arena::Arena;
-use crate::sim::{AgentId, TICK_HZ};
+use crate::sim::{AgentId, Motion, TICK_HZ};
 use crate::tracker::features;
 use crate::world::{
     EventKind, FinishReason, MatchConfig, MatchStatus, RobotObservation, RobotOrder, SetupError,
@@ -462,6 +463,18 @@ pub fn drive_order(action: &[f32]) -> RobotOrder {
         turn: clip(at(1)),
         tag: at(2) > 0.5,
     }
+}
+
+/// The action that gives what `command` did, as [`drive_order`] reads one: a planner's
+/// decision in a policy's terms, the label behaviour cloning learns from. A robot's motion
+/// is a differential drive; anything else (`Stop`, and `Toward`, which only bots walk)
+/// stands.
+pub fn command_action(command: &RobotCommand) -> [f32; ACTION_SIZE] {
+    let (forward, turn) = match command.motion {
+        Motion::Drive { forward, turn } => (clip(forward), clip(turn)),
+        Motion::Stop | Motion::Toward(_) => (0.0, 0.0),
+    };
+    [forward, turn, if command.tag { 1.0 } else { 0.0 }]
 }
 
 /// An action's fraction: clipped to [-1, 1], NaN as 0 (what the HTTP backend sends).

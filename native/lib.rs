@@ -35,7 +35,8 @@ use pyo3::types::PyDict;
 use rayon::prelude::*;
 
 use lasertag_core::env::engine::{self, EngineArgs, Refusal, RestartFailed, Slot, check_shape};
-use lasertag_core::env::{ACTION_SIZE, EnvSpec, Rewards, mm, rad};
+use lasertag_core::env::{ACTION_SIZE, EnvSpec, Rewards, command_action, mm, rad};
+use lasertag_core::planner::PlannerKind;
 use lasertag_core::sim::arena::Arena;
 use lasertag_core::sim::{AgentId, Pose};
 use lasertag_core::world::{FinishReason, Side, World, WorldInput};
@@ -59,6 +60,17 @@ struct Engine {
     /// Each world's trained policy when one drives the team (`planner="policy:<name>"`),
     /// else `None` for every world: one per world, as each decision writes its buffers.
     teams: Vec<Option<TeamPolicy>>,
+    /// Whether a built-in planner drives the robots, whose decisions `step_all` then keeps
+    /// in `teacher` (worlds × robots × 3): behaviour cloning's labels.
+    taught: bool,
+    teacher: Vec<f32>,
+}
+
+/// Each robot's planned command of `world` as the action that gives it, row by row.
+fn write_teacher(world: &World, out: &mut [f32]) {
+    for (row, robot) in out.chunks_exact_mut(ACTION_SIZE).zip(&world.robots) {
+        row.copy_from_slice(&command_action(&robot.command));
+    }
 }
 
 /// The policy's orders of this tick (none between its decisions) as inputs.
@@ -70,7 +82,11 @@ fn drive(team: &mut TeamPolicy, world: &mut World) {
 }
 
 /// One step of a world in a vector ([`Slot::step_or_restart`]), its policy giving the
-/// orders when it has one (the actions are then not read).
+/// orders when it has one (the actions are then not read). With `teacher`, the planners'
+/// commands go into it once the step has run: what they decided from the state the step's
+/// vectors describe, which they carry out on the next tick (zeros for an episode's first
+/// vectors, before any decision).
+#[allow(clippy::too_many_arguments)]
 fn step_world(
     slot: &mut Slot,
     team: &mut Option<TeamPolicy>,
@@ -79,13 +95,18 @@ fn step_world(
     actions: &[f32],
     obs: &mut [f32],
     rewards: &mut [f64],
+    teacher: Option<&mut [f32]>,
 ) -> Result<(bool, bool), RestartFailed> {
-    match team {
+    let flags = match team {
         None => slot.step_or_restart(arena, spec, actions, obs, rewards),
         Some(team) => {
             slot.step_or_restart_with(arena, spec, &[], obs, rewards, &mut |w| drive(team, w))
         }
+    }?;
+    if let Some(out) = teacher {
+        write_teacher(slot.episode.world(), out);
     }
+    Ok(flags)
 }
 
 /// The policy `name` (shipped) set up for every world of `engine`, or why it cannot drive
@@ -102,6 +123,11 @@ fn policy_teams(engine: &mut engine::Engine, name: &str) -> PyResult<Vec<Option<
     let team =
         TeamPolicy::new(policy, arena, robots, &physics, DEFAULT_EVERY).map_err(|e| refuse(&e))?;
     Ok(vec![Some(team); worlds])
+}
+
+/// Whether `spec`'s robots are all driven by a built-in planner (not by actions).
+fn planned_by_built_in(spec: &EnvSpec) -> bool {
+    spec.config.planner != PlannerKind::Api && !spec.config.outside_robots.contains(&true)
 }
 
 fn value_error(e: impl std::fmt::Display) -> PyErr {
@@ -165,11 +191,18 @@ impl Engine {
         let mut inner = py
             .detach(|| engine::Engine::build(checked))
             .map_err(refused)?;
+        let taught = policy.is_none() && planned_by_built_in(inner.spec());
         let teams = match policy {
             Some(name) => policy_teams(&mut inner, &name)?,
             None => vec![None; inner.worlds()],
         };
-        Ok(Engine { inner, teams })
+        let teacher = vec![0.0; inner.worlds() * inner.robots() * ACTION_SIZE];
+        Ok(Engine {
+            inner,
+            teams,
+            taught,
+            teacher,
+        })
     }
 
     /// Values in one robot's observation vector.
@@ -231,7 +264,9 @@ impl Engine {
         let out = obs.as_slice_mut().map_err(value_error)?;
         self.inner
             .reset_all(out, seed, seeds.as_deref())
-            .map_err(refused)
+            .map_err(refused)?;
+        self.teacher.fill(0.0);
+        Ok(())
     }
 
     /// One step of world `world`: `actions` (robots × 3) in, vectors into `obs` (robots ×
@@ -338,35 +373,60 @@ impl Engine {
             )
             .map_err(refused)?;
         let per_world = robots * size;
+        let taught = self.taught;
         let (arena, spec, slots) = self.inner.parts_mut();
         let teams = &mut self.teams;
+        let teacher = &mut self.teacher;
         // The core's `step_all` with the worlds spread over rayon's threads.
-        let failed =
-            py.detach(|| {
-                slots
-                    .par_iter_mut()
-                    .zip(teams.par_iter_mut())
-                    .zip(actions.par_chunks_exact(robots * ACTION_SIZE))
-                    .zip(obs.par_chunks_exact_mut(per_world))
-                    .zip(rewards.par_chunks_exact_mut(robots))
-                    .zip(terminated.par_iter_mut())
-                    .zip(truncated.par_iter_mut())
-                    .enumerate()
-                    .filter_map(|(world, ((((((slot, team), a), o), r), term), trunc))| {
-                        match step_world(slot, team, arena, spec, a, o, r) {
+        let failed = py.detach(|| {
+            slots
+                .par_iter_mut()
+                .zip(teams.par_iter_mut())
+                .zip(actions.par_chunks_exact(robots * ACTION_SIZE))
+                .zip(obs.par_chunks_exact_mut(per_world))
+                .zip(rewards.par_chunks_exact_mut(robots))
+                .zip(terminated.par_iter_mut())
+                .zip(truncated.par_iter_mut())
+                .zip(teacher.par_chunks_exact_mut(robots * ACTION_SIZE))
+                .enumerate()
+                .filter_map(
+                    |(world, (((((((slot, team), a), o), r), term), trunc), t))| {
+                        let t = taught.then_some(t);
+                        match step_world(slot, team, arena, spec, a, o, r, t) {
                             Ok(flags) => {
                                 (*term, *trunc) = flags;
                                 None
                             }
                             Err(e) => Some(e.of(world)),
                         }
-                    })
-                    .min_by_key(|e| match e {
-                        Refusal::Restart { world, .. } => *world,
-                        _ => usize::MAX,
-                    })
-            });
+                    },
+                )
+                .min_by_key(|e| match e {
+                    Refusal::Restart { world, .. } => *world,
+                    _ => usize::MAX,
+                })
+        });
         failed.map_or(Ok(()), |e| Err(refused(e)))
+    }
+
+    /// Each robot's action as its built-in planner decided it at the end of the last
+    /// `step_all` (worlds × robots × 3: forward, turn, tag as 1 or 0), into `out`: the
+    /// decision from the state the step's vectors describe, which the robot carries out on
+    /// the next tick, so behaviour cloning pairs those vectors with these actions. Zeros
+    /// after a reset and for an episode's first vectors (nothing decided yet). Refused
+    /// unless a built-in planner (`coordinated`, `search`, `baseline`) drives the robots.
+    fn teacher_actions(&self, mut out: PyReadwriteArray3<'_, f32>) -> PyResult<()> {
+        if !self.taught {
+            return Err(PyValueError::new_err(
+                "teacher actions: no built-in planner drives these robots (planner=\"coordinated\", \"search\" or \"baseline\" does)",
+            ));
+        }
+        let (worlds, robots) = (self.inner.worlds(), self.inner.robots());
+        check_shape("out", out.shape(), &[worlds, robots, ACTION_SIZE]).map_err(refused)?;
+        out.as_slice_mut()
+            .map_err(value_error)?
+            .copy_from_slice(&self.teacher);
+        Ok(())
     }
 
     /// `steps` steps of world `world`, step `k` with `actions[k % len]` (each robots × 3),
@@ -415,7 +475,7 @@ impl Engine {
                 ticks += t1 - t0;
                 if out.terminated || out.truncated {
                     slot.ended = true;
-                    step_world(slot, team, arena, spec, a, &mut obs, &mut rewards)
+                    step_world(slot, team, arena, spec, a, &mut obs, &mut rewards, None)
                         .map_err(|e| e.of(world))?;
                 }
             }

@@ -168,3 +168,31 @@ fn a_shells_driver_orders_the_robots_before_every_tick_of_a_step() {
     let b = hooked.advance_with(&spec, &drive, &mut rewards, &mut |_| {});
     assert_eq!((a, plain.world().digest()), (b, hooked.world().digest()));
 }
+
+#[test]
+fn a_planners_command_reads_back_as_the_action_that_gives_it() {
+    let drive = |forward, turn, tag| RobotCommand {
+        motion: Motion::Drive { forward, turn },
+        tag,
+        goal: None,
+    };
+    for (command, action) in [
+        (drive(0.75, -0.25, true), [0.75, -0.25, 1.0]),
+        (drive(1.0, 1.0, false), [1.0, 1.0, 0.0]),
+        (RobotCommand::default(), [0.0, 0.0, 0.0]),
+    ] {
+        assert_eq!(command_action(&command), action);
+        let RobotOrder::Drive { forward, turn, tag } = drive_order(&action) else {
+            panic!("a drive order");
+        };
+        let back = drive(forward, turn, tag);
+        let motion = match command.motion {
+            Motion::Stop => Motion::Drive {
+                forward: 0.0,
+                turn: 0.0,
+            },
+            m => m,
+        };
+        assert_eq!((back.motion, back.tag), (motion, command.tag));
+    }
+}

@@ -434,6 +434,17 @@ class LasertagVectorEnv(VectorEnv):
             obs, rew = obs.copy(), rew.copy()
         return obs, rew, term, trunc, {}
 
+    def teacher_actions(self) -> np.ndarray:
+        """With ``planner="coordinated"``, ``"search"`` or ``"baseline"``: each robot's
+        action (num_envs, 3: forward, turn, and tag as 1.0 or 0.0) as its planner decided it
+        at the end of the last :meth:`step`, from the state that step's observations
+        describe; the robot carries it out on the next tick. Behaviour cloning pairs those
+        observations with these actions. Zeros after ``reset`` and for an episode's first
+        observations (nothing decided yet). A ValueError when actions drive the robots."""
+        out = np.zeros((self.num_worlds, self.robots, 3), dtype=np.float32)
+        self._engine.teacher_actions(out)
+        return out.reshape(self.num_envs, 3)
+
     def world_digest(self, world: int) -> int:
         """World ``world``'s state digest."""
         return self._engine.digest(world)

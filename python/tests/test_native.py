@@ -257,6 +257,41 @@ def test_a_seed_per_world_and_the_papers_planners_in_the_same_harness():
         lasertag_env.vector_env(1, planner="clever")
 
 
+def test_the_planners_decisions_come_back_as_the_actions_that_give_them():
+    # One tick a step: the teacher's action after step k, decided from step k's
+    # observation, is the command that turns the robot during step k + 1.
+    v = lasertag_env.vector_env(2, planner="coordinated", ticks_per_step=1, seed=11)
+    v.reset()
+    label = v.teacher_actions()
+    assert not label.any()
+    zero = np.zeros((v.num_envs, 3), np.float32)
+    before = [v.world_truth(w)["robots"] for w in range(2)]
+    turned = agreed = fired = 0
+    for _ in range(300):
+        _, _, term, trunc, _ = v.step(zero)
+        after = [v.world_truth(w)["robots"] for w in range(2)]
+        for w in range(2):
+            for r in range(2):
+                turn = label[2 * w + r, 1]
+                if abs(turn) > 0.2 and not after[w][r]["frozen"]:
+                    d = np.angle(np.exp(1j * (after[w][r]["theta"] - before[w][r]["theta"])))
+                    turned += 1
+                    agreed += int(np.sign(d) == np.sign(turn))
+        before = after
+        label = v.teacher_actions()
+        assert label.shape == (v.num_envs, 3)
+        assert np.all(np.abs(label[:, :2]) <= 1.0) and set(np.unique(label[:, 2])) <= {0.0, 1.0}
+        fired += int(label[:, 2].sum())
+        for w in range(2):
+            if term[2 * w] or trunc[2 * w]:
+                # The next step starts the world's next episode: nothing to compare.
+                label[2 * w : 2 * w + 2] = 0.0
+    assert turned > 20 and agreed == turned, (turned, agreed)
+    assert fired > 0, "the planners fired at least once"
+    with pytest.raises(ValueError, match="no built-in planner"):
+        lasertag_env.vector_env(1).teacher_actions()
+
+
 def test_the_engine_carries_every_shipped_map_as_the_server_reads_it():
     import json
     import pathlib
