@@ -21,12 +21,9 @@ use nalgebra::Point2;
 use serde_json::json;
 use std::time::{Duration, Instant};
 
-#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn a_person_plays_the_learned_team_from_the_lobby_and_replays_it() {
-    // A server that keeps names: a rated match rates only a kept name.
-    let s = TestServer::start_stored(&common::temp_dir("learned")).await;
-    let mut b = Browser::launch().await;
-    let base = format!("http://{}", s.addr);
+/// Opens the lobby at `base`, picks the learned team at the Play door and waits until the
+/// page plays the match as its opponent.
+async fn play_the_learned_team_from_the_lobby(b: &mut Browser, base: &str) {
     b.navigate(&format!("{base}/")).await;
     b.wait_for(
         "__lasertag.page === 'lobby' && [...document.getElementById('door-difficulty').options].some((o) => o.value === 'learned')",
@@ -41,6 +38,15 @@ async fn a_person_plays_the_learned_team_from_the_lobby_and_replays_it() {
         20,
     )
     .await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_person_plays_the_learned_team_from_the_lobby_and_replays_it() {
+    // A server that keeps names: a rated match rates only a kept name.
+    let s = TestServer::start_stored(&common::temp_dir("learned")).await;
+    let mut b = Browser::launch().await;
+    let base = format!("http://{}", s.addr);
+    play_the_learned_team_from_the_lobby(&mut b, &base).await;
     assert_eq!(b.eval("__lasertag.rated").await, json!(true));
     let id = b.eval("__lasertag.matchId").await;
     let id = id.as_str().unwrap().to_string();
@@ -83,20 +89,7 @@ async fn a_person_plays_the_learned_team_from_the_lobby_and_replays_it() {
 async fn the_learned_team_never_stands_still_for_10_s_while_a_person_hides() {
     let s = TestServer::start().await;
     let mut b = Browser::launch().await;
-    b.navigate(&format!("http://{}/", s.addr)).await;
-    b.wait_for(
-        "__lasertag.page === 'lobby' && [...document.getElementById('door-difficulty').options].some((o) => o.value === 'learned')",
-        20,
-    )
-    .await;
-    b.eval("document.getElementById('door-difficulty').value = 'learned'")
-        .await;
-    b.eval("document.getElementById('door-play').click()").await;
-    b.wait_for(
-        "__lasertag.role === 'player' && __lasertag.team === 'opponents' && __lasertag.snapshots > 0",
-        20,
-    )
-    .await;
+    play_the_learned_team_from_the_lobby(&mut b, &format!("http://{}", s.addr)).await;
     let id = b.eval("__lasertag.matchId").await;
     let handle = s
         .registry
