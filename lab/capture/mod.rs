@@ -107,6 +107,10 @@ impl Record for Outcome {
     }
 }
 
+/// What a run's line holds before its GOSPA track, as the parameter `run_fields` names it:
+/// a part whose runs hold less cannot be read.
+const RUN_FIELDS: &str = "tagged,first_seen,longest_still";
+
 /// The run's [`Outcome`] and the belief's GOSPA at every tick while the match ran.
 fn one_run(
     arena: Arc<Arena>,
@@ -258,6 +262,7 @@ impl Study for Capture {
         MapStamp::to_params(&self.maps, &mut p);
         p.set("planners", planner::list_name(&c.planners));
         p.set("bots", bots_name(&c.bots));
+        p.set("run_fields", RUN_FIELDS);
         let policies = c.planners.iter().filter_map(|p| match p {
             Planner::Policy(name) => Some(name.as_str()),
             Planner::BuiltIn(_) => None,
@@ -267,6 +272,11 @@ impl Study for Capture {
     }
 
     fn from_params(p: &Params) -> Result<Capture, String> {
+        if p.get("run_fields").ok() != Some(RUN_FIELDS) {
+            return Err(format!(
+                "its runs do not record {RUN_FIELDS}: the part was written by an earlier build; run its shard again"
+            ));
+        }
         Ok(Capture {
             cfg: CaptureConfig {
                 runs: p.parse("runs")?,
@@ -529,6 +539,34 @@ mod tests {
         assert_eq!(first_seen, 6.0, "median of 2, 4, 8, 300");
         assert_eq!(chase, 5.5, "median of 10 and 1");
         assert!(find_and_chase(&runs[3..], 300.0).1.is_nan());
+    }
+
+    #[test]
+    fn a_part_whose_runs_record_less_is_refused_by_why() {
+        let study = Capture {
+            cfg: CaptureConfig {
+                runs: 1,
+                opponents: 1,
+                seed: 0,
+                time_limit_s: 5,
+                coordination: Default::default(),
+                localisation: true,
+                radio: Default::default(),
+                oracle_belief: false,
+                planners: Planner::parse_list(planner::DEFAULT).expect("the default"),
+                bots: parse_bots(DEFAULT_BOTS).expect("the default"),
+            },
+            maps: Vec::new(),
+        };
+        let p = study.params();
+        assert!(Capture::from_params(&p).is_ok());
+        // A part of the build before: no `run_fields`.
+        let mut earlier = Params::default();
+        for (k, v) in p.iter().filter(|(k, _)| *k != "run_fields") {
+            earlier.set(k, v);
+        }
+        let err = Capture::from_params(&earlier).expect_err("refused");
+        assert!(err.contains("earlier build"), "{err}");
     }
 
     #[test]
