@@ -120,8 +120,10 @@ fn policy_teams(engine: &mut engine::Engine, name: &str) -> PyResult<Vec<Option<
     let (robots, worlds) = (engine.robots(), engine.worlds());
     let physics = engine.spec().config.physics.clone();
     let (arena, ..) = engine.parts_mut();
-    let team =
-        TeamPolicy::new(policy, arena, robots, &physics, DEFAULT_EVERY).map_err(|e| refuse(&e))?;
+    // A shipped model, served as the server serves it: with its guard against parking.
+    let team = TeamPolicy::new(policy, arena, robots, &physics, DEFAULT_EVERY)
+        .map_err(|e| refuse(&e))?
+        .unparked();
     Ok(vec![Some(team); worlds])
 }
 

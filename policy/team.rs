@@ -2,8 +2,9 @@
 //! environment's one layout, `lasertag_core::env::Layout`) through the model, its action read
 //! as the environments read one (`lasertag_core::env::drive_order`), every `every` ticks.
 //!
-//! A robot the policy leaves standing still is walked on by [`crate::unpark`]: a served team
-//! never waits out a person who hides.
+//! With [`TeamPolicy::unparked`] (the shipped models), a robot the policy leaves standing
+//! still is walked on by [`crate::unpark`]: the project's team never waits out a person who
+//! hides.
 //!
 //! The shell (the server's match task, the native engine, the experiments) applies the orders
 //! as inputs, so they go into the match's record like any robot command: a replay or a
@@ -42,8 +43,8 @@ pub struct TeamPolicy {
     observation: Vec<f32>,
     action: Vec<f32>,
     scratch: Vec<f32>,
-    /// Each robot's guard against parking.
-    unpark: Vec<Unpark>,
+    /// Each robot's guard against parking, for a shipped team ([`TeamPolicy::unparked`]).
+    unpark: Option<Vec<Unpark>>,
 }
 
 /// The detection slots a model of `input_len` values has in a team of `robots` on a match
@@ -123,8 +124,16 @@ impl TeamPolicy {
             every: every.max(1),
             action: Vec::with_capacity(ACTION_SIZE),
             scratch: Vec::new(),
-            unpark: vec![Unpark::default(); robots],
+            unpark: None,
         })
+    }
+
+    /// This team with the guard against parking ([`crate::unpark`]): what the project
+    /// serves its own shipped models with. An uploaded model drives as it was trained, so
+    /// a researcher measures their policy, not the guard.
+    pub fn unparked(mut self) -> TeamPolicy {
+        self.unpark = Some(Vec::new());
+        self
     }
 
     /// Ticks between decisions.
@@ -142,13 +151,18 @@ impl TeamPolicy {
         let limit = world.config.time_limit_ticks.max(1) as f64;
         let time_fraction = (world.tick as f64 / limit).min(1.0);
         let mut orders = Vec::new();
-        self.unpark.resize(world.robots.len(), Unpark::default());
+        if let Some(guards) = self.unpark.as_mut() {
+            guards.resize(world.robots.len(), Unpark::default());
+        }
         for i in 0..world.robots.len() {
+            let guard = self.unpark.as_mut().and_then(|g| g.get_mut(i));
             if !world.robot_outside(i) || world.robots[i].seated {
-                self.unpark[i] = Unpark::default();
+                if let Some(guard) = guard {
+                    *guard = Unpark::default();
+                }
                 continue;
             }
-            match self.unpark[i].decide(world, i) {
+            match guard.map_or(Decision::Policy, |g| g.decide(world, i)) {
                 Decision::Policy => {}
                 Decision::Walking => continue,
                 Decision::Start(order) => {
@@ -221,7 +235,9 @@ mod tests {
             &[(vec![vec![0.0; inputs]; 3], vec![0.0; 3], "Identity")],
         );
         let policy = Arc::new(Policy::from_onnx(&stand, &Limits::default()).expect("a model"));
-        let mut team = TeamPolicy::new(policy, &arena, 2, &physics, DEFAULT_EVERY).expect("fits");
+        let mut team = TeamPolicy::new(policy.clone(), &arena, 2, &physics, DEFAULT_EVERY)
+            .expect("fits")
+            .unparked();
         let mut still = LongestStill::default();
         let mut walks = 0;
         while world.status == MatchStatus::Running && world.tick < 40 * 20 {
@@ -237,6 +253,18 @@ mod tests {
             }
         }
         assert!(walks >= 2, "both robots were walked on: {walks} walks");
+        // An uploaded model drives as trained: without the guard nobody is walked.
+        let mut world = World::new(arena.clone(), world.config.clone()).expect("a world");
+        let mut plain = TeamPolicy::new(policy, &arena, 2, &physics, DEFAULT_EVERY).expect("fits");
+        for _ in 0..300 {
+            assert!(
+                plain
+                    .orders(&world)
+                    .iter()
+                    .all(|(_, o)| !matches!(o, RobotOrder::Waypoints(_)))
+            );
+            world.step();
+        }
         assert!(
             still.longest_ticks() < 2 * UNPARK_AFTER_TICKS,
             "no robot stood 10 s: the longest stood {} ticks",

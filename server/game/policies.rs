@@ -178,15 +178,21 @@ pub fn policy_for(store: &PolicyStore, world: &World) -> Option<TeamPolicy> {
         .ok()
 }
 
-/// `stored` set up for `world`'s team, or why it does not fit.
+/// `stored` set up for `world`'s team, or why it does not fit: a shipped model with the
+/// guard against parking (`lasertag_policy::unpark`), an uploaded one as it was trained.
 pub fn team_for(stored: &StoredPolicy, world: &World) -> Result<TeamPolicy, PolicyError> {
-    TeamPolicy::new(
+    let team = TeamPolicy::new(
         stored.policy.clone(),
         &world.arena,
         world.robots.len(),
         &world.config.physics,
         stored.every,
-    )
+    )?;
+    Ok(if stored.shipped() {
+        team.unparked()
+    } else {
+        team
+    })
 }
 
 /// `kept` as the server holds it: read and checked again, one inference timed on this
