@@ -37,6 +37,12 @@ minibatch, gradient clipping and a linearly annealed learning rate. Adapted to a
   the default mask without random starts, 60% (65.7 s); both, as the defaults, 100%
   (12.1 s).
 
+``--bc-steps N`` first fits the actor's mean to the coordinated planner's decisions on the
+same observations (behaviour cloning from ``vector_env.teacher_actions``: N environment steps
+of the planner on the training maps, ``--bc-epochs`` passes of squared error), so that PPO
+starts from the paper's planner rather than from nothing. Off by default: the shipped
+policy was trained without it.
+
 The action is forward, turn and tag (fires above 0.5): a Gaussian around the actor's
 output in training, the output itself (the mean) in every evaluation, as the server runs it.
 The environment clips forward and turn to [-1, 1].
@@ -329,6 +335,80 @@ def export_onnx(seq: nn.Sequential, obs_dim: int, path: str, probe: np.ndarray) 
 # ---------------------------------------------------------------------------------------
 
 
+def clone_teacher(agent: Agent, *, maps: list[str], bots: list[str], worlds_per_map: int,
+                  random_starts: float, steps: int, epochs: int, minibatch: int, lr: float,
+                  seed: int, step_threads: int) -> dict:
+    """Behaviour cloning: fits the actor's mean to the coordinated planner's decisions on
+    the same observations (``vector_env.teacher_actions``), before PPO starts from it.
+
+    The planner drives every world (``planner="coordinated"``, the same maps, bots and
+    share of random starts as training); after each step every robot's observation is
+    paired with the action its planner decided from it (forward, turn, and tag as 1 or 0).
+    An episode's first observation has no decision yet and is left out. The loss is the
+    mean squared error of the actor's mean against those actions (the tag fires above 0.5,
+    so 1 and 0 are what the mean should give), the tag's errors weighted so that the
+    decisions to fire weigh as much as the rest. Returns the samples, the share the planner
+    fired in, the loss before and after, and the seconds it took."""
+    t0 = time.perf_counter()
+    per_bot = max(1, worlds_per_map // len(bots))
+    n_random = int(round(random_starts * per_bot))
+    envs = []
+    for i, m in enumerate(maps):
+        for j, b in enumerate(bots):
+            for k, (n, placement) in enumerate([(per_bot - n_random, None), (n_random, "random")]):
+                if n > 0:
+                    envs.append(lasertag_env.vector_env(
+                        n, map=m, opponent_bot=b, placement=placement, planner="coordinated",
+                        seed=seed * 1_000_000 + 500_000 + 100_000 * i + 20_000 * j + 10_000 * k,
+                        copy=True, **ENV))
+    worlds = sum(e.num_worlds for e in envs)
+    for e in envs:
+        e.reset()
+    pool = concurrent.futures.ThreadPoolExecutor(max(1, step_threads))
+    xs, ys = [], []
+    # Whether a step's observation is an episode's first (a world that ended the step
+    # before starts its next one): no decision was made from it.
+    fresh = [np.zeros(e.num_envs, bool) for e in envs]
+    for _ in range(max(1, steps // worlds)):
+        outs = list(pool.map(lambda e: e.step(np.zeros((e.num_envs, 3), np.float32)), envs))
+        for i, (e, (obs, _, term, trunc, _)) in enumerate(zip(envs, outs)):
+            keep = ~fresh[i]
+            if keep.any():
+                xs.append(obs[keep])
+                ys.append(e.teacher_actions()[keep])
+            fresh[i] = term | trunc
+    pool.shutdown()
+    x = torch.from_numpy(np.concatenate(xs))
+    y = torch.from_numpy(np.concatenate(ys))
+    opt = torch.optim.Adam(agent.actor.parameters(), lr=lr, eps=1e-5)
+    # The planner fires in a few percent of its decisions: unweighted, the tag's mean would
+    # regress below 0.5 everywhere and the clone would never fire. Each class of the tag
+    # weighs as much as the other.
+    fired = float(y[:, 2].mean())
+    tag_weight = torch.where(y[:, 2] > 0.5, 0.5 / max(fired, 1e-6), 0.5 / max(1 - fired, 1e-6))
+
+    def loss_of(idx) -> torch.Tensor:
+        err = (agent.mean(x[idx]) - y[idx]) ** 2
+        return err[:, :2].mean() + (err[:, 2] * tag_weight[idx]).mean()
+
+    def loss_on_all() -> float:
+        with torch.no_grad():
+            return float(loss_of(slice(None)))
+
+    before = loss_on_all()
+    agent.train()
+    for _ in range(epochs):
+        perm = torch.randperm(len(x))
+        for s in range(0, len(x), minibatch):
+            loss = loss_of(perm[s : s + minibatch])
+            opt.zero_grad()
+            loss.backward()
+            opt.step()
+    after = loss_on_all()
+    return {"samples": len(x), "teacher_fired": fired, "loss_before": before,
+            "loss_after": after, "seconds": round(time.perf_counter() - t0, 1)}
+
+
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--out", default="results/train_team")
@@ -368,6 +448,10 @@ def main() -> None:
                    help="share of each training map's worlds starting from random free positions")
     p.add_argument("--mask", default="time,pose,teammates",
                    help="observation parts zeroed before the first layer ('' for none)")
+    p.add_argument("--bc-steps", type=int, default=0,
+                   help="behaviour cloning first: environment steps of the coordinated planner "
+                        "whose decisions the actor is fitted to before PPO (0: none)")
+    p.add_argument("--bc-epochs", type=int, default=10, help="passes over the cloning samples")
     p.add_argument("--smoke", action="store_true",
                    help="a few hundred steps and a tiny evaluation (CI): checks the pipeline")
     args = p.parse_args()
@@ -375,6 +459,7 @@ def main() -> None:
         args.total_steps = min(args.total_steps, 512)
         args.num_envs, args.num_steps = min(args.num_envs, 2), min(args.num_steps, 32)
         args.eval_seeds, args.curve_seeds, args.eval_every = 2, 2, 2
+        args.bc_steps, args.bc_epochs = min(args.bc_steps or 64, 64), min(args.bc_epochs, 2)
     os.makedirs(args.out, exist_ok=True)
     torch.set_num_threads(args.threads)
     torch.manual_seed(args.seed)
@@ -393,6 +478,15 @@ def main() -> None:
     for part in filter(None, args.mask.split(",")):
         mask[layout.slices[part]] = 0.0
     agent = Agent(obs_dim, args.hidden, mask, args.log_std)
+    cloned = None
+    if args.bc_steps > 0:
+        cloned = clone_teacher(agent, maps=maps, bots=bots, worlds_per_map=args.num_envs,
+                               random_starts=args.random_starts, steps=args.bc_steps,
+                               epochs=args.bc_epochs, minibatch=args.minibatch, lr=args.lr,
+                               seed=args.seed, step_threads=args.step_threads)
+        print(f"behaviour cloning: {cloned['samples']:,} samples of the coordinated planner, "
+              f"loss {cloned['loss_before']:.4f} -> {cloned['loss_after']:.4f} "
+              f"({cloned['seconds']:.0f} s)", flush=True)
     opt = torch.optim.Adam(agent.parameters(), lr=args.lr, eps=1e-5)
 
     # Per training map and bot, a vector of worlds starting from the map's spawns and, with
@@ -652,6 +746,7 @@ def main() -> None:
                    "collect_s": round(collect_s, 1), "learn_s": round(learn_s, 1),
                    "steps_per_s": speeds(env_steps, collect_s, learn_s),
                    "total_wall_s": round(time.perf_counter() - t0, 1), "onnx": onnx_info,
+                   "behaviour_cloning": cloned,
                    "script_revision": rev or "uncommitted", "script_modified": bool(dirty),
                    "results": summary}, f, indent=1)
     print(f"\n{speed_line(env_steps, collect_s, learn_s)}")
