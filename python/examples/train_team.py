@@ -335,6 +335,25 @@ def export_onnx(seq: nn.Sequential, obs_dim: int, path: str, probe: np.ndarray) 
 # ---------------------------------------------------------------------------------------
 
 
+def map_envs(maps: list[str], bots: list[str], worlds_per_map: int, random_starts: float,
+             seed: int, **kwargs) -> list:
+    """Per map and bot (the map's worlds shared equally between the bots), a vector of
+    worlds starting from the map's spawns and, for the ``random_starts`` share, one starting
+    from random free positions (placement "random"). The first worlds' seeds: ``seed`` +
+    100,000 (map index + 1) + 20,000 bot index + 10,000 for the random starts."""
+    per_bot = max(1, worlds_per_map // len(bots))
+    n_random = int(round(random_starts * per_bot))
+    envs = []
+    for i, m in enumerate(maps):
+        for j, b in enumerate(bots):
+            for k, (n, placement) in enumerate([(per_bot - n_random, None), (n_random, "random")]):
+                if n > 0:
+                    envs.append(lasertag_env.vector_env(
+                        n, map=m, opponent_bot=b, placement=placement,
+                        seed=seed + 100_000 * (i + 1) + 20_000 * j + 10_000 * k, **kwargs, **ENV))
+    return envs
+
+
 def clone_teacher(agent: Agent, *, maps: list[str], bots: list[str], worlds_per_map: int,
                   random_starts: float, steps: int, epochs: int, minibatch: int, lr: float,
                   seed: int, step_threads: int) -> dict:
@@ -350,17 +369,9 @@ def clone_teacher(agent: Agent, *, maps: list[str], bots: list[str], worlds_per_
     decisions to fire weigh as much as the rest. Returns the samples, the share the planner
     fired in, the loss before and after, and the seconds it took."""
     t0 = time.perf_counter()
-    per_bot = max(1, worlds_per_map // len(bots))
-    n_random = int(round(random_starts * per_bot))
-    envs = []
-    for i, m in enumerate(maps):
-        for j, b in enumerate(bots):
-            for k, (n, placement) in enumerate([(per_bot - n_random, None), (n_random, "random")]):
-                if n > 0:
-                    envs.append(lasertag_env.vector_env(
-                        n, map=m, opponent_bot=b, placement=placement, planner="coordinated",
-                        seed=seed * 1_000_000 + 500_000 + 100_000 * i + 20_000 * j + 10_000 * k,
-                        copy=True, **ENV))
+    # Seeds apart from training's (seed * 1,000,000 + 100,000 … 330,000).
+    envs = map_envs(maps, bots, worlds_per_map, random_starts,
+                    seed * 1_000_000 + 400_000, planner="coordinated")
     worlds = sum(e.num_worlds for e in envs)
     for e in envs:
         e.reset()
@@ -489,19 +500,8 @@ def main() -> None:
               f"({cloned['seconds']:.0f} s)", flush=True)
     opt = torch.optim.Adam(agent.parameters(), lr=args.lr, eps=1e-5)
 
-    # Per training map and bot, a vector of worlds starting from the map's spawns and, with
-    # --random-starts, one starting from random free positions (placement "random").
-    per_bot = max(1, args.num_envs // len(bots))
-    n_random = int(round(args.random_starts * per_bot))
-    envs = []
-    for i, m in enumerate(maps):
-        for j, b in enumerate(bots):
-            for k, (n, placement) in enumerate([(per_bot - n_random, None), (n_random, "random")]):
-                if n > 0:
-                    envs.append(lasertag_env.vector_env(
-                        n, map=m, opponent_bot=b, placement=placement, rewards=rewards,
-                        seed=args.seed * 1_000_000 + 100_000 * (i + 1) + 20_000 * j + 10_000 * k,
-                        **ENV))
+    envs = map_envs(maps, bots, args.num_envs, args.random_starts, args.seed * 1_000_000,
+                    rewards=rewards)
     n_entries = sum(e.num_envs for e in envs)
     worlds = sum(e.num_worlds for e in envs)
     bounds = np.cumsum([0] + [e.num_envs for e in envs])
