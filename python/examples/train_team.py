@@ -47,12 +47,13 @@ The action is forward, turn and tag (fires above 0.5): a Gaussian around the act
 output in training, the output itself (the mean) in every evaluation, as the server runs it.
 The environment clips forward and turn to [-1, 1].
 
-Matches: 2 robots against 1 bot, a decision every 4 ticks (5 a second), 90 s at most;
+Matches: 2 robots against 1 bot, a decision every 4 ticks (5 a second; ``--ticks-per-step`` sets it), 90 s at most;
 ``--bots`` (``wander`` and ``evade``: the one that strolls and the one that runs from the
 robots) share each map's worlds equally, and every evaluation plays each. Reward per robot and step: the environment's (1 for the robot whose
 shot tags, ``--team-tag`` to each robot for any robot's tag, -0.001 a tick) plus the
 shaping ``--see-bonus`` a step in which the robot sees an opponent (less than the 0.004 a
-step costs in ticks, so watching never pays more than capturing).
+step of 4 ticks costs, so watching never pays more than capturing; deciding every 2 ticks,
+pass at most 0.002).
 
 Outputs in ``--out``:
 
@@ -103,10 +104,19 @@ from torch import nn  # noqa: E402
 import lasertag_env  # noqa: E402
 
 #: What every environment shares: 2 robots hunting 1 bot, a decision every 4 ticks (5 a
-#: second), episodes of at most 90 s (450 steps).
+#: second; ``--ticks-per-step`` changes it), episodes of at most 90 s (450 steps).
 ENV = dict(robots=2, opponents=1, ticks_per_step=4, max_steps=450)
 STEP_S = ENV["ticks_per_step"] / 20.0
 LIMIT_S = ENV["max_steps"] * STEP_S
+
+
+def decide_every(ticks: int) -> None:
+    """Sets the decision rate of every environment the script makes, episodes still 90 s."""
+    global STEP_S
+    if ticks < 1 or 1800 % ticks:
+        raise SystemExit(f"--ticks-per-step {ticks}: must divide a 90 s episode's 1,800 ticks")
+    ENV.update(ticks_per_step=ticks, max_steps=int(LIMIT_S * 20) // ticks)
+    STEP_S = ticks / 20.0
 #: Operators the server's policy runtime accepts (policy/lib.rs).
 ALLOWED_OPS = {"Gemm", "MatMul", "Add", "Relu", "Tanh", "Sigmoid", "Identity", "Flatten"}
 #: Seeds: the learning curve's (each map), the final comparison's (each map, 20000 + i),
@@ -463,6 +473,9 @@ def main() -> None:
                    help="behaviour cloning first: environment steps of the coordinated planner "
                         "whose decisions the actor is fitted to before PPO (0: none)")
     p.add_argument("--bc-epochs", type=int, default=10, help="passes over the cloning samples")
+    p.add_argument("--ticks-per-step", type=int, default=4,
+                   help="ticks between decisions in training and evaluation (the server serves "
+                        "the shipped team deciding every 2)")
     p.add_argument("--smoke", action="store_true",
                    help="a few hundred steps and a tiny evaluation (CI): checks the pipeline")
     args = p.parse_args()
@@ -471,6 +484,7 @@ def main() -> None:
         args.num_envs, args.num_steps = min(args.num_envs, 2), min(args.num_steps, 32)
         args.eval_seeds, args.curve_seeds, args.eval_every = 2, 2, 2
         args.bc_steps, args.bc_epochs = min(args.bc_steps or 64, 64), min(args.bc_epochs, 2)
+    decide_every(args.ticks_per_step)
     os.makedirs(args.out, exist_ok=True)
     torch.set_num_threads(args.threads)
     torch.manual_seed(args.seed)
