@@ -53,7 +53,7 @@ robots) share each map's worlds equally, and every evaluation plays each. Reward
 shot tags, ``--team-tag`` to each robot for any robot's tag, -0.001 a tick) plus the
 shaping ``--see-bonus`` a step in which the robot sees an opponent (less than the 0.004 a
 step of 4 ticks costs, so watching never pays more than capturing; deciding every 2 ticks,
-pass at most 0.002).
+pass less than 0.002).
 
 Outputs in ``--out``:
 
