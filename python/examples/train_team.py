@@ -47,13 +47,14 @@ The action is forward, turn and tag (fires above 0.5): a Gaussian around the act
 output in training, the output itself (the mean) in every evaluation, as the server runs it.
 The environment clips forward and turn to [-1, 1].
 
-Matches: 2 robots against 1 bot, a decision every 4 ticks (5 a second; ``--ticks-per-step`` sets it), 90 s at most;
-``--bots`` (``wander`` and ``evade``: the one that strolls and the one that runs from the
-robots) share each map's worlds equally, and every evaluation plays each. Reward per robot and step: the environment's (1 for the robot whose
-shot tags, ``--team-tag`` to each robot for any robot's tag, -0.001 a tick) plus the
-shaping ``--see-bonus`` a step in which the robot sees an opponent (less than the 0.004 a
-step of 4 ticks costs, so watching never pays more than capturing; deciding every 2 ticks,
-pass less than 0.002).
+Matches: 2 robots against 1 bot, a decision every 4 ticks (5 a second; ``--ticks-per-step``
+sets it), 90 s at most; ``--bots`` (``wander`` and ``evade``: the one that strolls and the
+one that runs from the robots) share each map's worlds equally, and every evaluation plays
+each. Reward per robot and step: the environment's (1 for the robot whose shot tags,
+``--team-tag`` to each robot for any robot's tag, -0.001 a tick) plus the shaping
+``--see-bonus`` a step in which the robot sees an opponent (less than the 0.004 a step of 4
+ticks costs, so watching never pays more than capturing; deciding every 2 ticks, pass less
+than 0.002).
 
 Outputs in ``--out``:
 
@@ -117,6 +118,8 @@ def decide_every(ticks: int) -> None:
         raise SystemExit(f"--ticks-per-step {ticks}: must divide a 90 s episode's 1,800 ticks")
     ENV.update(ticks_per_step=ticks, max_steps=int(LIMIT_S * 20) // ticks)
     STEP_S = ticks / 20.0
+
+
 #: Operators the server's policy runtime accepts (policy/lib.rs).
 ALLOWED_OPS = {"Gemm", "MatMul", "Add", "Relu", "Tanh", "Sigmoid", "Identity", "Flatten"}
 #: Seeds: the learning curve's (each map), the final comparison's (each map, 20000 + i),
