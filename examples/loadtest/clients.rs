@@ -35,6 +35,8 @@ pub(crate) struct Client {
     pub window: Window,
     /// `json` or `compact`.
     pub format: String,
+    /// Over WebTransport: acknowledge every this many snapshots taken (0: never).
+    pub ack_every: u64,
 }
 
 /// The measured window, `[start, until)`: opened by the load test once every client is
@@ -267,8 +269,8 @@ impl Client {
     }
 
     /// Watches over WebTransport (compact snapshots by datagram or on the stream, what is
-    /// held acknowledged every second one, a player's inputs by datagram, as the page does);
-    /// over the WebSocket when the session is refused or, for a spectator, moved.
+    /// held acknowledged every `--ack-every` taken, a player's inputs by datagram, as the page
+    /// does); over the WebSocket when the session is refused or, for a spectator, moved.
     pub(crate) async fn over_webtransport(&self, at: &Published) -> ClientStats {
         let mut st = ClientStats {
             player: self.player(),
@@ -330,8 +332,11 @@ impl Client {
             };
             let (kind, flags, len) = (a.bytes[0], a.bytes.get(1).copied(), a.bytes.len() as u64);
             let tick = lasertag::protocol::compact::tick_of(&a.bytes);
-            if let (Ok(Some(_)), Some(ack)) = (held.take(a.bytes), held.ack_due()) {
-                let _ = conn.send_datagram(ack);
+            if let Ok(Some(_)) = held.take(a.bytes)
+                && self.ack_every > 0
+                && held.taken.is_multiple_of(self.ack_every)
+            {
+                let _ = conn.send_datagram(held.ack());
             }
             // Wholes and deltas (a motion part is followed by its whole).
             if self.window.counts(Instant::now())

@@ -89,6 +89,11 @@ struct Args {
     /// server of its own, `--addr` needs `--max-seats-per-address` raised to the players.
     #[arg(long, default_value_t = 0)]
     players_per_match: usize,
+    /// Over WebTransport, each client acknowledges every this many snapshots it takes (the
+    /// page's cadence by default); 0 never (the server then sends wholes where it would send
+    /// deltas: a measure of what reading acknowledgements costs it).
+    #[arg(long, default_value_t = wt::ACK_EVERY)]
+    ack_every: u64,
 }
 
 fn pct(sorted: &[f64], q: f64) -> f64 {
@@ -249,6 +254,7 @@ async fn run(args: Args) -> Result<(), String> {
             http: http.clone(),
             window: window.clone(),
             format: args.format.clone(),
+            ack_every: args.ack_every,
         };
         let published = published.clone();
         clients.push(tokio::spawn(async move {
@@ -312,9 +318,24 @@ async fn run(args: Args) -> Result<(), String> {
         first.push(tick_at(id.clone()).await);
     }
     let first_reads = start.elapsed();
+    // A client still handshaking when the window closes (its session neither opened nor
+    // refused) would hold the report for ever: past a grace it is stopped and counted as
+    // closed early, with that reason.
+    let grace = until + Duration::from_secs(10);
     let mut stats: Vec<ClientStats> = Vec::new();
-    for c in clients {
-        stats.push(c.await.unwrap_or_default());
+    for (k, c) in clients.into_iter().enumerate() {
+        let abort = c.abort_handle();
+        stats.push(match tokio::time::timeout_at(grace.into(), c).await {
+            Ok(done) => done.unwrap_or_default(),
+            Err(_) => {
+                abort.abort();
+                let mut hung = ClientStats::default();
+                hung.player = k >= args.spectators;
+                hung.closed_early = true;
+                hung.close_reason = Some("still connecting 10 s after the window".into());
+                hung
+            }
+        });
     }
     tokio::time::sleep_until(until.into()).await; // (when there are no spectators to wait for)
     let secs = args.seconds as f64;
