@@ -16,7 +16,7 @@ const RETRY_FIRST_MS = 250;
 const RETRY_MAX_MS = 4000;
 const GIVE_UP_MS = 30000;
 /** Over WebTransport the page says which snapshots it holds every this many it takes. */
-const ACK_EVERY = 2;
+const ACK_EVERY = 8;
 
 /** The page's status line. */
 const status = (text) => { document.getElementById("hud-status").textContent = text; };
@@ -108,8 +108,9 @@ export class PageSocket {
           return;
         }
         // Over a carrier that may lose snapshots, the server's deltas are against those the
-        // page says it holds: every second snapshot (each acknowledgement is a datagram the
-        // server reads; a baseline a tick older costs a delta little).
+        // page says it holds: every eighth snapshot. Each acknowledgement costs the server a
+        // datagram to read and, on most round trips, a QUIC acknowledgement packet of its own
+        // to send; a baseline some ticks older costs a delta a few bytes (docs/network.md).
         if (binary && this.carrier && this.carrier.ack && ++this.taken % ACK_EVERY === 0) {
           this.carrier.ack(decoder.acks());
         }

@@ -50,7 +50,7 @@ pub struct Held {
 }
 
 /// The page acknowledges every this many snapshots it takes (web/socket.js).
-pub const ACK_EVERY: u64 = 2;
+pub const ACK_EVERY: u64 = 8;
 
 impl Held {
     /// Takes a compact snapshot as it came: a whole is kept, a delta applied to the whole it

@@ -24,10 +24,11 @@ pub struct Parts {
     pub belief: bool,
 }
 
-/// Whole snapshots kept as baselines on a carrier that may lose them: 0.8 s of ticks, so a
-/// client more than that behind in acknowledging (a round trip over ~700 ms) gets wholes.
-/// Each is one connection's own bytes, so this bounds what a connection holds.
-pub const ACKED_BASES: usize = 16;
+/// Whole snapshots kept as baselines on a carrier that may lose them: 1.2 s of ticks, so a
+/// client acknowledging every 8 snapshots (web/socket.js) finds one it holds over a round
+/// trip up to ~800 ms, and one more behind than that gets wholes. Each is one connection's
+/// own bytes, so this bounds what a connection holds (the page keeps 33).
+pub const ACKED_BASES: usize = 24;
 
 /// What a delta may be against.
 #[derive(Debug)]
