@@ -109,7 +109,7 @@ export class PageSocket {
         }
         // Over a carrier that may lose snapshots, the server's deltas are against those the
         // page says it holds: every eighth snapshot. Each acknowledgement costs the server a
-        // datagram to read and, on most round trips, a QUIC acknowledgement packet of its own
+        // datagram to read and, on many round trips, a QUIC acknowledgement packet of its own
         // to send; a baseline some ticks older costs a delta a few bytes (docs/network.md).
         if (binary && this.carrier && this.carrier.ack && ++this.taken % ACK_EVERY === 0) {
           this.carrier.ack(decoder.acks());

@@ -318,9 +318,10 @@ async fn run(args: Args) -> Result<(), String> {
         first.push(tick_at(id.clone()).await);
     }
     let first_reads = start.elapsed();
-    // A client still handshaking when the window closes (its session neither opened nor
-    // refused) would hold the report for ever: past a grace it is stopped and counted as
-    // closed early, with that reason.
+    // A client not done when the window closes (a session still handshaking, neither opened
+    // nor refused; a spectator of a match that ended, still on its way to the WebSocket)
+    // would hold the report for ever: past a grace it is stopped and counted as closed
+    // early, with that reason.
     let grace = until + Duration::from_secs(10);
     let mut stats: Vec<ClientStats> = Vec::new();
     for (k, c) in clients.into_iter().enumerate() {
@@ -332,7 +333,7 @@ async fn run(args: Args) -> Result<(), String> {
                 let mut hung = ClientStats::default();
                 hung.player = k >= args.spectators;
                 hung.closed_early = true;
-                hung.close_reason = Some("still connecting 10 s after the window".into());
+                hung.close_reason = Some("not done 10 s after the window".into());
                 hung
             }
         });
