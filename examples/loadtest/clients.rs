@@ -37,11 +37,14 @@ pub(crate) struct Client {
     pub format: String,
     /// Over WebTransport: acknowledge every this many snapshots taken (0: never).
     pub ack_every: u64,
+    /// Its place among the clients (which loopback address its session opens from).
+    pub index: usize,
 }
 
 /// The measured window, `[start, until)`: opened by the load test once every client is
-/// connected (thousands of WebTransport handshakes, 8 at a time, take seconds, and a client
-/// connected late would otherwise count as starved), and the count of clients connected.
+/// connected (thousands of WebTransport handshakes, 8 at a time from each address, take
+/// seconds, and a client connected late would otherwise count as starved), and the count
+/// of clients connected.
 #[derive(Debug, Clone)]
 pub(crate) struct Window {
     opened: tokio::sync::watch::Receiver<Option<(Instant, Instant)>>,
@@ -78,8 +81,9 @@ impl Window {
 pub(crate) struct Published {
     pub url: String,
     pub hash: wtransport::tls::Sha256Digest,
-    /// Handshakes in progress at once (a client's are capped at 8 on the server).
-    pub handshakes: std::sync::Arc<tokio::sync::Semaphore>,
+    /// The loopback addresses the sessions open from, each with its handshakes in progress
+    /// (the server takes 8 at once from one address): client `k` uses `sources[k % len]`.
+    pub sources: Vec<(std::net::IpAddr, std::sync::Arc<tokio::sync::Semaphore>)>,
 }
 
 /// The carrier a client's snapshots came over at the end.
@@ -278,14 +282,18 @@ impl Client {
             ..ClientStats::default()
         };
         let (connected, token) = {
-            let _permit = at.handshakes.acquire().await;
+            let (from, handshakes) = &at.sources[self.index % at.sources.len()];
+            let _permit = handshakes.acquire().await;
             let Ok(token) = self.join().await else {
                 self.window.note_connected();
                 st.closed_early = true;
                 return st;
             };
             let url = format!("{}{}", at.url, self.path(token.as_deref()));
-            (wt::WtClient::connect(&url, &at.hash).await, token)
+            (
+                wt::WtClient::connect_from(&url, &at.hash, Some(*from)).await,
+                token,
+            )
         };
         let Ok(client) = connected else {
             st.refused = true;
