@@ -332,7 +332,16 @@ impl Client {
                     break;
                 }
                 Ok(None) => {
-                    // Moved off for a player: the rest of the window over the WebSocket.
+                    // Moved off for a player (1012, as the page is told): the rest of the
+                    // window over the WebSocket. Any other close (the match ended) ends it.
+                    let moved = matches!(
+                        conn.closed().await,
+                        wtransport::error::ConnectionError::ApplicationClosed(c)
+                            if c.code() == wtransport::VarInt::from_u32(1012)
+                    );
+                    if !moved {
+                        break;
+                    }
                     st.moved = true;
                     self.websocket_into(&mut st, None).await;
                     return st;
