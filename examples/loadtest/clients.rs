@@ -349,11 +349,10 @@ impl Client {
             };
             let (kind, flags, len) = (a.bytes[0], a.bytes.get(1).copied(), a.bytes.len() as u64);
             let tick = lasertag::protocol::compact::tick_of(&a.bytes);
-            if let Ok(Some(_)) = held.take(a.bytes)
-                && self.ack_every > 0
-                && held.taken.is_multiple_of(self.ack_every)
+            if let (Ok(Some(_)), Some(ack)) =
+                (held.take(a.bytes), held.ack_due_every(self.ack_every))
             {
-                let _ = conn.send_datagram(held.ack());
+                let _ = conn.send_datagram(ack);
             }
             // Wholes and deltas (a motion part is followed by its whole).
             if self.window.counts(Instant::now())

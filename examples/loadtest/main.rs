@@ -190,7 +190,7 @@ async fn run(args: Args) -> Result<(), String> {
             hash,
             // The server takes 8 handshakes at once from one address (and 256 in all): the
             // sessions open from 16 loopback addresses, as a crowd's come from many, so that
-            // 2,000 open in seconds rather than in a minute of matches running meanwhile.
+            // the one address's cap is not what the connecting measures.
             sources: (2..18u8)
                 .map(|i| {
                     let ip = std::net::IpAddr::V4(std::net::Ipv4Addr::new(127, 0, 0, i));
@@ -329,9 +329,8 @@ async fn run(args: Args) -> Result<(), String> {
     }
     let first_reads = start.elapsed();
     // A client not done when the window closes (a session still handshaking, neither opened
-    // nor refused; a spectator of a match that ended, still on its way to the WebSocket)
-    // would hold the report for ever: past a grace it is stopped and counted as closed
-    // early, with that reason.
+    // nor refused) would hold the report for ever: past a grace it is stopped and counted
+    // as closed early, with that reason.
     let grace = until + Duration::from_secs(10);
     let mut stats: Vec<ClientStats> = Vec::new();
     for (k, c) in clients.into_iter().enumerate() {

@@ -81,7 +81,12 @@ impl Held {
     /// The acknowledgement datagram of what is held, when the page would send one (every
     /// [`ACK_EVERY`] snapshots taken).
     pub fn ack_due(&self) -> Option<Vec<u8>> {
-        self.taken.is_multiple_of(ACK_EVERY).then(|| self.ack())
+        self.ack_due_every(ACK_EVERY)
+    }
+
+    /// The acknowledgement datagram when one is due every `every` snapshots taken (0: never).
+    pub fn ack_due_every(&self, every: u64) -> Option<Vec<u8>> {
+        (every > 0 && self.taken.is_multiple_of(every)).then(|| self.ack())
     }
 
     /// The acknowledgement datagram of what is held.
